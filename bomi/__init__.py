@@ -1,0 +1,1 @@
+"""The BoMI signal chain: frames -> fusion -> windows/features -> classifier -> joystick commands."""

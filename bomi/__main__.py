@@ -1,0 +1,5 @@
+import sys
+
+from bomi.cli import main
+
+sys.exit(main())

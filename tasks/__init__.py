@@ -1,0 +1,1 @@
+"""The stacking task, its operators (scripted joystick, BoMI virtual participant) and metrics."""
