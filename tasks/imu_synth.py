@@ -1,0 +1,217 @@
+"""What a real IMU node would send for a given orientation trajectory, and the base-station bytes.
+
+Array in, array out. The orientation of a node is given as the angles the host fusion
+(``bomi.fusion``, ../shared/docs/hardware.md section 3) defines, in degrees per sample:
+
+- pitch = atan2(-ay, -ax) and roll = atan2(-az, -ax) of the gravity reading in the mounted
+  ("body") axes: body x points down at zero tilt;
+- yaw = the tilt-compensated magnetometer heading atan2(-zh, -yh) of the fusion.
+
+The body rotation (level frame -> body) used for gravity and the gyroscope is
+``Rx(yaw) Rz(-pitch') Ry(roll)`` with ``tan(pitch') = tan(pitch) cos(roll)``, which makes the two
+accelerometer angles exactly ``pitch`` and ``roll`` and gives, at small angles, the fusion's rate
+conventions (pitch rate = -gz, roll rate = +gy, yaw rate = +gx). The magnetometer reads the earth
+field that the fusion's heading formula turns into ``yaw`` (see docs/virtual_participant.md for
+why that is not the field of a right-handed sensor under the same rotation). Every vector is then
+taken back to the sensor's own axes (inverse mounting), the magnetometer is distorted by the
+inverse of the node's hard/soft-iron correction, noise is added and values are rounded to int16.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from bomi.frames import DEFAULT_PERIOD_MS, ImuFrame, encode_imu_frame, imu_node_id
+from bomi.fusion import DT, GYRO_DEG_PER_LSB, NodeCalibration
+
+ACC_LSB_PER_G = 1000.0 / 0.061          # LSM9DS0 at +-2 g: 0.061 mg/LSB
+GYRO_LSB_PER_DEG_S = 1.0 / GYRO_DEG_PER_LSB
+SAMPLE_RATE_HZ = 1.0 / DT
+INT16_MIN, INT16_MAX = -32768, 32767
+
+
+@dataclass(frozen=True)
+class EarthField:
+    """The earth magnetic field as the magnetometer sees it.
+
+    ``strength_lsb`` is its magnitude in raw LSB (about 5,000 for the headset node: its
+    soft-iron matrix maps that to |m| = 0.8, the size seen in the real data); the default
+    inclination of 70 deg is southern Quebec's, where the dataset was recorded.
+    """
+
+    strength_lsb: float = 5000.0
+    inclination_deg: float = 70.0
+
+    def at_zero_heading(self, cal: NodeCalibration) -> np.ndarray:
+        """The corrected field in level axes (x down) at heading 0, in the node's corrected units.
+
+        The soft-iron matrix sets the units; its cube-root determinant is its mean gain.
+        """
+        gain = np.cbrt(abs(np.linalg.det(np.array(cal.soft_iron))))
+        dip = np.radians(self.inclination_deg)
+        return self.strength_lsb * gain * np.array([np.sin(dip), -np.cos(dip), 0.0])
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """White noise standard deviations, in LSB of each sensor (assumptions, see the docs)."""
+
+    acc_lsb: float = 20.0
+    gyro_lsb: float = 4.0
+    mag_lsb: float = 25.0
+
+
+@dataclass(frozen=True)
+class RawImu:
+    """Raw int16 sensor counts in the sensor's own axes, each (n, 3)."""
+
+    acc: np.ndarray
+    gyro: np.ndarray
+    mag: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.acc)
+
+
+def body_rotation(angles_deg: np.ndarray) -> Rotation:
+    """Level-from-body rotations for (n, 3) fusion angles (pitch, roll, yaw) in degrees."""
+    pitch, roll, yaw = np.radians(np.atleast_2d(angles_deg)).T
+    pitch_euler = np.arctan(np.tan(pitch) * np.cos(roll))
+    return Rotation.from_euler("XZY", np.column_stack([yaw, -pitch_euler, roll]))
+
+
+def gravity_reading(angles_deg: np.ndarray) -> np.ndarray:
+    """Accelerometer at rest in body axes, in g: minus the downward unit vector, (n, 3)."""
+    return -body_rotation(angles_deg).inv().apply([1.0, 0.0, 0.0])
+
+
+def angular_rate(angles_deg: np.ndarray, previous_deg: Sequence[float] | None = None,
+                 dt: float = DT) -> np.ndarray:
+    """Body angular velocity (deg/s, (n, 3)) over each sample interval (backward difference).
+
+    ``previous_deg`` is the orientation one sample before the first row (streaming); without
+    it the first rate is zero.
+    """
+    angles = np.atleast_2d(angles_deg)
+    first = angles[:1] if previous_deg is None else np.atleast_2d(previous_deg)
+    rotations = body_rotation(np.vstack([first, angles]))
+    step = rotations[:-1].inv() * rotations[1:]
+    return np.degrees(step.as_rotvec()) / dt
+
+
+def magnetometer_reading(angles_deg: np.ndarray, cal: NodeCalibration,
+                         field: EarthField = EarthField()) -> np.ndarray:
+    """Corrected magnetometer in body axes whose fusion heading is the given yaw, (n, 3).
+
+    The fusion compensates tilt with Rz(-pitch) Ry(roll) and reads heading atan2(-zh, -yh), so
+    the body field is Ry(-roll) Rz(pitch) Rx(yaw) applied to the zero-heading field.
+    """
+    pitch, roll, yaw = np.atleast_2d(angles_deg).T
+    to_body = Rotation.from_euler("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True)
+    return to_body.apply(field.at_zero_heading(cal))
+
+
+def to_sensor_axes(body_vectors: np.ndarray, cal: NodeCalibration) -> np.ndarray:
+    """Undo the node's mounting rotation (body = mounting @ sensor) for (n, 3) row vectors."""
+    return np.asarray(body_vectors, dtype=float) @ np.array(cal.mounting)
+
+
+def distort_magnetometer(corrected_sensor: np.ndarray, cal: NodeCalibration) -> np.ndarray:
+    """Raw magnetometer LSB whose correction m = C (mx - h0, my - h1, -mz - h2) gives ``corrected_sensor``."""
+    uncorrected = np.linalg.solve(np.array(cal.soft_iron), np.asarray(corrected_sensor, float).T).T
+    raw = uncorrected + np.array(cal.hard_iron)
+    raw[:, 2] *= -1.0
+    return raw
+
+
+def to_int16(values: np.ndarray) -> np.ndarray:
+    """Round and saturate to the sensor's signed 16-bit range."""
+    return np.clip(np.rint(values), INT16_MIN, INT16_MAX).astype(np.int16)
+
+
+def synthesize_raw(angles_deg: np.ndarray, cal: NodeCalibration, rng: np.random.Generator,
+                   noise: SensorNoise = SensorNoise(), field: EarthField = EarthField(),
+                   previous_deg: Sequence[float] | None = None,
+                   linear_acc_g: np.ndarray | None = None) -> RawImu:
+    """Raw int16 acc/gyro/mag (sensor axes) for an (n, 3) trajectory of fusion angles in degrees.
+
+    ``linear_acc_g`` is an optional (n, 3) body-axis linear acceleration in g added to gravity.
+    """
+    angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
+    n = len(angles)
+    acc_body = gravity_reading(angles) + (0.0 if linear_acc_g is None else linear_acc_g)
+    acc = to_sensor_axes(acc_body, cal) * ACC_LSB_PER_G
+    gyro = to_sensor_axes(angular_rate(angles, previous_deg), cal) * GYRO_LSB_PER_DEG_S
+    mag = distort_magnetometer(to_sensor_axes(magnetometer_reading(angles, cal, field), cal), cal)
+    return RawImu(
+        acc=to_int16(acc + rng.normal(0.0, noise.acc_lsb, (n, 3))),
+        gyro=to_int16(gyro + rng.normal(0.0, noise.gyro_lsb, (n, 3))),
+        mag=to_int16(mag + rng.normal(0.0, noise.mag_lsb, (n, 3))),
+    )
+
+
+@dataclass(frozen=True)
+class LinkModel:
+    """Radio/USB link between the nodes and the host: frame loss and bursty delivery.
+
+    Each frame is lost with probability ``loss_fraction`` (its counter still advances). A
+    surviving frame reaches the base station after ``latency_s`` plus an exponential jitter
+    of mean ``jitter_s``; the base station forwards what it holds every ``burst_s``, so frames
+    arrive in bursts. Frames of one node never overtake each other.
+    """
+
+    loss_fraction: float = 0.09
+    latency_s: float = 0.004
+    jitter_s: float = 0.006
+    burst_s: float = 0.032
+
+
+@dataclass(frozen=True)
+class Delivery:
+    """Frames as they reach the host, in arrival order (all arrays (m,))."""
+
+    arrival_s: np.ndarray
+    node_index: np.ndarray      # 1-based IMU index (1 = headset, node id 10)
+    sample_index: np.ndarray    # index of the sample on the node's clock
+    frames: list[bytes]
+
+    def stream(self) -> bytes:
+        return b"".join(self.frames)
+
+    def until(self, t_end: float) -> tuple[Delivery, Delivery]:
+        """Split into what has arrived by ``t_end`` and the rest."""
+        k = int(np.searchsorted(self.arrival_s, t_end, side="right"))
+        return (Delivery(self.arrival_s[:k], self.node_index[:k], self.sample_index[:k], self.frames[:k]),
+                Delivery(self.arrival_s[k:], self.node_index[k:], self.sample_index[k:], self.frames[k:]))
+
+
+def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_time_s: np.ndarray,
+            rng: np.random.Generator, link: LinkModel = LinkModel(),
+            not_before_s: Mapping[int, float] | None = None,
+            period_ms: int = DEFAULT_PERIOD_MS) -> Delivery:
+    """Encode each node's samples as 32-byte frames, drop ~``loss_fraction`` of them, interleave by arrival.
+
+    ``sample_index`` (n,) numbers the samples on the nodes' clock (it also gives the packet
+    counter, modulo 256); ``sample_time_s`` (n,) is when they were taken. ``not_before_s`` gives
+    per node the arrival time of its last frame of an earlier call (streaming keeps order).
+    """
+    times, nodes, indices, frames = [], [], [], []
+    for node, raw in sorted(raw_by_node.items()):
+        kept = rng.random(len(raw)) >= link.loss_fraction
+        sent = sample_time_s + link.latency_s + rng.exponential(link.jitter_s, len(raw))
+        arrival = np.ceil(np.maximum.accumulate(sent) / link.burst_s) * link.burst_s
+        arrival = np.maximum(arrival, (not_before_s or {}).get(node, -np.inf))
+        for k in np.flatnonzero(kept):
+            frame = ImuFrame(imu_node_id(node), period_ms, int(sample_index[k]) % 256,
+                             tuple(int(v) for v in raw.mag[k]), tuple(int(v) for v in raw.gyro[k]),
+                             tuple(int(v) for v in raw.acc[k]))
+            frames.append(encode_imu_frame(frame))
+            times.append(arrival[k])
+            nodes.append(node)
+            indices.append(int(sample_index[k]))
+    order = np.lexsort((np.array(nodes), np.array(indices), np.array(times)))
+    return Delivery(np.asarray(times, float)[order], np.asarray(nodes, int)[order],
+                    np.asarray(indices, int)[order], [frames[i] for i in order])
