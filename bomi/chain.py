@@ -1,0 +1,232 @@
+"""The BoMI chain, batch (training, evaluation) and streaming (live and simulated runs).
+
+Both forms share every stage: node states -> ``component_index`` -> windows -> ``features`` ->
+``posteriors`` -> post-processing -> class, joystick function, proportional output nu.
+Node state = neutral-subtracted (pitch, roll, yaw) + gyroscope as the recording holds it (raw LSB).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, decide, fit_lda, gamma,
+                             linear_parameters, posteriors, proportional)
+from bomi.errors import BomiError
+from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
+from bomi.fusion import NodeFusion, neutral_offsets
+from bomi.profiles import Profile
+from bomi.recording import Recording
+
+_WIDTH = len(NODE_STATE)
+
+
+# ----------------------------------------------------------------------------------------- batch
+def recording_neutral(rec: Recording, nodes: Sequence[int], samples: int) -> np.ndarray:
+    """(len(nodes), 3) neutral offsets: mean angles of each node over the first ``samples`` rows."""
+    return np.stack([neutral_offsets(rec.nodes[i].angles, samples) for i in nodes])
+
+
+def node_states(rec: Recording, nodes: Sequence[int], neutral: np.ndarray) -> np.ndarray:
+    """(n, len(nodes) * 6): per node, angles minus its neutral offset, then the gyroscope."""
+    missing = [i for i in nodes if i not in rec.nodes]
+    if missing:
+        raise BomiError(f"{rec.source}: the model needs node(s) {missing}, the recording has {list(rec.node_indices)}")
+    return np.hstack([np.hstack([rec.nodes[i].angles - neutral[k], rec.nodes[i].gyro]) for k, i in enumerate(nodes)])
+
+
+def window_features(states: np.ndarray, spec: FeatureSpec) -> np.ndarray:
+    """Features of every window (time order) of the node-state sequence."""
+    return features(spec.kind, sliding_windows(states[:, spec.components], spec.window, spec.stride))
+
+
+@dataclass
+class PreparedRecording:
+    """A recording cut into windows for one feature spec."""
+
+    features: np.ndarray     # (m, F), every window in time order
+    ends: np.ndarray         # (m,) index of each window's last sample
+    states: np.ndarray       # (n, nodes * 6)
+    labels: np.ndarray | None  # (m,) label of each window's last sample
+    pure: np.ndarray | None    # (m,) window lies inside one label segment
+
+
+def prepare(rec: Recording, spec: FeatureSpec, neutral_samples: int) -> PreparedRecording:
+    states = node_states(rec, spec.nodes, recording_neutral(rec, spec.nodes, neutral_samples))
+    ends = window_ends(len(rec), spec.window, spec.stride)
+    labels = pure = None
+    if rec.labels is not None:
+        labels = rec.labels[ends]
+        pure = single_label_windows(rec.labels, spec.window, spec.stride)
+    return PreparedRecording(window_features(states, spec), ends, states, labels, pure)
+
+
+def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec | None = None,
+          shrinkage: float | str | None = ..., post: PostProcessing | None = None) -> Model:
+    """Fit the LDA on the single-label windows of every recording (each with its own neutral offsets).
+
+    ``spec``, ``shrinkage`` and ``post`` default to the profile's.
+    """
+    spec = spec or profile.spec
+    shrinkage = profile.shrinkage if shrinkage is ... else shrinkage
+    xs, ys, gammas = [], [], {i: [] for i in spec.nodes}
+    for rec in recordings:
+        rec.require_labels()
+        prepared = prepare(rec, spec, profile.neutral_samples)
+        xs.append(prepared.features[prepared.pure])
+        ys.append(prepared.labels[prepared.pure])
+        ends = prepared.ends[prepared.pure]
+        for k, i in enumerate(spec.nodes):
+            gammas[i].append(gamma(prepared.states[ends, k * _WIDTH:k * _WIDTH + 3]))
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    unknown = sorted(set(y.tolist()) - {cls.label for cls in profile.classes})
+    if unknown:
+        raise BomiError(f"{recordings[0].source}: label(s) {unknown} are not classes of profile {profile.name}")
+    if len(np.unique(y)) < 3:
+        raise BomiError(f"{recordings[0].source}: training needs at least three classes, found {np.unique(y).tolist()}")
+    classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))
+    amplitude = amplitude_ranges({i: np.concatenate(g) for i, g in gammas.items()}, y, profile.class_nodes)
+    return Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
+                 post=post or profile.post, shrinkage=shrinkage)
+
+
+@dataclass
+class Evaluation:
+    """Scores of a model on the single-label windows of a labelled recording."""
+
+    source: str
+    truth: np.ndarray
+    predicted: np.ndarray    # after post-processing (a rejected window is predicted neutral)
+    rejected: np.ndarray
+
+    @property
+    def accuracy(self) -> float:
+        return float(np.mean(self.predicted == self.truth))
+
+    @property
+    def rejected_share(self) -> float:
+        return float(np.mean(self.rejected))
+
+    @property
+    def accepted_accuracy(self) -> float:
+        """Accuracy over the windows the rejection let through."""
+        accepted = ~self.rejected
+        return float(np.mean(self.predicted[accepted] == self.truth[accepted])) if accepted.any() else float("nan")
+
+
+def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProcessing | None = None) -> Evaluation:
+    """Decide every window in time order (as the stream does), then score the single-label ones."""
+    rec.require_labels()
+    prepared = prepare(rec, model.spec, neutral_samples)
+    decisions = decide(model, prepared.features, post)
+    pure = prepared.pure
+    return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure])
+
+
+# ------------------------------------------------------------------------------------- streaming
+@dataclass(frozen=True)
+class Decision:
+    label: int
+    name: str
+    function: str            # joystick function (F, B, R, L, Rr, Lr, B1, B2) or "neutral"
+    confidence: float        # posterior of the LDA's winning class (before post-processing)
+    rejected: bool
+    gamma: float             # sqrt(p^2 + r^2 + y^2) of the node carrying the class (0 for neutral)
+    nu: float                # proportional output in [0, 1]
+    sample_index: int        # index of the tick (node-1 sample) that produced it
+
+
+class OnlineChain:
+    """One sample at a time: per-node fusion, then a tick with at most one Decision per node-1 sample.
+
+    The other nodes contribute their latest state; no decision is made until every node has
+    reported once and the window is full.
+    """
+
+    def __init__(self, model: Model, profile: Profile):
+        missing = set(model.spec.nodes) - set(profile.node_indices)
+        if missing:
+            raise BomiError(f"{profile.source}: the model needs node(s) {sorted(missing)} the profile does not define")
+        self.model = model
+        self.profile = profile
+        self.nodes = model.spec.nodes
+        self._slot = {node: k for k, node in enumerate(self.nodes)}
+        calibrations = {n.index: n.calibration for n in profile.nodes}
+        self._fusion = {node: NodeFusion(calibrations[node]) for node in self.nodes}
+        self._state = np.zeros(len(self.nodes) * _WIDTH)
+        self._seen: set[int] = set()
+        self._neutral = np.zeros((len(self.nodes), 3))
+        self._window = WindowBuffer(model.spec.window, len(model.spec.components), model.spec.stride)
+        self._vote = MajorityVote(model.post.vote_length)
+        self._calibration: dict[int, list] | None = None
+        self.ticks = 0
+
+    # neutral-offset calibration
+    def set_neutral(self, offsets: Mapping[int, Sequence[float]]) -> None:
+        """Neutral (pitch, roll, yaw) per node index; the window restarts."""
+        for node, offset in offsets.items():
+            self._neutral[self._slot[node]] = offset
+        self._window.reset()
+
+    def begin_neutral_calibration(self) -> None:
+        """Collect the next ``profile.neutral_samples`` fused samples of every node as the neutral posture."""
+        self._calibration = {node: [] for node in self.nodes}
+
+    @property
+    def calibrating(self) -> bool:
+        return self._calibration is not None
+
+    # inputs
+    def push(self, node: int, acc, gyro, mag) -> Decision | None:
+        """Raw int16 LSB in the sensor's axes -> fusion -> ``push_angles``. Unknown nodes are ignored."""
+        fusion = self._fusion.get(node)
+        if fusion is None:
+            return None
+        return self.push_angles(node, fusion.update(acc, gyro, mag), gyro)
+
+    def push_angles(self, node: int, angles: Sequence[float], gyro: Sequence[float]) -> Decision | None:
+        """Already-fused (pitch, roll, yaw) and gyro of one node (e.g. replaying a published recording)."""
+        slot = self._slot.get(node)
+        if slot is None:
+            return None
+        if self._calibration is not None:
+            return self._collect_neutral(node, angles)
+        base = slot * _WIDTH
+        self._state[base:base + 3] = angles
+        self._state[base:base + 3] -= self._neutral[slot]
+        self._state[base + 3:base + 6] = gyro
+        self._seen.add(node)
+        if node != self.nodes[0] or len(self._seen) < len(self.nodes):
+            return None
+        return self._tick()
+
+    def _collect_neutral(self, node: int, angles: Sequence[float]) -> None:
+        samples = self._calibration[node]
+        samples.append(tuple(angles))
+        if all(len(s) >= self.profile.neutral_samples for s in self._calibration.values()):
+            offsets = {n: neutral_offsets(np.array(s)) for n, s in self._calibration.items()}
+            self._calibration = None
+            self.set_neutral(offsets)
+
+    def _tick(self) -> Decision | None:
+        index = self.ticks
+        self.ticks += 1
+        window = self._window.push(self._state[self.model.spec.components])
+        if window is None:
+            return None
+        prob = posteriors(self.model, features(self.model.spec.kind, window[None]))[0]
+        best = int(prob.argmax())
+        confidence = float(prob[best])
+        raw = int(self.model.classes[best])
+        threshold = self.model.post.rejection_threshold
+        is_rejected = threshold is not None and confidence < threshold
+        label = self._vote.push(NEUTRAL_LABEL if is_rejected else raw)
+        cls = self.profile.class_of(label)
+        amplitude = self.model.amplitude.get(label)
+        g = 0.0
+        if amplitude is not None:
+            base = self._slot[amplitude.node] * _WIDTH
+            g = float(gamma(self._state[base:base + 3]))
+        return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
+                        rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)

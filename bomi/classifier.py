@@ -1,0 +1,165 @@
+"""LDA classification, optional post-processing, and the paper's proportional output.
+
+scikit-learn fits the LDA. Decisions use the fitted linear discriminant (``coef_``, ``intercept_``)
+through ``posteriors``, the same softmax sklearn's ``predict_proba`` computes, because sklearn's
+per-call input validation costs ~90 us per single sample, more than the whole streaming budget.
+A model loaded from disk therefore predicts with exactly the arithmetic of the trained one.
+
+Post-processing steps are separate and optional (off by default): confidence rejection (posterior
+below a threshold -> the neutral class) then a majority vote over the last N decisions.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+from bomi.features import FeatureSpec
+
+NEUTRAL_LABEL = 0
+
+
+@dataclass(frozen=True)
+class PostProcessing:
+    """Rejection threshold on the winning posterior (None = off) and majority-vote length (1 = off)."""
+
+    rejection_threshold: float | None = None
+    vote_length: int = 1
+
+    def __post_init__(self) -> None:
+        if self.rejection_threshold is not None and not 0.0 < self.rejection_threshold < 1.0:
+            raise ValueError(f"rejection threshold must be in (0, 1), got {self.rejection_threshold}")
+        if self.vote_length < 1:
+            raise ValueError(f"vote length must be >= 1, got {self.vote_length}")
+
+
+@dataclass(frozen=True)
+class AmplitudeRange:
+    """The node that carries a class and its gamma range over the class's training samples (degrees)."""
+
+    node: int
+    gamma_min: float
+    gamma_max: float
+
+
+@dataclass
+class Model:
+    """A trained classifier: everything needed to turn node states into decisions."""
+
+    classes: np.ndarray          # (K,) int labels, in sklearn's order
+    coef: np.ndarray             # (K, F)
+    intercept: np.ndarray        # (K,)
+    spec: FeatureSpec
+    amplitude: dict[int, AmplitudeRange]
+    post: PostProcessing = field(default_factory=PostProcessing)
+    shrinkage: float | str | None = None
+
+
+def fit_lda(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None) -> LinearDiscriminantAnalysis:
+    """sklearn LDA; 'svd' without shrinkage, 'lsqr' with it (svd does not support shrinkage)."""
+    if shrinkage is None:
+        return LinearDiscriminantAnalysis(solver="svd").fit(features, labels)
+    return LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage).fit(features, labels)
+
+
+def linear_parameters(lda: LinearDiscriminantAnalysis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(classes, coef (K, F), intercept (K,)) of a fitted multi-class LDA."""
+    if len(lda.classes_) < 3:
+        raise ValueError("need at least three classes (binary LDA has a single discriminant)")
+    return np.asarray(lda.classes_, dtype=np.int64), np.array(lda.coef_, dtype=float), np.array(lda.intercept_, dtype=float)
+
+
+def posteriors(model: Model, features: np.ndarray) -> np.ndarray:
+    """(n, F) -> (n, K) class posteriors: softmax of the linear discriminant scores."""
+    scores = features @ model.coef.T + model.intercept
+    scores -= scores.max(axis=1, keepdims=True)
+    np.exp(scores, out=scores)
+    scores /= scores.sum(axis=1, keepdims=True)
+    return scores
+
+
+def rejected(confidence: np.ndarray, threshold: float | None) -> np.ndarray:
+    """Mask of decisions whose winning posterior is below ``threshold`` (none when rejection is off)."""
+    if threshold is None:
+        return np.zeros(np.shape(confidence), dtype=bool)
+    return np.asarray(confidence) < threshold
+
+
+def reject(labels: np.ndarray, confidence: np.ndarray, threshold: float | None,
+           neutral: int = NEUTRAL_LABEL) -> np.ndarray:
+    """Replace decisions whose posterior is below ``threshold`` with the neutral class."""
+    return np.where(rejected(confidence, threshold), neutral, labels)
+
+
+class MajorityVote:
+    """Streaming majority over the last ``length`` labels; a tie goes to the most recent tied label."""
+
+    def __init__(self, length: int):
+        self._history: deque[int] = deque(maxlen=length)
+
+    def push(self, label: int) -> int:
+        self._history.append(label)
+        counts: dict[int, int] = {}
+        for item in self._history:
+            counts[item] = counts.get(item, 0) + 1
+        best = max(counts.values())
+        return next(item for item in reversed(self._history) if counts[item] == best)
+
+
+def majority_vote(labels: np.ndarray, length: int) -> np.ndarray:
+    """Batch form of ``MajorityVote`` over a decision sequence."""
+    if length == 1:
+        return labels
+    vote = MajorityVote(length)
+    return np.array([vote.push(int(label)) for label in labels], dtype=labels.dtype)
+
+
+@dataclass
+class BatchDecisions:
+    raw: np.ndarray          # argmax of the posteriors
+    confidence: np.ndarray   # the winning posterior
+    rejected: np.ndarray     # confidence below the rejection threshold
+    labels: np.ndarray       # after post-processing
+
+
+def decide(model: Model, features: np.ndarray, post: PostProcessing | None = None) -> BatchDecisions:
+    """Decisions for a sequence of windows in time order (the vote depends on the order)."""
+    post = post or model.post
+    prob = posteriors(model, features)
+    best = prob.argmax(axis=1)
+    raw = model.classes[best]
+    confidence = prob[np.arange(len(prob)), best]
+    labels = majority_vote(reject(raw, confidence, post.rejection_threshold), post.vote_length)
+    return BatchDecisions(raw=raw, confidence=confidence, rejected=rejected(confidence, post.rejection_threshold),
+                          labels=labels)
+
+
+def gamma(angles: np.ndarray) -> np.ndarray:
+    """sqrt(pitch^2 + roll^2 + yaw^2) of (..., 3) neutral-subtracted angles."""
+    return np.sqrt(np.sum(np.square(angles), axis=-1))
+
+
+def amplitude_ranges(gammas: dict[int, np.ndarray], labels: np.ndarray, class_nodes: dict[int, int]) -> dict[int, AmplitudeRange]:
+    """Per non-neutral class: min and max of gamma of its node over the class's training samples.
+
+    ``gammas`` maps node index -> gamma per sample; ``class_nodes`` maps label -> node carrying it.
+    """
+    ranges = {}
+    for label, node in class_nodes.items():
+        values = gammas[node][labels == label]
+        if label == NEUTRAL_LABEL or values.size == 0:
+            continue
+        ranges[label] = AmplitudeRange(node=node, gamma_min=float(values.min()), gamma_max=float(values.max()))
+    return ranges
+
+
+def proportional(gamma_value: float, amplitude: AmplitudeRange | None) -> float:
+    """nu = |gamma - gamma_min| / (gamma_max - gamma_min), clipped to [0, 1]; 0 for the neutral class."""
+    if amplitude is None:
+        return 0.0
+    span = amplitude.gamma_max - amplitude.gamma_min
+    if span <= 0.0:
+        return 1.0
+    return min(1.0, abs(gamma_value - amplitude.gamma_min) / span)

@@ -1,0 +1,134 @@
+"""Windows and the paper's feature vectors, as plain array functions shared by batch and streaming.
+
+Every node contributes a 6-value state per sample: neutral-subtracted (pitch, roll, yaw) and gyro
+(x, y, z). A feature kind selects components from those states (``component_index``):
+- FV1: pitch, roll, yaw of the first node (node 1); pitch and roll of every other node;
+- FV2: FV1 plus every node's gyroscope x, y, z;
+- FV3: the FV2 components over two sub-windows (halves); per half, the minimum, maximum, mean and
+  absolute sum of every component.
+FV1 and FV2 are reduced over the window by its mean (a window of 8 smooths single-sample jumps).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+FEATURE_KINDS = ("FV1", "FV2", "FV3")
+NODE_STATE = ("pitch", "roll", "yaw", "gyro_x", "gyro_y", "gyro_z")
+_FV3_STATS = ("min", "max", "mean", "abssum")
+
+
+def component_index(n_nodes: int, kind: str) -> np.ndarray:
+    """Positions, in the flattened (n_nodes * 6) node states, of the components ``kind`` uses."""
+    if kind not in FEATURE_KINDS:
+        raise ValueError(f"unknown feature vector {kind!r}, expected one of {', '.join(FEATURE_KINDS)}")
+    width = len(NODE_STATE)
+    index = [0, 1, 2] + [node * width + k for node in range(1, n_nodes) for k in (0, 1)]
+    if kind != "FV1":
+        index += [node * width + k for node in range(n_nodes) for k in (3, 4, 5)]
+    return np.array(index, dtype=np.intp)
+
+
+def component_names(nodes: tuple[int, ...], kind: str) -> list[str]:
+    flat = [f"{name}{node}" for node in nodes for name in NODE_STATE]
+    return [flat[i] for i in component_index(len(nodes), kind)]
+
+
+def feature_names(nodes: tuple[int, ...], kind: str) -> list[str]:
+    components = component_names(nodes, kind)
+    if kind != "FV3":
+        return components
+    return [f"{stat}_{half}({c})" for half in ("a", "b") for stat in _FV3_STATS for c in components]
+
+
+def sliding_windows(samples: np.ndarray, length: int = 8, stride: int = 1) -> np.ndarray:
+    """(n, C) samples -> (m, length, C) read-only view of the windows, the k-th ending at sample
+    ``length - 1 + k * stride``."""
+    if length < 1 or stride < 1:
+        raise ValueError("window length and stride must be >= 1")
+    if len(samples) < length:
+        return np.empty((0, length) + samples.shape[1:], dtype=samples.dtype)
+    view = np.lib.stride_tricks.sliding_window_view(samples, length, axis=0)
+    return np.moveaxis(view, -1, 1)[::stride]
+
+
+def window_ends(n_samples: int, length: int = 8, stride: int = 1) -> np.ndarray:
+    """Index of the last sample of every window ``sliding_windows`` cuts from ``n_samples`` samples."""
+    return np.arange(length - 1, n_samples, stride)
+
+
+def single_label_windows(labels: np.ndarray, length: int = 8, stride: int = 1) -> np.ndarray:
+    """Boolean mask over windows: True where all samples of the window carry the same label."""
+    windows = sliding_windows(np.asarray(labels)[:, None], length, stride)[:, :, 0]
+    return np.all(windows == windows[:, :1], axis=1)
+
+
+def features(kind: str, windows: np.ndarray) -> np.ndarray:
+    """(m, L, C) windows of the ``kind`` components -> (m, F) feature vectors."""
+    if kind == "FV3":
+        return fv3(windows)
+    if kind in ("FV1", "FV2"):
+        return windows.mean(axis=1)
+    raise ValueError(f"unknown feature vector {kind!r}")
+
+
+def fv3(windows: np.ndarray) -> np.ndarray:
+    """Min, max, mean, absolute sum of every component over each half of the window.
+
+    Layout: [min, max, mean, abssum of half a, then the same of half b], each over all components.
+    """
+    m, length, channels = windows.shape
+    if length % 2:
+        raise ValueError(f"FV3 needs an even window length (two equal sub-windows), got {length}")
+    halves = windows.reshape(m, 2, length // 2, channels)
+    stats = (halves.min(axis=2), halves.max(axis=2), halves.mean(axis=2), np.abs(halves).sum(axis=2))
+    return np.stack(stats, axis=2).reshape(m, 8 * channels)
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """What a model was trained on: the feature kind, its nodes, and the window."""
+
+    kind: str
+    nodes: tuple[int, ...]
+    window: int = 8
+    stride: int = 1
+
+    def __post_init__(self) -> None:
+        component_index(len(self.nodes), self.kind)  # validates kind
+        if self.window < 1 or self.stride < 1:
+            raise ValueError("window length and stride must be >= 1")
+        if self.kind == "FV3" and self.window % 2:
+            raise ValueError(f"FV3 needs an even window length, got {self.window}")
+
+    @property
+    def components(self) -> np.ndarray:
+        return component_index(len(self.nodes), self.kind)
+
+
+class WindowBuffer:
+    """Streaming window of the last ``length`` rows; ``push`` returns the full window or None.
+
+    Rows are written twice into a buffer of 2 * length so the current window is always one
+    contiguous slice (no copy, no reordering).
+    """
+
+    def __init__(self, length: int, channels: int, stride: int = 1):
+        self.length = length
+        self.stride = stride
+        self._buffer = np.zeros((2 * length, channels))
+        self._count = 0
+
+    def push(self, row: np.ndarray) -> np.ndarray | None:
+        slot = self._count % self.length
+        self._buffer[slot] = row
+        self._buffer[slot + self.length] = row
+        self._count += 1
+        if self._count < self.length or (self._count - self.length) % self.stride:
+            return None
+        start = slot + 1
+        return self._buffer[start:start + self.length]
+
+    def reset(self) -> None:
+        self._count = 0

@@ -1,0 +1,133 @@
+"""Per-node orientation fusion exactly as ../shared/docs/hardware.md section 3 describes it.
+
+Magnetometer hard/soft-iron correction, mounting rotation, complementary filters on pitch and roll,
+a 10 Hz low-pass on both, tilt-compensated complementary yaw. ``NodeFusion.update`` is the one
+implementation; the batch ``fuse`` runs it over a whole recording, so both agree bit for bit.
+Angles in degrees; inputs raw int16 LSB in the sensor's own axes.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GYRO_DEG_PER_LSB = 2000.0 / 32768.0
+DT = 1.0 / 62.5
+GYRO_WEIGHT = 0.92
+ACC_WEIGHT = 0.08
+MAG_WEIGHT = 0.01
+LOWPASS_B = 0.355   # y[n] = b x[n] + b x[n-1] + a y[n-1]: first order, 10 Hz at 62.5 Hz
+LOWPASS_A = 0.2905
+
+Vector3 = tuple[float, float, float]
+Matrix3 = tuple[Vector3, Vector3, Vector3]
+
+IDENTITY: Matrix3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+HEADSET_HARD_IRON: Vector3 = (-127.4200, 158.6824, -57.7485)
+HEADSET_SOFT_IRON: Matrix3 = (
+    (1.6357e-4, -1.0404e-5, -1.4933e-6),
+    (-1.0404e-5, 1.5810e-4, 6.6342e-7),
+    (1.4933e-6, 6.6342e-7, 1.6295e-4),
+)
+HEADSET_MOUNTING: Matrix3 = ((0.0, 0.0, -1.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # (x,y,z) -> (-z,-x,y)
+
+
+def _as_vector(values, name: str) -> Vector3:
+    vector = tuple(float(v) for v in values)
+    if len(vector) != 3 or not all(math.isfinite(v) for v in vector):
+        raise ValueError(f"{name} must be 3 finite numbers, got {values!r}")
+    return vector
+
+
+def _as_matrix(values, name: str) -> Matrix3:
+    rows = tuple(tuple(float(v) for v in row) for row in values)
+    if len(rows) != 3 or any(len(r) != 3 for r in rows) or not all(math.isfinite(v) for r in rows for v in r):
+        raise ValueError(f"{name} must be a 3x3 matrix of finite numbers, got {values!r}")
+    return rows
+
+
+@dataclass(frozen=True)
+class NodeCalibration:
+    """A node's constants: magnetometer hard-iron offset h (LSB), soft-iron matrix C, mounting rotation.
+
+    The defaults are the headset node's (IMU1) from hardware.md; ``NodeCalibration.uncalibrated()``
+    is the sane default for other nodes (h = 0, C = I, no mounting rotation): the yaw filter only
+    uses the direction of the field, so an uncalibrated C only costs heading accuracy.
+    """
+
+    hard_iron: Vector3 = HEADSET_HARD_IRON
+    soft_iron: Matrix3 = HEADSET_SOFT_IRON
+    mounting: Matrix3 = HEADSET_MOUNTING
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "hard_iron", _as_vector(self.hard_iron, "hard_iron"))
+        object.__setattr__(self, "soft_iron", _as_matrix(self.soft_iron, "soft_iron"))
+        mounting = _as_matrix(self.mounting, "mounting")
+        m = np.array(mounting)
+        if not (np.allclose(m @ m.T, np.eye(3), atol=1e-6) and np.isclose(np.linalg.det(m), 1.0, atol=1e-6)):
+            raise ValueError(f"mounting must be a rotation matrix (orthonormal, det +1), got {mounting!r}")
+        object.__setattr__(self, "mounting", mounting)
+
+    @classmethod
+    def uncalibrated(cls) -> NodeCalibration:
+        return cls(hard_iron=(0.0, 0.0, 0.0), soft_iron=IDENTITY, mounting=IDENTITY)
+
+
+def _mat_vec(m: Matrix3, x: float, y: float, z: float) -> Vector3:
+    return (m[0][0] * x + m[0][1] * y + m[0][2] * z,
+            m[1][0] * x + m[1][1] * y + m[1][2] * z,
+            m[2][0] * x + m[2][1] * y + m[2][2] * z)
+
+
+@dataclass
+class NodeFusion:
+    """Streaming fusion of one node; the filter states start at zero as on the original host."""
+
+    calibration: NodeCalibration = field(default_factory=NodeCalibration)
+    pitch_state: float = 0.0
+    roll_state: float = 0.0
+    yaw_state: float = 0.0
+    pitch: float = 0.0
+    roll: float = 0.0
+
+    def update(self, acc, gyro, mag) -> Vector3:
+        """One sample of raw LSB (sensor axes) -> (pitch, roll, yaw) in degrees."""
+        cal = self.calibration
+        mount = cal.mounting
+        h = cal.hard_iron
+        corrected = _mat_vec(cal.soft_iron, mag[0] - h[0], mag[1] - h[1], -mag[2] - h[2])
+        ax, ay, az = _mat_vec(mount, acc[0], acc[1], acc[2])
+        gx, gy, gz = _mat_vec(mount, gyro[0], gyro[1], gyro[2])
+        m1, m2, m3 = _mat_vec(mount, *corrected)
+        step = GYRO_DEG_PER_LSB * DT
+
+        previous_pitch_state, previous_roll_state = self.pitch_state, self.roll_state
+        self.pitch_state = (ACC_WEIGHT * math.degrees(math.atan2(-ay, -ax))
+                            + GYRO_WEIGHT * (previous_pitch_state - gz * step))
+        self.roll_state = (ACC_WEIGHT * math.degrees(math.atan2(-az, -ax))
+                           + GYRO_WEIGHT * (previous_roll_state + gy * step))
+        self.pitch = LOWPASS_B * (self.pitch_state + previous_pitch_state) + LOWPASS_A * self.pitch
+        self.roll = LOWPASS_B * (self.roll_state + previous_roll_state) + LOWPASS_A * self.roll
+
+        p, r = math.radians(-self.pitch), math.radians(self.roll)
+        c_p, s_p, c_r, s_r = math.cos(p), math.sin(p), math.cos(r), math.sin(r)
+        y_h = s_p * c_r * m1 + c_p * m2 + s_p * s_r * m3
+        z_h = -s_r * m1 + c_r * m3
+        self.yaw_state = (MAG_WEIGHT * math.degrees(math.atan2(-z_h, -y_h))
+                          + (1.0 - MAG_WEIGHT) * (self.yaw_state + gx * step))
+        return self.pitch, self.roll, self.yaw_state
+
+
+def fuse(acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,
+         cal: NodeCalibration | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Batch fusion of a whole recording of one node: (n, 3) arrays -> pitch, roll, yaw arrays (n,)."""
+    node = NodeFusion(cal or NodeCalibration())
+    out = np.array([node.update(a, g, m) for a, g, m in zip(acc.tolist(), gyro.tolist(), mag.tolist())],
+                   dtype=float).reshape(-1, 3)
+    return out[:, 0], out[:, 1], out[:, 2]
+
+
+def neutral_offsets(angles: np.ndarray, samples: int = 100) -> np.ndarray:
+    """Neutral-offset calibration: mean (pitch, roll, yaw) over the first ``samples`` rows of neutral posture."""
+    return np.asarray(angles, dtype=float)[:samples].mean(axis=0)

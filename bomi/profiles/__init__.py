@@ -1,0 +1,194 @@
+"""User profiles (TOML): the nodes worn and where, the classes and their joystick functions, features,
+window, LDA shrinkage and post-processing. ``load_profile("P1")`` resolves the shipped profiles.
+
+Node calibration defaults: node 1 (the headset) gets hardware.md's headset constants; other nodes get
+h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`` table says otherwise.
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bomi.classifier import NEUTRAL_LABEL, PostProcessing
+from bomi.errors import BomiError
+from bomi.features import FEATURE_KINDS, FeatureSpec
+from bomi.fusion import NodeCalibration
+
+PROFILE_DIR = Path(__file__).resolve().parent
+JOYSTICK_FUNCTIONS = ("F", "B", "R", "L", "Rr", "Lr", "B1", "B2")
+NEUTRAL_FUNCTION = "neutral"
+
+_TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "post_processing"}
+_NODE_KEYS = {"index", "node_id", "site", "calibration"}
+_CALIBRATION_KEYS = {"hard_iron", "soft_iron", "mounting"}
+_CLASS_KEYS = {"label", "name", "function", "node"}
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    index: int            # 1..6, the column suffix in recordings; node 1 carries yaw in FV1
+    node_id: int          # the base station's id for it (10, 11, 12, ...)
+    site: str
+    calibration: NodeCalibration
+
+
+@dataclass(frozen=True)
+class ClassConfig:
+    label: int
+    name: str
+    function: str         # one of JOYSTICK_FUNCTIONS, or "neutral" for c0
+    node: int | None      # the node whose gamma gives the class's proportional output
+
+
+@dataclass(frozen=True)
+class Profile:
+    name: str
+    description: str
+    nodes: tuple[NodeConfig, ...]
+    classes: tuple[ClassConfig, ...]
+    spec: FeatureSpec
+    shrinkage: float | str | None
+    neutral_samples: int
+    post: PostProcessing
+    source: str
+
+    @property
+    def node_indices(self) -> tuple[int, ...]:
+        return tuple(node.index for node in self.nodes)
+
+    def class_of(self, label: int) -> ClassConfig:
+        for cls in self.classes:
+            if cls.label == label:
+                return cls
+        raise KeyError(label)
+
+    @property
+    def class_nodes(self) -> dict[int, int]:
+        return {cls.label: cls.node for cls in self.classes if cls.node is not None}
+
+
+def load_profile(path_or_name: str | Path) -> Profile:
+    """Load and validate a profile file, or a shipped one by name (P1, P4, P5)."""
+    path = Path(path_or_name)
+    shipped = PROFILE_DIR / f"{path_or_name}.toml"
+    if not path.suffix and shipped.is_file():
+        path = shipped
+    if not path.is_file():
+        names = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.toml")))
+        raise BomiError(f"{path}: no such profile file (shipped profiles: {names})")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+    try:
+        return _parse(data, str(path))
+    except ValueError as exc:
+        raise BomiError(f"{path}: {exc}") from None
+
+
+def _check_keys(table: dict, allowed: set[str], where: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
+
+
+def _get(table: dict, key: str, kind: type | tuple, where: str, default: Any = ...) -> Any:
+    if key not in table:
+        if default is ...:
+            raise ValueError(f"{where}: missing '{key}'")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, kind):  # no profile field is a boolean
+        raise ValueError(f"{where}: '{key}' has the wrong type ({type(value).__name__})")
+    return value
+
+
+def _parse(data: dict, source: str) -> Profile:
+    _check_keys(data, _TOP_KEYS, "profile")
+    nodes = tuple(_parse_node(t, f"nodes[{k}]") for k, t in enumerate(_get(data, "nodes", list, "profile")))
+    indices = [node.index for node in nodes]
+    if not nodes or len(set(indices)) != len(indices) or len({n.node_id for n in nodes}) != len(nodes):
+        raise ValueError("nodes: need at least one node, with distinct index and node_id")
+    if indices != sorted(indices):
+        raise ValueError("nodes: list them in increasing index (the first one carries yaw in FV1)")
+    classes = tuple(_parse_class(t, f"classes[{k}]", set(indices)) for k, t in enumerate(_get(data, "classes", list, "profile")))
+    labels = [cls.label for cls in classes]
+    if len(set(labels)) != len(labels):
+        raise ValueError("classes: duplicate label")
+    if len(classes) < 3:
+        raise ValueError("classes: need at least three classes (neutral and two motions)")
+    neutral = [cls for cls in classes if cls.function == NEUTRAL_FUNCTION]
+    if len(neutral) != 1 or neutral[0].label != NEUTRAL_LABEL:
+        raise ValueError(f"classes: exactly one class, label {NEUTRAL_LABEL}, must have function \"neutral\"")
+
+    features = _get(data, "features", dict, "profile", {})
+    _check_keys(features, {"vector", "window", "stride"}, "features")
+    kind = _get(features, "vector", str, "features", "FV3")
+    if kind not in FEATURE_KINDS:
+        raise ValueError(f"features: vector must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
+    spec = FeatureSpec(kind=kind, nodes=tuple(indices), window=_get(features, "window", int, "features", 8),
+                       stride=_get(features, "stride", int, "features", 1))
+
+    classifier = _get(data, "classifier", dict, "profile", {})
+    _check_keys(classifier, {"shrinkage"}, "classifier")
+    shrinkage = _get(classifier, "shrinkage", (str, float, int), "classifier", "none")
+    if isinstance(shrinkage, str):
+        if shrinkage not in ("auto", "none"):
+            raise ValueError(f"classifier: shrinkage must be \"auto\", \"none\" or a number in [0, 1], got {shrinkage!r}")
+        shrinkage = None if shrinkage == "none" else shrinkage
+    elif not 0.0 <= shrinkage <= 1.0:
+        raise ValueError(f"classifier: shrinkage must be in [0, 1], got {shrinkage}")
+
+    neutral_table = _get(data, "neutral", dict, "profile", {})
+    _check_keys(neutral_table, {"samples"}, "neutral")
+    neutral_samples = _get(neutral_table, "samples", int, "neutral", 100)
+    if neutral_samples < 1:
+        raise ValueError("neutral: samples must be >= 1")
+
+    post_table = _get(data, "post_processing", dict, "profile", {})
+    _check_keys(post_table, {"rejection_threshold", "vote_length"}, "post_processing")
+    post = PostProcessing(rejection_threshold=_get(post_table, "rejection_threshold", (float, int), "post_processing", None),
+                          vote_length=_get(post_table, "vote_length", int, "post_processing", 1))
+    return Profile(name=_get(data, "name", str, "profile"), description=_get(data, "description", str, "profile", ""),
+                   nodes=nodes, classes=tuple(sorted(classes, key=lambda c: c.label)), spec=spec,
+                   shrinkage=shrinkage, neutral_samples=neutral_samples, post=post, source=source)
+
+
+def _parse_node(table: Any, where: str) -> NodeConfig:
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: must be a table")
+    _check_keys(table, _NODE_KEYS, where)
+    index = _get(table, "index", int, where)
+    if not 1 <= index <= 6:
+        raise ValueError(f"{where}: index must be in 1..6, got {index}")
+    default = NodeCalibration() if index == 1 else NodeCalibration.uncalibrated()
+    calibration = _get(table, "calibration", dict, where, {})
+    _check_keys(calibration, _CALIBRATION_KEYS, f"{where}.calibration")
+    try:
+        cal = NodeCalibration(hard_iron=calibration.get("hard_iron", default.hard_iron),
+                              soft_iron=calibration.get("soft_iron", default.soft_iron),
+                              mounting=calibration.get("mounting", default.mounting))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}.calibration: {exc}") from None
+    return NodeConfig(index=index, node_id=_get(table, "node_id", int, where),
+                      site=_get(table, "site", str, where), calibration=cal)
+
+
+def _parse_class(table: Any, where: str, node_indices: set[int]) -> ClassConfig:
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: must be a table")
+    _check_keys(table, _CLASS_KEYS, where)
+    label = _get(table, "label", int, where)
+    if label < 0:
+        raise ValueError(f"{where}: label must be >= 0")
+    function = _get(table, "function", str, where)
+    if function not in JOYSTICK_FUNCTIONS + (NEUTRAL_FUNCTION,):
+        raise ValueError(f"{where}: function must be one of {', '.join(JOYSTICK_FUNCTIONS)} or \"neutral\", got {function!r}")
+    node = _get(table, "node", int, where, None)
+    if function != NEUTRAL_FUNCTION and node is None:
+        raise ValueError(f"{where}: a motion class needs 'node' (the node that carries it)")
+    if node is not None and node not in node_indices:
+        raise ValueError(f"{where}: node {node} is not one of the profile's nodes {sorted(node_indices)}")
+    return ClassConfig(label=label, name=_get(table, "name", str, where), function=function, node=node)
