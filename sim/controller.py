@@ -1,0 +1,130 @@
+"""Cartesian velocity control: a commanded tool twist becomes joint velocities (damped least squares).
+
+The commanded twist is integrated into a target pose; the joint velocities track the twist plus a
+proportional pull toward that target, so a zero command holds the pose instead of drifting.
+Virtual walls (a box and a reach shell around the shoulder) clamp the target, which makes the
+hand stop at a wall without jitter. Limited joints stop a margin short of their range; the
+joint-velocity vector is scaled as a whole when a joint would exceed its speed limit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from sim.config import ControlConfig, WorkspaceConfig
+from sim.kinematics import ArmKinematics
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    lower: np.ndarray  # -inf for continuous joints
+    upper: np.ndarray
+    speed: np.ndarray  # rad/s
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where the tool point may go: an axis-aligned box intersected with a shell around the shoulder."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    shoulder: np.ndarray
+    reach_min: float
+    reach_max: float
+
+    @classmethod
+    def from_config(cls, config: WorkspaceConfig, shoulder: np.ndarray) -> Workspace:
+        bounds = np.array([config.x, config.y, config.z], dtype=float)
+        return cls(bounds[:, 0], bounds[:, 1], np.asarray(shoulder, float), config.reach_min, config.reach_max)
+
+    def clamp(self, point: np.ndarray) -> np.ndarray:
+        """The nearest allowed point (box first, then the shell; the shell wins where they disagree)."""
+        point = np.clip(point, self.lower, self.upper)
+        offset = point - self.shoulder
+        distance = np.linalg.norm(offset)
+        if distance > self.reach_max:
+            return self.shoulder + offset * (self.reach_max / distance)
+        if 0 < distance < self.reach_min:
+            return self.shoulder + offset * (self.reach_min / distance)
+        return point
+
+    def contains(self, point: np.ndarray, tolerance: float = 1e-9) -> bool:
+        return bool(np.allclose(self.clamp(point), point, atol=tolerance, rtol=0))
+
+
+def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float) -> np.ndarray:
+    """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities."""
+    jjt = jacobian @ jacobian.T
+    jjt[np.diag_indices_from(jjt)] += damping**2
+    return jacobian.T @ np.linalg.solve(jjt, twist)
+
+
+def speed_scale(qd: np.ndarray, speed_limit: np.ndarray) -> float:
+    """Largest factor <= 1 that keeps every joint within its speed limit (same factor for all)."""
+    ratio = np.max(np.abs(qd) / speed_limit)
+    return 1.0 if ratio <= 1.0 else 1.0 / ratio
+
+
+def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """Rotation vector (world axes) taking ``current`` to ``target``."""
+    return pin.log3(target @ current.T)
+
+
+class CartesianVelocityController:
+    """Turns a tool twist into joint velocities, one control tick at a time."""
+
+    def __init__(self, kinematics: ArmKinematics, limits: JointLimits, workspace: Workspace,
+                 config: ControlConfig, dt: float):
+        self.kinematics = kinematics
+        self.limits = limits
+        self.workspace = workspace
+        self.config = config
+        self.dt = dt
+        self.target_position = np.zeros(3)
+        self.target_rotation = np.eye(3)
+
+    def reset(self, q: np.ndarray) -> None:
+        """Hold the pose the arm is in."""
+        self.target_position, self.target_rotation = self.kinematics.tool_pose(q)
+        self.target_position = self.workspace.clamp(self.target_position)
+
+    def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
+        """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
+        position, rotation = self.kinematics.tool_pose(q)
+        feedforward = self._advance_target(position, rotation, np.asarray(linear, float), np.asarray(angular, float))
+        twist = feedforward + np.concatenate((
+            self.config.position_gain * (self.target_position - position),
+            self.config.orientation_gain * rotation_error(self.target_rotation, rotation)))
+        jacobian = self.kinematics.jacobian(q)
+        qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
+        blocked = self._blocked_joints(q, qd)
+        if blocked.any():
+            jacobian[:, blocked] = 0.0
+            qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
+            qd[blocked] = 0.0
+        return qd * speed_scale(qd, self.limits.speed)
+
+    def _advance_target(self, position, rotation, linear, angular) -> np.ndarray:
+        """Move the target by one tick of the command inside the walls; return the feedforward twist."""
+        walled = self.workspace.clamp(self.target_position + linear * self.dt)
+        linear_ff = (walled - self.target_position) / self.dt
+        self.target_position = walled
+        self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
+        # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
+        lag = self.target_position - position
+        distance = np.linalg.norm(lag)
+        if distance > self.config.max_tracking_error:
+            self.target_position = position + lag * (self.config.max_tracking_error / distance)
+        turn = rotation_error(self.target_rotation, rotation)
+        angle = np.linalg.norm(turn)
+        max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
+        if angle > max_angle:
+            self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
+        return np.concatenate((linear_ff, angular))
+
+    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Limited joints within the margin of a range end and moving further toward it."""
+        margin = self.config.joint_limit_margin
+        return ((q <= self.limits.lower + margin) & (qd < 0)) | ((q >= self.limits.upper - margin) & (qd > 0))

@@ -1,0 +1,172 @@
+"""The physics loop: one 60 Hz control tick = joystick -> twist -> DLS IK -> velocity actuators -> substeps.
+
+``ArmSim`` knows nothing of any task: the caller places the cubes, drives the stick (or a twist
+directly) and reads positions, grasp state, mode and counters.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from sim.config import MODELS_DIR, SimConfig, load_config
+from sim.controller import CartesianVelocityController, JointLimits, Workspace
+from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState, Mode
+from sim.kinematics import arm_kinematics
+from sim.scene import build_scene
+
+# Tool frame with the hand pointing down (tool z = -world z) and the fingers closing along world x.
+HAND_DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+class ArmSim:
+    """The JACO arm, hand and cubes on the table, advanced one control tick at a time."""
+
+    def __init__(self, config: SimConfig | None = None, models_dir: Path = MODELS_DIR):
+        self.config = config or load_config()
+        self.scene = build_scene(self.config, models_dir)
+        self.model = self.scene.model
+        self.data = mujoco.MjData(self.model)
+        self.dt = 1.0 / self.config.physics.control_hz
+        self.kinematics = arm_kinematics(self.scene)
+        self.home_q = self.kinematics.solve_pose(np.array(self.config.arm.home_tool_pos), HAND_DOWN,
+                                                 np.array(self.config.arm.home_seed))
+        arm_joints = self.model.actuator_trnid[self.scene.arm_actuators, 0]
+        limited = self.model.jnt_limited[arm_joints].astype(bool)
+        ranges = self.model.jnt_range[arm_joints]
+        self.limits = JointLimits(
+            lower=np.where(limited, ranges[:, 0], -np.inf),
+            upper=np.where(limited, ranges[:, 1], np.inf),
+            speed=self.model.actuator_ctrlrange[self.scene.arm_actuators, 1].copy())
+        self.workspace = Workspace.from_config(self.config.workspace, self._shoulder_position())
+        self.controller = CartesianVelocityController(self.kinematics, self.limits, self.workspace,
+                                                      self.config.control, self.dt)
+        self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed)
+        self.finger_target = np.zeros(3)
+        self.reset()
+
+    def _shoulder_position(self) -> np.ndarray:
+        """World position of joint 2's axis: the centre of the reach shell."""
+        pin.forwardKinematics(self.kinematics.model, self.kinematics.data, self.home_q)
+        joint2 = self.kinematics.model.getJointId("joint_2")
+        return self.kinematics.base.act(self.kinematics.data.oMi[joint2].translation)
+
+    # -- episode -------------------------------------------------------------------------------
+
+    def default_cube_positions(self) -> np.ndarray:
+        """Cubes side by side at location A, as configured: (n, 2) x, y."""
+        return self.scene.location_a + np.array(self.config.scene.cube_offsets)
+
+    def reset(self, cube_positions: Sequence[Sequence[float]] | None = None) -> None:
+        """Arm at home, hand open, cubes resting on the table at ``(x, y)`` or ``(x, y, yaw)`` each."""
+        poses = self.default_cube_positions() if cube_positions is None else np.asarray(cube_positions, float)
+        if poses.ndim != 2 or poses.shape[0] != len(self.scene.cube_qpos) or poses.shape[1] not in (2, 3):
+            raise ValueError(f"cube_positions must be {len(self.scene.cube_qpos)} rows of (x, y) or (x, y, yaw), "
+                             f"got shape {poses.shape}")
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[self.scene.arm_qpos] = self.home_q
+        self.data.qpos[self.scene.finger_qpos] = self.scene.finger_range[:, 0]
+        for address, pose in zip(self.scene.cube_qpos, poses):
+            yaw = pose[2] if len(pose) == 3 else 0.0
+            self.data.qpos[address:address + 3] = (pose[0], pose[1], self.scene.cube_half_size)
+            self.data.qpos[address + 3:address + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
+        mujoco.mj_forward(self.model, self.data)
+        self.controller.reset(self.home_q)
+        self.joystick.reset()
+        self.finger_target = self.data.qpos[self.scene.finger_qpos].copy()
+
+    # -- control ---------------------------------------------------------------------------------
+
+    def step(self, state: JoystickState) -> ArmCommand:
+        """One control tick driven by the joystick; returns the command it produced."""
+        command = self.joystick.update(state)
+        self.step_twist(command.linear, command.angular, command.finger)
+        return command
+
+    def step_twist(self, linear: Sequence[float], angular: Sequence[float] = (0.0, 0.0, 0.0),
+                   finger: float = 0.0) -> None:
+        """One control tick below the joystick: a tool twist (m/s, rad/s, world axes), finger rate in [-1, 1]."""
+        q = self.arm_qpos
+        self.data.ctrl[self.scene.arm_actuators] = self.controller.joint_velocities(q, linear, angular)
+        self.data.ctrl[self.scene.finger_actuators] = self._finger_velocities(float(np.clip(finger, -1, 1)))
+        mujoco.mj_step(self.model, self.data, nstep=self.config.physics.substeps)
+
+    def _finger_velocities(self, rate: float) -> np.ndarray:
+        """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing."""
+        control = self.config.control
+        lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
+        self.finger_target = np.clip(self.finger_target + rate * control.finger_speed * self.dt, lower, upper)
+        velocity = control.finger_gain * (self.finger_target - self.data.qpos[self.scene.finger_qpos])
+        limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1]
+        return np.clip(velocity, -limit, limit)
+
+    # -- read-outs -------------------------------------------------------------------------------
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    @property
+    def arm_qpos(self) -> np.ndarray:
+        return self.data.qpos[self.scene.arm_qpos].copy()
+
+    @property
+    def tool_position(self) -> np.ndarray:
+        return self.data.site_xpos[self.scene.tool_site].copy()
+
+    @property
+    def tool_rotation(self) -> np.ndarray:
+        return self.data.site_xmat[self.scene.tool_site].reshape(3, 3).copy()
+
+    @property
+    def tool_quat(self) -> np.ndarray:
+        """Tool orientation as a unit quaternion (w, x, y, z)."""
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, self.data.site_xmat[self.scene.tool_site])
+        return quat
+
+    @property
+    def finger_closure(self) -> float:
+        """Mean finger closure: 0 fully open, 1 fully closed."""
+        lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
+        return float(np.mean((self.data.qpos[self.scene.finger_qpos] - lower) / (upper - lower)))
+
+    @property
+    def cube_positions(self) -> np.ndarray:
+        """(n, 3) cube centres."""
+        return self.data.geom_xpos[self.scene.cube_geoms].copy()
+
+    @property
+    def cube_quats(self) -> np.ndarray:
+        """(n, 4) cube orientations (w, x, y, z)."""
+        return np.array([self.data.qpos[a + 3:a + 7] for a in self.scene.cube_qpos])
+
+    @property
+    def mode(self) -> Mode:
+        return self.joystick.mode
+
+    @property
+    def mode_switches(self) -> int:
+        return self.joystick.mode_switches
+
+    @property
+    def button_presses(self) -> int:
+        return self.joystick.button_presses
+
+    def touching(self, geoms_a: frozenset[int], geoms_b: frozenset[int]) -> bool:
+        """Whether any active contact joins a geom of ``geoms_a`` to one of ``geoms_b``."""
+        contact = self.data.contact
+        first, second = contact.geom1[:self.data.ncon], contact.geom2[:self.data.ncon]
+        return any((a in geoms_a and b in geoms_b) or (a in geoms_b and b in geoms_a)
+                   for a, b in zip(first.tolist(), second.tolist()))
+
+    def cube_in_grasp(self) -> np.ndarray:
+        """Per cube: held between finger 1 and at least one of the opposing fingers 2, 3."""
+        one, two, three = self.scene.finger_geoms
+        return np.array([
+            self.touching(one, frozenset({cube})) and (self.touching(two, frozenset({cube}))
+                                                       or self.touching(three, frozenset({cube})))
+            for cube in self.scene.cube_geoms.tolist()])
