@@ -1,0 +1,235 @@
+"""Fit the virtual participant P1 to the published 5-day recordings; write its TOML profile.
+
+    python -m tasks.fit_participant [--data DIR] --out tasks/participants/P1.toml
+
+Only numbers leave the data: per-class posture deltas from neutral, their variability from
+repetition to repetition and from day to day, and the slow sway and tremor in holds, all
+measured on the recordings' fused angles (PitchiRaw, RolliRaw, YawiRaw). The files hold only the
+5 s holds, stitched (transitions were cut by the dataset's post-processing), so onset timing is
+not measurable from them and stays an assumption. docs/virtual_participant.md explains each step.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.signal
+from tqdm import tqdm
+
+from bomi.dataset import data_dir
+from bomi.errors import BomiError
+from bomi.fusion import DT
+from bomi.recording import Recording, read_recording
+
+SAMPLE_RATE_HZ = 1.0 / DT
+SPLIT_HZ = 1.0                 # below: slow sway; above: tremor
+EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
+MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
+TREMOR_POWER_BAND = (0.1, 0.9)  # the tremor band holds this central share of the tremor power
+ASSUMED_ONSET_S = 0.8          # min-jerk onset of a posture (not measurable here, see docs)
+ASSUMED_REACTION_S = 0.4       # cue-to-movement delay (likewise)
+
+
+@dataclass(frozen=True)
+class Block:
+    """One stitched hold: its label, day and rows [start, stop) of the day's recording."""
+
+    day: int
+    label: int
+    start: int
+    stop: int
+
+
+def hold_blocks(labels: np.ndarray, day: int) -> list[Block]:
+    """The runs of equal labels of one recording."""
+    edges = np.r_[0, np.flatnonzero(np.diff(labels.astype(int))) + 1, len(labels)]
+    return [Block(day, int(labels[a]), int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def stacked_angles(rec: Recording) -> np.ndarray:
+    """(n, nodes, 3) fused angles in node order."""
+    return np.stack([rec.nodes[i].angles for i in rec.node_indices], axis=1)
+
+
+def repeated_fraction(x: np.ndarray) -> float:
+    """Share of rows identical to the previous one (the recorder holds a node's last sample on loss)."""
+    return float(np.mean(np.all(np.diff(x, axis=0) == 0, axis=-1))) if len(x) > 1 else 1.0
+
+
+def split_sway_tremor(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A hold's (n, 3) angles -> slow sway around the hold's median and tremor (above SPLIT_HZ), edges dropped."""
+    b, a = scipy.signal.butter(2, SPLIT_HZ / (SAMPLE_RATE_HZ / 2), "high")
+    tremor = scipy.signal.filtfilt(b, a, x, axis=0)
+    sway = x - tremor - np.median(x, axis=0)
+    keep = slice(EDGE_SAMPLES, -EDGE_SAMPLES)
+    return sway[keep], tremor[keep]
+
+
+def power_band(freqs: np.ndarray, psd: np.ndarray, shares: tuple[float, float]) -> tuple[float, float]:
+    """The frequencies at which the cumulative power reaches the two shares."""
+    cumulative = np.cumsum(psd) / np.sum(psd)
+    return float(np.interp(shares[0], cumulative, freqs)), float(np.interp(shares[1], cumulative, freqs))
+
+
+@dataclass
+class Fit:
+    """Everything the profile stores, arrays are (nodes, 3) unless noted."""
+
+    days: int
+    neutral_deg: np.ndarray
+    neutral_rep_std: np.ndarray
+    neutral_sway_std: np.ndarray
+    neutral_tremor_std: np.ndarray
+    tremor_band_hz: tuple[float, float]
+    tremor_peak_hz: float
+    postures: dict[int, np.ndarray]
+    rep_std: dict[int, np.ndarray]
+    day_std: dict[int, np.ndarray]
+    sway_std: dict[int, np.ndarray]
+    tremor_std: dict[int, np.ndarray]
+
+
+def _rms(parts: list[np.ndarray]) -> np.ndarray:
+    """Pooled RMS over lists of (n, 3) pieces; NaN where nothing usable."""
+    return np.sqrt(np.mean(np.concatenate(parts) ** 2, axis=0)) if parts else np.full(3, np.nan)
+
+
+def fit_recordings(recordings: list[Recording]) -> Fit:
+    """Measure the participant from one recording per day (all with the same nodes and labels)."""
+    n_nodes = len(recordings[0].node_indices)
+    deltas: dict[tuple[int, int], list[np.ndarray]] = {}     # (label, day) -> per-repetition deltas
+    neutral_levels: dict[int, list[np.ndarray]] = {}          # day -> c0 block medians
+    sway: dict[tuple[int, int], list[np.ndarray]] = {}        # (label, node) -> pieces
+    tremor: dict[tuple[int, int], list[np.ndarray]] = {}
+    spectra: list[np.ndarray] = []
+    for day, rec in enumerate(tqdm(recordings, desc="fitting days", unit="day"), start=1):
+        angles = stacked_angles(rec)
+        blocks = hold_blocks(rec.require_labels(), day)
+        medians = [np.median(angles[b.start:b.stop], axis=0) for b in blocks]
+        for k, (block, level) in enumerate(zip(blocks, medians)):
+            if block.label == 0:
+                neutral_levels.setdefault(day, []).append(level)
+                continue
+            around = [medians[j] for j in (k - 1, k + 1) if 0 <= j < len(blocks) and blocks[j].label == 0]
+            if around:   # delta from the neutral before and after: robust to the slow yaw drift
+                deltas.setdefault((block.label, day), []).append(level - np.mean(around, axis=0))
+        for block in blocks:
+            for node in range(n_nodes):
+                x = angles[block.start:block.stop, node]
+                if repeated_fraction(x) > MAX_REPEATED_ROWS or len(x) <= 4 * EDGE_SAMPLES:
+                    continue
+                s, t = split_sway_tremor(x)
+                sway.setdefault((block.label, node), []).append(s)
+                tremor.setdefault((block.label, node), []).append(t)
+                if node == 0:
+                    spectra.append(scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=128, axis=0)[1].sum(axis=1))
+    freqs = scipy.signal.welch(np.zeros(256), fs=SAMPLE_RATE_HZ, nperseg=128)[0]
+    mean_psd = np.mean(spectra, axis=0)
+    labels = sorted({label for label, _ in deltas})
+
+    def per_node(table: dict, label: int) -> np.ndarray:
+        return np.array([_rms(table.get((label, node), [])) for node in range(n_nodes)])
+
+    per_day = {label: [np.array(deltas[(label, d)]) for d in range(1, len(recordings) + 1) if (label, d) in deltas]
+               for label in labels}
+    within = [reps - reps.mean(axis=0) for days in per_day.values() for reps in days if len(reps) > 1]
+    pooled_rep_var = np.mean(np.concatenate(within) ** 2, axis=0)
+    postures, rep_std, day_std = {}, {}, {}
+    for label, days in per_day.items():
+        postures[label] = np.median(np.concatenate(days), axis=0)
+        own = [reps - reps.mean(axis=0) for reps in days if len(reps) > 1]
+        rep_var = np.mean(np.concatenate(own) ** 2, axis=0) if own else pooled_rep_var
+        reps_per_day = np.mean([len(reps) for reps in days])
+        # var(day means) = day var + rep var / reps per day
+        day_var = np.var([reps.mean(axis=0) for reps in days], axis=0, ddof=1) - rep_var / reps_per_day
+        rep_std[label] = np.sqrt(rep_var)
+        day_std[label] = np.sqrt(np.clip(day_var, 0.0, None))
+    day_neutrals = [np.array(levels) for levels in neutral_levels.values()]
+    neutral_within = np.concatenate([lv - lv.mean(axis=0) for lv in day_neutrals])
+    return Fit(
+        days=len(recordings),
+        neutral_deg=np.median(day_neutrals[0], axis=0),
+        neutral_rep_std=np.sqrt(np.mean(neutral_within ** 2, axis=0)),
+        neutral_sway_std=per_node(sway, 0),
+        neutral_tremor_std=per_node(tremor, 0),
+        tremor_band_hz=power_band(freqs, mean_psd, TREMOR_POWER_BAND),
+        tremor_peak_hz=float(freqs[np.argmax(mean_psd)]),
+        postures=postures,
+        rep_std=rep_std,
+        day_std=day_std,
+        sway_std={label: per_node(sway, label) for label in labels},
+        tremor_std={label: per_node(tremor, label) for label in labels},
+    )
+
+
+def _fill_missing(values: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Noise levels of nodes with no usable block (every block held) take the neutral level."""
+    return np.where(np.isnan(values), fallback, values)
+
+
+def _toml_matrix(m: np.ndarray) -> str:
+    return "[" + ", ".join("[" + ", ".join(f"{v:.3f}" for v in row) + "]" for row in m) + "]"
+
+
+def fit_toml(fit: Fit, source: str) -> str:
+    """The participant profile text (see tasks/participant.py for the schema)."""
+    lines = [
+        f"# Virtual participant P1, fitted by `python -m tasks.fit_participant` on {fit.days} days of",
+        f"# {source} (the published P1 test recordings). Numbers only, no data. Angles are",
+        "# (pitch, roll, yaw) in degrees per node, node order of bomi profile P1. See docs/virtual_participant.md.",
+        'name = "P1"',
+        'profile = "P1"',
+        'description = "Able-bodied participant P1 of the paper, fitted on the 5-day recordings."',
+        f"onset_s = {ASSUMED_ONSET_S}      # assumed: the recordings hold no transitions",
+        f"reaction_s = {ASSUMED_REACTION_S}   # assumed",
+        "max_amplitude = 1.0",
+        "",
+        "[tremor]",
+        f"band_hz = [{fit.tremor_band_hz[0]:.2f}, {fit.tremor_band_hz[1]:.2f}]   "
+        f"# 10-90 % of the head's tremor power; peak {fit.tremor_peak_hz:.2f} Hz",
+        "",
+        "[neutral]",
+        f"angles_deg = {_toml_matrix(fit.neutral_deg)}   # day 1, absolute",
+        f"rep_std_deg = {_toml_matrix(fit.neutral_rep_std)}",
+        f"sway_std_deg = {_toml_matrix(fit.neutral_sway_std)}",
+        f"tremor_std_deg = {_toml_matrix(fit.neutral_tremor_std)}",
+    ]
+    for label, posture in fit.postures.items():
+        lines += [
+            "",
+            "[[classes]]",
+            f"label = {label}",
+            f"posture_deg = {_toml_matrix(posture)}",
+            f"rep_std_deg = {_toml_matrix(fit.rep_std[label])}",
+            f"day_std_deg = {_toml_matrix(fit.day_std[label])}",
+            f"sway_std_deg = {_toml_matrix(_fill_missing(fit.sway_std[label], fit.neutral_sway_std))}",
+            f"tremor_std_deg = {_toml_matrix(_fill_missing(fit.tremor_std[label], fit.neutral_tremor_std))}",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m tasks.fit_participant", description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=None, help="directory of dayN_testp.mat (default: BOMI_DATA_DIR)")
+    parser.add_argument("--out", type=Path, required=True, help="participant TOML to write")
+    args = parser.parse_args(argv)
+    directory = args.data or data_dir()
+    paths = sorted(directory.glob("day*_testp.mat"))
+    try:
+        if not paths:
+            raise BomiError(f"{directory}: no dayN_testp.mat recordings found")
+        text = fit_toml(fit_recordings([read_recording(p) for p in paths]), directory.name)
+    except BomiError as exc:
+        print(f"fit_participant: error: {exc}", file=sys.stderr)
+        return 2
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
