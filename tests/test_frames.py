@@ -1,0 +1,204 @@
+"""Frame encoding/parsing against hardware.md §1, hand-computed values and a naive reference."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+from hypothesis import assume, given, settings, strategies as st
+
+from bomi.frames import (
+    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame,
+    imu_index, imu_node_id,
+)
+
+# hardware.md §1 worked example: headset, counter 42, period 16 ms
+WORKED_EXAMPLE = bytes.fromhex(
+    "33 0A 10 2A 00 F9 A1 F7 7F 17 33 FF FF FF F5 00 05 FD 23 FC B1 3D 09 00 00 00 00 00 00 00 00 34")
+WORKED_FRAME = ImuFrame(node_id=10, period_ms=16, counter=42, mag=(-1631, -2177, 5939),
+                        gyro=(-1, -11, 5), acc=(-733, -847, 15625))
+
+PROPERTY_SETTINGS = settings(max_examples=150, deadline=None)
+int16 = st.integers(-32768, 32767)
+vector3 = st.tuples(int16, int16, int16)
+
+
+def reference_parse(stream: bytes) -> list[tuple]:
+    """The documented rule, written the slow obvious way on the whole stream at once."""
+    frames, i = [], 0
+    while True:
+        i = stream.find(b"\x33", i)
+        if i < 0 or i + FRAME_SIZE > len(stream):
+            return frames
+        if stream[i + 31] != 0x34:
+            i += 1
+            continue
+        raw = stream[i:i + FRAME_SIZE]
+        if 10 <= raw[1] <= 15:
+            words = [int.from_bytes(raw[k:k + 2], "big", signed=True) for k in range(5, 23, 2)]
+            frames.append((raw[1], raw[2], raw[3], tuple(words[0:3]), tuple(words[3:6]), tuple(words[6:9])))
+        i += FRAME_SIZE
+
+
+def as_tuple(frame: ImuFrame) -> tuple:
+    return (frame.node_id, frame.period_ms, frame.counter, frame.mag, frame.gyro, frame.acc)
+
+
+def feed_in_chunks(parser: FrameParser, stream: bytes, cuts: list[int]) -> list[ImuFrame]:
+    bounds = [0, *sorted(c % (len(stream) + 1) for c in cuts), len(stream)]
+    frames = []
+    for a, b in zip(bounds, bounds[1:]):
+        frames += parser.feed(stream[a:b])
+    return frames
+
+
+def test_worked_example_decodes_to_documented_values():
+    assert FrameParser().feed(WORKED_EXAMPLE) == [WORKED_FRAME]
+
+
+def test_worked_example_encodes_to_documented_bytes():
+    assert encode_imu_frame(WORKED_FRAME) == WORKED_EXAMPLE
+
+
+def test_worked_example_byte_by_byte_with_garbage_and_false_start():
+    parser = FrameParser()
+    stream = b"\x00\x33\x12" + WORKED_EXAMPLE + b"\x33"
+    frames = [f for byte in stream for f in parser.feed(bytes([byte]))]
+    assert frames == [WORKED_FRAME]
+    assert parser.discarded_bytes == 3  # the trailing 0x33 is kept, waiting for more bytes
+
+
+def test_node_index_mapping():
+    assert [imu_node_id(i) for i in range(1, 7)] == [10, 11, 12, 13, 14, 15]
+    assert [imu_index(n) for n in (9, 10, 15, 16, 30, 40)] == [None, 1, 6, None, None, None]
+    with pytest.raises(ValueError):
+        imu_node_id(7)
+
+
+def test_lost_packets_with_counter_wrap():
+    parser = FrameParser()
+    for counter in (250, 253, 2, 3):
+        parser.feed(encode_imu_frame(ImuFrame(11, 16, counter, (0, 0, 0), (0, 0, 0), (0, 0, 0))))
+    # 250 -> 253 loses 251, 252; 253 -> 2 loses 254, 255, 0, 1
+    assert parser.nodes[11].lost == 6
+    assert parser.nodes[11].frames == 4
+
+
+def test_rate_from_arrival_times_and_period():
+    parser = FrameParser()
+    for k in range(11):
+        parser.feed(encode_imu_frame(ImuFrame(10, 16, k, (0, 0, 0), (0, 0, 0), (0, 0, 0))), now=5.0 + k * 0.016)
+    assert parser.nodes[10].rate_hz == pytest.approx(62.5)
+    assert parser.nodes[10].nominal_rate_hz == 62.5
+
+
+def test_non_imu_frames_skipped_and_safety_events_exposed():
+    emg = bytearray(WORKED_EXAMPLE)
+    emg[1] = 31
+    stream = (bytes(emg) + encode_safety_key_frame(SafetyKey.STANDBY, counter=7) + WORKED_EXAMPLE
+              + encode_safety_key_frame(SafetyKey.NONE, counter=8) + bytes(emg))
+    parser = FrameParser()
+    assert parser.feed(stream) == [WORKED_FRAME]
+    assert parser.skipped == {31: 2, 40: 2}
+    assert [(e.event, e.counter, e.frame_number) for e in parser.safety_events] == [(SafetyKey.STANDBY, 7, 1)]
+
+
+def test_false_start_whose_byte_31_is_end_byte_is_taken_as_a_frame():
+    """The format has no checksum: a garbage 0x33 with 0x34 31 bytes later looks like a frame.
+
+    The parser takes it (node id 0: skipped), goes on right after it and finds the next real frame;
+    the real frame it overlapped is lost.
+    """
+    fake_start = b"\x33" + bytes(20)  # its byte 31 falls on byte 10 of the frame after it
+    overlapped = bytearray(WORKED_EXAMPLE)
+    overlapped[10] = 0x34
+    parser = FrameParser()
+    assert parser.feed(fake_start + bytes(overlapped) + WORKED_EXAMPLE) == [WORKED_FRAME]
+    assert parser.skipped == {0: 1}
+
+
+@given(frame=st.builds(ImuFrame, st.integers(10, 15), st.integers(0, 255), st.integers(0, 255),
+                       vector3, vector3, vector3))
+@PROPERTY_SETTINGS
+def test_encode_then_parse_gives_back_the_frame(frame):
+    assert FrameParser().feed(encode_imu_frame(frame)) == [frame]
+
+
+@given(stream=st.binary(max_size=600) | st.lists(
+           st.sampled_from([b"\x33", b"\x34", b"\x00", WORKED_EXAMPLE, WORKED_EXAMPLE[:20], WORKED_EXAMPLE[7:]]),
+           max_size=40).map(b"".join),
+       cuts=st.lists(st.integers(0, 10_000), max_size=8))
+@PROPERTY_SETTINGS
+def test_any_bytes_in_any_chunks_match_the_reference_and_never_raise(stream, cuts):
+    parser = FrameParser()
+    frames = feed_in_chunks(parser, stream, cuts)
+    assert [as_tuple(f) for f in frames] == reference_parse(stream)
+
+
+@dataclass
+class Piece:
+    data: bytes
+    intact: bool = False  # a whole frame, start and end bytes in place
+    node_id: int = 0      # for intact IMU frames: the node and its unwrapped sequence number
+    seq: int = 0
+
+
+@st.composite
+def noisy_streams(draw) -> list[Piece]:
+    """Interleaved frames of 1-3 IMU nodes plus an EMG node (id 30), with drops, corruption,
+    truncation, garbage and false start bytes between them."""
+    node_ids = draw(st.lists(st.integers(10, 15), min_size=1, max_size=3, unique=True))
+    first_seq = draw(st.integers(0, 255))
+    pieces: list[Piece] = []
+    for seq in range(first_seq, first_seq + draw(st.integers(1, 40))):
+        for node_id in node_ids + [30]:
+            fate = draw(st.sampled_from(["ok"] * 6 + ["drop", "corrupt", "truncate", "garbage", "false start"]))
+            frame = encode_imu_frame(ImuFrame(node_id, 16, seq % 256, draw(vector3), draw(vector3), draw(vector3)))
+            if fate == "drop":
+                continue
+            if fate == "truncate":
+                pieces.append(Piece(frame[:draw(st.integers(1, FRAME_SIZE - 1))]))
+                continue
+            if fate == "garbage":
+                pieces.append(Piece(draw(st.binary(min_size=1, max_size=40))))
+            if fate == "false start":
+                pieces.append(Piece(b"\x33" + draw(st.binary(max_size=5))))
+            if fate == "corrupt":
+                # the start/end byte (frame lost) or a sensor byte (frame kept, with other values)
+                where = draw(st.sampled_from([0, 31, *range(5, 23)]))
+                mangled = bytearray(frame)
+                mangled[where] ^= draw(st.integers(1, 255))
+                frame = bytes(mangled)
+            intact = frame[0] == 0x33 and frame[31] == 0x34
+            pieces.append(Piece(frame, intact, node_id if intact and node_id < 30 else 0, seq))
+    return pieces
+
+
+def is_ambiguous(pieces: list[Piece]) -> bool:
+    """True if some 0x33 outside an intact frame has 0x34 31 bytes later: the format cannot
+    tell such a false start from a frame (see the test above)."""
+    stream = b"".join(p.data for p in pieces)
+    offset = 0
+    for piece in pieces:
+        if not piece.intact:
+            for j, byte in enumerate(piece.data):
+                end = offset + j + 31
+                if byte == 0x33 and end < len(stream) and stream[end] == 0x34:
+                    return True
+        offset += len(piece.data)
+    return False
+
+
+@given(pieces=noisy_streams(), cuts=st.lists(st.integers(0, 10_000), max_size=10))
+@PROPERTY_SETTINGS
+def test_every_intact_frame_recovered_and_losses_counted(pieces, cuts):
+    assume(not is_ambiguous(pieces))
+    parser = FrameParser()
+    frames = feed_in_chunks(parser, b"".join(p.data for p in pieces), cuts)
+
+    imu = [p for p in pieces if p.node_id]
+    assert [encode_imu_frame(f) for f in frames] == [p.data for p in imu]
+    for node_id in {p.node_id for p in imu}:
+        seqs = [p.seq for p in imu if p.node_id == node_id]
+        assert parser.nodes[node_id].frames == len(seqs)
+        assert parser.nodes[node_id].lost == (seqs[-1] - seqs[0]) - (len(seqs) - 1)
+    assert parser.skipped.get(30, 0) == sum(p.intact and p.data[1] == 30 for p in pieces)
