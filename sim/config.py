@@ -71,6 +71,7 @@ class WorkspaceConfig:
     z: Vec2
     reach_max: float
     reach_min: float
+    table_clearance: float
 
     def validate(self) -> None:
         for name in ("x", "y", "z"):
@@ -80,6 +81,8 @@ class WorkspaceConfig:
         _positive(self, "reach_max")
         if not 0 <= self.reach_min < self.reach_max:
             raise ValueError("reach_min must be in [0, reach_max)")
+        if self.table_clearance < 0:
+            raise ValueError("table_clearance must be >= 0")
 
 
 @dataclass(frozen=True)

@@ -26,22 +26,37 @@ class JointLimits:
 
 @dataclass(frozen=True)
 class Workspace:
-    """Where the tool point may go: an axis-aligned box intersected with a shell around the shoulder."""
+    """Where the tool point may go: a box intersected with a shell around the shoulder, and a floor.
+
+    The floor keeps the whole hand above the table: ``hand_box`` holds the corners of the hand's
+    bounding box (fingers open and closed) in the tool frame, so the tool point's lowest allowed
+    height depends on the hand's orientation.
+    """
 
     lower: np.ndarray
     upper: np.ndarray
     shoulder: np.ndarray
     reach_min: float
     reach_max: float
+    floor: float           # lowest height for any point of the hand
+    hand_box: np.ndarray   # (8, 3) corners in the tool frame
 
     @classmethod
-    def from_config(cls, config: WorkspaceConfig, shoulder: np.ndarray) -> Workspace:
+    def from_config(cls, config: WorkspaceConfig, shoulder: np.ndarray, table_top: float,
+                    hand_box: np.ndarray) -> Workspace:
         bounds = np.array([config.x, config.y, config.z], dtype=float)
-        return cls(bounds[:, 0], bounds[:, 1], np.asarray(shoulder, float), config.reach_min, config.reach_max)
+        return cls(bounds[:, 0], bounds[:, 1], np.asarray(shoulder, float), config.reach_min, config.reach_max,
+                   table_top + config.table_clearance, hand_box)
 
-    def clamp(self, point: np.ndarray) -> np.ndarray:
-        """The nearest allowed point (box first, then the shell; the shell wins where they disagree)."""
-        point = np.clip(point, self.lower, self.upper)
+    def lowest_tool_height(self, rotation: np.ndarray) -> float:
+        """Tool height at which the hand, so oriented, just touches the floor."""
+        return self.floor - float(np.min(self.hand_box @ rotation[2]))
+
+    def clamp(self, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """The nearest allowed point (box and floor, then the shell; the shell wins where they disagree)."""
+        lower = self.lower.copy()
+        lower[2] = max(lower[2], self.lowest_tool_height(rotation))
+        point = np.clip(point, lower, np.maximum(lower, self.upper))
         offset = point - self.shoulder
         distance = np.linalg.norm(offset)
         if distance > self.reach_max:
@@ -49,9 +64,6 @@ class Workspace:
         if 0 < distance < self.reach_min:
             return self.shoulder + offset * (self.reach_min / distance)
         return point
-
-    def contains(self, point: np.ndarray, tolerance: float = 1e-9) -> bool:
-        return bool(np.allclose(self.clamp(point), point, atol=tolerance, rtol=0))
 
 
 def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float) -> np.ndarray:
@@ -88,7 +100,7 @@ class CartesianVelocityController:
     def reset(self, q: np.ndarray) -> None:
         """Hold the pose the arm is in."""
         self.target_position, self.target_rotation = self.kinematics.tool_pose(q)
-        self.target_position = self.workspace.clamp(self.target_position)
+        self.target_position = self.workspace.clamp(self.target_position, self.target_rotation)
 
     def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
@@ -108,10 +120,10 @@ class CartesianVelocityController:
 
     def _advance_target(self, position, rotation, linear, angular) -> np.ndarray:
         """Move the target by one tick of the command inside the walls; return the feedforward twist."""
-        walled = self.workspace.clamp(self.target_position + linear * self.dt)
+        self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
+        walled = self.workspace.clamp(self.target_position + linear * self.dt, self.target_rotation)
         linear_ff = (walled - self.target_position) / self.dt
         self.target_position = walled
-        self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
         # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
         lag = self.target_position - position
         distance = np.linalg.norm(lag)

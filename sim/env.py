@@ -16,6 +16,7 @@ from sim.config import MODELS_DIR, SimConfig, load_config
 from sim.controller import CartesianVelocityController, JointLimits, Workspace
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState, Mode
 from sim.kinematics import arm_kinematics
+from sim.render import FrameRenderer
 from sim.scene import build_scene
 
 # Tool frame with the hand pointing down (tool z = -world z) and the fingers closing along world x.
@@ -41,11 +42,15 @@ class ArmSim:
             lower=np.where(limited, ranges[:, 0], -np.inf),
             upper=np.where(limited, ranges[:, 1], np.inf),
             speed=self.model.actuator_ctrlrange[self.scene.arm_actuators, 1].copy())
-        self.workspace = Workspace.from_config(self.config.workspace, self._shoulder_position())
+        table = self.scene.table_geom
+        table_top = float(self.model.geom_pos[table, 2] + self.model.geom_size[table, 2])
+        self.workspace = Workspace.from_config(self.config.workspace, self._shoulder_position(), table_top,
+                                               self._hand_box())
         self.controller = CartesianVelocityController(self.kinematics, self.limits, self.workspace,
                                                       self.config.control, self.dt)
         self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed)
         self.finger_target = np.zeros(3)
+        self._renderer: FrameRenderer | None = None
         self.reset()
 
     def _shoulder_position(self) -> np.ndarray:
@@ -54,27 +59,47 @@ class ArmSim:
         joint2 = self.kinematics.model.getJointId("joint_2")
         return self.kinematics.base.act(self.kinematics.data.oMi[joint2].translation)
 
+    def _hand_box(self) -> np.ndarray:
+        """Corners (8, 3) of the box around every hand mesh vertex, fingers open and closed, tool frame."""
+        points = []
+        for closure in (0, 1):
+            self.data.qpos[self.scene.finger_qpos] = self.scene.finger_range[:, closure]
+            mujoco.mj_kinematics(self.model, self.data)
+            tool_rotation = self.data.site_xmat[self.scene.tool_site].reshape(3, 3)
+            tool_position = self.data.site_xpos[self.scene.tool_site]
+            for geom in self.scene.hand_geoms:
+                mesh = self.model.geom_dataid[geom]
+                start = self.model.mesh_vertadr[mesh]
+                vertices = self.model.mesh_vert[start:start + self.model.mesh_vertnum[mesh]]
+                world = self.data.geom_xpos[geom] + vertices @ self.data.geom_xmat[geom].reshape(3, 3).T
+                points.append((world - tool_position) @ tool_rotation)
+        points = np.vstack(points)
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
     # -- episode -------------------------------------------------------------------------------
 
     def default_cube_positions(self) -> np.ndarray:
         """Cubes side by side at location A, as configured: (n, 2) x, y."""
         return self.scene.location_a + np.array(self.config.scene.cube_offsets)
 
-    def reset(self, cube_positions: Sequence[Sequence[float]] | None = None) -> None:
-        """Arm at home, hand open, cubes resting on the table at ``(x, y)`` or ``(x, y, yaw)`` each."""
+    def reset(self, cube_positions: Sequence[Sequence[float]] | None = None,
+              arm_qpos: Sequence[float] | None = None) -> None:
+        """Arm at home (or ``arm_qpos``), hand open, cubes on the table at ``(x, y)`` or ``(x, y, yaw)`` each."""
         poses = self.default_cube_positions() if cube_positions is None else np.asarray(cube_positions, float)
         if poses.ndim != 2 or poses.shape[0] != len(self.scene.cube_qpos) or poses.shape[1] not in (2, 3):
             raise ValueError(f"cube_positions must be {len(self.scene.cube_qpos)} rows of (x, y) or (x, y, yaw), "
                              f"got shape {poses.shape}")
         mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[self.scene.arm_qpos] = self.home_q
+        start = self.home_q if arm_qpos is None else np.asarray(arm_qpos, float)
+        self.data.qpos[self.scene.arm_qpos] = start
         self.data.qpos[self.scene.finger_qpos] = self.scene.finger_range[:, 0]
         for address, pose in zip(self.scene.cube_qpos, poses):
             yaw = pose[2] if len(pose) == 3 else 0.0
             self.data.qpos[address:address + 3] = (pose[0], pose[1], self.scene.cube_half_size)
             self.data.qpos[address + 3:address + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
         mujoco.mj_forward(self.model, self.data)
-        self.controller.reset(self.home_q)
+        self.controller.reset(start)
         self.joystick.reset()
         self.finger_target = self.data.qpos[self.scene.finger_qpos].copy()
 
@@ -170,3 +195,18 @@ class ArmSim:
             self.touching(one, frozenset({cube})) and (self.touching(two, frozenset({cube}))
                                                        or self.touching(three, frozenset({cube})))
             for cube in self.scene.cube_geoms.tolist()])
+
+    # -- rendering -------------------------------------------------------------------------------
+
+    def render(self, caption: str | None = None) -> np.ndarray:
+        """An RGB frame from the fixed workspace camera, with an optional caption strip on top."""
+        if self._renderer is None:
+            settings = self.config.render
+            self._renderer = FrameRenderer(self.model, settings.camera, settings.width, settings.height)
+        return self._renderer.render(self.data, caption)
+
+    def close(self) -> None:
+        """Release the rendering context (if a frame was rendered)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
