@@ -1,0 +1,373 @@
+"""The scripted JACO user: a person who knows the stacking task and picks joystick functions.
+
+``plan`` is a pure function of what the person sees (``View``) and a little memory; it re-plans
+every tick from where the hand and the cubes really are, so overshoots, misclassified BoMI
+outputs and slipped cubes are corrected rather than ignored.  ``ScriptedUser`` adds the human
+timing on top: reaction time before a new move, pauses between moves, stopping early by
+anticipation.  One set of parameters (``tasks/operator.toml``) serves both channels; the only
+difference between channels is whether several axes may be combined (a 3-axis joystick can, a
+BoMI gives one class at a time).
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from bomi.errors import BomiError
+from sim.joystick import BUTTON_STEP, FINGER_DIRECTION, MODE_CYCLE, TRANSLATION_AXES, WRIST_AXES, Mode
+
+DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
+FULL_SPEED = 0.20  # m/s at full deflection (the JACO mapping of the paper)
+CUBE_SYMMETRY = math.pi / 2  # a cube looks the same every quarter turn
+
+
+@dataclass(frozen=True)
+class OperatorParams:
+    reaction_time: float
+    pause_between_moves: float
+    anticipation: float
+    squeeze_time: float
+    coarse: float
+    fine: float
+    slow_down_distance: float
+    stop: float
+    align: float
+    placed: float
+    target_zone: float
+    yaw_deg: float
+    hover: float
+    carry_clearance: float
+    grasp_offset: float
+    release_gap: float
+    retreat: float
+    open_closure: float
+
+
+_SECTIONS = {
+    "timing": ("reaction_time", "pause_between_moves", "anticipation", "squeeze_time"),
+    "deflection": ("coarse", "fine", "slow_down_distance"),
+    "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg"),
+    "heights": ("hover", "carry_clearance", "grasp_offset", "release_gap", "retreat"),
+    "fingers": ("open_closure",),
+}
+_MAY_BE_NEGATIVE = {"grasp_offset"}
+
+
+def load_operator(path: Path | str = DEFAULT_OPERATOR_FILE) -> OperatorParams:
+    """Read and validate an operator TOML file; raise BomiError naming the file and the fault."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot read operator file ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+    values: dict[str, float] = {}
+    for section, keys in _SECTIONS.items():
+        table = data.get(section)
+        if not isinstance(table, dict):
+            raise BomiError(f"{path}: missing table [{section}]")
+        unknown = set(table) - set(keys)
+        if unknown:
+            raise BomiError(f"{path}: unknown key(s) in [{section}]: {', '.join(sorted(unknown))}")
+        for key in keys:
+            value = table.get(key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise BomiError(f"{path}: [{section}] {key} must be a finite number, got {value!r}")
+            if value < 0 and key not in _MAY_BE_NEGATIVE:
+                raise BomiError(f"{path}: [{section}] {key} must not be negative, got {value}")
+            values[key] = float(value)
+    unknown_sections = set(data) - set(_SECTIONS)
+    if unknown_sections:
+        raise BomiError(f"{path}: unknown table(s): {', '.join(sorted(unknown_sections))}")
+    if not 0 < values["fine"] <= values["coarse"] <= 1:
+        raise BomiError(f"{path}: [deflection] needs 0 < fine <= coarse <= 1")
+    if not 0 < values["open_closure"] < 1:
+        raise BomiError(f"{path}: [fingers] open_closure must lie strictly between 0 and 1")
+    if values["stop"] <= 0 or values["align"] <= 0 or values["placed"] <= 0:
+        raise BomiError(f"{path}: [tolerance] stop, align and placed must be positive")
+    return OperatorParams(**values)
+
+
+@dataclass(frozen=True)
+class View:
+    """What the person sees at one moment (built by the task from the simulation)."""
+
+    t: float
+    hand_pos: np.ndarray  # (3,) pinch point, world frame, m
+    hand_yaw: float  # rad, heading of the hand about the vertical
+    closure: float  # fingers, 0 open .. 1 closed
+    mode: Mode  # the arm's current joystick mode
+    cube_pos: tuple[np.ndarray, ...]  # (3,) centre of each cube
+    cube_yaw: tuple[float, ...]
+    touching: tuple[bool, ...]  # the fingers touch cube k
+    target_xy: np.ndarray  # (2,) location B
+    table_z: float  # table top height
+    cube_size: float
+
+
+@dataclass(frozen=True)
+class StickIntent:
+    """What the person wants from the stick now: functions with deflections, or one button."""
+
+    deflection: Mapping[str, float] = field(default_factory=dict)
+    button: str | None = None
+    goal: str = "rest"  # plain words for logs and figures
+
+    @property
+    def functions(self) -> frozenset[str]:
+        return frozenset(self.deflection)
+
+    @property
+    def is_rest(self) -> bool:
+        return not self.deflection and self.button is None
+
+    def gesture(self) -> tuple[frozenset[str], str | None]:
+        """The move irrespective of how far the stick is pushed."""
+        return self.functions, self.button
+
+
+REST = StickIntent()
+
+
+@dataclass(frozen=True)
+class Memory:
+    """The little the person remembers between glances."""
+
+    axis: int | None = None  # single-axis channel: the axis being worked on
+    touch_since: float | None = None  # when the fingers started touching the cube being grasped
+    turning: bool = False  # a wrist turn goes on until the hand is well lined up
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry of the task, as the person judges it
+
+def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]:
+    """(cube resting on the table at B, cube resting on top of it), None where there is none."""
+    rest_z = view.table_z + view.cube_size / 2
+    bottom = None
+    for k, pos in enumerate(view.cube_pos):
+        at_b = np.linalg.norm(pos[:2] - view.target_xy) <= p.target_zone
+        if at_b and abs(pos[2] - rest_z) <= p.placed and not view.touching[k]:
+            bottom = k
+    if bottom is None:
+        return None, None
+    for k, pos in enumerate(view.cube_pos):
+        if k == bottom or view.touching[k]:
+            continue
+        on_top = np.linalg.norm(pos[:2] - view.cube_pos[bottom][:2]) <= p.placed
+        if on_top and abs(pos[2] - view.cube_pos[bottom][2] - view.cube_size) <= p.placed:
+            return bottom, k
+    return bottom, None
+
+
+def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
+    """The cube the hand has been squeezing for the squeeze time, if any."""
+    if memory.touch_since is None or view.t - memory.touch_since < p.squeeze_time:
+        return None
+    touching = [k for k, touch in enumerate(view.touching) if touch]
+    return touching[0] if len(touching) == 1 and view.closure > p.open_closure else None
+
+
+def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
+    """Wrist turn (rad) that lines the hand up with a face of cube k, in [-pi/4, pi/4)."""
+    err = view.cube_yaw[k] - view.hand_yaw - grasp_yaw
+    return (err + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
+
+
+def deflection_for(distance: float, p: OperatorParams) -> float:
+    """Coarse far away, fine close by, linear in between."""
+    ramp = min(1.0, distance / p.slow_down_distance) if p.slow_down_distance > 0 else 1.0
+    return p.fine + (p.coarse - p.fine) * ramp
+
+
+# ---------------------------------------------------------------------------------------------
+# the decision
+
+@dataclass(frozen=True)
+class Action:
+    """A step of the task: move the hand to a point, turn the wrist, open or close the fingers."""
+
+    kind: str  # "move" | "turn" | "open" | "close" | "rest"
+    goal: str
+    point: np.ndarray | None = None  # for "move"
+    turn: float = 0.0  # for "turn", rad
+
+
+def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
+    """The next step of the task from the current view (the person's plan, re-made every tick)."""
+    hand = view.hand_pos
+    bottom, top = placed_cubes(view, p)
+    stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
+    held = held_cube(view, memory, p)
+    open_hand = view.closure <= p.open_closure
+
+    if top is not None:  # both cubes stacked: let go, rise, rest
+        if not open_hand:
+            return Action("open", "release")
+        above = np.array([hand[0], hand[1], stack_top + p.retreat])
+        if hand[2] < above[2] - p.stop:
+            return Action("move", "retreat", above)
+        return Action("rest", "done")
+
+    if held is not None:
+        cube = view.cube_pos[held]
+        grip = hand - cube  # where the hand holds the cube (it is not centred)
+        dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
+        support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
+        release = np.r_[dest_xy + grip[:2], support + view.cube_size / 2 + p.release_gap + grip[2]]
+        set_down = (np.linalg.norm(cube[:2] - dest_xy) <= p.placed
+                    and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop)
+        if set_down:
+            return Action("open", f"release cube {held + 1}")
+        carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
+        label = f"carry cube {held + 1}"
+        return _approach(hand, release, carry_z, p, label, on_arrival=Action("open", f"release cube {held + 1}"))
+
+    k = next(k for k in range(len(view.cube_pos)) if k != bottom)
+    cube = view.cube_pos[k]
+    grasp = np.r_[cube[:2], cube[2] + p.grasp_offset]
+    at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= p.align and abs(hand[2] - grasp[2]) <= 2 * p.stop)
+    if at_grasp and (view.touching[k] or not open_hand):
+        return Action("close", f"grasp cube {k + 1}")
+    if not open_hand:
+        return Action("open", "open hand")
+    hover_z = max(grasp[2] + p.hover, stack_top + p.carry_clearance + view.cube_size)
+    turn = yaw_error(view, k)
+    yaw_tolerance = math.radians(p.yaw_deg) / (4 if memory.turning else 1)
+    if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
+        return Action("turn", f"turn to cube {k + 1}", turn=turn)
+    return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", on_arrival=Action("close", f"grasp cube {k + 1}"))
+
+
+def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, label: str,
+              on_arrival: Action) -> Action:
+    """Rise to the travel height if low and far, travel over the goal, go down, then act."""
+    xy_off = np.linalg.norm(hand[:2] - goal[:2])
+    if xy_off > p.align:
+        if hand[2] < travel_z - 4 * p.stop and xy_off > 4 * p.align:
+            return Action("move", f"{label}: rise", np.r_[hand[:2], travel_z])
+        return Action("move", f"{label}: travel", np.r_[goal[:2], hand[2]])
+    if abs(hand[2] - goal[2]) > p.stop:
+        return Action("move", f"{label}: descend", np.r_[hand[:2] if xy_off <= p.stop else goal[:2], goal[2]])
+    return on_arrival
+
+
+def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
+         speed: Mapping[str, float] | None = None) -> tuple[StickIntent, Memory]:
+    """Decide the stick intent for this tick.
+
+    ``speed`` is the deflection currently applied per function (what the person feels in the hand);
+    the person lets go early by ``anticipation`` seconds of travel at that speed.
+    """
+    memory = _remember_touch(view, memory)
+    action = next_action(view, memory, p)
+    memory = replace(memory, turning=action.kind == "turn")
+    need = _MODE_FOR.get(action.kind)
+    if need is not None and need is not view.mode:
+        return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
+    if action.kind == "move":
+        deflection, axis = _translation(view.hand_pos, action.point, p, combine_axes, memory.axis, speed or {})
+        return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
+    memory = replace(memory, axis=None)
+    if action.kind == "turn":
+        fn = _function_for(WRIST_AXES, np.array([0.0, 0.0, math.copysign(1.0, action.turn)]))
+        return StickIntent({fn: p.fine}, goal=action.goal), memory
+    if action.kind in ("open", "close"):
+        closing = 1.0 if action.kind == "close" else -1.0
+        fn = next(fn for fn, sign in FINGER_DIRECTION.items() if sign == closing)
+        return StickIntent({fn: p.coarse}, goal=action.goal), memory
+    return StickIntent(goal=action.goal), memory
+
+
+def _remember_touch(view: View, memory: Memory) -> Memory:
+    if not any(view.touching):
+        return replace(memory, touch_since=None)
+    return memory if memory.touch_since is not None else replace(memory, touch_since=view.t)
+
+
+def _translation(hand: np.ndarray, point: np.ndarray, p: OperatorParams, combine_axes: bool,
+                 axis: int | None, speed: Mapping[str, float]) -> tuple[dict[str, float], int | None]:
+    """Joystick functions (and their deflections) that bring the hand to ``point``."""
+    error = point - hand
+    moving = []
+    for i in range(3):
+        fn = _function_along(i, error[i])
+        current = speed.get(fn, 0.0) * FULL_SPEED
+        if abs(error[i]) > p.stop + p.anticipation * current:
+            moving.append(i)
+    if not moving:
+        return {}, None
+    if not combine_axes:
+        if axis not in moving:
+            axis = max(moving, key=lambda i: abs(error[i]))
+        moving = [axis]
+    return {_function_along(i, error[i]): deflection_for(abs(error[i]), p) for i in moving}, axis
+
+
+def _function_along(axis: int, signed: float) -> str:
+    direction = np.zeros(3)
+    direction[axis] = 1.0 if signed >= 0 else -1.0
+    return _function_for(TRANSLATION_AXES, direction)
+
+
+def _function_for(axes: Mapping[str, tuple[float, float, float]], direction: np.ndarray) -> str:
+    return next(fn for fn, unit in axes.items() if np.allclose(unit, direction))
+
+
+_MODE_FOR = {"move": Mode.TRANSLATION, "turn": Mode.WRIST, "open": Mode.FINGERS, "close": Mode.FINGERS}
+
+
+def mode_button(current: Mode, wanted: Mode) -> str:
+    """The button that reaches ``wanted`` from ``current`` in fewer presses."""
+    forward = (MODE_CYCLE.index(wanted) - MODE_CYCLE.index(current)) % len(MODE_CYCLE)
+    presses = {button: (forward * step) % len(MODE_CYCLE) for button, step in BUTTON_STEP.items()}
+    return min(presses, key=presses.get)
+
+
+# ---------------------------------------------------------------------------------------------
+# the person in time
+
+@dataclass
+class ScriptedUser:
+    """``plan`` with a human's timing: reaction time, pauses between moves, no jitter."""
+
+    params: OperatorParams
+    combine_axes: bool
+    memory: Memory = field(default_factory=Memory)
+    current: StickIntent = REST
+    _waiting_since: float | None = None
+    _stopped_at: float = -math.inf
+
+    def decide(self, view: View) -> StickIntent:
+        wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection)
+        if wanted.is_rest or _continues(self.current, wanted):
+            if wanted.is_rest and not self.current.is_rest:
+                self._stopped_at = view.t
+            self.current, self._waiting_since = wanted, None
+            return wanted
+        if not self.current.is_rest:  # a different move: stop this one first
+            self._stopped_at = view.t
+            self.current = REST
+        if self._waiting_since is None:
+            self._waiting_since = view.t
+        ready = max(self._waiting_since + self.params.reaction_time,
+                    self._stopped_at + self.params.pause_between_moves)
+        if view.t + 1e-9 < ready:
+            return replace(REST, goal=wanted.goal)
+        self.current, self._waiting_since = wanted, None
+        return wanted
+
+
+def _continues(current: StickIntent, wanted: StickIntent) -> bool:
+    """Same move still going on (dropping an axis of a combined move counts as continuing)."""
+    if current.is_rest:
+        return False
+    if wanted.button is not None:
+        return wanted.button == current.button
+    return bool(wanted.functions) and wanted.functions <= current.functions

@@ -1,0 +1,128 @@
+"""The paper's assembly task: two 5 cm cubes start at A, are carried one by one and stacked at B.
+
+Composer style: the task composes the arm scene (``sim.env.ArmSim``), randomises the cube
+start poses per seed, defines what the operator observes (``planner.View``) and decides
+success and failure.  Success = the top cube rests on the bottom one at B (xy offset and tilt
+within tolerance), the hand has let go, and both cubes stay still for ``still_time``.
+Failure = the time limit or a cube off the table.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.env import ArmSim
+from tasks.planner import View
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    time_limit: float = 600.0  # s
+    start_jitter: float = 0.01  # m: each cube's start is moved by up to this in x and y
+    start_yaw_deg: float = 15.0  # each cube starts turned by up to this
+    stack_xy: float = 0.015  # m: top cube centre over the bottom one
+    stack_tilt_deg: float = 10.0
+    at_b: float = 0.03  # m: bottom cube centre from B
+    still_time: float = 1.0  # s
+    still_speed: float = 0.01  # m/s: a cube moving slower than this is still
+
+
+@dataclass(frozen=True)
+class Outcome:
+    done: bool
+    success: bool
+    completion_time: float | None  # s: when the finished stack started being still
+    failure: str | None
+
+
+def cube_yaw(quat: np.ndarray) -> float:
+    """Heading (rad) of a cube's x axis about the vertical, from a (w, x, y, z) quaternion."""
+    w, x, y, z = quat
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def cube_tilt_deg(quat: np.ndarray) -> float:
+    """Angle between the vertical and the cube's face normal closest to it."""
+    w, x, y, z = quat
+    world_z_in_cube = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+    return math.degrees(math.acos(min(1.0, float(np.max(np.abs(world_z_in_cube))))))
+
+
+def start_poses(sim: ArmSim, config: TaskConfig, seed: int) -> np.ndarray:
+    """(n, 3) cube starts (x, y, yaw): the configured spots at A moved by a seeded jitter."""
+    rng = np.random.default_rng(seed)
+    xy = sim.default_cube_positions()
+    jitter = rng.uniform(-config.start_jitter, config.start_jitter, size=xy.shape)
+    yaw = np.radians(rng.uniform(-config.start_yaw_deg, config.start_yaw_deg, size=len(xy)))
+    return np.column_stack([xy + jitter, yaw])
+
+
+class StackingTask:
+    """Observations, success and failure of one stacking trial on an ``ArmSim``."""
+
+    def __init__(self, sim: ArmSim, config: TaskConfig = TaskConfig()):
+        self.sim = sim
+        self.config = config
+        scene = sim.scene
+        self.cube_size = 2 * scene.cube_half_size
+        self.table_z = 0.0  # the scene's table top (models/scene.xml)
+        table = scene.model.geom(scene.table_geom)
+        self.table_lo = table.pos[:2] - table.size[:2]
+        self.table_hi = table.pos[:2] + table.size[:2]
+        self.target_pos = np.r_[scene.location_b, self.table_z]
+        self._still_since: float | None = None
+        self._previous: np.ndarray | None = None
+
+    def reset(self, seed: int) -> None:
+        self.sim.reset(start_poses(self.sim, self.config, seed))
+        self._still_since, self._previous = None, self.sim.cube_positions
+
+    def view(self) -> View:
+        sim = self.sim
+        rotation = sim.tool_rotation
+        return View(
+            t=sim.time,
+            hand_pos=sim.tool_position,
+            hand_yaw=math.atan2(rotation[1, 0], rotation[0, 0]),
+            closure=sim.finger_closure,
+            mode=sim.mode,
+            cube_pos=tuple(sim.cube_positions),
+            cube_yaw=tuple(cube_yaw(q) for q in sim.cube_quats),
+            touching=tuple(bool(g) for g in sim.cube_in_grasp()),
+            target_xy=self.target_pos[:2].copy(),
+            table_z=self.table_z,
+            cube_size=self.cube_size,
+        )
+
+    def stacked(self) -> bool:
+        """The top cube rests on the bottom one at B and the hand touches neither."""
+        pos, quats = self.sim.cube_positions, self.sim.cube_quats
+        bottom, top = np.argsort(pos[:, 2])[:2]
+        hand = self.sim.scene.hand_geoms
+        return bool(
+            np.linalg.norm(pos[bottom, :2] - self.target_pos[:2]) <= self.config.at_b
+            and np.linalg.norm(pos[top, :2] - pos[bottom, :2]) <= self.config.stack_xy
+            and abs(pos[top, 2] - pos[bottom, 2] - self.cube_size) <= 0.1 * self.cube_size
+            and cube_tilt_deg(quats[top]) <= self.config.stack_tilt_deg
+            and not any(self.sim.touching(hand, frozenset({int(g)})) for g in self.sim.scene.cube_geoms))
+
+    def outcome(self) -> Outcome:
+        """Call once per control tick, after the step."""
+        t, pos = self.sim.time, self.sim.cube_positions
+        speed = np.linalg.norm(pos - self._previous, axis=1).max() / self.sim.dt
+        self._previous = pos
+        if speed <= self.config.still_speed and self.stacked():
+            self._still_since = t if self._still_since is None else self._still_since
+            if t - self._still_since >= self.config.still_time - 1e-9:
+                return Outcome(True, True, self._still_since, None)
+        else:
+            self._still_since = None
+        off = (pos[:, 2] < self.table_z - self.cube_size) | np.any(pos[:, :2] < self.table_lo, axis=1) \
+            | np.any(pos[:, :2] > self.table_hi, axis=1)
+        if off.any():
+            return Outcome(True, False, None, f"cube {int(np.flatnonzero(off)[0]) + 1} knocked off the table")
+        if t >= self.config.time_limit:
+            return Outcome(True, False, None, f"time limit {self.config.time_limit:g} s")
+        return Outcome(False, False, None, None)
