@@ -1,0 +1,196 @@
+"""One episode: the one loop that advances simulated time at the 60 Hz control rate.
+
+Joystick channel: planner intent -> JoystickState -> arm.
+BoMI channel: planner intent -> virtual participant (body motion) -> base-station frames ->
+FrameParser -> OnlineChain -> Decision -> joystick function with nu as deflection (a B1/B2 class
+presses its button on the rising edge) -> arm.  IMU samples and control ticks share one clock.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.env import ArmSim
+from sim.joystick import TRANSLATION_AXES, JoystickState, Mode, combine
+from sim.render import FrameRenderer, VideoWriter, describe
+from tasks import metrics
+from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser, StickIntent, load_operator
+from tasks.stacking import StackingTask, TaskConfig
+
+OPERATORS = ("joystick", "bomi")
+
+
+@dataclass
+class DecisionTrace:
+    """One entry per classifier decision."""
+
+    t: np.ndarray
+    intended: np.ndarray  # class label the participant was performing
+    decided: np.ndarray  # class label the chain output
+    gamma: np.ndarray
+    nu: np.ndarray
+
+
+@dataclass
+class EpisodeLog:
+    """Everything an episode records; metrics and figures are computed from it."""
+
+    operator: str
+    participant: str
+    seed: int
+    t: np.ndarray  # (N,) control ticks
+    hand_pos: np.ndarray  # (N, 3)
+    intended_dir: np.ndarray  # (N, 3) unit direction the person wanted, zero when resting
+    mode: list[str]
+    presses: int
+    cube_pos: np.ndarray  # (N, K, 3)
+    touching: np.ndarray  # (N, K)
+    target_pos: np.ndarray  # (3,) B on the table top
+    success: bool
+    completion_time: float | None
+    failure: str | None
+    wall_time: float
+    decisions: DecisionTrace | None = None
+    class_names: tuple[str, ...] = ()
+    neutral: int = 0
+    allowance: int = 0  # decisions after an intent change that belong to the transition
+    sample_period: float = 0.016
+
+
+def summarize(log: EpisodeLog) -> dict:
+    """The per-episode metrics as a JSON-ready dict."""
+    sim_time = float(log.t[-1]) if len(log.t) else 0.0
+    out = {
+        "operator": log.operator,
+        "participant": log.participant,
+        "seed": log.seed,
+        "success": bool(log.success),
+        "completion_time": log.completion_time,
+        "failure": log.failure,
+        "sim_time": sim_time,
+        "wall_time": log.wall_time,
+        "realtime_factor": sim_time / log.wall_time if log.wall_time > 0 else None,
+        "mode_switches": metrics.count_changes(log.mode),
+        "button_presses": log.presses,
+        "unintended_displacement_mm": metrics.unintended_displacement_mm(log.hand_pos, log.intended_dir),
+        "cube_drops": metrics.cube_drops(log.cube_pos[:, :, 2], log.touching),
+    }
+    d = log.decisions
+    if d is None:
+        return out
+    errors = metrics.misclassified(d.intended, d.decided, log.allowance)
+    latency = metrics.decision_latencies(d.intended, d.decided, log.neutral)
+    out.update({
+        "decisions": int(len(d.t)),
+        "decisions_intended_active": int(np.sum(d.intended != log.neutral)),
+        "decisions_emitted_active": int(np.sum(d.decided != log.neutral)),
+        "realtime_accuracy": metrics.realtime_accuracy(d.intended, d.decided, log.allowance),
+        "misclassified": int(errors.sum()),
+        "longest_error_run_ms": metrics.longest_error_run_ms(errors, log.sample_period),
+        **{f"errors_{k}": v for k, v in metrics.error_destinations(d.decided, errors, log.neutral).items()},
+        "latency_samples_mean": float(latency.mean()) if latency.size else None,
+        "latency_samples_max": int(latency.max()) if latency.size else None,
+        "latency_ms_mean": float(latency.mean() * 1000 * log.sample_period) if latency.size else None,
+        "latency_ms_max": float(latency.max() * 1000 * log.sample_period) if latency.size else None,
+        "latency_allowance_samples": log.allowance,
+    })
+    return out
+
+
+def rising_edge(button: str | None, previous: str | None) -> frozenset[str]:
+    """A button counts as pressed only on the tick it goes down."""
+    return frozenset({button}) if button is not None and button != previous else frozenset()
+
+
+class JoystickChannel:
+    """The person's decision goes straight to the stick (a 3-axis stick may combine axes)."""
+
+    combine_axes = True
+
+    def __init__(self) -> None:
+        self._button: str | None = None
+
+    def command(self, intent: StickIntent, t_end: float) -> JoystickState:
+        pressed = rising_edge(intent.button, self._button)
+        self._button = intent.button
+        return JoystickState(dict(intent.deflection), pressed)
+
+    def trace(self) -> DecisionTrace | None:
+        return None
+
+
+def intended_direction(mode: Mode, intent: StickIntent) -> np.ndarray:
+    """Unit hand direction the person wants this tick (zero unless translating)."""
+    if mode is not Mode.TRANSLATION or not intent.deflection:
+        return np.zeros(3)
+    direction = combine(dict(intent.deflection), TRANSLATION_AXES)
+    norm = np.linalg.norm(direction)
+    return direction / norm if norm > 0 else direction
+
+
+def run_episode(channel, *, operator: str, participant: str, seed: int,
+                operator_file: Path | str = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
+                video: Path | None = None, sim: ArmSim | None = None) -> EpisodeLog:
+    """Advance the task at the control rate until success or failure; optionally film it."""
+    sim = sim or ArmSim()
+    task = StackingTask(sim, task_config)
+    task.reset(seed)
+    user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes)
+    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
+    film = _Film(sim, video) if video is not None else None
+    started = time.perf_counter()
+    try:
+        while True:
+            view = task.view()
+            intent = user.decide(view)
+            state = channel.command(intent, view.t + sim.dt)
+            rows["t"].append(view.t)
+            rows["hand"].append(view.hand_pos)
+            rows["dir"].append(intended_direction(view.mode, intent))
+            rows["mode"].append(view.mode.value)
+            rows["cubes"].append(np.array(view.cube_pos))
+            rows["touching"].append(view.touching)
+            sim.step(state)
+            if film is not None:
+                film.tick(describe(sim.mode, state) + f"  | {intent.goal}")
+            outcome = task.outcome()
+            if outcome.done:
+                break
+    finally:
+        if film is not None:
+            film.close()
+    extra = {}
+    trace = channel.trace()
+    if trace is not None:
+        extra = channel.log_fields()
+    return EpisodeLog(
+        operator=operator, participant=participant, seed=seed,
+        t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
+        mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
+        touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(),
+        success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
+        wall_time=time.perf_counter() - started, decisions=trace, **extra)
+
+
+class _Film:
+    """Every n-th control tick rendered with a caption into an MP4."""
+
+    def __init__(self, sim: ArmSim, path: Path):
+        render = sim.config.render
+        self.sim = sim
+        self.every = max(1, round(sim.config.physics.control_hz / render.fps))
+        self.renderer = FrameRenderer(sim.model, render.camera, render.width, render.height)
+        self.writer = VideoWriter(Path(path), render.fps)
+        self.ticks = 0
+
+    def tick(self, caption: str) -> None:
+        if self.ticks % self.every == 0:
+            self.writer.append(self.renderer.render(self.sim.data, caption))
+        self.ticks += 1
+
+    def close(self) -> None:
+        self.writer.close()
+        self.renderer.close()
