@@ -1,0 +1,79 @@
+"""Drive the arm through each joystick function and mode and measure what it achieves.
+
+Used by ``bomi sim-check`` and ``benchmarks/sim_speed.py``. Every run starts from the home pose,
+reaches the mode with the real B1 presses, holds one function for a while and measures the
+steady part (after ``settle`` seconds).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from sim.env import ArmSim
+from sim.joystick import FINGER_DIRECTION, FUNCTIONS, MODE_CYCLE, TRANSLATION_AXES, WRIST_AXES, JoystickState, Mode
+
+
+@dataclass(frozen=True)
+class DirectionResult:
+    mode: str
+    function: str
+    commanded: float      # m/s (translation), rad/s (wrist), closure fraction/s (fingers)
+    achieved: float       # same unit, along the commanded axis, steady part
+    tracking_error: float  # translation: max distance from the commanded line (m); wrist: tool-point drift (m)
+
+    @property
+    def ratio(self) -> float:
+        return self.achieved / self.commanded if self.commanded else float("nan")
+
+
+def enter_mode(sim: ArmSim, mode: Mode) -> None:
+    """Press B1 until the arm is in ``mode`` (one press per tick, as a person would)."""
+    while sim.mode is not mode:
+        sim.step(JoystickState(pressed=frozenset({"B1"})))
+
+
+def hold(sim: ArmSim, state: JoystickState, seconds: float) -> list[tuple[float, np.ndarray, np.ndarray, float]]:
+    """Hold a stick state; return (time, tool position, tool rotation, finger closure) per tick."""
+    samples = []
+    for _ in range(round(seconds / sim.dt)):
+        sim.step(state)
+        samples.append((sim.time, sim.tool_position, sim.tool_rotation, sim.finger_closure))
+    return samples
+
+
+def measure(sim: ArmSim, mode: Mode, function: str, deflection: float = 1.0,
+            seconds: float = 1.0, settle: float = 0.25) -> DirectionResult:
+    """Hold ``function`` at ``deflection`` in ``mode`` from the home pose and measure the motion."""
+    sim.reset()
+    enter_mode(sim, mode)
+    if mode is Mode.FINGERS and FINGER_DIRECTION.get(function, 0.0) < 0:
+        hold(sim, JoystickState({"F": 1.0}), 1.5)  # close first, so that opening can be measured
+    start_position = sim.tool_position
+    samples = hold(sim, JoystickState({function: deflection}), seconds)
+    steady = [s for s in samples if s[0] - samples[0][0] >= settle - 1e-9]
+    (t0, p0, r0, c0), (t1, p1, r1, c1) = steady[0], steady[-1]
+    if mode is Mode.TRANSLATION:
+        axis = np.asarray(TRANSLATION_AXES[function])
+        offsets = np.array([s[1] - start_position for s in samples])
+        off_line = offsets - np.outer(offsets @ axis, axis)
+        return DirectionResult(mode.value, function, sim.config.control.full_speed * deflection,
+                               float((p1 - p0) @ axis / (t1 - t0)), float(np.linalg.norm(off_line, axis=1).max()))
+    if mode is Mode.WRIST:
+        axis = np.asarray(WRIST_AXES[function])
+        turned = pin.log3(r1 @ r0.T) @ axis
+        drift = max(np.linalg.norm(s[1] - start_position) for s in samples)
+        return DirectionResult(mode.value, function, sim.config.control.wrist_speed * deflection,
+                               float(turned / (t1 - t0)), float(drift))
+    finger_range = np.mean(np.diff(sim.scene.finger_range, axis=1))
+    rate = FINGER_DIRECTION.get(function, 0.0) * deflection * sim.config.control.finger_speed / finger_range
+    return DirectionResult(mode.value, function, float(rate), float((c1 - c0) / (t1 - t0)), float("nan"))
+
+
+def check_all(sim: ArmSim, deflection: float = 1.0, seconds: float = 1.0) -> list[DirectionResult]:
+    """Every function in translation and wrist mode, and the finger functions in finger mode."""
+    results = [measure(sim, mode, function, deflection, seconds)
+               for mode in MODE_CYCLE if mode is not Mode.FINGERS for function in FUNCTIONS]
+    results += [measure(sim, Mode.FINGERS, function, deflection, seconds) for function in FINGER_DIRECTION]
+    return results

@@ -1,0 +1,125 @@
+"""``bomi sim-check`` and ``bomi render``: the simulated arm from the command line."""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from sim.check import check_all
+from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
+from sim.env import ArmSim
+from sim.errors import SimError
+from sim.joystick import JoystickState
+from sim.render import VideoWriter, describe, write_png
+
+# The scripted motion of ``bomi render``: (seconds, stick state) segments; a segment's buttons are
+# pressed once, at its first tick, while its functions are held throughout.
+DEMO_SCRIPT: tuple[tuple[float, JoystickState], ...] = (
+    (0.5, JoystickState()),
+    (1.0, JoystickState({"R": 0.7})),
+    (0.8, JoystickState({"Lr": 0.8})),
+    (0.1, JoystickState(pressed=frozenset({"B1"}))),
+    (1.0, JoystickState({"Rr": 0.8})),
+    (0.1, JoystickState(pressed=frozenset({"B1"}))),
+    (1.2, JoystickState({"F": 1.0})),
+    (1.0, JoystickState({"B": 1.0})),
+    (0.1, JoystickState(pressed=frozenset({"B2"}))),
+    (0.1, JoystickState(pressed=frozenset({"B2"}))),
+    (1.0, JoystickState({"L": 1.0, "Rr": 0.5})),
+    (0.5, JoystickState()),
+)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    check = subparsers.add_parser("sim-check", help="drive the simulated arm through every joystick function")
+    _common_options(check)
+    check.add_argument("--deflection", type=float, default=1.0, help="stick deflection in (0, 1] (default 1)")
+    check.add_argument("--seconds", type=float, default=1.0, help="how long each function is held (default 1)")
+    check.add_argument("--json", type=Path, help="also write the results as JSON here")
+    check.set_defaults(func=run_check)
+
+    render = subparsers.add_parser("render", help="render a short scripted motion of the arm to MP4")
+    _common_options(render)
+    render.add_argument("--out", type=Path, required=True, help="MP4 file to write")
+    render.add_argument("--png", type=Path, help="also write the last frame as PNG here")
+    render.set_defaults(func=run_render)
+
+
+def _common_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="simulation TOML (default models/sim.toml)")
+    parser.add_argument("--models", type=Path, default=MODELS_DIR, help="directory of the MJCF model files")
+
+
+def run_check(args: argparse.Namespace) -> int:
+    if not 0 < args.deflection <= 1 or args.seconds <= 0.5:
+        raise SimError("sim-check: --deflection must be in (0, 1] and --seconds above 0.5")
+    sim = ArmSim(load_config(args.config), args.models)
+    results = check_all(sim, args.deflection, args.seconds)
+    print(f"{'mode':<12}{'function':<9}{'commanded':>10}{'achieved':>10}{'ratio':>7}{'tracking error':>16}")
+    units = {"translation": ("m/s", "mm off line"), "wrist": ("rad/s", "mm drift"), "fingers": ("1/s", "")}
+    for result in results:
+        speed_unit, error_unit = units[result.mode]
+        error = "" if np.isnan(result.tracking_error) else f"{1000 * result.tracking_error:.1f} {error_unit}"
+        print(f"{result.mode:<12}{result.function:<9}{result.commanded:>10.3f}{result.achieved:>10.3f}"
+              f"{result.ratio:>7.2f}{error:>16}  {speed_unit}")
+    if args.json:
+        records = [{key: _json_number(value) for key, value in (asdict(r) | {"ratio": r.ratio}).items()}
+                   for r in results]
+        _write_atomic(args.json, lambda tmp: tmp.write_text(json.dumps(records, indent=2)))
+    return 0
+
+
+def run_render(args: argparse.Namespace) -> int:
+    if args.out.suffix.lower() != ".mp4":
+        raise SimError(f"{args.out}: --out must name an .mp4 file")
+    for path in filter(None, (args.out, args.png)):
+        if not path.parent.is_dir():
+            raise SimError(f"{path}: directory {path.parent} does not exist")
+    sim = ArmSim(load_config(args.config), args.models)
+    fps = sim.config.render.fps
+    ticks_per_frame = max(1, round(sim.config.physics.control_hz / fps))
+    total = sum(round(seconds * sim.config.physics.control_hz) for seconds, _ in DEMO_SCRIPT)
+    frame = None
+
+    def write_video(tmp: Path) -> None:
+        nonlocal frame
+        with VideoWriter(tmp, fps=sim.config.physics.control_hz / ticks_per_frame) as video, \
+                tqdm(total=total, desc="render", unit="tick") as progress:
+            tick = 0
+            for seconds, state in DEMO_SCRIPT:
+                for i in range(round(seconds * sim.config.physics.control_hz)):
+                    sim.step(state if i == 0 else JoystickState(state.deflection))
+                    if tick % ticks_per_frame == 0:
+                        frame = sim.render(describe(sim.mode, state))
+                        video.append(frame)
+                    tick += 1
+                    progress.update()
+
+    try:
+        _write_atomic(args.out, write_video)
+        if args.png:
+            _write_atomic(args.png, lambda tmp: write_png(tmp, frame))
+    finally:
+        sim.close()
+    print(f"wrote {args.out}" + (f" and {args.png}" if args.png else "")
+          + f" ({sim.time:.1f} s simulated, mode switches {sim.mode_switches}, button presses {sim.button_presses})")
+    return 0
+
+
+def _json_number(value):
+    """NaN is not JSON: write null."""
+    return None if isinstance(value, float) and np.isnan(value) else value
+
+
+def _write_atomic(path: Path, write) -> None:
+    """Write through a temporary sibling and rename, so a failure never leaves a half-written file."""
+    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+    try:
+        write(tmp)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
