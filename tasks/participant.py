@@ -1,0 +1,558 @@
+"""The BoMI operator's body: a virtual participant that turns intents into IMU base-station frames.
+
+An intent ``(class_label, amplitude)`` set at a sim time becomes, after a reaction time, a
+minimum-jerk move from the current posture to neutral + amplitude x (the class posture + this
+session's and this repetition's offsets), held with slow sway and tremor; intent 0 returns to
+a (freshly drawn) neutral. Each node's angle trajectory goes through ``tasks.imu_synth`` to raw
+sensor counts and base-station frames, with frame loss and bursty delivery. Parameters come
+from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.fit_participant``).
+Every modelling assumption is listed in docs/virtual_participant.md.
+
+TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset_s``,
+``reaction_s``, ``max_amplitude`` (0..1]; ``[tremor] band_hz = [lo, hi]``; ``[neutral]`` with
+``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg``; one
+``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_std_deg``,
+``sway_std_deg``, ``tremor_std_deg``; optional ``[spasm]`` with ``rate_per_s``, ``max_deg``,
+``duration_s``, ``nodes``. Every ``*_deg`` value is a (nodes x 3) matrix of (pitch, roll, yaw).
+"""
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.signal
+
+from bomi.errors import BomiError
+from bomi.fusion import DT, NodeFusion
+from bomi.frames import FrameParser, imu_index
+from bomi.profiles import Profile
+from bomi.recording import NodeData, Recording
+from tasks.imu_synth import Delivery, LinkModel, RawImu, SensorNoise, deliver, synthesize_raw
+
+PARTICIPANT_DIR = Path(__file__).resolve().parent / "participants"
+SAMPLE_RATE_HZ = 1.0 / DT
+SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the P1 fit
+NEUTRAL_LABEL = 0
+
+_TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
+             "classes", "spasm"}
+_NEUTRAL_KEYS = {"angles_deg", "rep_std_deg", "sway_std_deg", "tremor_std_deg"}
+_CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_std_deg", "sway_std_deg", "tremor_std_deg"}
+_SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
+
+
+@dataclass(frozen=True)
+class ClassMotion:
+    """One motion class: nominal posture change from neutral at amplitude 1, and its variability."""
+
+    label: int
+    posture_deg: np.ndarray      # (nodes, 3)
+    rep_std_deg: np.ndarray      # repetition-to-repetition std of the posture
+    day_std_deg: np.ndarray      # session-to-session (day-to-day) std of the posture
+    sway_std_deg: np.ndarray     # slow wander while holding (below SWAY_CUTOFF_HZ)
+    tremor_std_deg: np.ndarray   # tremor while holding (in the tremor band)
+
+
+@dataclass(frozen=True)
+class Spasm:
+    """Involuntary bursts: Poisson with ``rate_per_s``; each a raised-cosine of up to ``max_deg``."""
+
+    rate_per_s: float
+    max_deg: float
+    duration_s: float
+    nodes: tuple[int, ...]       # 1-based node positions in the profile's node list
+
+
+@dataclass(frozen=True)
+class ParticipantParams:
+    name: str
+    profile: str
+    description: str
+    onset_s: float
+    reaction_s: float
+    max_amplitude: float
+    tremor_band_hz: tuple[float, float]
+    neutral: ClassMotion         # label 0: angles_deg absolute, rep_std = neutral-to-neutral std
+    classes: dict[int, ClassMotion]
+    spasm: Spasm | None
+    source: str
+
+    @property
+    def n_nodes(self) -> int:
+        return self.neutral.posture_deg.shape[0]
+
+    def motion(self, label: int) -> ClassMotion:
+        return self.neutral if label == NEUTRAL_LABEL else self.classes[label]
+
+
+# ------------------------------------------------------------------------------------- loading
+def load_participant(path_or_name: str | Path) -> ParticipantParams:
+    """Load and validate a participant file, or a shipped one by name (P1, P4, P5)."""
+    path = Path(path_or_name)
+    if not path.suffix and (PARTICIPANT_DIR / f"{path_or_name}.toml").is_file():
+        path = PARTICIPANT_DIR / f"{path_or_name}.toml"
+    if not path.is_file():
+        names = ", ".join(sorted(p.stem for p in PARTICIPANT_DIR.glob("*.toml")))
+        raise BomiError(f"{path}: no such participant file (shipped participants: {names})")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        return _parse(data, str(path))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+    except ValueError as exc:
+        raise BomiError(f"{path}: {exc}") from None
+
+
+def _check_keys(table: Any, allowed: set[str], required: set[str], where: str) -> dict:
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: expected a table")
+    unknown, missing = sorted(set(table) - allowed), sorted(required - set(table))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)}")
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {', '.join(missing)}")
+    return table
+
+
+def _number(table: dict, key: str, where: str, low: float, high: float = np.inf) -> float:
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
+        raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
+    return float(value)
+
+
+def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative: bool) -> np.ndarray:
+    try:
+        m = np.array(table[key], dtype=float)
+    except (TypeError, ValueError):
+        m = np.array([])
+    if m.ndim != 2 or m.shape[1] != 3 or (n_nodes is not None and m.shape[0] != n_nodes) or not np.isfinite(m).all():
+        nodes = "nodes" if n_nodes is None else str(n_nodes)
+        raise ValueError(f"{where}: '{key}' must be a {nodes} x 3 matrix of numbers (pitch, roll, yaw per node)")
+    if nonnegative and (m < 0).any():
+        raise ValueError(f"{where}: '{key}' holds standard deviations, they cannot be negative")
+    return m
+
+
+def _motion(table: dict, label: int, where: str, n_nodes: int, posture_key: str = "posture_deg") -> ClassMotion:
+    zeros = np.zeros((n_nodes, 3))
+    return ClassMotion(
+        label=label,
+        posture_deg=_matrix(table, posture_key, where, n_nodes, nonnegative=False),
+        rep_std_deg=_matrix(table, "rep_std_deg", where, n_nodes, nonnegative=True),
+        day_std_deg=_matrix(table, "day_std_deg", where, n_nodes, nonnegative=True) if "day_std_deg" in table else zeros,
+        sway_std_deg=_matrix(table, "sway_std_deg", where, n_nodes, nonnegative=True),
+        tremor_std_deg=_matrix(table, "tremor_std_deg", where, n_nodes, nonnegative=True),
+    )
+
+
+def _parse(data: dict, source: str) -> ParticipantParams:
+    _check_keys(data, _TOP_KEYS, _TOP_KEYS - {"description", "spasm"}, "participant")
+    for key in ("name", "profile"):
+        if not isinstance(data[key], str) or not data[key]:
+            raise ValueError(f"'{key}' must be a non-empty string")
+    neutral_table = _check_keys(data["neutral"], _NEUTRAL_KEYS, _NEUTRAL_KEYS, "[neutral]")
+    n_nodes = _matrix(neutral_table, "angles_deg", "[neutral]", None, nonnegative=False).shape[0]
+    neutral = _motion(neutral_table, NEUTRAL_LABEL, "[neutral]", n_nodes, posture_key="angles_deg")
+    tremor = _check_keys(data["tremor"], {"band_hz"}, {"band_hz"}, "[tremor]")
+    band = tremor["band_hz"]
+    if (not isinstance(band, list) or len(band) != 2 or not all(isinstance(f, (int, float)) for f in band)
+            or not 0 < band[0] < band[1] < SAMPLE_RATE_HZ / 2):
+        raise ValueError(f"[tremor]: band_hz must be [low, high] with 0 < low < high < {SAMPLE_RATE_HZ / 2} Hz")
+    if not isinstance(data["classes"], list) or not data["classes"]:
+        raise ValueError("'classes' must be a non-empty list of [[classes]] tables")
+    classes: dict[int, ClassMotion] = {}
+    for k, table in enumerate(data["classes"]):
+        where = f"classes[{k}]"
+        _check_keys(table, _CLASS_KEYS, _CLASS_KEYS, where)
+        label = table["label"]
+        if isinstance(label, bool) or not isinstance(label, int) or label <= NEUTRAL_LABEL or label in classes:
+            raise ValueError(f"{where}: 'label' must be a positive integer not used before, got {label!r}")
+        classes[label] = _motion(table, label, where, n_nodes)
+    spasm = None
+    if "spasm" in data:
+        table = _check_keys(data["spasm"], _SPASM_KEYS, _SPASM_KEYS, "[spasm]")
+        nodes = table["nodes"]
+        if not isinstance(nodes, list) or not nodes or not all(isinstance(n, int) and 1 <= n <= n_nodes for n in nodes):
+            raise ValueError(f"[spasm]: 'nodes' must list node positions 1..{n_nodes}")
+        spasm = Spasm(_number(table, "rate_per_s", "[spasm]", 0.0), _number(table, "max_deg", "[spasm]", 0.0, 90.0),
+                      _number(table, "duration_s", "[spasm]", DT, 10.0), tuple(nodes))
+    return ParticipantParams(
+        name=data["name"], profile=data["profile"], description=str(data.get("description", "")),
+        onset_s=_number(data, "onset_s", "participant", DT, 10.0),
+        reaction_s=_number(data, "reaction_s", "participant", 0.0, 10.0),
+        max_amplitude=_number(data, "max_amplitude", "participant", 0.01, 1.0),
+        tremor_band_hz=(float(band[0]), float(band[1])), neutral=neutral, classes=classes, spasm=spasm,
+        source=source)
+
+
+def check_against_profile(params: ParticipantParams, profile: Profile) -> None:
+    """The participant must wear the profile's nodes and perform exactly its motion classes."""
+    if params.profile != profile.name:
+        raise BomiError(f"{params.source}: made for profile {params.profile}, not {profile.name}")
+    if params.n_nodes != len(profile.nodes):
+        raise BomiError(f"{params.source}: {params.n_nodes} nodes per angle matrix, profile {profile.name} "
+                        f"has {len(profile.nodes)}")
+    motions = sorted(cls.label for cls in profile.classes if cls.label != NEUTRAL_LABEL)
+    if sorted(params.classes) != motions:
+        raise BomiError(f"{params.source}: classes {sorted(params.classes)} do not match profile "
+                        f"{profile.name}'s motion classes {motions}")
+
+
+# ------------------------------------------------------------------------------ motion pieces
+def minimum_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk position profile 10 s^3 - 15 s^4 + 6 s^5 for s in [0, 1] (clipped outside)."""
+    s = np.clip(s, 0.0, 1.0)
+    return s ** 3 * (10.0 - 15.0 * s + 6.0 * s ** 2)
+
+
+@dataclass
+class ColouredNoise:
+    """Unit-variance Gaussian noise through a fixed filter, streamed (filter state kept between calls)."""
+
+    sos: np.ndarray
+    channels: int
+    rng: np.random.Generator
+    gain: float = field(init=False)
+    state: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        impulse = scipy.signal.sosfilt(self.sos, np.r_[1.0, np.zeros(8191)])
+        self.gain = 1.0 / float(np.sqrt(np.sum(impulse ** 2)))
+        self.state = np.zeros((self.sos.shape[0], 2, self.channels))
+        # start in the stationary regime: run the filter over a few seconds of noise first
+        self.next(int(10 * SAMPLE_RATE_HZ))
+
+    def next(self, n: int) -> np.ndarray:
+        out, self.state = scipy.signal.sosfilt(self.sos, self.rng.standard_normal((n, self.channels)), axis=0,
+                                               zi=self.state)
+        return out * self.gain
+
+
+def sway_filter() -> np.ndarray:
+    return scipy.signal.butter(2, SWAY_CUTOFF_HZ, "low", fs=SAMPLE_RATE_HZ, output="sos")
+
+
+def tremor_filter(band_hz: tuple[float, float]) -> np.ndarray:
+    return scipy.signal.butter(2, band_hz, "bandpass", fs=SAMPLE_RATE_HZ, output="sos")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A min-jerk move from ``start`` to ``target`` (absolute angles, (nodes, 3)) beginning at ``t0``."""
+
+    t0: float
+    duration: float
+    start: np.ndarray
+    target: np.ndarray
+    label: int
+    amplitude: float
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        s = minimum_jerk((t - self.t0) / self.duration)
+        return self.start[None] + s[:, None, None] * (self.target - self.start)[None]
+
+    def progress(self, t: np.ndarray) -> np.ndarray:
+        return minimum_jerk((t - self.t0) / self.duration)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth per generated sample: time, intent (label, amplitude) and true angles (n, nodes, 3)."""
+
+    time_s: np.ndarray
+    intent: np.ndarray
+    amplitude: np.ndarray
+    angles: np.ndarray
+
+
+# ------------------------------------------------------------------------ the virtual participant
+class VirtualParticipant:
+    """A streaming source of base-station bytes driven by intents (see the module docstring).
+
+    ``seed`` fixes everything random: this session's ("day's") posture offsets, repetition
+    offsets, sway, tremor, spasms, sensor noise, frame loss and delivery times.
+    """
+
+    def __init__(self, params: ParticipantParams, profile: Profile, seed: int,
+                 noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()):
+        check_against_profile(params, profile)
+        self.params, self.profile, self.noise, self.link = params, profile, noise, link
+        self._rng = np.random.default_rng(seed)
+        channels = params.n_nodes * 3
+        self._sway = ColouredNoise(sway_filter(), channels, self._rng)
+        self._tremor = ColouredNoise(tremor_filter(params.tremor_band_hz), channels, self._rng)
+        self._day_offset = {label: self._rng.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
+        self._neutral_now = self._draw_neutral()
+        rest = self._neutral_now
+        self._segments: list[Segment] = [Segment(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
+        n_spasm_nodes = len(params.spasm.nodes) if params.spasm else 0
+        self._spasm_onsets = np.empty(0)
+        self._spasm_sizes = np.empty((0, n_spasm_nodes, 3))
+        self._spasm_until = 0.0                 # spasm onsets are drawn up to this time
+        self._generated = 0                     # samples generated so far (sample k at time k * DT)
+        self._last_angles: dict[int, np.ndarray] = {}
+        self._last_arrival: dict[int, float] = {}
+        self._pending = _merge()
+        self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    # -- intents
+    def _draw_neutral(self) -> np.ndarray:
+        neutral = self.params.neutral
+        return neutral.posture_deg + self._rng.normal(0.0, neutral.rep_std_deg)
+
+    def _target(self, label: int, amplitude: float) -> np.ndarray:
+        if label == NEUTRAL_LABEL:
+            self._neutral_now = self._draw_neutral()
+            return self._neutral_now
+        motion = self.params.classes[label]
+        excursion = motion.posture_deg + self._day_offset[label] + self._rng.normal(0.0, motion.rep_std_deg)
+        return self._neutral_now + amplitude * self.params.max_amplitude * excursion
+
+    @property
+    def time_s(self) -> float:
+        """Sim time up to which samples have been generated."""
+        return self._generated * DT
+
+    @property
+    def intent(self) -> tuple[int, float]:
+        return self._segments[-1].label, self._segments[-1].amplitude
+
+    def set_intent(self, label: int, amplitude: float, t: float) -> None:
+        """From sim time ``t``: move (after the reaction time) to ``label``'s posture at ``amplitude`` in [0, 1].
+
+        Setting the intent already in force does nothing (the posture is held).
+        """
+        if label != NEUTRAL_LABEL and label not in self.params.classes:
+            raise ValueError(f"participant {self.params.name} has no class {label}")
+        if not 0.0 <= amplitude <= 1.0:
+            raise ValueError(f"amplitude must be in [0, 1], got {amplitude}")
+        if (label, amplitude) == self.intent or (label == NEUTRAL_LABEL and self.intent[0] == NEUTRAL_LABEL):
+            return
+        t0 = max(t + self.params.reaction_s, self.time_s, self._segments[-1].t0)
+        start = self._posture_at(np.array([t0]))[0]
+        self._segments.append(Segment(t0, self.params.onset_s, start, self._target(label, amplitude), label,
+                                      amplitude))
+
+    def _posture_at(self, t: np.ndarray) -> np.ndarray:
+        """Deliberate posture (no sway/tremor/spasm) at times ``t`` (non-decreasing), (n, nodes, 3)."""
+        starts = np.array([s.t0 for s in self._segments])
+        which = np.searchsorted(starts, t, side="right") - 1
+        out = np.empty((len(t), self.params.n_nodes, 3))
+        for k in np.unique(which):
+            mask = which == k
+            out[mask] = self._segments[max(k, 0)].at(t[mask])
+        return out
+
+    def _noise_scale(self, t: np.ndarray, attribute: str) -> np.ndarray:
+        """Per-sample std (n, nodes, 3) of sway or tremor, blended from the old to the new class over each move."""
+        starts = np.array([s.t0 for s in self._segments])
+        which = np.searchsorted(starts, t, side="right") - 1
+        out = np.empty((len(t), self.params.n_nodes, 3))
+        for k in np.unique(which):
+            mask = which == k
+            seg = self._segments[max(k, 0)]
+            before = self._segments[max(k - 1, 0)].label
+            old = getattr(self.params.motion(before), attribute)
+            new = getattr(self.params.motion(seg.label), attribute)
+            s = seg.progress(t[mask])[:, None, None]
+            out[mask] = (1 - s) * old[None] + s * new[None]
+        return out
+
+    def _spasms(self, t: np.ndarray) -> np.ndarray:
+        """Spasm bursts over the samples at ``t``, (n, nodes, 3)."""
+        out = np.zeros((len(t), self.params.n_nodes, 3))
+        spasm = self.params.spasm
+        if spasm is None or spasm.rate_per_s == 0 or len(t) == 0:
+            return out
+        while self._spasm_until < t[-1]:
+            n_new = self._rng.poisson(spasm.rate_per_s * 10.0)
+            onsets = np.sort(self._rng.uniform(self._spasm_until, self._spasm_until + 10.0, n_new))
+            size = self._rng.uniform(-1.0, 1.0, (n_new, len(spasm.nodes), 3))
+            size *= spasm.max_deg / np.maximum(np.abs(size).max(axis=(1, 2), keepdims=True), 1e-9)
+            size *= self._rng.uniform(0.3, 1.0, (n_new, 1, 1))
+            self._spasm_onsets = np.concatenate([self._spasm_onsets, onsets])
+            self._spasm_sizes = np.concatenate([self._spasm_sizes, size])
+            self._spasm_until += 10.0
+        nodes = np.array(spasm.nodes) - 1
+        for onset, size in zip(self._spasm_onsets, self._spasm_sizes):
+            phase = (t - onset) / spasm.duration_s
+            active = (phase >= 0) & (phase <= 1)
+            if active.any():
+                bump = 0.5 * (1 - np.cos(2 * np.pi * phase[active]))
+                out[np.ix_(np.flatnonzero(active), nodes)] += bump[:, None, None] * size[None]
+        return out
+
+    # -- output
+    def _generate(self, t_end: float) -> None:
+        n_total = int(np.floor(t_end / DT + 1e-9)) + 1
+        n = n_total - self._generated
+        if n <= 0:
+            return
+        index = np.arange(self._generated, n_total)
+        t = index * DT
+        shape = (n, self.params.n_nodes, 3)
+        angles = (self._posture_at(t)
+                  + self._sway.next(n).reshape(shape) * self._noise_scale(t, "sway_std_deg")
+                  + self._tremor.next(n).reshape(shape) * self._noise_scale(t, "tremor_std_deg")
+                  + self._spasms(t))
+        raw = {}
+        for k, node in enumerate(self.profile.nodes):
+            raw[node.index] = synthesize_raw(angles[:, k], node.calibration, self._rng, self.noise,
+                                             previous_deg=self._last_angles.get(node.index))
+            self._last_angles[node.index] = angles[-1, k]
+        fresh = deliver(raw, index, t, self._rng, self.link, not_before_s=self._last_arrival)
+        for node in np.unique(fresh.node_index):
+            self._last_arrival[int(node)] = float(fresh.arrival_s[fresh.node_index == node].max())
+        self._pending = _merge(self._pending, fresh)
+        labels = np.array([s.label for s in self._segments])
+        amplitudes = np.array([s.amplitude for s in self._segments])
+        which = np.searchsorted([s.t0 for s in self._segments], t, side="right") - 1
+        self._truth.append((t, labels[np.maximum(which, 0)], amplitudes[np.maximum(which, 0)], angles))
+        self._generated = n_total
+
+    def deliveries(self, t_end: float) -> Delivery:
+        """The frames that reach the host by sim time ``t_end`` (and were not returned before)."""
+        self._generate(t_end)
+        now, self._pending = self._pending.until(t_end)
+        return now
+
+    def advance(self, t_end: float) -> bytes:
+        """The base-station bytes that arrive by sim time ``t_end`` (and were not returned before)."""
+        return self.deliveries(t_end).stream()
+
+    def flush(self) -> Delivery:
+        """Every frame generated but not yet returned, whatever its arrival time (end of a session)."""
+        rest, self._pending = self._pending, _merge()
+        return rest
+
+    def truth(self) -> Truth:
+        """Ground truth of every sample generated so far (the body's intent and angles, not the chain's)."""
+        if not self._truth:
+            return Truth(np.empty(0), np.empty(0, int), np.empty(0), np.empty((0, self.params.n_nodes, 3)))
+        t, label, amp, angles = (np.concatenate(parts) for parts in zip(*self._truth))
+        return Truth(t, label, amp, angles)
+
+
+def _merge(*parts: Delivery) -> Delivery:
+    """Deliveries in one arrival order (stable: earlier parts first on ties); no parts: nothing."""
+    parts = (Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), []),) + parts
+    arrival = np.concatenate([p.arrival_s for p in parts])
+    order = np.argsort(arrival, kind="stable")
+    frames = [frame for p in parts for frame in p.frames]
+    return Delivery(arrival[order], np.concatenate([p.node_index for p in parts])[order],
+                    np.concatenate([p.sample_index for p in parts])[order], [frames[i] for i in order])
+
+
+# ------------------------------------------------------------------------- calibration protocol
+@dataclass(frozen=True)
+class CalibrationSession:
+    """The paper's calibration protocol performed by a virtual participant.
+
+    Per generated sample (n,): ``cue`` is the class asked for (0 between motions), ``holding``
+    is True while the cued posture is reached and held (the published recordings keep only
+    these samples), ``recorded`` is False during the warm-up that lets the fusion settle.
+    ``delivery`` is every frame the base station sent, in arrival order.
+    """
+
+    participant: str
+    seed: int
+    delivery: Delivery
+    truth: Truth
+    cue: np.ndarray
+    holding: np.ndarray
+    recorded: np.ndarray
+
+
+def protocol_order(labels: Sequence[int], repetitions: int, amplitudes: Sequence[float]) -> list[tuple[int, float]]:
+    """Every class at every amplitude, class after class, the whole sequence ``repetitions`` times."""
+    return [(label, amp) for _ in range(repetitions) for label in labels for amp in amplitudes]
+
+
+def calibration_session(params: ParticipantParams, profile: Profile, seed: int, repetitions: int = 3,
+                        hold_s: float = 5.0, neutral_s: float = 5.0, amplitudes: Sequence[float] = (1.0,),
+                        order: Sequence[tuple[int, float]] | None = None, warmup_s: float = 12.0,
+                        noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()) -> CalibrationSession:
+    """Run the protocol: neutral, then each cued motion held ``hold_s`` with ``neutral_s`` of neutral between.
+
+    The participant needs ``reaction_s + onset_s`` after each cue to reach the posture; the
+    hold (and the neutral) lasts ``hold_s`` (``neutral_s``) from then. ``order`` overrides the
+    default (label, amplitude) sequence.
+    """
+    vp = VirtualParticipant(params, profile, seed, noise, link)
+    motions = list(order) if order is not None else protocol_order(sorted(params.classes), repetitions, amplitudes)
+    settle = params.reaction_s + params.onset_s
+    holds: list[tuple[float, float, int]] = [(warmup_s, warmup_s + neutral_s, NEUTRAL_LABEL)]
+    cues: list[tuple[float, int]] = [(0.0, NEUTRAL_LABEL)]
+    t = warmup_s + neutral_s
+    parts = []
+    for label, amplitude in motions:
+        for cue_label, cue_amp, duration in ((label, amplitude, hold_s), (NEUTRAL_LABEL, 0.0, neutral_s)):
+            parts.append(vp.deliveries(t))
+            vp.set_intent(cue_label, cue_amp, t)
+            cues.append((t, cue_label))
+            holds.append((t + settle, t + settle + duration, cue_label))
+            t += settle + duration
+    parts += [vp.deliveries(t), vp.flush()]
+    delivery = _merge(*parts)
+    truth = vp.truth()
+    keep = truth.time_s <= t
+    truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
+    cue = np.zeros(len(truth.time_s), dtype=int)
+    for start, label in cues:
+        cue[truth.time_s >= start] = label
+    holding = np.zeros(len(truth.time_s), dtype=bool)
+    for start, stop, _ in holds:
+        holding |= (truth.time_s >= start) & (truth.time_s < stop)
+    return CalibrationSession(params.name, seed, delivery, truth, cue, holding, truth.time_s >= warmup_s)
+
+
+# ------------------------------------------------------------------------------ recording it
+def sample_indices(counters: Sequence[int]) -> np.ndarray:
+    """Unwrap a node's 8-bit packet counters into sample indices (first frame: its counter)."""
+    steps = np.diff(np.asarray(counters, dtype=int)) % 256
+    return np.concatenate([[counters[0]], counters[0] + np.cumsum(steps)]).astype(int) if len(counters) else \
+        np.empty(0, int)
+
+
+def record_stream(stream: bytes, profile: Profile, n_samples: int, source: str) -> Recording:
+    """Parse base-station bytes and fuse each node, one row per sample index, as the host records.
+
+    Each node is fused frame by frame (``bomi.fusion.NodeFusion``, as live); a lost sample
+    repeats the node's previous row, as the published recordings do.
+    """
+    per_node: dict[int, list] = {node.index: [] for node in profile.nodes}
+    for frame in FrameParser().feed(stream):
+        index = imu_index(frame.node_id)
+        if index in per_node:
+            per_node[index].append(frame)
+    nodes = {}
+    for node in profile.nodes:
+        frames = per_node[node.index]
+        if not frames:
+            raise BomiError(f"{source}: no frame of node {node.index} (id {node.node_id})")
+        fusion = NodeFusion(node.calibration)
+        angles = np.array([fusion.update(f.acc, f.gyro, f.mag) for f in frames])
+        columns = {"acc": np.array([f.acc for f in frames], float), "gyro": np.array([f.gyro for f in frames], float),
+                   "mag": np.array([f.mag for f in frames], float), "angles": angles}
+        received = sample_indices([f.counter for f in frames])
+        latest = np.clip(np.searchsorted(received, np.arange(n_samples), side="right") - 1, 0, None)
+        nodes[node.index] = NodeData(**{name: values[latest] for name, values in columns.items()})
+    return Recording(nodes=nodes, labels=None, time=np.arange(n_samples) * DT, source=source)
+
+
+def session_recording(session: CalibrationSession, profile: Profile, holds_only: bool = True) -> Recording:
+    """The session as the chain records it, labelled with the cue; warm-up cut.
+
+    ``holds_only`` keeps just the held postures, like the published (post-processed) recordings;
+    otherwise every sample after the warm-up is kept, transitions labelled with their cue.
+    """
+    source = f"virtual {session.participant} (seed {session.seed})"
+    full = record_stream(session.delivery.stream(), profile, len(session.cue), source)
+    keep = session.recorded & (session.holding if holds_only else True)
+    nodes = {i: NodeData(d.acc[keep], d.gyro[keep], d.mag[keep], d.angles[keep]) for i, d in full.nodes.items()}
+    return Recording(nodes=nodes, labels=session.cue[keep], time=full.time[keep], source=source)
