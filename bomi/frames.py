@@ -198,3 +198,38 @@ class FrameParser:
             parts.append("skipped " + ", ".join(f"id {k}: {v}" for k, v in sorted(self.skipped.items())))
         parts.append(f"{self.discarded_bytes} garbage bytes")
         return "; ".join(parts)
+
+
+@dataclass
+class RowAssembler:
+    """Groups interleaved frames of ``node_ids`` into rows holding one frame per node.
+
+    A row is complete when every node has delivered a frame; when a node delivers again first
+    (its partner's frame was lost), the row is emitted with the missing nodes' previous frames
+    (counted in ``held``). Rows before every node has been seen once are dropped.
+    """
+
+    node_ids: tuple[int, ...]
+    held: int = 0
+    _pending: dict[int, ImuFrame] = field(default_factory=dict, repr=False)
+    _last: dict[int, ImuFrame] = field(default_factory=dict, repr=False)
+
+    def push(self, frame: ImuFrame) -> dict[int, ImuFrame] | None:
+        """Add a frame; return the row it completes, if any. Frames of other nodes are ignored."""
+        if frame.node_id not in self.node_ids:
+            return None
+        row = self._flush() if frame.node_id in self._pending else None
+        self._pending[frame.node_id] = frame
+        if len(self._pending) == len(self.node_ids):
+            row = self._flush()
+        return row
+
+    def _flush(self) -> dict[int, ImuFrame] | None:
+        row = {**self._last, **self._pending}
+        fresh = len(self._pending)
+        self._pending = {}
+        if len(row) < len(self.node_ids):
+            return None
+        self.held += len(self.node_ids) - fresh
+        self._last = row
+        return row

@@ -1,0 +1,119 @@
+"""A live base-station stream: pyserial's ``serial_for_url`` -> :class:`~bomi.frames.FrameParser`.
+
+Any URL pyserial knows works: a real port (``/dev/ttyUSB0``, 1,998,848 baud, raw mode, which is
+what pyserial sets up on POSIX), a pseudo-terminal path, ``socket://host:port``, ``loop://``.
+When the stream is lost (USB unplugged, pty or socket closed) the source says so on one line,
+reconnects with exponential backoff and goes on; after the last attempt it raises BomiError.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+
+import serial
+
+from bomi.errors import BomiError
+from bomi.frames import FrameParser, ImuFrame
+
+BASE_STATION_BAUD = 1_998_848
+READ_TIMEOUT_S = 0.05
+READ_SIZE = 4096
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+@dataclass(frozen=True)
+class RetryPolicy:
+    """Reconnection after a lost stream: ``attempts`` tries, delays doubling up to ``max_delay_s``."""
+
+    attempts: int = 6
+    first_delay_s: float = 0.5
+    max_delay_s: float = 8.0
+
+    def delays(self) -> list[float]:
+        return [min(self.first_delay_s * 2 ** k, self.max_delay_s) for k in range(self.attempts)]
+
+
+def open_port(url: str, baudrate: int = BASE_STATION_BAUD, timeout: float = READ_TIMEOUT_S) -> serial.SerialBase:
+    """Open ``url`` with pyserial; any failure becomes a one-line BomiError naming the port."""
+    try:
+        return serial.serial_for_url(url, baudrate=baudrate, timeout=timeout)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise BomiError(f"{url}: cannot open the port ({_one_line(exc)})") from None
+
+
+@dataclass
+class SerialSource:
+    """Frames from a base station at ``url``; iterate :meth:`batches`. Use as a context manager."""
+
+    url: str
+    baudrate: int = BASE_STATION_BAUD
+    timeout_s: float = READ_TIMEOUT_S
+    retry: RetryPolicy = field(default_factory=RetryPolicy)
+    parser: FrameParser = field(default_factory=FrameParser)
+    log: Callable[[str], None] = _stderr
+    clock: Callable[[], float] = time.monotonic
+    sleep: Callable[[float], None] = time.sleep
+    port: serial.SerialBase | None = field(default=None, init=False)
+    reconnections: int = field(default=0, init=False)
+
+    def open(self) -> SerialSource:
+        if self.port is None:
+            self.port = open_port(self.url, self.baudrate, self.timeout_s)
+        return self
+
+    def close(self) -> None:
+        if self.port is not None:
+            self.port.close()
+            self.port = None
+
+    def __enter__(self) -> SerialSource:
+        return self.open()
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+    def chunks(self) -> Iterator[bytes]:
+        """Raw bytes as they arrive; ``b""`` after each read timeout so callers can keep time."""
+        self.open()
+        while True:
+            try:
+                yield self.port.read(max(1, self.port.in_waiting))
+            except (serial.SerialException, OSError) as exc:
+                self._reconnect(exc)
+
+    def batches(self, duration_s: float | None = None) -> Iterator[tuple[float, list[ImuFrame]]]:
+        """(seconds since start, IMU frames completed by one chunk) until ``duration_s`` has passed."""
+        start = self.clock()
+        for chunk in self.chunks():
+            now = self.clock()
+            elapsed = now - start
+            if duration_s is not None and elapsed >= duration_s:
+                return
+            yield elapsed, self.parser.feed(chunk, now)
+
+    def _reconnect(self, exc: BaseException) -> None:
+        self.close()
+        self.log(f"bomi: {self.url}: stream lost ({_one_line(exc)}); reconnecting")
+        delays = self.retry.delays()
+        for attempt, delay in enumerate(delays, start=1):
+            self.log(f"bomi: {self.url}: retry {attempt} of {len(delays)} in {delay:g} s")
+            self.sleep(delay)
+            try:
+                self.open()
+            except BomiError as failure:
+                exc = failure
+                continue
+            self.reconnections += 1
+            self.log(f"bomi: {self.url}: reconnected")
+            return
+        raise BomiError(f"{self.url}: stream lost and not back after {len(delays)} attempts "
+                        f"over {sum(delays):g} s (last error: {_one_line(exc)})")
