@@ -14,7 +14,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from dm_control import composer, mjcf
-from dm_control.entities.manipulators.kinova import JacoArm, JacoHand
+from dm_control.entities.manipulators.kinova import JacoArm, JacoHand, assets_path
 
 from sim.config import MODELS_DIR, SimConfig
 from sim.errors import SimError
@@ -65,8 +65,9 @@ class Cube(composer.Entity):
         self._mjcf_root = load_fragment(path)
         self._mjcf_root.model = name
         self._geom = _require(self._mjcf_root, "geom", "cube", path)
-        if self._geom.type != "box" or self._geom.size is None or len(self._geom.size) != 3:
-            raise SimError(f"{path}: geom 'cube' must be a box with 3 half-sizes")
+        size = self._geom.size
+        if self._geom.type != "box" or size is None or len(size) != 3 or not all(h > 0 for h in size):
+            raise SimError(f"{path}: geom 'cube' must be a box with 3 positive half-sizes")
         self._geom.rgba = rgba
 
     @property
@@ -84,15 +85,20 @@ def _set_armature(arm: JacoArm, config: SimConfig) -> None:
         joint.armature = config.arm.armature_large if joint.name in LARGE_JOINTS else config.arm.armature_small
 
 
-def _compile(root: mjcf.RootElement, gravcomp_bodies: list[str], models_dir: Path) -> mujoco.MjModel:
-    """Compile with MuJoCo's MjSpec; dm_control's MJCF schema predates ``gravcomp``, so set it here."""
+def _compile(root: mjcf.RootElement, gravcomp_bodies: list[str], sources: dict[str, Path]) -> mujoco.MjModel:
+    """Compile with MuJoCo's MjSpec; dm_control's MJCF schema predates ``gravcomp``, so set it here.
+
+    ``sources`` maps name prefixes ("cube_0/") to their file, so that an error names its file.
+    """
     try:
         spec = mujoco.MjSpec.from_string(root.to_xml_string(), assets=root.get_assets())
         for name in gravcomp_bodies:
             spec.body(name).gravcomp = 1.0
         return spec.compile()
     except (ValueError, mujoco.FatalError) as exc:
-        raise SimError(f"{models_dir}: model files do not compile together: {' '.join(str(exc).split())}") from None
+        message = " ".join(str(exc).split())
+        culprit = next((path for prefix, path in sources.items() if prefix and f"'{prefix}" in message), sources[""])
+        raise SimError(f"{culprit}: model does not compile: {message}") from None
 
 
 @dataclass(frozen=True)
@@ -135,7 +141,9 @@ def build_scene(config: SimConfig, models_dir: Path = MODELS_DIR) -> Scene:
              for i in range(len(config.scene.cube_offsets))]
     cube_joints = [arena.attach(cube).add("freejoint", name="free") for cube in cubes]
     arm_bodies = [b.full_identifier for b in arm.mjcf_model.find_all("body")]  # includes the hand
-    model = _compile(arena.mjcf_model, arm_bodies if config.arm.gravity_compensation else [], models_dir)
+    sources = {"": models_dir / "scene.xml", "jaco_arm/": Path(assets_path.KINOVA_ROOT)}
+    sources |= {f"{cube.mjcf_model.model}/": cube_path for cube in cubes}
+    model = _compile(arena.mjcf_model, arm_bodies if config.arm.gravity_compensation else [], sources)
 
     def ids(kind, elements) -> np.ndarray:
         return np.array([mujoco.mj_name2id(model, kind, e.full_identifier) for e in elements])

@@ -1,0 +1,97 @@
+"""Bad model files and configs: one-line SimError naming the file; the CLI exits 2 and writes nothing."""
+import shutil
+from pathlib import Path
+
+import pytest
+
+from bomi.cli import main
+from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
+from sim.errors import SimError
+from sim.scene import build_scene
+
+
+@pytest.fixture
+def models(tmp_path) -> Path:
+    target = tmp_path / "models"
+    shutil.copytree(MODELS_DIR, target)
+    return target
+
+
+def edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+
+
+def test_default_config_loads_with_the_measured_timing():
+    config = load_config()
+    assert config.physics.timestep == pytest.approx(1 / 480)
+    assert config.control.full_speed == pytest.approx(0.20)
+
+
+@pytest.mark.parametrize("old, new, complaint", [
+    ("substeps = 8", 'substeps = "8"', "[physics] substeps: expected a number"),
+    ("substeps = 8", "substeps = 2.5", "[physics] substeps: expected an integer"),
+    ("full_speed = 0.20", "full_speed = -0.2", "[control] full_speed: must be > 0"),
+    ("x = [-0.45, 0.45]", "x = [0.45, -0.45]", "[workspace] x: lower bound"),
+    ("base_pos = [0.0, 0.0, 0.0]", "base_pos = [0.0, 0.0]", "[arm] base_pos: expected 3 values"),
+    ("fps = 30", "fps = 30\nspeed = 2", "[render] unknown key(s) ['speed']"),
+    ("[render]", "[rendering]", "[render] section missing"),
+    ("control_hz = 60.0", "control_hz = nan", "[physics] control_hz: expected a finite number"),
+    ("[physics]", "[physics", "not valid TOML"),
+])
+def test_bad_config_names_file_and_problem(tmp_path, old, new, complaint):
+    path = tmp_path / "sim.toml"
+    shutil.copy(DEFAULT_CONFIG, path)
+    edit(path, old, new)
+    with pytest.raises(SimError) as info:
+        load_config(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and complaint in message and "\n" not in message
+
+
+def test_missing_config_file(tmp_path):
+    with pytest.raises(SimError, match="cannot read config"):
+        load_config(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize("file, old, new, complaint", [
+    ("scene.xml", "</mujoco>", "", "malformed model file"),
+    ("scene.xml", 'camera name="workspace"', 'camera name="elsewhere"', "no camera named 'workspace'"),
+    ("scene.xml", 'geom name="table"', 'geom name="desk"', "no geom named 'table'"),
+    ("scene.xml", 'material="floor"/>', 'material="missing"/>', "model does not compile"),
+    ("cube.xml", 'type="box"', 'type="boxx"', "malformed model file"),
+    ("cube.xml", 'size="0.025 0.025 0.025"', 'size="0.025 0.025 -0.025"', "3 positive half-sizes"),
+    ("cube.xml", 'mass="0.075"', 'mass="-1"', "model does not compile"),
+])
+def test_malformed_model_file_names_that_file(models, file, old, new, complaint):
+    edit(models / file, old, new)
+    with pytest.raises(SimError) as info:
+        build_scene(load_config(), models)
+    message = str(info.value)
+    assert message.startswith(f"{models / file}: ") and complaint in message and "\n" not in message
+
+
+def test_binary_garbage_model_file(models):
+    (models / "cube.xml").write_bytes(b"\x00\xff garbage \x89PNG")
+    with pytest.raises(SimError, match="cube.xml: malformed model file"):
+        build_scene(load_config(), models)
+
+
+def test_cli_reports_one_line_and_overwrites_nothing(models, tmp_path, capsys):
+    edit(models / "scene.xml", "</mujoco>", "")
+    out = tmp_path / "run.mp4"
+    out.write_bytes(b"previous video")
+    assert main(["render", "--models", str(models), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bomi: error: ") and err.count("\n") == 1 and "scene.xml" in err
+    assert out.read_bytes() == b"previous video"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["models", "run.mp4"]
+
+
+def test_cli_rejects_bad_config_for_sim_check(tmp_path, capsys):
+    path = tmp_path / "sim.toml"
+    path.write_text("[physics]\ncontrol_hz = 60.0\n")
+    assert main(["sim-check", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(path) in err and "[physics] substeps: missing" in err

@@ -1,0 +1,74 @@
+"""Pinocchio kinematics of the tool frame against MuJoCo's own site pose and Jacobian."""
+import mujoco
+import numpy as np
+import pytest
+
+from sim.config import load_config
+from sim.env import HAND_DOWN
+from sim.kinematics import arm_kinematics
+from sim.scene import build_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_scene(load_config())
+
+
+@pytest.fixture(scope="module")
+def kinematics(scene):
+    return arm_kinematics(scene)
+
+
+def random_configurations(count: int, seed: int = 7) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-np.pi, np.pi, size=(count, 6))
+    q[:, 1] = rng.uniform(0.85, 5.4, count)  # joints 2 and 3 are limited
+    q[:, 2] = rng.uniform(0.35, 5.9, count)
+    return q
+
+
+def mujoco_tool(scene, q):
+    data = mujoco.MjData(scene.model)
+    data.qpos[scene.arm_qpos] = q
+    data.qpos[scene.finger_qpos] = np.random.default_rng(0).uniform(0.15, 1.35, 3)  # fingers must not matter
+    mujoco.mj_forward(scene.model, data)
+    jacp = np.zeros((3, scene.model.nv))
+    jacr = np.zeros((3, scene.model.nv))
+    mujoco.mj_jacSite(scene.model, data, jacp, jacr, scene.tool_site)
+    return (data.site_xpos[scene.tool_site].copy(), data.site_xmat[scene.tool_site].reshape(3, 3).copy(),
+            np.vstack((jacp[:, scene.arm_dof], jacr[:, scene.arm_dof])))
+
+
+def rotation_angle(a, b) -> float:
+    return float(np.arccos(np.clip((np.trace(a.T @ b) - 1) / 2, -1, 1)))
+
+
+@pytest.mark.parametrize("q", random_configurations(40))
+def test_forward_kinematics_and_jacobian_match_mujoco(scene, kinematics, q):
+    position, rotation, jacobian = mujoco_tool(scene, q)
+    pin_position, pin_rotation = kinematics.tool_pose(q)
+    assert np.linalg.norm(pin_position - position) <= 1e-6
+    assert rotation_angle(pin_rotation, rotation) <= 1e-4
+    pin_jacobian = kinematics.jacobian(q)
+    assert np.abs(pin_jacobian[:3] - jacobian[:3]).max() <= 1e-6
+    assert np.abs(pin_jacobian[3:] - jacobian[3:]).max() <= 1e-4
+
+
+def test_tool_frame_is_the_pinch_point_between_the_fingers(scene, kinematics):
+    """The tool point sits on the hand's axis, beyond the wrist, between the three fingertips."""
+    data = mujoco.MjData(scene.model)
+    data.qpos[scene.arm_qpos] = random_configurations(1, seed=3)[0]
+    mujoco.mj_forward(scene.model, data)
+    tool = data.site_xpos[scene.tool_site]
+    wrist = data.site_xpos[scene.wrist_site]
+    assert 0.18 < np.linalg.norm(tool - wrist) < 0.21  # dm_control's pinch site: 19.3 cm down the hand
+    tips = [data.xpos[scene.model.body(f"jaco_arm/jaco_hand/b_finger_tip_{k}").id] for k in (1, 2, 3)]
+    assert np.linalg.norm(np.mean(tips, axis=0) - tool) < 0.07
+
+
+def test_solve_pose_reaches_the_requested_pose(kinematics):
+    target = np.array([0.1, -0.5, 0.15])
+    q = kinematics.solve_pose(target, HAND_DOWN, np.array([4.71, 3.6, 1.5, 4.2, 1.5, 0.0]))
+    position, rotation = kinematics.tool_pose(q)
+    assert np.linalg.norm(position - target) < 1e-6
+    assert rotation_angle(rotation, HAND_DOWN) < 1e-6
