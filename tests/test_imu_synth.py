@@ -1,0 +1,152 @@
+"""tasks.imu_synth: hand-computed sensor readings, and the round trip through bomi.fusion."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from bomi.frames import FrameParser
+from bomi.fusion import GYRO_DEG_PER_LSB, NodeCalibration, fuse
+from tasks.imu_synth import (ACC_LSB_PER_G, LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer,
+                             synthesize_raw, to_int16)
+
+NO_NOISE = SensorNoise(0.0, 0.0, 0.0)
+HEADSET = NodeCalibration()
+UNCALIBRATED = NodeCalibration.uncalibrated()
+# an arbitrary node: tilted mounting, strong soft iron with cross terms, large hard-iron offset
+ODD = NodeCalibration(hard_iron=(300.0, -450.0, 120.0),
+                      soft_iron=((2.1e-4, 3e-5, -1e-5), (3e-5, 1.5e-4, 2e-5), (-1e-5, 2e-5, 1.8e-4)),
+                      mounting=tuple(map(tuple, Rotation.from_euler("zyx", [30, -20, 75], degrees=True).as_matrix())))
+SETTLE = 900   # yaw settles within ~600 samples from the zero state (hardware.md); margin added
+
+
+def fused(raw: RawImu, cal: NodeCalibration) -> np.ndarray:
+    return np.column_stack(fuse(raw.acc.astype(float), raw.gyro.astype(float), raw.mag.astype(float), cal))
+
+
+def test_neutral_headset_reads_one_g_on_sensor_z():
+    # body x (down) = -sensor z for the headset mounting, so gravity's reaction is +1 g on sensor z
+    raw = synthesize_raw(np.zeros((1, 3)), HEADSET, np.random.default_rng(0), NO_NOISE)
+    assert raw.acc[0].tolist() == [0, 0, round(1000 / 0.061)]
+    assert raw.gyro[0].tolist() == [0, 0, 0]
+
+
+@pytest.mark.parametrize("column, body_axis, sign", [(0, 2, -1), (1, 1, +1), (2, 0, +1)])
+def test_constant_rates_follow_the_fusion_sign_conventions(column, body_axis, sign):
+    # pitch rate = -gz K, roll rate = +gy K, yaw rate = +gx K (body axes); 10 deg/s ramp
+    angles = np.zeros((40, 3))
+    angles[:, column] = 10.0 * np.arange(40) / 62.5
+    raw = synthesize_raw(angles, UNCALIBRATED, np.random.default_rng(0), NO_NOISE)
+    expected = np.zeros(3)
+    expected[body_axis] = sign * 10.0 / GYRO_DEG_PER_LSB
+    assert np.abs(raw.gyro[1:] - expected).max() <= 1   # rounding only
+
+
+def test_headset_pitch_rate_lands_on_sensor_y():
+    # body z = sensor y for (x, y, z) -> (-z, -x, y); a 10 deg/s pitch-up means body gz = -10 deg/s
+    angles = np.column_stack([10.0 * np.arange(20) / 62.5, np.zeros(20), np.zeros(20)])
+    raw = synthesize_raw(angles, HEADSET, np.random.default_rng(0), NO_NOISE)
+    assert raw.gyro[5].tolist() == [0, round(-10.0 / GYRO_DEG_PER_LSB), 0]
+
+
+def test_magnetometer_distortion_is_undone_by_the_hardware_correction():
+    rng = np.random.default_rng(1)
+    corrected = rng.normal(0.0, 0.8, (50, 3))
+    raw = distort_magnetometer(corrected, ODD)
+    h, c = np.array(ODD.hard_iron), np.array(ODD.soft_iron)
+    # hardware.md step 1, written out: m = C (mx - h0, my - h1, -mz - h2)
+    again = np.array([c @ np.array([x - h[0], y - h[1], -z - h[2]]) for x, y, z in raw])
+    np.testing.assert_allclose(again, corrected, atol=1e-9)
+
+
+def test_int16_saturates_and_rounds():
+    assert to_int16(np.array([40000.0, -40000.0, 1.5, -2.4])).tolist() == [32767, -32768, 2, -2]
+
+
+@pytest.mark.parametrize("cal", [HEADSET, UNCALIBRATED, ODD], ids=["headset", "uncalibrated", "odd"])
+@pytest.mark.parametrize("target", [(0, 0, 0), (29, -2, -3), (2, 24, -21), (-2, -28, 30), (-25, 5, -12),
+                                    (10, -20, 60), (40, 35, -120)])
+def test_static_round_trip_through_fusion(cal, target):
+    """Settled fusion of the synthesised data returns the intended angles.
+
+    Without noise the only error is int16 rounding: 1 LSB of a ~16,400 LSB gravity is 0.004 deg;
+    the horizontal earth field is only ~1,700 LSB (70 deg inclination), so 1 LSB of it is ~0.03 deg
+    of heading; 0.1 deg leaves room for both and the yaw filter's residual after SETTLE samples.
+    """
+    angles = np.tile(np.array(target, float), (SETTLE, 1))
+    out = fused(synthesize_raw(angles, cal, np.random.default_rng(0), NO_NOISE), cal)
+    np.testing.assert_allclose(out[-1], target, atol=0.1)
+
+
+def minimum_jerk_path(start, stop, n_move, n_hold, n_before=SETTLE):
+    s = np.linspace(0.0, 1.0, n_move)
+    profile = np.r_[np.zeros(n_before), s ** 3 * (10 - 15 * s + 6 * s ** 2), np.ones(n_hold)]
+    return np.asarray(start, float) + profile[:, None] * (np.asarray(stop, float) - np.asarray(start, float))
+
+
+@pytest.mark.parametrize("stop", [(28, -3, -1), (3, 25, -21), (-3, -26, 27), (-1, -3, -12)])
+def test_dynamic_round_trip_with_noise(stop):
+    """A 0.8 s minimum-jerk move then a 5 s hold, with sensor noise: steady state within 0.3 deg.
+
+    During the move the complementary filter lags (the gyro is the true body rate, not the angle
+    rates), and the yaw correction has a 1.6 s time constant, hence judging the last 0.5 s.
+    """
+    start = (-2.5, 1.5, -1.9)
+    angles = minimum_jerk_path(start, np.add(start, stop), 50, 312)
+    out = fused(synthesize_raw(angles, HEADSET, np.random.default_rng(3)), HEADSET)
+    steady = slice(-31, None)
+    np.testing.assert_allclose(out[steady].mean(axis=0), angles[-1], atol=0.3)
+    assert np.abs(out[SETTLE:] - angles[SETTLE:]).max() < 5.0   # no runaway during the move
+
+
+def make_raw(n: int, seed: int) -> dict[int, RawImu]:
+    rng = np.random.default_rng(seed)
+    return {node: RawImu(*(rng.integers(-30000, 30000, (n, 3)).astype(np.int16) for _ in range(3)))
+            for node in (1, 2, 3)}
+
+
+def test_delivery_loses_frames_but_counters_advance_and_values_survive():
+    n = 3000
+    raw = make_raw(n, 0)
+    index = np.arange(n)
+    out = deliver(raw, index, index / 62.5, np.random.default_rng(5))
+    parser = FrameParser()
+    frames = parser.feed(out.stream())
+    assert len(frames) == len(out.frames)
+    lost = 3 * n - len(frames)
+    assert 0.08 < lost / (3 * n) < 0.10                    # 9 % +- ~4 binomial sigmas
+    # the parser's lost count (from counters) sees every dropped frame after each node's first
+    first = {node: int(out.sample_index[out.node_index == node].min()) for node in (1, 2, 3)}
+    last = {node: int(out.sample_index[out.node_index == node].max()) for node in (1, 2, 3)}
+    assert parser.total_lost == lost - sum(first.values()) - sum(n - 1 - last[k] for k in last)
+    for frame, node, k in zip(frames, out.node_index, out.sample_index):
+        assert (frame.acc, frame.gyro, frame.mag) == (tuple(raw[node].acc[k]), tuple(raw[node].gyro[k]),
+                                                      tuple(raw[node].mag[k]))
+        assert frame.counter == k % 256 and frame.node_id == 9 + node
+
+
+def test_delivery_is_bursty_ordered_interleaved_and_seeded():
+    n = 1000
+    raw = make_raw(n, 1)
+    index = np.arange(n)
+    out = deliver(raw, index, index / 62.5, np.random.default_rng(7))
+    assert np.all(np.diff(out.arrival_s) >= 0)
+    for node in (1, 2, 3):
+        assert np.all(np.diff(out.sample_index[out.node_index == node]) > 0)   # a node never overtakes itself
+        arrival = out.arrival_s[out.node_index == node]
+        assert np.all(arrival >= out.sample_index[out.node_index == node] / 62.5)  # nothing arrives before it is sampled
+    assert len(out.arrival_s) / len(np.unique(out.arrival_s)) > 4           # bursts: several frames per arrival
+    assert len(set(out.node_index[:12].tolist())) == 3                        # nodes interleaved
+    again = deliver(raw, index, index / 62.5, np.random.default_rng(7))
+    other = deliver(raw, index, index / 62.5, np.random.default_rng(8))
+    assert again.stream() == out.stream() and other.stream() != out.stream()
+
+
+def test_no_loss_link_delivers_everything():
+    raw = make_raw(200, 2)
+    index = np.arange(200)
+    out = deliver(raw, index, index / 62.5, np.random.default_rng(0), LinkModel(loss_fraction=0.0))
+    assert len(out.frames) == 600
+    early, late = out.until(1.0)
+    assert early.arrival_s.max() <= 1.0 < late.arrival_s.min()
+    assert early.stream() + late.stream() == out.stream()
