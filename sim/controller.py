@@ -105,6 +105,7 @@ class CartesianVelocityController:
     def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
         position, rotation = self.kinematics.tool_pose(q)
+        previous_position, previous_rotation = self.target_position, self.target_rotation
         feedforward = self._advance_target(position, rotation, np.asarray(linear, float), np.asarray(angular, float))
         twist = feedforward + np.concatenate((
             self.config.position_gain * (self.target_position - position),
@@ -116,7 +117,14 @@ class CartesianVelocityController:
             jacobian[:, blocked] = 0.0
             qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
             qd[blocked] = 0.0
-        return qd * speed_scale(qd, self.limits.speed)
+        scale = speed_scale(qd, self.limits.speed)
+        if scale < 1.0:
+            # The arm does only this fraction of the tick's motion: so does the target, which then
+            # never runs ahead and the hand stops where it is when the command stops.
+            self.target_position = previous_position + scale * (self.target_position - previous_position)
+            self.target_rotation = pin.exp3(scale * rotation_error(self.target_rotation, previous_rotation)) \
+                @ previous_rotation
+        return qd * scale
 
     def _advance_target(self, position, rotation, linear, angular) -> np.ndarray:
         """Move the target by one tick of the command inside the walls; return the feedforward twist."""

@@ -1,0 +1,149 @@
+"""Cartesian velocity control in the full physics: tracking, holding still, walls, joint limits, grasp."""
+import dataclasses
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim.check import enter_mode, hold, measure
+from sim.config import load_config
+from sim.env import ArmSim
+from sim.joystick import FUNCTIONS, JoystickState, Mode
+
+
+@pytest.fixture(scope="module")
+def sim():
+    arm = ArmSim()
+    yield arm
+    arm.close()
+
+
+def lowest_hand_point(sim: ArmSim) -> float:
+    """Lowest mesh vertex of the hand and fingers in the world (a naive check, vertex by vertex)."""
+    model, data = sim.model, sim.data
+    mujoco.mj_kinematics(model, data)
+    lowest = np.inf
+    for geom in sim.scene.hand_geoms:
+        mesh = model.geom_dataid[geom]
+        start = model.mesh_vertadr[mesh]
+        vertices = model.mesh_vert[start:start + model.mesh_vertnum[mesh]]
+        world = data.geom_xpos[geom] + vertices @ data.geom_xmat[geom].reshape(3, 3).T
+        lowest = min(lowest, world[:, 2].min())
+    return lowest
+
+
+@pytest.mark.parametrize("function", FUNCTIONS)
+def test_each_translation_direction_tracks_0_1_m_per_s_within_5_percent(sim, function):
+    result = measure(sim, Mode.TRANSLATION, function, deflection=0.5, seconds=1.25, settle=0.25)
+    assert result.commanded == pytest.approx(0.1)
+    assert abs(result.achieved / 0.1 - 1) < 0.05, result
+    assert result.tracking_error < 0.005, result
+
+
+@pytest.mark.parametrize("function", FUNCTIONS)
+def test_each_wrist_direction_turns_about_the_tool_point(sim, function):
+    result = measure(sim, Mode.WRIST, function, deflection=0.5, seconds=1.0, settle=0.25)
+    assert abs(result.achieved / result.commanded - 1) < 0.05, result
+    assert result.tracking_error < 0.005, result  # the tool point stays put while the hand turns
+
+
+def test_zero_command_drifts_less_than_2_mm_in_10_s(sim):
+    sim.reset()
+    hold(sim, JoystickState({"F": 1.0, "L": 0.6}), 0.5)  # release after a motion, not only from rest
+    hold(sim, JoystickState(), 0.5)
+    start_position, start_rotation = sim.tool_position, sim.tool_rotation
+    samples = hold(sim, JoystickState(), 10.0)
+    drift = max(np.linalg.norm(p - start_position) for _, p, _, _ in samples)
+    turn = max(np.linalg.norm(mujoco_rotation_vector(r @ start_rotation.T)) for _, _, r, _ in samples)
+    assert drift < 0.002 and turn < 0.01
+
+
+def mujoco_rotation_vector(rotation: np.ndarray) -> np.ndarray:
+    quat, vector = np.zeros(4), np.zeros(3)
+    mujoco.mju_mat2Quat(quat, rotation.ravel())
+    mujoco.mju_quat2Vel(vector, quat, 1.0)
+    return vector
+
+
+def test_pushing_into_the_table_stops_the_hand_above_it(sim):
+    table = frozenset({sim.scene.table_geom})
+    sim.reset(cube_positions=[(0.3, -0.6), (0.3, -0.7)])  # cubes out of the way
+    lowest = []
+    for segment, seconds in ((("Lr", None), 2.0), (("F", Mode.WRIST), 1.0), (("Lr", Mode.TRANSLATION), 1.0),
+                             (("R", Mode.WRIST), 1.0), (("Lr", Mode.TRANSLATION), 1.0)):
+        function, mode = segment
+        if mode is not None:
+            enter_mode(sim, mode)
+        for _ in range(round(seconds / sim.dt)):
+            sim.step(JoystickState({function: 1.0}))
+            lowest.append(lowest_hand_point(sim))
+            assert not sim.touching(sim.scene.hand_geoms, table)
+    assert min(lowest) >= 0.0
+    assert min(lowest) < 0.03  # it did get down to the table (open fingers reach 2 cm below the tool)
+
+
+def test_a_virtual_wall_stops_the_hand_without_jitter(sim):
+    sim.reset()
+    samples = hold(sim, JoystickState({"L": 1.0}), 3.5)  # x+ at 0.2 m/s until the x = 0.45 wall
+    positions = np.array([p for _, p, _, _ in samples])
+    wall = sim.config.workspace.x[1]
+    assert positions[:, 0].max() <= wall + 0.002
+    last_half_second = positions[-30:]
+    assert last_half_second[:, 0].min() > wall - 0.003
+    assert np.ptp(last_half_second, axis=0).max() < 0.0005  # standing still at the wall
+
+
+@pytest.mark.parametrize("joint, start, push", [(1, 0.95, -1.0), (2, 5.85, 1.0)])
+def test_pushing_past_a_joint_limit_never_violates_it(joint, start, push):
+    """Walls wide open so that only the joint range stops the arm; the twist drives one joint outward."""
+    config = load_config()
+    open_space = dataclasses.replace(config.workspace, x=(-2.0, 2.0), y=(-2.0, 2.0), z=(-1.0, 2.0),
+                                     reach_min=0.0, reach_max=3.0, table_clearance=0.0)
+    arm = ArmSim(dataclasses.replace(config, workspace=open_space))
+    q = arm.home_q.copy()
+    q[joint] = start
+    arm.reset(arm_qpos=q)
+    lower, upper = arm.limits.lower[joint], arm.limits.upper[joint]
+    angles = []
+    for _ in range(120):
+        twist = push * 0.5 * arm.kinematics.jacobian(arm.arm_qpos)[:, joint]
+        arm.step_twist(twist[:3], twist[3:])
+        angles.append(arm.arm_qpos[joint])
+    assert lower <= min(angles) and max(angles) <= upper
+    reached = min(angles) - lower if push < 0 else upper - max(angles)
+    assert reached < 2 * arm.config.control.joint_limit_margin  # it did get pushed up to the limit
+
+
+def test_scripted_grasp_lifts_a_cube_10_cm_and_holds_it_5_s(sim):
+    sim.reset()
+    cube, neighbour = sim.cube_positions
+    move_to(sim, np.array([cube[0], cube[1], 0.10]))
+    move_to(sim, np.array([cube[0], cube[1], cube[2]]))
+    enter_mode(sim, Mode.FINGERS)
+    hold(sim, JoystickState({"F": 1.0}), 1.5)
+    assert sim.cube_in_grasp().tolist() == [True, False]
+    enter_mode(sim, Mode.TRANSLATION)
+    hold(sim, JoystickState({"Rr": 0.5}), 1.1)  # 0.1 m/s up for 0.11 m
+    lifted = sim.cube_positions[0]
+    assert lifted[2] - cube[2] >= 0.10
+    heights = []
+    for _ in range(round(5.0 / sim.dt)):
+        sim.step(JoystickState())
+        heights.append(sim.cube_positions[0, 2])
+        assert sim.cube_in_grasp()[0]
+    assert max(heights) - min(heights) < 0.003
+    assert min(heights) - cube[2] >= 0.10
+    assert np.linalg.norm(sim.cube_positions[1] - neighbour) < 0.002  # the open hand missed the neighbour
+    assert sim.mode_switches == 3 and sim.button_presses == 3  # B1 x2 to fingers, B1 back
+
+
+def move_to(sim: ArmSim, goal: np.ndarray, speed: float = 0.15, tolerance: float = 0.002) -> None:
+    """Cartesian entry point: proportional twist toward a point, capped at ``speed``."""
+    for _ in range(600):
+        error = goal - sim.tool_position
+        if np.linalg.norm(error) < tolerance:
+            return
+        velocity = 4.0 * error
+        velocity *= min(1.0, speed / np.linalg.norm(velocity))
+        sim.step_twist(velocity)
+    raise AssertionError(f"did not reach {goal}: at {sim.tool_position}")
