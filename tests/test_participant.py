@@ -1,0 +1,272 @@
+"""tasks.participant and tasks.fit_participant: profiles, motion model, frames, calibration, the P1 fit."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from bomi.chain import OnlineChain, train
+from bomi.dataset import data_dir
+from bomi.errors import BomiError
+from bomi.frames import FrameParser, imu_index
+from bomi.fusion import DT
+from bomi.profiles import load_profile
+from tasks import fit_participant
+from tasks.participant import (PARTICIPANT_DIR, CalibrationSession, VirtualParticipant, calibration_session,
+                               load_participant, minimum_jerk, sample_indices, session_recording)
+
+P1_TOML = PARTICIPANT_DIR / "P1.toml"
+
+
+def still(params, **changes):
+    """The participant without any variability, sway, tremor or spasm (exact postures)."""
+    def quiet(motion):
+        zero = np.zeros_like(motion.posture_deg)
+        return dataclasses.replace(motion, rep_std_deg=zero, day_std_deg=zero, sway_std_deg=zero, tremor_std_deg=zero)
+    return dataclasses.replace(params, neutral=quiet(params.neutral),
+                               classes={k: quiet(m) for k, m in params.classes.items()}, spasm=None, **changes)
+
+
+@pytest.fixture(scope="module")
+def p1():
+    return load_participant("P1"), load_profile("P1")
+
+
+# ------------------------------------------------------------------------------------ profiles
+@pytest.mark.parametrize("name", ["P1", "P4", "P5"])
+def test_shipped_participants_match_their_bomi_profiles(name):
+    params = load_participant(name)
+    VirtualParticipant(params, load_profile(params.profile), seed=0)   # checks nodes and classes
+
+
+def bad_copy(tmp_path: Path, old: str, new: str) -> Path:
+    text = P1_TOML.read_text()
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("onset_s = 0.8", "onset_s = -1", "'onset_s' must be a number"),
+    ("onset_s = 0.8", "", "missing key(s) onset_s"),
+    ("max_amplitude = 1.0", "max_amplitude = 1.0\nspeed = 3", "unknown key(s) speed"),
+    ("band_hz = [0.55, 5.54]", "band_hz = [6.0, 5.0]", "band_hz must be [low, high]"),
+    ("label = 2", "label = 1", "'label' must be a positive integer not used before"),
+    ("rep_std_deg = [[1.004", "rep_std_deg = [[-1.004", "cannot be negative"),
+    ("posture_deg = [[27.929, -3.173, -0.964], ", "posture_deg = [", "must be a 3 x 3 matrix"),
+    ('name = "P1"', 'name = "P1', "not valid TOML"),
+])
+def test_bad_participant_files_name_the_file_and_the_problem(tmp_path, old, new, message):
+    path = bad_copy(tmp_path, old, new)
+    with pytest.raises(BomiError) as err:
+        load_participant(path)
+    assert str(path) in str(err.value) and message in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_participant_must_fit_the_profile(p1, tmp_path):
+    params, _ = p1
+    with pytest.raises(BomiError, match="made for profile P1, not P4"):
+        VirtualParticipant(params, load_profile("P4"), seed=0)
+    with pytest.raises(BomiError, match=r"classes \[1, 2, 3, 4, 5, 6, 7\] do not match"):
+        VirtualParticipant(dataclasses.replace(params, classes={k: v for k, v in params.classes.items() if k != 8}),
+                           load_profile("P1"), seed=0)
+    with pytest.raises(BomiError, match="no such participant file"):
+        load_participant(tmp_path / "missing.toml")
+
+
+# ------------------------------------------------------------------------------- motion model
+def test_minimum_jerk_profile_hand_values():
+    s = np.array([-1.0, 0.0, 0.25, 0.5, 0.75, 1.0, 2.0])
+    expected = [0.0, 0.0, 10 / 64 - 15 / 256 + 6 / 1024, 0.5, 1 - (10 / 64 - 15 / 256 + 6 / 1024), 1.0, 1.0]
+    np.testing.assert_allclose(minimum_jerk(s), expected, atol=1e-12)
+
+
+def test_intent_moves_min_jerk_after_reaction_holds_and_returns(p1):
+    params, profile = p1
+    quiet = still(params)
+    vp = VirtualParticipant(quiet, profile, seed=0)
+    vp.advance(1.0)
+    vp.set_intent(1, 0.5, 1.0)
+    vp.advance(4.0)
+    vp.set_intent(0, 0.0, 4.0)
+    vp.advance(7.0)
+    truth = vp.truth()
+    neutral, posture = quiet.neutral.posture_deg, quiet.classes[1].posture_deg
+    t0 = 1.0 + quiet.reaction_s
+
+    def at(t):
+        return truth.angles[int(round(t / DT))]
+    np.testing.assert_allclose(at(t0 - DT), neutral, atol=1e-9)                          # not before the reaction
+    k = int(np.ceil((t0 + quiet.onset_s / 2) / DT))                                   # about halfway
+    s = (k * DT - t0) / quiet.onset_s
+    assert 0.5 <= s < 0.5 + DT / quiet.onset_s
+    np.testing.assert_allclose(truth.angles[k], neutral + 0.5 * minimum_jerk(s) * posture, atol=1e-9)
+    np.testing.assert_allclose(at(3.9), neutral + 0.5 * posture, atol=1e-9)               # held at amplitude 0.5
+    np.testing.assert_allclose(at(6.9), neutral, atol=1e-9)                               # back to neutral
+    assert truth.intent[int(round(2.0 / DT))] == 1 and truth.amplitude[int(round(2.0 / DT))] == 0.5
+    assert truth.intent[-1] == 0
+
+
+def test_low_range_participant_reaches_only_its_max_amplitude():
+    params = still(load_participant("P5"))
+    vp = VirtualParticipant(params, load_profile("P5"), seed=0)
+    vp.set_intent(3, 1.0, 0.0)
+    vp.advance(3.0)
+    reached = vp.truth().angles[-1] - params.neutral.posture_deg
+    np.testing.assert_allclose(reached, 0.4 * params.classes[3].posture_deg, atol=1e-9)
+
+
+def test_tremor_and_sway_have_the_profiled_size_and_band(p1):
+    params, profile = p1
+    quiet = still(params)
+    neutral = dataclasses.replace(quiet.neutral, tremor_std_deg=params.neutral.tremor_std_deg)
+    vp = VirtualParticipant(dataclasses.replace(quiet, neutral=neutral), profile, seed=4)
+    vp.advance(200.0)
+    tremor = vp.truth().angles[:, 0, 0] - neutral.posture_deg[0, 0]
+    assert tremor.std() == pytest.approx(params.neutral.tremor_std_deg[0, 0], rel=0.1)
+    freqs, psd = scipy.signal.welch(tremor, fs=1 / DT, nperseg=512)
+    low, high = params.tremor_band_hz
+    inside = psd[(freqs >= low) & (freqs <= high)].sum() / psd.sum()
+    assert inside > 0.75
+
+
+def test_spasms_are_bursts_up_to_ten_degrees():
+    params = load_participant("P4")
+    quiet = still(params)
+    vp = VirtualParticipant(dataclasses.replace(quiet, spasm=params.spasm), load_profile("P4"), seed=2)
+    vp.advance(300.0)
+    deviation = np.abs(vp.truth().angles - quiet.neutral.posture_deg).max(axis=(1, 2))
+    assert 5.0 < deviation.max() <= params.spasm.max_deg + 1e-9
+    onsets = np.flatnonzero(np.diff((deviation > 0.01).astype(int)) == 1)
+    assert 15 <= len(onsets) <= 45            # Poisson(0.1/s x 300 s = 30), bursts can merge
+
+
+# --------------------------------------------------------------------------------------- frames
+def test_stream_parses_with_about_nine_percent_loss_and_nothing_from_the_future(p1):
+    params, profile = p1
+    vp = VirtualParticipant(params, profile, seed=1)
+    parser = FrameParser()
+    seen = 0
+    for step in range(1, 301):                   # 10 s in 60 Hz control ticks
+        t = step / 30.0
+        chunk = vp.deliveries(t)
+        assert (chunk.arrival_s <= t).all() and (chunk.sample_index * DT <= t).all()
+        seen += len(parser.feed(chunk.stream()))
+        if step == 90:
+            vp.set_intent(2, 1.0, t)
+    generated = len(vp.truth().time_s)
+    assert set(parser.nodes) == {10, 11, 12}
+    assert 0.80 < seen / (3 * generated) < 0.95
+    assert 0.06 < parser.nodes[10].loss_fraction < 0.12
+
+
+def test_sample_indices_unwrap_counters():
+    assert sample_indices([250, 253, 1, 2, 255, 3]).tolist() == [250, 253, 257, 258, 511, 515]
+
+
+# --------------------------------------------------------------------------------- calibration
+@pytest.fixture(scope="module")
+def session(p1) -> CalibrationSession:
+    params, profile = p1
+    return calibration_session(params, profile, seed=3, repetitions=2, hold_s=3.0, neutral_s=3.0,
+                               amplitudes=(1.0, 0.5))
+
+
+def test_calibration_protocol_layout(p1, session):
+    params, _ = p1
+    rate = 1 / DT
+    held = session.holding & session.recorded
+    for label in params.classes:
+        count = np.sum(held & (session.cue == label))
+        assert abs(count - 2 * 2 * 3.0 * rate) <= 4        # 2 repetitions x 2 amplitudes x 3 s
+    cues = session.cue[session.recorded]
+    changes = cues[np.r_[True, np.diff(cues) != 0]]
+    motions = [c for c in changes if c]
+    assert motions == [c for _ in range(2) for c in sorted(params.classes) for _ in range(2)]
+    assert not session.recorded[: int(12.0 * rate) - 1].any()
+    # holding means the posture is reached: the truth sits at its target, far from neutral, for class 1
+    head_pitch = session.truth.angles[held & (session.cue == 1), 0, 0] - params.neutral.posture_deg[0, 0]
+    assert np.median(head_pitch) > 10.0
+
+
+def test_session_recording_fuses_back_to_the_true_angles(p1, session):
+    _, profile = p1
+    rec = session_recording(session, profile)
+    keep = session.recorded & session.holding
+    assert len(rec) == keep.sum() and (rec.labels == session.cue[keep]).all()
+    truth = session.truth.angles[keep]
+    for k, node in enumerate(profile.node_indices):
+        error = rec.nodes[node].angles - truth[:, k]
+        assert np.median(np.abs(error[:, :2])) < 0.3   # pitch, roll: filter lag on tremor, held lost frames
+        assert np.median(np.abs(error[:, 2])) < 1.0    # yaw: its 1.6 s magnetometer time constant
+
+
+def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
+    """Train on a calibration session exactly as `bomi train` does, then drive the live chain with bytes."""
+    params, profile = p1
+    model = train([session_recording(session, profile)], profile)
+    chain = OnlineChain(model, profile)
+    vp = VirtualParticipant(params, profile, seed=11)
+    parser = FrameParser()
+    schedule = {14.0: 1, 19.0: 0, 24.0: 4, 29.0: 0, 34.0: 7, 39.0: 0}
+    decisions = []
+    for step in range(1, 60 * 44):
+        t = step / 60.0
+        for frame in parser.feed(vp.advance(t)):
+            d = chain.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
+            if d is not None:
+                decisions.append((t, d.label))
+        if step == 60 * 12:
+            chain.begin_neutral_calibration()
+        for when, label in schedule.items():
+            if abs(t - when) < 1e-9:
+                vp.set_intent(label, 1.0, t)
+    times, labels = map(np.array, zip(*decisions))
+    for start, label in [(16.0, 1), (21.0, 0), (26.0, 4), (31.0, 0), (36.0, 7), (41.0, 0)]:
+        hold = labels[(times > start) & (times < start + 3.0)]
+        assert np.mean(hold == label) > 0.9, (label, np.bincount(hold))
+
+
+# ------------------------------------------------------------------------------------ the P1 fit
+def test_fit_helpers_on_synthetic_signals():
+    labels = np.array([0, 0, 3, 3, 3, 0, 5])
+    blocks = fit_participant.hold_blocks(labels, day=2)
+    assert [(b.label, b.start, b.stop) for b in blocks] == [(0, 0, 2), (3, 2, 5), (0, 5, 6), (5, 6, 7)]
+    t = np.arange(600) * DT
+    x = np.column_stack([2.0 * np.sin(2 * np.pi * 0.2 * t), 0.5 * np.sin(2 * np.pi * 5 * t), np.full(600, 7.0)])
+    sway, tremor = fit_participant.split_sway_tremor(x)
+    assert tremor[:, 1].std() == pytest.approx(0.5 / np.sqrt(2), rel=0.05)       # 5 Hz goes to tremor
+    assert tremor[:, 0].std() < 0.1 and sway[:, 0].std() > 1.0                   # 0.2 Hz stays in sway
+    assert np.abs(sway[:, 2]).max() < 1e-9                                       # constant: neither
+    freqs = np.linspace(0, 10, 11)
+    # flat spectrum: cumulative share k/11 at k Hz, so 10 % at 0.1 Hz and 90 % at 8.9 Hz
+    assert fit_participant.power_band(freqs, np.ones(11), (0.1, 0.9)) == pytest.approx((0.1, 8.9))
+    assert fit_participant.repeated_fraction(np.array([[1, 2], [1, 2], [1, 3], [1, 3]])) == pytest.approx(2 / 3)
+
+
+needs_data = pytest.mark.skipif(not (data_dir() / "day1_testp.mat").is_file(), reason="shared P1 recordings absent")
+
+
+@needs_data
+def test_shipped_p1_is_what_the_fit_of_the_real_recordings_gives(tmp_path):
+    out = tmp_path / "P1.toml"
+    assert fit_participant.main(["--data", str(data_dir()), "--out", str(out)]) == 0
+    assert out.read_text() == P1_TOML.read_text()
+    params = load_participant(out)
+    # the dataset README's day-1 means: c1 head pitch +29, c3 -26, c8 left-shoulder roll +26 (over days: less)
+    assert params.classes[1].posture_deg[0, 0] == pytest.approx(29, abs=2)
+    assert params.classes[3].posture_deg[0, 0] == pytest.approx(-26, abs=2)
+    assert 15 < params.classes[8].posture_deg[2, 1] < 27
+
+
+def test_fit_reports_a_missing_dataset_in_one_line(tmp_path, capsys):
+    out = tmp_path / "P1.toml"
+    assert fit_participant.main(["--data", str(tmp_path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert str(tmp_path) in err and "no dayN_testp.mat" in err and "\n" not in err
+    assert not out.exists()
