@@ -26,7 +26,8 @@ from bomi.recording import Recording
 from bomi.serial_source import BASE_STATION_BAUD, open_port
 
 NOMINAL_RATE_HZ = 62.5
-# pyserial flushes the input queue right after opening a port: give the reader time to get there.
+# pyserial flushes the input (a tty's queue, a socket's ready bytes) right after opening a port:
+# give the reader time to get past that before streaming.
 READER_SETTLE_S = 0.3
 _SIGNALS = ("mag", "gyro", "acc")  # frame order
 
@@ -172,6 +173,7 @@ class SocketSink:
     def wait_for_reader(self) -> None:
         self._client, _ = self._server.accept()
         self._server.close()
+        time.sleep(READER_SETTLE_S)
 
     def write(self, data: bytes) -> bool:
         try:

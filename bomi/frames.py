@@ -206,7 +206,9 @@ class RowAssembler:
 
     A row is complete when every node has delivered a frame; when a node delivers again first
     (its partner's frame was lost), the row is emitted with the missing nodes' previous frames
-    (counted in ``held``). Rows before every node has been seen once are dropped.
+    (counted in ``held``). Rows before every node has been seen once are dropped. Frames are
+    paired by arrival, as nodes have their own clocks and counters: after a loss a row may pair
+    neighbouring samples (one period apart) of different nodes.
     """
 
     node_ids: tuple[int, ...]

@@ -1,0 +1,284 @@
+"""Serial source (loop://, pty, socket://), emulator and `bomi capture`/`bomi emulate` round trips."""
+from __future__ import annotations
+
+import os
+import re
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tty
+
+import numpy as np
+import pytest
+
+from bomi.cli import main
+from bomi.dataset import data_dir
+from bomi.emulator import READER_SETTLE_S, EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
+from bomi.errors import BomiError
+from bomi.frames import FrameParser, ImuFrame, RowAssembler, encode_imu_frame
+from bomi.recording import NodeData, Recording, read_recording, write_recording
+from bomi.serial_source import RetryPolicy, SerialSource
+
+FAST_RETRY = RetryPolicy(attempts=2, first_delay_s=0.01, max_delay_s=0.01)
+
+
+def imu(node_id: int, counter: int, value: int = 0) -> ImuFrame:
+    return ImuFrame(node_id, 16, counter, (value, -value, 1), (2, value, -3), (value, 4, -5))
+
+
+def collect(source: SerialSource, count: int, duration_s: float = 5.0) -> list[ImuFrame]:
+    frames: list[ImuFrame] = []
+    for _, batch in source.batches(duration_s):
+        frames += batch
+        if len(frames) >= count:
+            break
+    return frames
+
+
+def int_recording(samples: int, nodes=(1, 2, 3), seed: int = 1) -> Recording:
+    rng = np.random.default_rng(seed)
+    data = {i: NodeData(*(rng.integers(-32768, 32768, (samples, 3)).astype(float) for _ in range(3)),
+                        np.zeros((samples, 3))) for i in nodes}
+    return Recording(data, np.zeros(samples, dtype=int))
+
+
+# --------------------------------------------------------------------------------- serial source
+def test_retry_policy_doubles_up_to_the_cap():
+    assert RetryPolicy(attempts=6, first_delay_s=0.5, max_delay_s=4).delays() == [0.5, 1, 2, 4, 4, 4]
+
+
+def test_loop_url_garbage_and_frames():
+    sent = [imu(10, k, 100 * k) for k in range(5)]
+    with SerialSource("loop://") as source:
+        source.port.write(b"\x33\x00garbage" + b"".join(encode_imu_frame(f) for f in sent))
+        assert collect(source, 5) == sent
+    assert source.parser.discarded_bytes == 9
+
+
+def test_pty_stream_then_vanished_port_retries_and_gives_up_in_one_line():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    messages, sleeps = [], []
+    source = SerialSource(path, retry=FAST_RETRY, log=messages.append, sleep=sleeps.append)
+    with source:
+        os.write(master, b"".join(encode_imu_frame(imu(11, k)) for k in (0, 1, 3)))
+        assert [f.counter for f in collect(source, 3)] == [0, 1, 3]
+        assert source.parser.nodes[11].lost == 1
+        os.close(master)
+        os.close(slave)
+        with pytest.raises(BomiError) as error:
+            collect(source, 1)
+    assert "\n" not in str(error.value)
+    assert str(error.value).startswith(f"{path}: stream lost and not back after 2 attempts")
+    assert sleeps == [0.01, 0.01]
+    assert messages[0].startswith(f"bomi: {path}: stream lost (")
+    assert messages[1:] == [f"bomi: {path}: retry 1 of 2 in 0.01 s", f"bomi: {path}: retry 2 of 2 in 0.01 s"]
+
+
+def test_socket_reconnects_after_the_peer_drops():
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    first = [imu(12, k, k) for k in range(4)]
+    second = [imu(12, k, -k) for k in range(4, 9)]
+
+    def serve():
+        for frames in (first, second):
+            client, _ = server.accept()
+            time.sleep(READER_SETTLE_S)  # pyserial drops what is ready when it opens the socket
+            # split a frame across the reconnection: its head is garbage, the parser resyncs
+            payload = b"".join(encode_imu_frame(f) for f in frames)
+            client.sendall(payload if frames is second else payload + encode_imu_frame(imu(12, 99))[:10])
+            client.close()
+        server.close()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    messages = []
+    with SerialSource(f"socket://127.0.0.1:{port}", retry=FAST_RETRY, log=messages.append) as source:
+        assert collect(source, 9) == first + second
+    thread.join(5)
+    assert source.reconnections == 1
+    assert messages[-1] == f"bomi: socket://127.0.0.1:{port}: reconnected"
+    assert source.parser.nodes[12].lost == 0
+
+
+def test_unopenable_port_is_one_line_error():
+    with pytest.raises(BomiError, match=r"^socket://127.0.0.1:1: cannot open the port \(.*refused"):
+        SerialSource("socket://127.0.0.1:1").open()
+
+
+# --------------------------------------------------------------------------------- row assembly
+def test_rows_hold_the_previous_frame_of_a_lost_node():
+    assembler = RowAssembler((10, 11))
+    stream = [imu(10, 0), imu(10, 1), imu(11, 1), imu(10, 2), imu(10, 3), imu(11, 3)]
+    rows = [row for f in stream if (row := assembler.push(f)) is not None]
+    # 11's counters 0 and 2 are lost: the first row is dropped (no value of 11 yet), in the
+    # third 11's counter 1 is held
+    assert [(r[10].counter, r[11].counter) for r in rows] == [(1, 1), (2, 1), (3, 3)]
+    assert assembler.held == 1
+    assert assembler.push(imu(12, 4)) is None
+
+
+# --------------------------------------------------------------------------------- emulator
+def test_published_mat_values_are_refused():
+    path = data_dir() / "day1_testp.mat"
+    if not path.exists():
+        pytest.skip(f"{path} not available")
+    with pytest.raises(BomiError, match=r"day1_testp.mat: node 1 mag at row 1 is .* whole int16"):
+        raw_samples(read_recording(path))
+
+
+def test_out_of_range_values_are_refused():
+    rec = int_recording(3, nodes=(2,))
+    rec.nodes[2].gyro[1, 2] = 40000
+    with pytest.raises(BomiError, match="node 2 gyro at row 2 is"):
+        raw_samples(rec)
+
+
+def test_frame_chunks_loss_and_corruption_are_seeded_and_counted():
+    raw = raw_samples(int_recording(300))
+    config = EmulatorConfig(loss=0.09, corrupt=0.001, seed=7)
+    runs = []
+    for _ in range(2):
+        stats = EmulatorStats()
+        runs.append(([chunk for _, chunk in frame_chunks(raw, config, stats)], stats))
+    assert runs[0] == runs[1]
+    chunks, stats = runs[0]
+    assert stats.samples == 300 and stats.frames_sent + stats.frames_dropped == 900
+    assert 0.05 < stats.frames_dropped / 900 < 0.13
+    assert sum(map(len, chunks)) == 32 * stats.frames_sent
+    assert stats.bytes_corrupted > 0
+
+
+def test_frame_chunks_timing_and_exact_values_without_loss():
+    rec = int_recording(300)
+    raw = raw_samples(rec)
+    timed = list(frame_chunks(raw, EmulatorConfig(rate_hz=62.5), EmulatorStats()))
+    assert [t for t, _ in timed[:3]] == [0.0, 0.016, 0.032]
+    frames = FrameParser().feed(b"".join(chunk for _, chunk in timed))
+    assert [f.node_id for f in frames[:4]] == [10, 11, 12, 10]
+    assert [f.counter for f in frames[::3]] == [k % 256 for k in range(300)]
+    node2 = [f for f in frames if f.node_id == 11]
+    np.testing.assert_array_equal([f.acc for f in node2], rec.nodes[2].acc)
+    np.testing.assert_array_equal([f.mag for f in node2], rec.nodes[2].mag)
+
+
+def test_play_keeps_the_real_rate():
+    class Clock:
+        now = 100.0
+
+    sent = []
+
+    class ListSink:
+        def write(self, data: bytes) -> bool:
+            sent.append((Clock.now, data))
+            return True
+
+    def sleep(delay: float) -> None:
+        Clock.now += delay
+
+    assert play(iter([(0.0, b"a"), (0.016, b"b"), (0.032, b"c")]), ListSink(), lambda: Clock.now, sleep)
+    assert [round(t - 100, 6) for t, _ in sent] == [0.0, 0.016, 0.032]
+
+
+# --------------------------------------------------------------------------------- round trips
+def _emulate_to_pty(rec_path, config: EmulatorConfig) -> tuple[str, threading.Thread, EmulatorStats]:
+    sink = open_sink("pty", linger_s=5)
+    stats = EmulatorStats()
+
+    def run():
+        sink.wait_for_reader()
+        play(frame_chunks(raw_samples(read_recording(rec_path)), config, stats), sink)
+        sink.finish()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return sink.description, thread, stats
+
+
+def test_emulator_to_pty_to_capture_gives_back_raw_values(tmp_path, capsys):
+    rec_path = tmp_path / "rec.csv"
+    write_recording(rec_path, int_recording(150))
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig(rate_hz=250))
+    out = tmp_path / "capture.csv"
+    assert main(["capture", "--port", path, "--duration", "1.5", "--out", str(out)]) == 0
+    thread.join(10)
+    original, captured = read_recording(rec_path), read_recording(out)
+    assert captured.node_indices == (1, 2, 3) and len(captured) == 150
+    for i in (1, 2, 3):
+        for signal in ("acc", "gyro", "mag"):
+            np.testing.assert_array_equal(getattr(captured.nodes[i], signal), getattr(original.nodes[i], signal))
+    assert np.all(np.diff(captured.time) >= 0)
+    assert "0 lost" in capsys.readouterr().out
+
+
+def test_capture_with_loss_counts_what_the_emulator_dropped(tmp_path, capsys):
+    rec_path = tmp_path / "rec.csv"
+    write_recording(rec_path, int_recording(200, nodes=(1, 2)))
+    path, thread, stats = _emulate_to_pty(rec_path, EmulatorConfig(rate_hz=250, loss=0.09, seed=3))
+    out = tmp_path / "capture.csv"
+    assert main(["capture", "--port", path, "--duration", "1.8", "--out", str(out), "--nodes", "1,2"]) == 0
+    thread.join(10)
+    summary = capsys.readouterr().out
+    captured, original = read_recording(out), read_recording(rec_path)
+    # rows end with the last complete sample; lost frames are counted between received ones
+    lost = [int(n) for n in re.findall(r"(\d+) lost", summary)]
+    assert stats.frames_dropped - 2 <= sum(lost) <= stats.frames_dropped
+    assert len(captured) >= 190
+    acc = captured.nodes[1].acc
+    # every captured row of node 1 is one of the original samples, in order
+    index = [int(np.flatnonzero((original.nodes[1].acc == row).all(axis=1))[0]) for row in acc]
+    assert index == sorted(index)
+
+
+def test_cli_emulate_prints_the_pty_path_and_capture_records_it(tmp_path, capsys):
+    rec_path = tmp_path / "rec.csv"
+    write_recording(rec_path, int_recording(60, nodes=(1,)))
+    emulator = subprocess.Popen([sys.executable, "-m", "bomi", "emulate", "--recording", str(rec_path),
+                                 "--to", "pty", "--rate", "100", "--linger", "3"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = emulator.stdout.readline().strip()
+        assert path.startswith("/dev/pts/")
+        out = tmp_path / "capture.csv"
+        assert main(["capture", "--port", path, "--duration", "1.2", "--out", str(out)]) == 0
+        _, errors = emulator.communicate(timeout=10)
+    finally:
+        emulator.kill()
+    assert emulator.returncode == 0
+    assert "end of recording: 60 samples, 60 frames sent, 0 dropped" in errors
+    np.testing.assert_array_equal(read_recording(out).nodes[1].gyro, read_recording(rec_path).nodes[1].gyro)
+
+
+# --------------------------------------------------------------------------------- bad input
+def test_capture_never_overwrites(tmp_path, capsys):
+    out = tmp_path / "capture.csv"
+    out.write_text("precious\n")
+    assert main(["capture", "--port", "loop://", "--duration", "0.1", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"bomi: error: {out}: file exists, not overwriting it\n"
+    assert out.read_text() == "precious\n"
+
+
+def test_capture_of_a_silent_stream_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "capture.csv"
+    assert main(["capture", "--port", "loop://", "--duration", "0.2", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == "bomi: error: loop://: no IMU frames received; nothing recorded\n"
+    assert not out.exists()
+
+
+def test_emulate_refuses_a_malformed_recording(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("ACC1X,ACC1Y\n1,2\n")
+    assert main(["emulate", "--recording", str(bad), "--to", "pty"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"bomi: error: {bad}: ") and err.count("\n") == 1
+
+
+def test_emulate_rejects_impossible_settings(tmp_path, capsys):
+    rec_path = tmp_path / "rec.csv"
+    write_recording(rec_path, int_recording(5))
+    assert main(["emulate", "--recording", str(rec_path), "--to", "pty", "--loss", "1.5"]) == 2
+    assert capsys.readouterr().err == "bomi: error: --loss 1.5: must be a probability in [0, 1)\n"
