@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, decide, fit_lda, gamma,
-                             linear_parameters, posteriors, proportional)
+                             linear_parameters, posteriors, proportional, reject, rejected)
 from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
 from bomi.fusion import NodeFusion, neutral_offsets
@@ -230,3 +230,108 @@ class OnlineChain:
             g = float(gamma(self._state[base:base + 3]))
         return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
                         rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
+
+
+# ------------------------------------------------------------------------- within-recording checks
+def segment_folds(labels: np.ndarray, n_folds: int) -> np.ndarray:
+    """Fold id per sample: every constant-label segment is cut into ``n_folds`` consecutive chunks.
+
+    Each fold then holds a part of every segment, so every class stays in the training folds.
+    """
+    starts = np.flatnonzero(np.diff(labels, prepend=labels[0] - 1))
+    lengths = np.diff(np.append(starts, len(labels)))
+    position = np.arange(len(labels)) - np.repeat(starts, lengths)
+    return position * n_folds // np.repeat(lengths, lengths)
+
+
+def neutral_references(rec: Recording, nodes: Sequence[int], samples: int) -> list[np.ndarray]:
+    """Neutral offsets measured at the start of every later neutral (c0) segment of the recording.
+
+    Re-referencing with them mimics a new session, whose neutral calibration differs from the
+    training one (the main change from day to day), using the training recording alone.
+    """
+    labels = rec.require_labels()
+    starts = np.flatnonzero(np.diff(labels, prepend=labels[0] - 1))
+    lengths = np.diff(np.append(starts, len(labels)))
+    return [np.stack([rec.nodes[i].angles[start:start + samples].mean(axis=0) for i in nodes])
+            for start, length in zip(starts[1:], lengths[1:])
+            if labels[start] == NEUTRAL_LABEL and length >= samples]
+
+
+@dataclass
+class CrossValidation:
+    """Held-out windows of a cross-validation: fold, truth and posteriors of each."""
+
+    classes: np.ndarray
+    fold: np.ndarray
+    truth: np.ndarray
+    prob: np.ndarray
+
+    def predicted(self, threshold: float | None = None) -> np.ndarray:
+        prob_max = self.prob.max(axis=1)
+        return reject(self.classes[self.prob.argmax(axis=1)], prob_max, threshold)
+
+    @property
+    def accuracy(self) -> float:
+        return float(np.mean(self.predicted() == self.truth))
+
+    def rejected_share(self, threshold: float | None) -> float:
+        return float(np.mean(rejected(self.prob.max(axis=1), threshold)))
+
+
+def cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinkages: Sequence[float | str | None],
+                   n_folds: int = 5, references: Sequence[np.ndarray] | None = None) -> list[CrossValidation]:
+    """Segment-chunk cross-validation within one recording, one result per shrinkage value.
+
+    Training windows use the recording's own neutral calibration; held-out windows are scored once
+    per neutral ``references`` entry (default: that same calibration). Windows straddling a label
+    change or a chunk boundary are left out.
+    """
+    labels = rec.require_labels()
+    trained = prepare(rec, spec, profile.neutral_samples)
+    folds = segment_folds(labels, n_folds)
+    keep = single_label_windows(labels * n_folds + folds, spec.window, spec.stride)
+    window_fold = folds[trained.ends]
+    models = [[_fit(trained.features[keep & (window_fold != k)], trained.labels[keep & (window_fold != k)], spec, s)
+               for k in range(n_folds)] for s in shrinkages]
+    parts: list[list[tuple]] = [[] for _ in shrinkages]
+    for neutral in references if references is not None else [None]:
+        test_features = trained.features if neutral is None else window_features(node_states(rec, spec.nodes, neutral), spec)
+        for k in range(n_folds):
+            rows = keep & (window_fold == k)
+            for part, fold_models in zip(parts, models):
+                part.append((np.full(rows.sum(), k), trained.labels[rows], posteriors(fold_models[k], test_features[rows])))
+    return [CrossValidation(fold_models[0].classes, *(np.concatenate(column) for column in zip(*part)))
+            for part, fold_models in zip(parts, models)]
+
+
+def _fit(features: np.ndarray, labels: np.ndarray, spec: FeatureSpec, shrinkage: float | str | None) -> Model:
+    classes, coef, intercept = linear_parameters(fit_lda(features, labels, shrinkage))
+    return Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude={}, shrinkage=shrinkage)
+
+
+SHRINKAGE_GRID: tuple[float | str | None, ...] = (None, 1e-3, 1e-2, 1e-1, "auto")
+THRESHOLD_GRID = (0.5, 0.9, 0.99, 0.999, 0.9999)
+MAX_CV_REJECTED = 0.01
+
+
+@dataclass
+class Selection:
+    """Settings chosen on the training recording alone, with the cross-validation behind the choice."""
+
+    shrinkage: float | str | None
+    rejection_threshold: float
+    drift_accuracy: dict          # shrinkage -> accuracy under re-referenced neutral calibrations
+    drift_rejected: dict          # threshold -> rejected share with the chosen shrinkage
+
+
+def select_settings(rec: Recording, profile: Profile, spec: FeatureSpec) -> Selection:
+    """Shrinkage: best drift-aware CV accuracy; rejection threshold: the highest of THRESHOLD_GRID
+    that rejects at most MAX_CV_REJECTED of the drift-aware CV windows."""
+    references = neutral_references(rec, spec.nodes, profile.neutral_samples)
+    results = cross_validate(rec, profile, spec, SHRINKAGE_GRID, references=references)
+    accuracy = {s: r.accuracy for s, r in zip(SHRINKAGE_GRID, results)}
+    best = max(range(len(results)), key=lambda k: results[k].accuracy)
+    shares = {t: results[best].rejected_share(t) for t in THRESHOLD_GRID}
+    threshold = max(t for t in THRESHOLD_GRID if shares[t] <= MAX_CV_REJECTED)
+    return Selection(SHRINKAGE_GRID[best], threshold, accuracy, shares)
