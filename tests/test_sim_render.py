@@ -1,0 +1,87 @@
+"""Headless frames from the fixed camera (EGL), caption strip, PNG and MP4 files; the two CLI commands."""
+import json
+
+import imageio.v2 as imageio
+import numpy as np
+import pytest
+
+from bomi.cli import main
+from sim.env import ArmSim
+from sim.joystick import JoystickState, Mode
+from sim.render import CAPTION_HEIGHT, VideoWriter, caption_strip, describe, write_png
+
+
+@pytest.fixture(scope="module")
+def sim():
+    arm = ArmSim()
+    yield arm
+    arm.close()
+
+
+def coloured_pixels(frame: np.ndarray, rgb: tuple[int, int, int], tolerance: int = 60) -> int:
+    return int((np.abs(frame.astype(int) - np.array(rgb)).max(axis=2) < tolerance).sum())
+
+
+def test_frame_shows_the_cubes_and_follows_them(sim):
+    sim.reset()
+    frame = sim.render()
+    height, width = sim.config.render.height, sim.config.render.width
+    assert frame.shape == (height, width, 3) and frame.dtype == np.uint8
+    red, blue = (217, 51, 38), (38, 89, 217)  # the cube colours, lit
+    assert coloured_pixels(frame, red) > 100 and coloured_pixels(frame, blue) > 100
+    sim.reset(cube_positions=[(5.0, 5.0), (-0.14, -0.45)])  # red cube far off the table, out of view
+    assert coloured_pixels(sim.render(), red) < 10
+    sim.reset()
+
+
+def test_caption_strip_is_on_top_and_carries_the_text(sim):
+    state = JoystickState({"F": 0.5}, frozenset({"B1"}))
+    text = describe(Mode.WRIST, state)
+    assert text.startswith("mode: wrist") and "F=0.50" in text and "B1" in text
+    frame = sim.render(text)
+    assert frame.shape[0] == sim.config.render.height + CAPTION_HEIGHT
+    strip = frame[:CAPTION_HEIGHT]
+    assert (strip.max(axis=2) > 200).sum() > 50  # white text drawn
+    assert not np.array_equal(strip, caption_strip(describe(Mode.FINGERS, state), frame.shape[1]))
+
+
+def test_png_and_mp4_round_trip(sim, tmp_path):
+    frames = []
+    with VideoWriter(tmp_path / "clip.mp4", fps=30) as video:
+        for _ in range(12):
+            sim.step(JoystickState({"L": 1.0}))
+            frames.append(sim.render("moving"))
+            video.append(frames[-1])
+    write_png(tmp_path / "last.png", frames[-1])
+    np.testing.assert_array_equal(imageio.imread(tmp_path / "last.png"), frames[-1])
+    decoded = [frame for frame in imageio.get_reader(tmp_path / "clip.mp4")]
+    assert len(decoded) == 12 and decoded[0].shape == frames[0].shape
+    assert np.abs(decoded[-1].astype(int) - frames[-1]).mean() < 8  # lossy, but the same picture
+    assert not np.array_equal(frames[0], frames[-1])  # the arm moved
+
+
+def test_cli_render_writes_mp4_and_png(tmp_path, capsys):
+    out, png = tmp_path / "run.mp4", tmp_path / "run.png"
+    assert main(["render", "--out", str(out), "--png", str(png)]) == 0
+    assert "mode switches 4, button presses 4" in capsys.readouterr().out
+    assert imageio.get_reader(out).count_frames() > 100
+    assert imageio.imread(png).shape[2] == 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mp4", "run.png"]  # no leftovers
+
+
+def test_cli_render_refuses_non_mp4_and_missing_directory(tmp_path, capsys):
+    assert main(["render", "--out", str(tmp_path / "run.avi")]) == 2
+    assert main(["render", "--out", str(tmp_path / "nowhere" / "run.mp4")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and all(line.startswith("bomi: error: ") for line in err)
+
+
+def test_cli_sim_check_prints_every_direction(tmp_path, capsys):
+    record = tmp_path / "check.json"
+    assert main(["sim-check", "--deflection", "0.5", "--json", str(record)]) == 0
+    rows = capsys.readouterr().out.splitlines()[1:]
+    assert len(rows) == 6 + 6 + 2
+    results = json.loads(record.read_text())
+    translation = [r for r in results if r["mode"] == "translation"]
+    assert [r["function"] for r in translation] == ["F", "B", "R", "L", "Rr", "Lr"]
+    assert all(abs(r["ratio"] - 1) < 0.05 for r in translation)  # 0.1 m/s is within every joint limit
