@@ -73,6 +73,11 @@ class NodeCalibration:
     def uncalibrated(cls) -> NodeCalibration:
         return cls(hard_iron=(0.0, 0.0, 0.0), soft_iron=IDENTITY, mounting=IDENTITY)
 
+    @classmethod
+    def default_for(cls, node: int) -> NodeCalibration:
+        """Headset constants for node 1 (the headset IMU), uncalibrated for the others."""
+        return cls() if node == 1 else cls.uncalibrated()
+
 
 def _mat_vec(m: Matrix3, x: float, y: float, z: float) -> Vector3:
     return (m[0][0] * x + m[0][1] * y + m[0][2] * z,

@@ -163,7 +163,7 @@ def _parse_node(table: Any, where: str) -> NodeConfig:
     index = _get(table, "index", int, where)
     if not 1 <= index <= 6:
         raise ValueError(f"{where}: index must be in 1..6, got {index}")
-    default = NodeCalibration() if index == 1 else NodeCalibration.uncalibrated()
+    default = NodeCalibration.default_for(index)
     calibration = _get(table, "calibration", dict, where, {})
     _check_keys(calibration, _CALIBRATION_KEYS, f"{where}.calibration")
     try:

@@ -1,0 +1,266 @@
+"""`bomi train`, `bomi evaluate`, `bomi reproduce`, `bomi fuse`: the signal chain on recordings."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from bomi.chain import Evaluation, cross_validate, evaluate, select_settings, train
+from bomi.classifier import Model, PostProcessing
+from bomi.dataset import data_dir
+from bomi.errors import BomiError
+from bomi.features import FEATURE_KINDS, FeatureSpec
+from bomi.fusion import NodeCalibration, fuse
+from bomi.model_io import SUFFIXES, load_model, save_model
+from bomi.profiles import Profile, load_profile
+from bomi.recording import NodeData, Recording, read_recording, write_recording
+
+# Table "reliability over days" of the paper: the day-1 model (FV3) tested on each day, percent.
+PAPER_DAY1_MODEL = {1: 99.58, 2: 99.93, 3: 98.14, 4: 97.50, 5: 98.31}
+DAYS = (1, 2, 3, 4, 5)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("train", help="train an LDA model on labelled recordings")
+    p.add_argument("recordings", nargs="+", metavar="RECORDING", help=".mat or .csv recordings")
+    p.add_argument("--profile", default="P1", help="profile name (P1, P4, P5) or TOML file (default P1)")
+    p.add_argument("--features", choices=FEATURE_KINDS, help="override the profile's feature vector")
+    p.add_argument("--out", required=True, help="model file to write (.json or .npz)")
+    p.set_defaults(func=train_command)
+
+    p = subparsers.add_parser("evaluate", help="train on one recording, test on others")
+    p.add_argument("--train", required=True, metavar="A", help="training recording, or a trained model (.json/.npz)")
+    p.add_argument("--test", required=True, action="append", metavar="B", help="test recording (repeatable)")
+    p.add_argument("--profile", default="P1", help="profile name or TOML file (default P1)")
+    p.add_argument("--features", choices=FEATURE_KINDS, help="override the feature vector (only when training)")
+    p.add_argument("--reject", type=float, metavar="P", help="confidence rejection threshold (posterior)")
+    p.add_argument("--vote", type=int, metavar="N", help="majority vote over the last N decisions")
+    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.add_argument("--png", metavar="OUT", default="confusion.png", help="confusion matrix figure (default confusion.png)")
+    p.set_defaults(func=evaluate_command)
+
+    p = subparsers.add_parser("reproduce", help="the paper's reliability-over-days table beside ours (P1 data)")
+    p.add_argument("--data", type=Path, help="dataset directory (default: BOMI_DATA_DIR or ../shared/data/...)")
+    p.add_argument("--json", metavar="OUT", help="write the results as JSON")
+    p.add_argument("--markdown", metavar="OUT", help="write the table as markdown")
+    p.set_defaults(func=reproduce_command)
+
+    p = subparsers.add_parser("fuse", help="recompute Pitch/Roll/Yaw columns from the raw ACC/GYRO/MAG columns")
+    p.add_argument("input", metavar="IN", help=".mat or .csv recording")
+    p.add_argument("--out", required=True, help="CSV recording to write")
+    p.add_argument("--profile", help="take the node calibrations from this profile "
+                                     "(default: headset constants for node 1, uncalibrated otherwise)")
+    p.set_defaults(func=fuse_command)
+
+
+# --------------------------------------------------------------------------------------- helpers
+def _check_output(path: str | Path, suffixes: Sequence[str]) -> Path:
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise BomiError(f"{path}: output must end in {' or '.join(suffixes)}")
+    if not path.parent.is_dir():
+        raise BomiError(f"{path}: directory {path.parent} does not exist")
+    return path
+
+
+def _write_text(path: Path, text: str) -> None:
+    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    with os.fdopen(handle, "w", encoding="utf-8") as out:
+        out.write(text)
+    os.replace(temp, path)
+
+
+def _spec(profile: Profile, kind: str | None) -> FeatureSpec:
+    return replace(profile.spec, kind=kind) if kind else profile.spec
+
+
+def confusion_text(evaluation: Evaluation, classes: Sequence[int]) -> str:
+    from sklearn.metrics import confusion_matrix
+
+    matrix = confusion_matrix(evaluation.truth, evaluation.predicted, labels=list(classes))
+    width = max(6, len(str(matrix.max())) + 1)
+    lines = ["true\\pred " + "".join(f"c{c}".rjust(width) for c in classes)]
+    lines += [f"c{c}".ljust(10) + "".join(str(v).rjust(width) for v in row) for c, row in zip(classes, matrix)]
+    return "\n".join(lines)
+
+
+def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes: Sequence[int]) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from sklearn.metrics import ConfusionMatrixDisplay
+
+    fig, axes = plt.subplots(1, len(evaluations), figsize=(5 * len(evaluations), 4.6), squeeze=False)
+    for ax, ev in zip(axes[0], evaluations):
+        ConfusionMatrixDisplay.from_predictions(ev.truth, ev.predicted, labels=list(classes),
+                                                display_labels=[f"c{c}" for c in classes],
+                                                ax=ax, colorbar=False, values_format="d")
+        ax.set_title(f"{Path(ev.source).name}: {100 * ev.accuracy:.2f} %", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# -------------------------------------------------------------------------------------- commands
+def train_command(args: argparse.Namespace) -> int:
+    out = _check_output(args.out, SUFFIXES)
+    profile = load_profile(args.profile)
+    recordings = [read_recording(path) for path in args.recordings]
+    model = train(recordings, profile, _spec(profile, args.features))
+    save_model(out, model)
+    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), classes {model.classes.tolist()}, "
+          f"shrinkage {model.shrinkage}: wrote {out}")
+    return 0
+
+
+def evaluate_command(args: argparse.Namespace) -> int:
+    json_out = _check_output(args.json, (".json",)) if args.json else None
+    png_out = _check_output(args.png, (".png",))
+    profile = load_profile(args.profile)
+    if Path(args.train).suffix.lower() in SUFFIXES:
+        if args.features:
+            raise BomiError(f"{args.train}: --features only applies when training from a recording")
+        model = load_model(args.train)
+    else:
+        model = train([read_recording(args.train)], profile, _spec(profile, args.features))
+    post = PostProcessing(rejection_threshold=args.reject if args.reject is not None else model.post.rejection_threshold,
+                          vote_length=args.vote if args.vote is not None else model.post.vote_length)
+    evaluations = [evaluate(model, read_recording(path), profile.neutral_samples, post)
+                   for path in tqdm(args.test, desc="evaluating", unit="file", disable=len(args.test) < 2)]
+    results = []
+    for path, ev in zip(args.test, evaluations):
+        line = f"{path}: accuracy {100 * ev.accuracy:.2f} % over {len(ev.truth)} windows"
+        if post.rejection_threshold is not None:
+            line += (f"; rejected {100 * ev.rejected_share:.2f} %, accuracy of accepted windows "
+                     f"{100 * ev.accepted_accuracy:.2f} %")
+        print(line)
+        print(confusion_text(ev, model.classes.tolist()))
+        results.append({"test": str(path), "accuracy": ev.accuracy, "windows": int(len(ev.truth)),
+                        "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
+    save_confusion_figure(png_out, evaluations, model.classes.tolist())
+    print(f"confusion matrices: {png_out}")
+    if json_out:
+        record = {"train": str(args.train), "features": model.spec.kind, "shrinkage": model.shrinkage,
+                  "post_processing": {"rejection_threshold": post.rejection_threshold, "vote_length": post.vote_length},
+                  "results": results}
+        _write_text(json_out, json.dumps(record, indent=1) + "\n")
+    return 0
+
+
+@dataclass
+class FeatureReproduction:
+    kind: str
+    shrinkage: float | str | None
+    threshold: float
+    within_day1: float            # segment-chunk CV accuracy within day 1
+    days: dict[int, Evaluation]   # day -> without rejection
+    rejecting: dict[int, Evaluation]  # day -> with the day-1 threshold
+
+
+def reproduce(directory: Path, profile: Profile) -> list[FeatureReproduction]:
+    """Day-1 model tested on days 2..5, for FV1, FV2, FV3; every setting chosen on day 1 alone."""
+    paths = {day: directory / f"day{day}_testp.mat" for day in DAYS}
+    recordings = {day: read_recording(path) for day, path in tqdm(paths.items(), desc="reading days", unit="day")}
+    out = []
+    for kind in tqdm(FEATURE_KINDS, desc="feature vectors", unit="FV"):
+        spec = replace(profile.spec, kind=kind)
+        chosen = select_settings(recordings[1], profile, spec)
+        within = cross_validate(recordings[1], profile, spec, [chosen.shrinkage])[0].accuracy
+        model = train([recordings[1]], profile, spec, chosen.shrinkage, PostProcessing())
+        rejecting = PostProcessing(rejection_threshold=chosen.rejection_threshold)
+        out.append(FeatureReproduction(
+            kind, chosen.shrinkage, chosen.rejection_threshold, within,
+            {d: evaluate(model, recordings[d], profile.neutral_samples) for d in DAYS[1:]},
+            {d: evaluate(model, recordings[d], profile.neutral_samples, rejecting) for d in DAYS[1:]}))
+    return out
+
+
+def reproduction_record(rows: list[FeatureReproduction]) -> dict:
+    def pooled(evaluations: dict[int, Evaluation]) -> dict:
+        truth = np.concatenate([e.truth for e in evaluations.values()])
+        predicted = np.concatenate([e.predicted for e in evaluations.values()])
+        rejected = np.concatenate([e.rejected for e in evaluations.values()])
+        return {"accepted_accuracy": float(np.mean(predicted[~rejected] == truth[~rejected])),
+                "rejected_share": float(np.mean(rejected))}
+
+    return {
+        "paper_day1_model_fv3": PAPER_DAY1_MODEL,
+        "method": "train on day 1 (the day-1 test recording stands in for the unpublished training recording), "
+                  "test on days 2..5; shrinkage and rejection threshold chosen by drift-aware CV within day 1",
+        "features": {r.kind: {
+            "shrinkage": r.shrinkage, "rejection_threshold": r.threshold, "within_day1_cv_accuracy": r.within_day1,
+            "days": {d: {"accuracy": e.accuracy, "windows": int(len(e.truth))} for d, e in r.days.items()},
+            "mean_accuracy_days_2_5": float(np.mean([e.accuracy for e in r.days.values()])),
+            "with_rejection": {d: {"accuracy": e.accuracy, "accepted_accuracy": e.accepted_accuracy,
+                                   "rejected_share": e.rejected_share} for d, e in r.rejecting.items()},
+            "with_rejection_pooled_days_2_5": pooled(r.rejecting),
+        } for r in rows},
+    }
+
+
+def reproduction_markdown(record: dict) -> str:
+    features = record["features"]
+    kinds = list(features)
+    header = ["Day", "Paper FV3"] + kinds + [f"{k} + rejection: accepted (rejected)" for k in kinds]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    day1 = [f"{100 * features[k]['within_day1_cv_accuracy']:.2f}" for k in kinds]
+    lines.append(f"| 1 (within day 1, 5-fold CV) | {PAPER_DAY1_MODEL[1]:.2f} | " + " | ".join(day1)
+                 + " |" + " - |" * len(kinds))
+    for day in DAYS[1:]:
+        ours = [f"{100 * features[k]['days'][day]['accuracy']:.2f}" for k in kinds]
+        rej = [f"{100 * features[k]['with_rejection'][day]['accepted_accuracy']:.2f} "
+               f"({100 * features[k]['with_rejection'][day]['rejected_share']:.2f})" for k in kinds]
+        lines.append(f"| {day} | {PAPER_DAY1_MODEL[day]:.2f} | " + " | ".join(ours + rej) + " |")
+    paper_mean = np.mean([PAPER_DAY1_MODEL[d] for d in DAYS[1:]])
+    means = [f"{100 * features[k]['mean_accuracy_days_2_5']:.2f}" for k in kinds]
+    pooled = [f"{100 * features[k]['with_rejection_pooled_days_2_5']['accepted_accuracy']:.2f} "
+              f"({100 * features[k]['with_rejection_pooled_days_2_5']['rejected_share']:.2f})" for k in kinds]
+    lines.append(f"| mean 2..5 (rejection: pooled) | {paper_mean:.2f} | " + " | ".join(means + pooled) + " |")
+    settings = ", ".join(f"{k}: shrinkage {features[k]['shrinkage']}, threshold {features[k]['rejection_threshold']}"
+                         for k in kinds)
+    return ("Accuracy (%) of the day-1 model on each day; rejection columns: accuracy of accepted windows "
+            "(share of windows rejected).\n\n" + "\n".join(lines) + f"\n\nSettings chosen on day 1: {settings}.\n")
+
+
+def reproduce_command(args: argparse.Namespace) -> int:
+    json_out = _check_output(args.json, (".json",)) if args.json else None
+    md_out = _check_output(args.markdown, (".md",)) if args.markdown else None
+    directory = args.data or data_dir()
+    if not directory.is_dir():
+        raise BomiError(f"{directory}: dataset directory not found (set BOMI_DATA_DIR)")
+    record = reproduction_record(reproduce(directory, load_profile("P1")))
+    table = reproduction_markdown(record)
+    print(table)
+    if json_out:
+        _write_text(json_out, json.dumps(record, indent=1) + "\n")
+    if md_out:
+        _write_text(md_out, table)
+    return 0
+
+
+def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) -> Recording:
+    """The recording with every node's angles recomputed from its raw ACC/GYRO/MAG columns."""
+    nodes = {}
+    for index, node in rec.nodes.items():
+        pitch, roll, yaw = fuse(node.acc, node.gyro, node.mag, calibrations[index])
+        nodes[index] = NodeData(acc=node.acc, gyro=node.gyro, mag=node.mag, angles=np.column_stack([pitch, roll, yaw]))
+    return Recording(nodes=nodes, labels=rec.labels, time=rec.time, source=rec.source)
+
+
+def fuse_command(args: argparse.Namespace) -> int:
+    out = _check_output(args.out, (".csv",))
+    rec = read_recording(args.input)
+    calibrations = {i: NodeCalibration.default_for(i) for i in rec.node_indices}
+    if args.profile:
+        profile = load_profile(args.profile)
+        calibrations.update({n.index: n.calibration for n in profile.nodes})
+    write_recording(out, fused_recording(rec, calibrations))
+    print(f"fused {len(rec)} samples of node(s) {list(rec.node_indices)}: wrote {out}")
+    return 0
