@@ -8,6 +8,7 @@ joint-velocity vector is scaled as a whole when a joint would exceed its speed l
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,7 +59,7 @@ class Workspace:
         lower[2] = max(lower[2], self.lowest_tool_height(rotation))
         point = np.clip(point, lower, np.maximum(lower, self.upper))
         offset = point - self.shoulder
-        distance = np.linalg.norm(offset)
+        distance = math.sqrt(offset @ offset)
         if distance > self.reach_max:
             return self.shoulder + offset * (self.reach_max / distance)
         if 0 < distance < self.reach_min:
@@ -69,7 +70,7 @@ class Workspace:
 def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float) -> np.ndarray:
     """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities."""
     jjt = jacobian @ jacobian.T
-    jjt[np.diag_indices_from(jjt)] += damping**2
+    jjt.flat[::len(jjt) + 1] += damping**2  # the diagonal
     return jacobian.T @ np.linalg.solve(jjt, twist)
 
 
@@ -134,11 +135,11 @@ class CartesianVelocityController:
         self.target_position = walled
         # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
         lag = self.target_position - position
-        distance = np.linalg.norm(lag)
+        distance = math.sqrt(lag @ lag)
         if distance > self.config.max_tracking_error:
             self.target_position = position + lag * (self.config.max_tracking_error / distance)
         turn = rotation_error(self.target_rotation, rotation)
-        angle = np.linalg.norm(turn)
+        angle = math.sqrt(turn @ turn)
         max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
         if angle > max_angle:
             self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
