@@ -13,10 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
+from bomi.chain import Decision, OnlineChain, train
+from bomi.classifier import NEUTRAL_LABEL
+from bomi.frames import FrameParser, imu_index
+from bomi.fusion import DT
+from bomi.profiles import Profile, load_profile
 from sim.env import ArmSim
-from sim.joystick import TRANSLATION_AXES, JoystickState, Mode, combine
+from sim.joystick import BUTTONS, FUNCTIONS, TRANSLATION_AXES, JoystickState, Mode, combine
 from sim.render import FrameRenderer, VideoWriter, describe
 from tasks import metrics
+from tasks.imu_synth import Delivery
+from tasks.participant import VirtualParticipant, calibration_session, load_participant, session_recording
 from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser, StickIntent, load_operator
 from tasks.stacking import StackingTask, TaskConfig
 
@@ -113,13 +120,133 @@ class JoystickChannel:
     def __init__(self) -> None:
         self._button: str | None = None
 
-    def command(self, intent: StickIntent, t_end: float) -> JoystickState:
+    def command(self, intent: StickIntent, t: float, t_end: float) -> JoystickState:
         pressed = rising_edge(intent.button, self._button)
         self._button = intent.button
         return JoystickState(dict(intent.deflection), pressed)
 
-    def trace(self) -> DecisionTrace | None:
-        return None
+    def log_fields(self) -> dict:
+        return {}
+
+
+WARMUP_S = 12.0  # the fusion's yaw settles in about 600 samples (hardware.md)
+# Motion amplitudes the participant calibrates with and then uses: half to full range, so that
+# the calibrated gamma range (nu = 0 .. 1) spans the leans used in the task.
+BODY_RANGE = (0.5, 1.0)
+
+
+class BomiChannel:
+    """The person's decision becomes a body motion; the stick is whatever the chain decides.
+
+    Participant time runs ``lead`` seconds ahead of the task: the warm-up and the neutral-offset
+    calibration happen before the task's clock starts.  One class at a time: the participant
+    holds a posture for as long as the same function is wanted (its amplitude chosen at the start
+    of the move, as a person picks how far to lean).
+    """
+
+    combine_axes = False
+
+    def __init__(self, participant: VirtualParticipant, chain: OnlineChain, profile: Profile):
+        self.participant, self.chain, self.profile = participant, chain, profile
+        self.parser = FrameParser()
+        self._label_of = {cls.function: cls.label for cls in profile.classes}
+        self._last_sample: dict[int, int] = {}
+        self._function: str = "neutral"
+        self._nu = 0.0
+        self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
+        self._queue: list[Delivery] = []  # generated frames not yet arrived
+        # An intent set at t moves the body from t + reaction_s: samples may be made that far ahead.
+        self._lookahead = 0.5 * participant.params.reaction_s
+        self._asked_until = -np.inf
+        self.lead = 0.0
+        self._feed(participant.advance(WARMUP_S), record=False)
+        chain.begin_neutral_calibration()
+        t = WARMUP_S
+        while chain.calibrating:
+            t += 0.1
+            self._feed(participant.advance(t), record=False)
+        self.lead = t
+
+    def _feed(self, data: bytes, record: bool = True) -> Decision | None:
+        latest = None
+        for frame in self.parser.feed(data):
+            node = imu_index(frame.node_id)
+            if node is None:
+                continue
+            last = self._last_sample.get(node, frame.counter - 1)
+            sample = self._last_sample[node] = last + (frame.counter - last) % 256
+            decision = self.chain.push(node, frame.acc, frame.gyro, frame.mag)
+            if decision is not None:
+                latest = decision
+                if record:
+                    self._rows.append((sample, decision.label, decision.gamma, decision.nu))
+        return latest
+
+    def _arrived(self, now: float, t_end: float) -> bytes:
+        """Frames arriving by ``t_end``; samples are made in chunks (cheaper, same result)."""
+        if now + self._lookahead / 2 > self._asked_until:  # ask before the frames are due
+            self._asked_until = max(t_end, now + self._lookahead)
+            self._queue.append(self.participant.deliveries(self._asked_until))
+        arrived = []
+        while self._queue:
+            now_part, rest = self._queue[0].until(t_end)
+            arrived += now_part.frames
+            if len(rest.frames):
+                self._queue[0] = rest
+                break
+            self._queue.pop(0)
+        return b"".join(arrived)
+
+    def intent_class(self, intent: StickIntent) -> tuple[int, float]:
+        """(class label, amplitude) the participant performs for the person's intent."""
+        if intent.button is not None:
+            return self._label_of[intent.button], 1.0
+        if not intent.deflection:
+            return NEUTRAL_LABEL, 0.0
+        (function, deflection), = intent.deflection.items()
+        return self._label_of[function], BODY_RANGE[0] + (BODY_RANGE[1] - BODY_RANGE[0]) * float(deflection)
+
+    def command(self, intent: StickIntent, t: float, t_end: float) -> JoystickState:
+        label, amplitude = self.intent_class(intent)
+        if label != self.participant.intent[0]:
+            self.participant.set_intent(label, amplitude, self.lead + t)
+        decision = self._feed(self._arrived(self.lead + t, self.lead + t_end))
+        previous = self._function
+        if decision is not None:
+            self._function = decision.function
+            self._nu = decision.nu
+        if self._function in FUNCTIONS and self._nu > 0:
+            return JoystickState({self._function: min(1.0, self._nu)})
+        if self._function in BUTTONS and self._function != previous:
+            return JoystickState(pressed=frozenset({self._function}))
+        return JoystickState()
+
+    def log_fields(self) -> dict:
+        truth = self.participant.truth()
+        rows = np.array(self._rows, dtype=float).reshape(-1, 4)
+        samples = rows[:, 0].astype(int)
+        trace = DecisionTrace(t=samples * DT - self.lead, intended=truth.intent[samples].astype(int),
+                              decided=rows[:, 1].astype(int), gamma=rows[:, 2], nu=rows[:, 3])
+        names = tuple(cls.function for cls in sorted(self.profile.classes, key=lambda c: c.label))
+        return {"decisions": trace, "class_names": names, "neutral": NEUTRAL_LABEL,
+                "allowance": self.transition_samples, "sample_period": DT}
+
+    @property
+    def transition_samples(self) -> int:
+        """Samples after a motion onset that belong to the transition: the body's move, then a
+        full window and the vote."""
+        move = int(np.ceil(self.participant.params.onset_s / DT))
+        return move + self.chain.model.spec.window + self.chain.model.post.vote_length
+
+
+def calibrated_channel(participant: str, seed: int) -> BomiChannel:
+    """The paper's order: the participant performs the calibration protocol, the chain records
+    it and trains the LDA with the ``bomi train`` code (``bomi.chain.train``), then the task."""
+    params = load_participant(participant)
+    profile = load_profile(params.profile)
+    session = calibration_session(params, profile, seed, amplitudes=BODY_RANGE)
+    model = train([session_recording(session, profile)], profile)
+    return BomiChannel(VirtualParticipant(params, profile, seed), OnlineChain(model, profile), profile)
 
 
 def intended_direction(mode: Mode, intent: StickIntent) -> np.ndarray:
@@ -146,7 +273,7 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
         while True:
             view = task.view()
             intent = user.decide(view)
-            state = channel.command(intent, view.t + sim.dt)
+            state = channel.command(intent, view.t, view.t + sim.dt)
             rows["t"].append(view.t)
             rows["hand"].append(view.hand_pos)
             rows["dir"].append(intended_direction(view.mode, intent))
@@ -162,17 +289,13 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
     finally:
         if film is not None:
             film.close()
-    extra = {}
-    trace = channel.trace()
-    if trace is not None:
-        extra = channel.log_fields()
     return EpisodeLog(
         operator=operator, participant=participant, seed=seed,
         t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
         touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
-        wall_time=time.perf_counter() - started, decisions=trace, **extra)
+        wall_time=time.perf_counter() - started, **channel.log_fields())
 
 
 class _Film:

@@ -22,7 +22,6 @@ from bomi.errors import BomiError
 from sim.joystick import BUTTON_STEP, FINGER_DIRECTION, MODE_CYCLE, TRANSLATION_AXES, WRIST_AXES, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
-FULL_SPEED = 0.20  # m/s at full deflection (the JACO mapping of the paper)
 CUBE_SYMMETRY = math.pi / 2  # a cube looks the same every quarter turn
 
 
@@ -142,6 +141,7 @@ class Memory:
     axis: int | None = None  # single-axis channel: the axis being worked on
     touch_since: float | None = None  # when the fingers started touching the cube being grasped
     turning: bool = False  # a wrist turn goes on until the hand is well lined up
+    last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
 
 
 # ---------------------------------------------------------------------------------------------
@@ -181,9 +181,8 @@ def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
 
 
 def deflection_for(distance: float, p: OperatorParams) -> float:
-    """Coarse far away, fine close by, linear in between."""
-    ramp = min(1.0, distance / p.slow_down_distance) if p.slow_down_distance > 0 else 1.0
-    return p.fine + (p.coarse - p.fine) * ramp
+    """Coarse far from the goal, fine within the slow-down distance."""
+    return p.coarse if distance > p.slow_down_distance else p.fine
 
 
 # ---------------------------------------------------------------------------------------------
@@ -258,21 +257,33 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     return on_arrival
 
 
+def hand_velocity(view: View, memory: Memory) -> np.ndarray:
+    """What the person sees the hand doing: the change since the previous glance."""
+    if memory.last_seen is None or view.t <= memory.last_seen[0]:
+        return np.zeros(3)
+    return (view.hand_pos - memory.last_seen[1]) / (view.t - memory.last_seen[0])
+
+
 def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
-         speed: Mapping[str, float] | None = None) -> tuple[StickIntent, Memory]:
+         holding: Mapping[str, float] | None = None, anticipation: float | None = None
+         ) -> tuple[StickIntent, Memory]:
     """Decide the stick intent for this tick.
 
-    ``speed`` is the deflection currently applied per function (what the person feels in the hand);
-    the person lets go early by ``anticipation`` seconds of travel at that speed.
+    ``holding`` is the deflection currently applied per function (what the person feels in the
+    hand); the person lets go ``anticipation`` seconds (default: the parameter) of the hand's
+    current travel before the goal.
     """
-    memory = _remember_touch(view, memory)
+    velocity = hand_velocity(view, memory)
+    memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
     action = next_action(view, memory, p)
     memory = replace(memory, turning=action.kind == "turn")
     need = _MODE_FOR.get(action.kind)
     if need is not None and need is not view.mode:
         return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
     if action.kind == "move":
-        deflection, axis = _translation(view.hand_pos, action.point, p, combine_axes, memory.axis, speed or {})
+        lead = p.anticipation if anticipation is None else anticipation
+        deflection, axis = _translation(view.hand_pos, velocity * lead, action.point, p, combine_axes,
+                                        memory.axis, holding or {})
         return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
     memory = replace(memory, axis=None)
     if action.kind == "turn":
@@ -291,16 +302,28 @@ def _remember_touch(view: View, memory: Memory) -> Memory:
     return memory if memory.touch_since is not None else replace(memory, touch_since=view.t)
 
 
-def _translation(hand: np.ndarray, point: np.ndarray, p: OperatorParams, combine_axes: bool,
-                 axis: int | None, speed: Mapping[str, float]) -> tuple[dict[str, float], int | None]:
-    """Joystick functions (and their deflections) that bring the hand to ``point``."""
+def _translation(hand: np.ndarray, coast: np.ndarray, point: np.ndarray, p: OperatorParams, combine_axes: bool,
+                 axis: int | None, holding: Mapping[str, float]) -> tuple[dict[str, float], int | None]:
+    """Joystick functions (and their deflections) that bring the hand to ``point``.
+
+    An axis being moved stops when the hand would coast (``coast``: the travel expected after
+    letting go) to within the stop tolerance of its goal; an idle axis
+    starts again only when it is off by twice the stop tolerance (no dithering), unless nothing
+    else would move the hand toward a goal the plan still wants.
+    """
     error = point - hand
     moving = []
     for i in range(3):
         fn = _function_along(i, error[i])
-        current = speed.get(fn, 0.0) * FULL_SPEED
-        if abs(error[i]) > p.stop + p.anticipation * current:
+        if fn in holding:
+            closing_in = max(0.0, coast[i] * math.copysign(1.0, error[i]))
+            keep = abs(error[i]) > p.stop + closing_in
+        else:
+            keep = abs(error[i]) > 2 * p.stop
+        if keep:
             moving.append(i)
+    if not moving and not holding:
+        moving = [int(np.argmax(np.abs(error)))]
     if not moving:
         return {}, None
     if not combine_axes:
@@ -311,15 +334,15 @@ def _translation(hand: np.ndarray, point: np.ndarray, p: OperatorParams, combine
 
 
 def _function_along(axis: int, signed: float) -> str:
-    direction = np.zeros(3)
-    direction[axis] = 1.0 if signed >= 0 else -1.0
-    return _function_for(TRANSLATION_AXES, direction)
+    return _TRANSLATION_FUNCTION[axis, signed >= 0]
 
 
 def _function_for(axes: Mapping[str, tuple[float, float, float]], direction: np.ndarray) -> str:
     return next(fn for fn, unit in axes.items() if np.allclose(unit, direction))
 
 
+_TRANSLATION_FUNCTION = {(int(np.flatnonzero(unit)[0]), float(sum(unit)) > 0): fn
+                         for fn, unit in TRANSLATION_AXES.items()}
 _MODE_FOR = {"move": Mode.TRANSLATION, "turn": Mode.WRIST, "open": Mode.FINGERS, "close": Mode.FINGERS}
 
 
@@ -335,24 +358,35 @@ def mode_button(current: Mode, wanted: Mode) -> str:
 
 @dataclass
 class ScriptedUser:
-    """``plan`` with a human's timing: reaction time, pauses between moves, no jitter."""
+    """``plan`` with a human's timing: reaction time, pauses between moves, and a stopping
+    anticipation learnt from experience (how far the hand kept going after the last stops:
+    short with a joystick, longer through a BoMI)."""
 
     params: OperatorParams
     combine_axes: bool
     memory: Memory = field(default_factory=Memory)
     current: StickIntent = REST
+    anticipation: float | None = None
     _waiting_since: float | None = None
     _stopped_at: float = -math.inf
+    _coasting: tuple[float, np.ndarray, float] | None = None  # (t, hand, speed) when a move was let go
+
+    def __post_init__(self) -> None:
+        if self.anticipation is None:
+            self.anticipation = self.params.anticipation
 
     def decide(self, view: View) -> StickIntent:
-        wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection)
+        velocity = hand_velocity(view, self.memory)
+        self._learn_coasting(view, float(np.linalg.norm(velocity)))
+        wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
+                                   self.anticipation)
         if wanted.is_rest or _continues(self.current, wanted):
             if wanted.is_rest and not self.current.is_rest:
-                self._stopped_at = view.t
+                self._let_go(view, velocity)
             self.current, self._waiting_since = wanted, None
             return wanted
         if not self.current.is_rest:  # a different move: stop this one first
-            self._stopped_at = view.t
+            self._let_go(view, velocity)
             self.current = REST
         if self._waiting_since is None:
             self._waiting_since = view.t
@@ -363,11 +397,31 @@ class ScriptedUser:
         self.current, self._waiting_since = wanted, None
         return wanted
 
+    def _let_go(self, view: View, velocity: np.ndarray) -> None:
+        self._stopped_at = view.t
+        speed = float(np.linalg.norm(velocity))
+        if view.mode is Mode.TRANSLATION and speed > COASTING_MIN_SPEED:
+            self._coasting = (view.t, view.hand_pos, speed)
+
+    def _learn_coasting(self, view: View, speed: float) -> None:
+        """Once the hand has come to rest (or a new move began), update the anticipation."""
+        if self._coasting is None or (speed > COASTING_MIN_SPEED / 3 and self.current.is_rest):
+            return
+        t0, start, speed0 = self._coasting
+        seconds = float(np.linalg.norm(view.hand_pos - start)) / speed0
+        self.anticipation = 0.5 * self.anticipation + 0.5 * min(seconds, MAX_ANTICIPATION)
+        self._coasting = None
+
+
+COASTING_MIN_SPEED = 0.02  # m/s: slower moves teach nothing about stopping
+MAX_ANTICIPATION = 2.0  # s
+
 
 def _continues(current: StickIntent, wanted: StickIntent) -> bool:
-    """Same move still going on (dropping an axis of a combined move counts as continuing)."""
+    """Same move still going on: the same button held, or the stick still pushed along at least
+    one of the functions it already holds (a combined move may drop or add an axis)."""
     if current.is_rest:
         return False
     if wanted.button is not None:
         return wanted.button == current.button
-    return bool(wanted.functions) and wanted.functions <= current.functions
+    return bool(wanted.functions & current.functions)
