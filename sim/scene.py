@@ -119,13 +119,9 @@ class Scene:
     cube_half_size: float
     finger_geoms: tuple[frozenset[int], ...]  # geoms of finger 1, 2, 3
     hand_geoms: frozenset[int]  # everything on the hand, fingers included
-    arm_geoms: frozenset[int]
     table_geom: int
-    camera: str
-    arm_base_pos: np.ndarray
     location_a: np.ndarray
     location_b: np.ndarray
-    config: SimConfig
 
 
 def build_scene(config: SimConfig, models_dir: Path = MODELS_DIR) -> Scene:
@@ -169,12 +165,7 @@ def build_scene(config: SimConfig, models_dir: Path = MODELS_DIR) -> Scene:
         cube_half_size=float(model.geom_size[ids(mujoco.mjtObj.mjOBJ_GEOM, [cubes[0].geom])[0], 0]),
         finger_geoms=finger_geoms,
         hand_geoms=frozenset(int(g) for g in ids(mujoco.mjtObj.mjOBJ_GEOM, hand.mjcf_model.find_all("geom"))),
-        arm_geoms=frozenset(int(g) for g in ids(mujoco.mjtObj.mjOBJ_GEOM,
-                                                 arm.mjcf_model.find_all("geom", exclude_attachments=True))),
         table_geom=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "table"),
-        camera=config.render.camera,
-        arm_base_pos=np.array(config.arm.base_pos, dtype=float),
         location_a=np.array(config.scene.location_a, dtype=float),
         location_b=np.array(config.scene.location_b, dtype=float),
-        config=config,
     )
