@@ -51,13 +51,13 @@ class Workspace:
 
     def lowest_tool_height(self, rotation: np.ndarray) -> float:
         """Tool height at which the hand, so oriented, just touches the floor."""
-        return self.floor - float(np.min(self.hand_box @ rotation[2]))
+        return self.floor - float((self.hand_box @ rotation[2]).min())
 
     def clamp(self, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
         """The nearest allowed point (box and floor, then the shell; the shell wins where they disagree)."""
         lower = self.lower.copy()
         lower[2] = max(lower[2], self.lowest_tool_height(rotation))
-        point = np.clip(point, lower, np.maximum(lower, self.upper))
+        point = np.minimum(np.maximum(point, lower), np.maximum(lower, self.upper))
         offset = point - self.shoulder
         distance = math.sqrt(offset @ offset)
         if distance > self.reach_max:
@@ -76,7 +76,7 @@ def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float
 
 def speed_scale(qd: np.ndarray, speed_limit: np.ndarray) -> float:
     """Largest factor <= 1 that keeps every joint within its speed limit (same factor for all)."""
-    ratio = np.max(np.abs(qd) / speed_limit)
+    ratio = (np.abs(qd) / speed_limit).max()
     return 1.0 if ratio <= 1.0 else 1.0 / ratio
 
 

@@ -116,17 +116,18 @@ class ArmSim:
         """One control tick below the joystick: a tool twist (m/s, rad/s, world axes), finger rate in [-1, 1]."""
         q = self.arm_qpos
         self.data.ctrl[self.scene.arm_actuators] = self.controller.joint_velocities(q, linear, angular)
-        self.data.ctrl[self.scene.finger_actuators] = self._finger_velocities(float(np.clip(finger, -1, 1)))
+        self.data.ctrl[self.scene.finger_actuators] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
         mujoco.mj_step(self.model, self.data, nstep=self.config.physics.substeps)
 
     def _finger_velocities(self, rate: float) -> np.ndarray:
         """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing."""
         control = self.config.control
         lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
-        self.finger_target = np.clip(self.finger_target + rate * control.finger_speed * self.dt, lower, upper)
+        self.finger_target = np.minimum(np.maximum(self.finger_target + rate * control.finger_speed * self.dt,
+                                                   lower), upper)
         velocity = control.finger_gain * (self.finger_target - self.data.qpos[self.scene.finger_qpos])
         limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1]
-        return np.clip(velocity, -limit, limit)
+        return np.minimum(np.maximum(velocity, -limit), limit)
 
     # -- read-outs -------------------------------------------------------------------------------
 
