@@ -22,16 +22,16 @@ from bomi.errors import BomiError
 NODE_INDICES = range(1, 7)
 TIME_COLUMN = "Time"
 LABEL_COLUMN = "Etiquette"
-_SIGNALS = ("acc", "gyro", "mag", "angles")
+_SIGNALS = ("angles", "acc", "gyro", "mag")  # column order of the published files
 
 
 def node_columns(node: int) -> dict[str, tuple[str, str, str]]:
     """The three column names of each signal of one node, keyed by signal."""
     return {
+        "angles": (f"Pitch{node}Raw", f"Roll{node}Raw", f"Yaw{node}Raw"),
         "acc": tuple(f"ACC{node}{axis}" for axis in "XYZ"),
         "gyro": tuple(f"GYRO{node}{axis}" for axis in "XYZ"),
         "mag": tuple(f"MAG{node}{axis}" for axis in "XYZ"),
-        "angles": (f"Pitch{node}Raw", f"Roll{node}Raw", f"Yaw{node}Raw"),
     }
 
 
@@ -138,7 +138,7 @@ def _read_csv_columns(path: Path) -> dict[str, np.ndarray]:
             columns[name] = cells[:, j].astype(float)
         except ValueError:
             line = next(i for i, cell in enumerate(cells[:, j], start=2) if not _is_number(cell))
-            raise BomiError(f"{path}: column {name}, line {line}: not a number ({cells[line - 2, j]!r})") from None
+            raise BomiError(f"{path}: column {name}, line {line}: not a number ({str(cells[line - 2, j])!r})") from None
     return columns
 
 
@@ -201,7 +201,7 @@ def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = 62
     buffer = io.StringIO()
     buffer.write(",".join(_header(nodes, rec.labels is not None)) + "\n")
     for k in range(len(rec)):
-        samples = [NodeSample(*(getattr(rec.nodes[i], s)[k] for s in _SIGNALS)) for i in nodes]
+        samples = [NodeSample(**{s: getattr(rec.nodes[i], s)[k] for s in _SIGNALS}) for i in nodes]
         buffer.write(_format_row(time[k], samples, None if rec.labels is None else rec.labels[k]))
     _atomic_write_text(path, buffer.getvalue())
 

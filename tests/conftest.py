@@ -1,0 +1,33 @@
+"""Shared fixtures: the published P1 recordings (read once per session) and day-1 models."""
+from __future__ import annotations
+
+import pytest
+
+from bomi.chain import train
+from bomi.dataset import data_dir
+from bomi.features import FeatureSpec
+from bomi.profiles import load_profile
+from bomi.recording import read_recording
+
+
+@pytest.fixture(scope="session")
+def p1_days():
+    """day -> Recording of the published dataset (days 1..5)."""
+    directory = data_dir()
+    return {day: read_recording(directory / f"day{day}_testp.mat") for day in range(1, 6)}
+
+
+@pytest.fixture(scope="session")
+def p1_profile():
+    return load_profile("P1")
+
+
+@pytest.fixture(scope="session")
+def day1_fv3_model(p1_days, p1_profile):
+    """The P1 profile's model (FV3, day-1 shrinkage) trained on day 1."""
+    return train([p1_days[1]], p1_profile)
+
+
+@pytest.fixture(scope="session")
+def day1_fv1_model(p1_days, p1_profile):
+    return train([p1_days[1]], p1_profile, FeatureSpec("FV1", p1_profile.node_indices))
