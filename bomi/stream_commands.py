@@ -1,24 +1,33 @@
-"""`bomi emulate` and `bomi capture`: the live IMU stream on the command line."""
+"""`bomi emulate`, `bomi capture` and `bomi record`: the live IMU stream on the command line."""
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from tqdm import tqdm
 
+from bomi.chain import train
 from bomi.emulator import EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
-from bomi.frames import ImuFrame, RowAssembler, imu_index, imu_node_id
+from bomi.frames import FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
 from bomi.fusion import NodeCalibration, NodeFusion
-from bomi.profiles import load_profile
+from bomi.model_io import save_model
+from bomi.profiles import NEUTRAL_FUNCTION, ClassConfig, Profile, load_profile
 from bomi.recording import NodeSample, RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
 NODE_DETECTION_S = 0.5
-ROWS_PER_FLUSH = 62  # about one second of samples
+# How long record waits for every node of the profile before giving up.
+NODE_WAIT_S = 5.0
+ROWS_PER_FLUSH = 62  # capture: about one second of samples
+COUNTDOWN_S = 3.0
+
+TimedFrame = tuple[float, ImuFrame]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,17 +51,36 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     capture = subparsers.add_parser(
         "capture", help="record what a base-station stream carries, without prompts",
         description="Record raw frames per node (and their fused angles) into a recording CSV.")
-    capture.add_argument("--port", required=True, metavar="PORT_OR_URL",
-                         help="serial port, pty path or pyserial URL (socket://, loop://)")
+    _add_stream_arguments(capture)
     capture.add_argument("--duration", required=True, type=float, help="seconds to record")
-    capture.add_argument("--out", required=True, type=Path, help="recording to write (.csv, must not exist)")
     capture.add_argument("--nodes", type=_node_list, help="IMU node indices, e.g. 1,2,3 (default: those on the stream)")
     capture.add_argument("--profile", help="profile whose node calibrations fuse the angles (default: headset "
                                            "calibration for node 1, none for the others)")
-    capture.add_argument("--baud", type=int, default=BASE_STATION_BAUD)
-    capture.add_argument("--retries", type=int, default=RetryPolicy.attempts,
-                         help="reconnection attempts after the stream is lost")
     capture.set_defaults(func=run_capture)
+
+    record = subparsers.add_parser(
+        "record", help="guided calibration: prompt each motion, record it labelled, optionally train",
+        description="The paper's calibration protocol: neutral, then each class held --hold s with --neutral s "
+                    "of neutral between, the whole sequence --repetitions times; --session does 3 sequences.")
+    _add_stream_arguments(record)
+    record.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
+    record.add_argument("--session", action="store_true", help="a Session of 3 sequences instead of one Sequence")
+    record.add_argument("--repetitions", type=int, default=3, help="repetitions of every class in a sequence")
+    record.add_argument("--amplitudes", type=_amplitude_list, default=(1.0,),
+                        help="fractions of the full motion to hold, e.g. 1,0.5 (multi-amplitude)")
+    record.add_argument("--hold", type=float, default=5.0, help="seconds each motion is held")
+    record.add_argument("--neutral", type=float, default=5.0, help="seconds of neutral posture between motions")
+    record.add_argument("--train", type=Path, metavar="MODEL", help="then train the model and write it (.json/.npz)")
+    record.set_defaults(func=run_record)
+
+
+def _add_stream_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--port", required=True, metavar="PORT_OR_URL",
+                        help="serial port, pty path or pyserial URL (socket://, loop://)")
+    parser.add_argument("--out", required=True, type=Path, help="recording to write (.csv, must not exist)")
+    parser.add_argument("--baud", type=int, default=BASE_STATION_BAUD)
+    parser.add_argument("--retries", type=int, default=RetryPolicy.attempts,
+                        help="reconnection attempts after the stream is lost")
 
 
 def _node_list(text: str) -> tuple[int, ...]:
@@ -63,6 +91,20 @@ def _node_list(text: str) -> tuple[int, ...]:
     if not all(1 <= i <= 6 for i in nodes):
         raise argparse.ArgumentTypeError(f"node indices are 1..6, got {text!r}")
     return nodes
+
+
+def _amplitude_list(text: str) -> tuple[float, ...]:
+    try:
+        amplitudes = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected fractions like 1,0.5, got {text!r}") from None
+    if not all(0 < a <= 1 for a in amplitudes):
+        raise argparse.ArgumentTypeError(f"amplitudes are fractions in (0, 1], got {text!r}")
+    return amplitudes
+
+
+def _note(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
 
 
 # ------------------------------------------------------------------------------------ emulate
@@ -88,24 +130,55 @@ def run_emulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _note(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
+# ------------------------------------------------------------------------------ rows of samples
+@dataclass
+class FusedRows:
+    """Rows of frames (by node id) -> recording samples (by node index), each frame fused once."""
+
+    calibrations: dict[int, NodeCalibration]  # by node index
+    _fusion: dict[int, NodeFusion] = field(default_factory=dict)
+    _last: dict[int, tuple[ImuFrame, NodeSample]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self._fusion = {imu_node_id(i): NodeFusion(cal) for i, cal in self.calibrations.items()}
+
+    @property
+    def node_ids(self) -> tuple[int, ...]:
+        return tuple(self._fusion)
+
+    def samples(self, row: dict[int, ImuFrame]) -> dict[int, NodeSample]:
+        out = {}
+        for node_id, frame in row.items():
+            last = self._last.get(node_id)
+            if last is None or last[0] is not frame:  # a held frame is not fused twice
+                angles = self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag)
+                last = self._last[node_id] = (frame, NodeSample(frame.acc, frame.gyro, frame.mag, angles))
+            out[imu_index(node_id)] = last[1]
+        return out
+
+
+def _timed_frames(batches: Iterator[tuple[float, list[ImuFrame]]], backlog: Sequence[TimedFrame],
+                  progress: tqdm, parser: FrameParser) -> Iterator[TimedFrame]:
+    yield from backlog
+    for elapsed, frames in batches:
+        progress.set_postfix_str(_quality(parser), refresh=False)
+        yield from ((elapsed, frame) for frame in frames)
+
+
+def _quality(parser: FrameParser) -> str:
+    """Live signal quality, short: per node rate and lost share."""
+    return " ".join(f"IMU{imu_index(n)} {s.rate_hz:.0f}Hz {100 * s.loss_fraction:.0f}%lost"
+                    for n, s in sorted(parser.nodes.items()))
+
+
+def _refuse_existing(path: Path) -> None:
+    if path.exists():
+        raise BomiError(f"{path}: file exists, not overwriting it")
 
 
 # ------------------------------------------------------------------------------------ capture
-def _calibrations(profile_name: str | None, indices: tuple[int, ...]) -> dict[int, NodeCalibration]:
-    if profile_name is None:
-        return {i: NodeCalibration() if i == 1 else NodeCalibration.uncalibrated() for i in indices}
-    profile = load_profile(profile_name)
-    by_index = {node.index: node.calibration for node in profile.nodes}
-    missing = [i for i in indices if i not in by_index]
-    if missing:
-        raise BomiError(f"{profile.source}: no calibration for node(s) {missing} on the stream")
-    return {i: by_index[i] for i in indices}
-
-
 def _detect_nodes(batches: Iterator[tuple[float, list[ImuFrame]]], url: str,
-                  backlog: list[tuple[float, ImuFrame]]) -> tuple[int, ...]:
+                  backlog: list[TimedFrame]) -> tuple[int, ...]:
     """IMU nodes seen within NODE_DETECTION_S of the first IMU frame; frames read go to ``backlog``."""
     first = None
     for elapsed, frames in batches:
@@ -119,39 +192,133 @@ def _detect_nodes(batches: Iterator[tuple[float, list[ImuFrame]]], url: str,
     return tuple(sorted({imu_index(frame.node_id) for _, frame in backlog}))
 
 
+def _capture_calibrations(profile_name: str | None, indices: tuple[int, ...]) -> dict[int, NodeCalibration]:
+    if profile_name is None:
+        return {i: NodeCalibration.default_for(i) for i in indices}
+    profile = load_profile(profile_name)
+    by_index = {node.index: node.calibration for node in profile.nodes}
+    missing = [i for i in indices if i not in by_index]
+    if missing:
+        raise BomiError(f"{profile.source}: no calibration for node(s) {missing} on the stream")
+    return {i: by_index[i] for i in indices}
+
+
 def run_capture(args: argparse.Namespace) -> int:
-    if args.out.exists():
-        raise BomiError(f"{args.out}: file exists, not overwriting it")
+    _refuse_existing(args.out)
     source = SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries))
-    with source, tqdm(total=args.duration, unit="s", disable=None, file=sys.stderr,
+    with source, tqdm(total=round(args.duration, 1), unit="s", disable=None, file=sys.stderr,
                       bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s {postfix}") as progress:
         batches = source.batches(args.duration)
-        backlog: list[tuple[float, ImuFrame]] = []
+        backlog: list[TimedFrame] = []
         indices = args.nodes or _detect_nodes(batches, args.port, backlog)
-        calibrations = _calibrations(args.profile, indices)
-        fusion = {imu_node_id(i): NodeFusion(calibrations[i]) for i in indices}
-        assembler = RowAssembler(tuple(fusion))
-        last_fused: dict[int, tuple[ImuFrame, tuple[float, float, float]]] = {}
-
-        def fused(frame: ImuFrame) -> tuple[float, float, float]:
-            cached = last_fused.get(frame.node_id)
-            if cached is None or cached[0] is not frame:
-                cached = last_fused[frame.node_id] = (frame, fusion[frame.node_id].update(frame.acc, frame.gyro, frame.mag))
-            return cached[1]
-
-        def timed_frames() -> Iterator[tuple[float, ImuFrame]]:
-            yield from backlog
-            for elapsed, frames in batches:
-                progress.update(elapsed - progress.n)
-                progress.set_postfix_str(source.parser.summary(), refresh=False)
-                yield from ((elapsed, frame) for frame in frames)
-
+        rows = FusedRows(_capture_calibrations(args.profile, indices))
+        assembler = RowAssembler(rows.node_ids)
         with RecordingWriter(args.out, indices, labelled=False, segment_rows=ROWS_PER_FLUSH) as writer:
-            for elapsed, frame in timed_frames():
+            for elapsed, frame in _timed_frames(batches, backlog, progress, source.parser):
+                progress.update(round(elapsed - progress.n, 1))
                 row = assembler.push(frame)
                 if row is not None:
-                    writer.append(elapsed, {imu_index(node_id): NodeSample(f.acc, f.gyro, f.mag, fused(f))
-                                            for node_id, f in row.items()})
+                    writer.append(elapsed, rows.samples(row))
     print(f"{args.out}: {writer.rows_written} rows of node(s) {list(indices)} in {args.duration:g} s "
           f"({assembler.held} values held over lost frames); {source.parser.summary()}")
+    return 0
+
+
+# ------------------------------------------------------------------------------------ record
+@dataclass(frozen=True)
+class Segment:
+    """One cue of the calibration protocol: hold ``label`` (or neutral) from start_s to end_s."""
+
+    label: int
+    prompt: str
+    start_s: float
+    end_s: float
+
+
+def calibration_schedule(profile: Profile, *, repetitions: int = 3, sequences: int = 1,
+                         amplitudes: Sequence[float] = (1.0,), hold_s: float = 5.0,
+                         neutral_s: float = 5.0) -> list[Segment]:
+    """Neutral, then every motion class (at every amplitude) in label order, each held ``hold_s``
+    and followed by ``neutral_s`` of neutral; the class sequence ``repetitions`` times per sequence."""
+    neutral = next(cls for cls in profile.classes if cls.function == NEUTRAL_FUNCTION)
+    motions = [cls for cls in profile.classes if cls.function != NEUTRAL_FUNCTION]
+    cues = [(cls, amp) for _ in range(sequences * repetitions) for cls in motions for amp in amplitudes]
+    segments, t = [Segment(neutral.label, _prompt(neutral, None), 0.0, neutral_s)], neutral_s
+    for cls, amp in cues:
+        segments.append(Segment(cls.label, _prompt(cls, amp if len(amplitudes) > 1 else None), t, t + hold_s))
+        segments.append(Segment(neutral.label, _prompt(neutral, None), t + hold_s, t + hold_s + neutral_s))
+        t += hold_s + neutral_s
+    return segments
+
+
+def _prompt(cls: ClassConfig, amplitude: float | None) -> str:
+    if cls.function == NEUTRAL_FUNCTION:
+        return f"relax: {cls.name}"
+    extent = "" if amplitude is None else f" at {100 * amplitude:.0f} % of your range"
+    return f"HOLD c{cls.label} {cls.function}: {cls.name}{extent}"
+
+
+def _cue(segments: list[Segment], k: int, t: float) -> str:
+    """What the terminal shows at time t of segment k: the cue, time left, a countdown to the next."""
+    segment = segments[k]
+    left = segment.end_s - t
+    text = f"[{k + 1}/{len(segments)}] {segment.prompt} ({left:.0f} s)"
+    if k + 1 < len(segments) and segments[k + 1].label != segment.label and left <= COUNTDOWN_S:
+        text += f" - next: {segments[k + 1].prompt.removeprefix('HOLD ')} in {left:.0f}"
+    return text
+
+
+def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowAssembler, source: SerialSource,
+                progress: tqdm) -> Iterator[tuple[float, dict[int, ImuFrame]]]:
+    """(arrival time, complete row); BomiError if no complete row comes within NODE_WAIT_S."""
+    started = False
+    for elapsed, frames in batches:
+        for frame in frames:
+            row = assembler.push(frame)
+            if row is not None:
+                started = True
+                yield elapsed, row
+        if not started and elapsed > NODE_WAIT_S:
+            raise BomiError(f"{source.url}: no frames from every node id {list(assembler.node_ids)} within "
+                            f"{NODE_WAIT_S:g} s (frames came from {sorted(source.parser.nodes) or 'none'})")
+        progress.set_postfix_str(_quality(source.parser), refresh=False)
+
+
+def run_record(args: argparse.Namespace) -> int:
+    _refuse_existing(args.out)
+    profile = load_profile(args.profile)
+    if any(imu_node_id(node.index) != node.node_id for node in profile.nodes):
+        raise BomiError(f"{profile.source}: record expects node_id = 10 + index - 1 (base-station numbering)")
+    segments = calibration_schedule(profile, repetitions=args.repetitions, sequences=3 if args.session else 1,
+                                    amplitudes=args.amplitudes, hold_s=args.hold, neutral_s=args.neutral)
+    rows = FusedRows({node.index: node.calibration for node in profile.nodes})
+    source = SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries))
+    _note(f"record: {profile.name}: {(len(segments) - 1) // 2} motions, {segments[-1].end_s:.0f} s; "
+          "waiting for every node of the profile")
+    with source, tqdm(total=round(segments[-1].end_s), unit="s", disable=None, file=sys.stderr,
+                      bar_format="{desc} |{bar}| {postfix}") as progress:
+        timed_rows = _timed_rows(source.batches(), RowAssembler(rows.node_ids), source, progress)
+        start, first_row = next(timed_rows)
+        tqdm.write(segments[0].prompt, file=sys.stderr)
+        k, pending = 0, []
+        with RecordingWriter(args.out, profile.node_indices) as writer:
+            for elapsed, row in itertools.chain([(start, first_row)], timed_rows):
+                t = elapsed - start
+                while k < len(segments) and t >= segments[k].end_s:  # a segment is written once complete
+                    for sample_time, samples in pending:
+                        writer.append(sample_time, samples, segments[k].label)
+                    writer.flush()
+                    pending, k = [], k + 1
+                    if k < len(segments):
+                        tqdm.write(segments[k].prompt, file=sys.stderr)
+                if k == len(segments):
+                    break
+                pending.append((t, rows.samples(row)))
+                progress.set_description_str(_cue(segments, k, t), refresh=False)
+                progress.update(int(t) - progress.n)
+    print(f"{args.out}: {writer.rows_written} labelled rows, {len(segments)} segments; {source.parser.summary()}")
+    if args.train is not None:
+        model = train([read_recording(args.out)], profile)
+        save_model(args.train, model)
+        print(f"{args.train}: model of profile {profile.name}, classes {model.classes.tolist()}")
     return 0

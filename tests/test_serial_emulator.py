@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import socket
 import subprocess
 import sys
@@ -282,3 +283,106 @@ def test_emulate_rejects_impossible_settings(tmp_path, capsys):
     write_recording(rec_path, int_recording(5))
     assert main(["emulate", "--recording", str(rec_path), "--to", "pty", "--loss", "1.5"]) == 2
     assert capsys.readouterr().err == "bomi: error: --loss 1.5: must be a probability in [0, 1)\n"
+
+
+# --------------------------------------------------------------------------------- guided calibration
+TEST_PROFILE = """
+name = "T"
+[neutral]
+samples = 10
+[[nodes]]
+index = 1
+node_id = 10
+site = "head"
+[[classes]]
+label = 0
+name = "neutral posture"
+function = "neutral"
+[[classes]]
+label = 1
+name = "tilt left"
+function = "F"
+node = 1
+[[classes]]
+label = 2
+name = "tilt right"
+function = "B"
+node = 1
+"""
+POSTURE_ACC = {0: (-16000, 0, 1000), 1: (-14000, 8000, 1000), 2: (-14000, -8000, 1000)}
+
+
+def posture_recording(labels: list[int], samples_each: int, seed: int = 0) -> Recording:
+    """One headset node holding a posture (gravity direction) per label, with sensor noise."""
+    rng = np.random.default_rng(seed)
+    series = np.repeat(labels, samples_each)
+    n = len(series)
+    acc = np.array([POSTURE_ACC[c] for c in series], float) + rng.integers(-50, 50, (n, 3))
+    node = NodeData(acc, rng.integers(-5, 5, (n, 3)).astype(float), np.tile([200.0, -300.0, 400.0], (n, 1)),
+                    np.zeros((n, 3)))
+    return Recording({1: node}, series)
+
+
+def test_calibration_schedule_of_p1():
+    from bomi.profiles import load_profile
+    from bomi.stream_commands import calibration_schedule
+
+    profile = load_profile("P1")
+    sequence = calibration_schedule(profile)
+    assert len(sequence) == 1 + 2 * 8 * 3 and sequence[-1].end_s == 5 + 24 * 10
+    assert [s.label for s in sequence[:6]] == [0, 1, 0, 2, 0, 3]
+    assert [s.label for s in sequence[1:49:2]] == list(range(1, 9)) * 3
+    assert all(a.end_s == b.start_s for a, b in zip(sequence, sequence[1:]))
+    session = calibration_schedule(profile, sequences=3, amplitudes=(1.0, 0.5), hold_s=4, neutral_s=2)
+    assert len(session) == 1 + 2 * 8 * 3 * 3 * 2 and session[-1].end_s == 2 + 144 * 6
+    assert session[1].prompt.endswith("at 100 % of your range") and session[3].prompt.endswith("at 50 % of your range")
+    assert session[3].label == 1 and session[5].label == 2
+
+
+def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
+    from bomi.model_io import load_model
+
+    profile = tmp_path / "t.toml"
+    profile.write_text(TEST_PROFILE)
+    rec_path = tmp_path / "stream.csv"
+    write_recording(rec_path, posture_recording([0, 1, 0, 2, 0, 0, 0, 0], 25))
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
+    out, model = tmp_path / "calibration.csv", tmp_path / "model.json"
+    assert main(["record", "--profile", str(profile), "--port", path, "--out", str(out), "--repetitions", "1",
+                 "--hold", "0.4", "--neutral", "0.4", "--train", str(model)]) == 0
+    thread.join(10)
+    recorded, streamed = read_recording(out), read_recording(rec_path)
+    labels = recorded.labels
+    starts = np.r_[0, np.flatnonzero(np.diff(labels)) + 1]
+    assert labels[starts].tolist() == [0, 1, 0, 2, 0]
+    assert all(abs(n - 25) <= 4 for n in np.diff(np.r_[starts, len(labels)]))  # 0.4 s at 62.5 Hz
+    first = int(np.flatnonzero((streamed.nodes[1].acc == recorded.nodes[1].acc[0]).all(axis=1))[0])
+    np.testing.assert_array_equal(recorded.nodes[1].acc, streamed.nodes[1].acc[first:first + len(labels)])
+    assert load_model(model).classes.tolist() == [0, 1, 2]
+    assert f"{model}: model of profile T, classes [0, 1, 2]" in capsys.readouterr().out
+
+
+def test_interrupted_record_keeps_only_completed_segments(tmp_path):
+    profile = tmp_path / "t.toml"
+    profile.write_text(TEST_PROFILE)
+    rec_path = tmp_path / "stream.csv"
+    write_recording(rec_path, posture_recording([0, 1, 0, 2, 0] * 4, 30))
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
+    out = tmp_path / "calibration.csv"
+    recorder = subprocess.Popen([sys.executable, "-m", "bomi", "record", "--profile", str(profile), "--port", path,
+                                 "--out", str(out), "--hold", "0.5", "--neutral", "0.5"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and (not out.exists() or out.read_text().count("\n") < 60):
+            time.sleep(0.05)
+        time.sleep(0.25)  # in the middle of a segment
+        recorder.send_signal(signal.SIGINT)
+        _, errors = recorder.communicate(timeout=10)
+    finally:
+        recorder.kill()
+    thread.join(10)
+    assert recorder.returncode == 130 and errors.endswith("bomi: interrupted\n")
+    labels = read_recording(out).labels
+    runs = np.diff(np.r_[0, np.flatnonzero(np.diff(labels)) + 1, len(labels)])
+    assert 2 <= len(runs) < 13 and all(abs(n - 31) <= 4 for n in runs)  # 0.5 s segments, none cut short
