@@ -1,0 +1,121 @@
+"""LDA decisions vs scikit-learn, post-processing and proportional output by hand, model files."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bomi.chain import prepare
+from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, decide, fit_lda,
+                             gamma, majority_vote, posteriors, proportional, reject)
+from bomi.cli import main
+from bomi.errors import BomiError
+from bomi.model_io import FORMAT_VERSION, load_model, save_model
+
+
+def test_posteriors_are_sklearns(p1_days, p1_profile, day1_fv1_model):
+    """The exported linear discriminant reproduces the fitted sklearn estimator on real data."""
+    prepared = prepare(p1_days[1], day1_fv1_model.spec, p1_profile.neutral_samples)
+    x, y = prepared.features[prepared.pure], prepared.labels[prepared.pure]
+    lda = fit_lda(x, y, day1_fv1_model.shrinkage)
+    test = prepare(p1_days[2], day1_fv1_model.spec, p1_profile.neutral_samples).features
+    assert np.allclose(posteriors(day1_fv1_model, test), lda.predict_proba(test), rtol=0, atol=1e-12)
+    assert np.array_equal(decide(day1_fv1_model, test).raw, lda.predict(test))
+
+
+def test_rejection_and_vote_by_hand():
+    labels = np.array([1, 1, 2, 3, 3, 1])
+    confidence = np.array([0.99, 0.5, 0.95, 0.7, 0.99, 0.9])
+    assert reject(labels, confidence, None).tolist() == labels.tolist()
+    assert reject(labels, confidence, 0.9).tolist() == [1, 0, 2, 0, 3, 1]
+    # window of 3: [1] [1,1] [1,1,2] [1,2,3]->tie, latest 3 [2,3,3] [3,3,1]
+    assert majority_vote(labels, 3).tolist() == [1, 1, 1, 3, 3, 3]
+    assert majority_vote(labels, 1).tolist() == labels.tolist()
+    vote = MajorityVote(2)
+    assert [vote.push(v) for v in (4, 5, 5, 4)] == [4, 5, 5, 4]
+
+
+def test_decide_applies_rejection_before_vote():
+    from bomi.classifier import Model
+    from bomi.features import FeatureSpec
+    model = Model(classes=np.array([0, 1, 2]), coef=np.array([[0.0], [1.0], [-1.0]]), intercept=np.zeros(3),
+                  spec=FeatureSpec("FV1", (1,), window=1), amplitude={})
+    x = np.array([[5.0], [0.1], [5.0], [-5.0]])
+    d = decide(model, x, PostProcessing(rejection_threshold=0.9, vote_length=1))
+    assert d.raw.tolist() == [1, 1, 1, 2] and d.rejected.tolist() == [False, True, False, False]
+    assert d.labels.tolist() == [1, 0, 1, 2]
+    assert decide(model, x, PostProcessing(rejection_threshold=0.9, vote_length=3)).labels.tolist() == [1, 0, 1, 2]
+
+
+def test_proportional_output_by_hand():
+    assert gamma(np.array([[3.0, 4.0, 12.0], [0, 0, 0]])).tolist() == [13.0, 0.0]
+    r = AmplitudeRange(node=1, gamma_min=5.0, gamma_max=25.0)
+    assert proportional(15.0, r) == 0.5
+    assert proportional(40.0, r) == 1.0 and proportional(5.0, r) == 0.0
+    assert proportional(1.0, r) == 0.2           # |gamma - gamma_min|, as the paper writes it
+    assert proportional(7.0, None) == 0.0        # neutral class
+    labels = np.array([0, 1, 1, 2, 2, 2])
+    ranges = amplitude_ranges({1: np.array([9, 3, 8, 0, 0, 0.0]), 2: np.array([9, 9, 9, 4, 6, 5.0])}, labels,
+                              {1: 1, 2: 2})
+    assert ranges == {1: AmplitudeRange(1, 3.0, 8.0), 2: AmplitudeRange(2, 4.0, 6.0)}
+
+
+def test_post_processing_validation():
+    with pytest.raises(ValueError):
+        PostProcessing(rejection_threshold=1.5)
+    with pytest.raises(ValueError):
+        PostProcessing(vote_length=0)
+
+
+@pytest.mark.parametrize("suffix", [".json", ".npz"])
+def test_saved_model_predicts_exactly_like_trained(tmp_path, suffix, p1_days, p1_profile, day1_fv3_model):
+    path = tmp_path / f"model{suffix}"
+    save_model(path, day1_fv3_model)
+    loaded = load_model(path)
+    x = prepare(p1_days[3], loaded.spec, p1_profile.neutral_samples).features
+    assert np.array_equal(posteriors(loaded, x), posteriors(day1_fv3_model, x))
+    assert loaded.spec == day1_fv3_model.spec and loaded.amplitude == day1_fv3_model.amplitude
+    assert loaded.post == day1_fv3_model.post and loaded.shrinkage == day1_fv3_model.shrinkage
+
+
+def corrupt(tmp_path, day1_fv1_model, edit):
+    path = tmp_path / "m.json"
+    save_model(path, day1_fv1_model)
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d.update(version=FORMAT_VERSION + 1), "format version 2"),
+    (lambda d: d.update(format="other"), "format is 'other'"),
+    (lambda d: d.pop("coef"), "coef"),
+    (lambda d: d.update(coef=d["coef"][:-1]), "do not fit"),
+    (lambda d: d["features"].update(kind="FV9"), "unknown feature vector"),
+    (lambda d: d.pop("features"), "missing field 'features'"),
+    (lambda d: d["coef"][0].__setitem__(0, "x"), "could not convert"),
+])
+def test_bad_model_files_give_clear_errors(tmp_path, day1_fv1_model, edit, message):
+    path = corrupt(tmp_path, day1_fv1_model, edit)
+    with pytest.raises(BomiError) as info:
+        load_model(path)
+    assert str(path) in str(info.value) and message in str(info.value)
+
+
+def test_truncated_and_pickled_files_are_refused(tmp_path, day1_fv1_model, capsys):
+    for suffix in (".json", ".npz"):
+        path = tmp_path / f"m{suffix}"
+        save_model(path, day1_fv1_model)
+        path.write_bytes(path.read_bytes()[:100])
+        with pytest.raises(BomiError, match="not a valid bomi model"):
+            load_model(path)
+    pickled = tmp_path / "p.npz"
+    np.savez(pickled, meta=np.array([{"format": "bomi-model"}], dtype=object), classes=np.arange(3),
+             coef=np.zeros((3, 7)), intercept=np.zeros(3))
+    with pytest.raises(BomiError, match="p.npz: not a valid bomi model"):
+        load_model(pickled)
+    assert main(["evaluate", "--train", str(pickled), "--test", "x.mat", "--png", str(tmp_path / "c.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bomi: error: ") and err.count("\n") == 1 and "p.npz" in err

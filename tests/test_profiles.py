@@ -1,0 +1,66 @@
+"""The shipped profiles and profile validation errors."""
+from __future__ import annotations
+
+import pytest
+
+from bomi.errors import BomiError
+from bomi.fusion import NodeCalibration
+from bomi.profiles import PROFILE_DIR, load_profile
+
+
+def test_p1_matches_the_dataset_readme():
+    p1 = load_profile("P1")
+    assert p1.node_indices == (1, 2, 3) and [n.node_id for n in p1.nodes] == [10, 11, 12]
+    assert [c.function for c in p1.classes] == ["neutral", "F", "B", "R", "L", "Rr", "Lr", "B1", "B2"]
+    assert [c.label for c in p1.classes] == list(range(9))
+    assert p1.class_nodes == {1: 1, 2: 1, 3: 1, 4: 1, 5: 1, 6: 1, 7: 2, 8: 3}
+    assert p1.nodes[0].calibration == NodeCalibration()            # headset constants of hardware.md
+    assert p1.nodes[1].calibration == NodeCalibration.uncalibrated()
+    assert p1.spec.kind == "FV3" and p1.spec.window == 8 and p1.spec.stride == 1
+    assert p1.post.rejection_threshold is None and p1.post.vote_length == 1   # off by default
+
+
+@pytest.mark.parametrize("name, sites", [("P4", ["head (headband)", "right foot"]),
+                                         ("P5", ["head (headband)", "left thumb"])])
+def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
+    profile = load_profile(name)
+    assert [n.site for n in profile.nodes] == sites and len(profile.classes) == 6
+    assert load_profile(PROFILE_DIR / f"{name}.toml") == profile
+
+
+def variant(tmp_path, old: str, new: str):
+    text = (PROFILE_DIR / "P1.toml").read_text()
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('function = "F"', 'function = "Up"', "classes[1]: function must be one of"),
+    ("label = 2", "label = 1", "duplicate label"),
+    ('function = "neutral"', 'function = "B2"\nnode = 1', "must have function \"neutral\""),
+    ('function = "neutral"', 'function = "B2"', "classes[0]: a motion class needs 'node'"),
+    ("node = 3", "node = 4", "node 4 is not one of the profile's nodes"),
+    ('vector = "FV3"', 'vector = "FV7"', "vector must be one of"),
+    ("window = 8", "window = 7", "even window"),
+    ("window = 8", 'window = "8"', "'window' has the wrong type"),
+    ("shrinkage = 0.001", "shrinkage = 2.0", "shrinkage must be in [0, 1]"),
+    ("vote_length = 1", "vote_length = 1\nrejection_threshold = 1.2", "rejection threshold must be in (0, 1)"),
+    ("vote_length = 1", "vote_lenght = 1", "unknown key(s) vote_lenght"),
+    ("index = 3", "index = 7", "index must be in 1..6"),
+    ("node_id = 12", "node_id = 11", "distinct index and node_id"),
+    ('site = "left shoulder"', 'site = "left shoulder"\ncalibration = { mounting = [[1, 0, 0], [0, 1, 0], [0, 0, 2]] }',
+     "nodes[2].calibration: mounting must be a rotation matrix"),
+    ('name = "P1"', 'name = "P1', "not valid TOML"),
+])
+def test_invalid_profiles_name_file_and_problem(tmp_path, old, new, message):
+    path = variant(tmp_path, old, new)
+    with pytest.raises(BomiError) as info:
+        load_profile(path)
+    assert str(path) in str(info.value) and message in str(info.value)
+
+
+def test_unknown_profile_name():
+    with pytest.raises(BomiError, match="no such profile file .*P1, P4, P5"):
+        load_profile("P9")
