@@ -208,13 +208,13 @@ class PortSink:
         self._port.close()
 
 
-def open_sink(to: str, linger_s: float = 5.0) -> Sink:
+def open_sink(to: str, linger_s: float = 5.0, baudrate: int = BASE_STATION_BAUD) -> Sink:
     """``pty`` -> a new pseudo-terminal, ``socket://...`` -> a listening socket, else a port URL."""
     if to == "pty":
         return PtySink(linger_s)
     if to.startswith("socket://"):
         return SocketSink(to)
-    return PortSink(to)
+    return PortSink(to, baudrate)
 
 
 def play(chunks: Iterator[tuple[float, bytes]], sink: Sink,

@@ -115,7 +115,7 @@ def run_emulate(args: argparse.Namespace) -> int:
         samples = max(1, int(args.duration * config.rate_hz))
         raw = {index: values[:samples] for index, values in raw.items()}
     samples = len(next(iter(raw.values())))
-    sink = open_sink(args.to, args.linger)
+    sink = open_sink(args.to, args.linger, args.baud)
     print(sink.description, flush=True)
     _note(f"emulate: {args.recording}: {len(raw)} node(s), {samples} samples at {config.rate_hz:g} Hz "
           f"-> {sink.description}; waiting for a reader")

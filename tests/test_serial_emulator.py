@@ -235,6 +235,28 @@ def test_capture_with_loss_counts_what_the_emulator_dropped(tmp_path, capsys):
     assert index == sorted(index)
 
 
+def test_emulator_to_socket_to_capture(tmp_path, capsys):
+    rec_path = tmp_path / "rec.csv"
+    write_recording(rec_path, int_recording(250, nodes=(2, 4)))
+    sink = open_sink("socket://127.0.0.1:0")
+    stats = EmulatorStats()
+
+    def run():
+        sink.wait_for_reader()
+        play(frame_chunks(raw_samples(read_recording(rec_path)), EmulatorConfig(rate_hz=250), stats), sink)
+        sink.finish()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    out = tmp_path / "capture.csv"
+    assert main(["capture", "--port", sink.description, "--duration", "0.8", "--out", str(out)]) == 0
+    thread.join(10)
+    captured, original = read_recording(out), read_recording(rec_path)
+    assert captured.node_indices == (2, 4) and 80 < len(captured) < 250  # the capture ends first
+    np.testing.assert_array_equal(captured.nodes[4].mag, original.nodes[4].mag[:len(captured)])
+    assert stats.samples < 250  # the emulator noticed the reader went away
+
+
 def test_cli_emulate_prints_the_pty_path_and_capture_records_it(tmp_path, capsys):
     rec_path = tmp_path / "rec.csv"
     write_recording(rec_path, int_recording(60, nodes=(1,)))
