@@ -66,6 +66,9 @@ class Workspace:
             return self.shoulder + offset * (self.reach_min / distance)
         return point
 
+    def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
+        return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
+
 
 def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float) -> np.ndarray:
     """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities."""

@@ -14,13 +14,25 @@ import pinocchio as pin
 
 from sim.config import MODELS_DIR, SimConfig, load_config
 from sim.controller import CartesianVelocityController, JointLimits, Workspace
+from sim.errors import SimError
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState, Mode
 from sim.kinematics import arm_kinematics
 from sim.render import FrameRenderer
-from sim.scene import build_scene
+from sim.scene import Scene, build_scene
 
 # Tool frame with the hand pointing down (tool z = -world z) and the fingers closing along world x.
 HAND_DOWN = np.diag([1.0, -1.0, -1.0])
+
+
+def joint_limits(scene: Scene) -> JointLimits:
+    """Ranges (infinite for the continuous joints) and speed limits (the actuators' ctrlrange) of joints 1-6."""
+    model = scene.model
+    joints = model.actuator_trnid[scene.arm_actuators, 0]
+    limited = model.jnt_limited[joints].astype(bool)
+    ranges = model.jnt_range[joints]
+    return JointLimits(lower=np.where(limited, ranges[:, 0], -np.inf),
+                       upper=np.where(limited, ranges[:, 1], np.inf),
+                       speed=model.actuator_ctrlrange[scene.arm_actuators, 1].copy())
 
 
 class ArmSim:
@@ -33,25 +45,38 @@ class ArmSim:
         self.data = mujoco.MjData(self.model)
         self.dt = 1.0 / self.config.physics.control_hz
         self.kinematics = arm_kinematics(self.scene)
-        self.home_q = self.kinematics.solve_pose(np.array(self.config.arm.home_tool_pos), HAND_DOWN,
-                                                 np.array(self.config.arm.home_seed))
-        arm_joints = self.model.actuator_trnid[self.scene.arm_actuators, 0]
-        limited = self.model.jnt_limited[arm_joints].astype(bool)
-        ranges = self.model.jnt_range[arm_joints]
-        self.limits = JointLimits(
-            lower=np.where(limited, ranges[:, 0], -np.inf),
-            upper=np.where(limited, ranges[:, 1], np.inf),
-            speed=self.model.actuator_ctrlrange[self.scene.arm_actuators, 1].copy())
-        table = self.scene.table_geom
-        table_top = float(self.model.geom_pos[table, 2] + self.model.geom_size[table, 2])
-        self.workspace = Workspace.from_config(self.config.workspace, self._shoulder_position(), table_top,
-                                               self._hand_box())
+        self.limits = joint_limits(self.scene)
+        self.home_q = self._solve_home()
+        self.workspace = self._workspace()
         self.controller = CartesianVelocityController(self.kinematics, self.limits, self.workspace,
                                                       self.config.control, self.dt)
         self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed)
         self.finger_target = np.zeros(3)
         self._renderer: FrameRenderer | None = None
         self.reset()
+
+    def _solve_home(self) -> np.ndarray:
+        """Joint angles of the configured home pose (hand down), checked against the joint ranges."""
+        home = np.array(self.config.arm.home_tool_pos)
+        try:
+            q = self.kinematics.solve_pose(home, HAND_DOWN, np.array(self.config.arm.home_seed))
+        except ValueError as exc:
+            raise SimError(f"{self.config.source}: [arm] home_tool_pos: {exc} (hand down)") from None
+        if np.any(q < self.limits.lower) or np.any(q > self.limits.upper):
+            raise SimError(f"{self.config.source}: [arm] home_tool_pos: the joint solution from home_seed "
+                           "leaves a joint range; choose another home_seed")
+        return q
+
+    def _workspace(self) -> Workspace:
+        """The virtual walls; the home pose must lie inside them."""
+        table = self.scene.table_geom
+        table_top = float(self.model.geom_pos[table, 2] + self.model.geom_size[table, 2])
+        workspace = Workspace.from_config(self.config.workspace, self._shoulder_position(), table_top,
+                                          self._hand_box())
+        home = np.array(self.config.arm.home_tool_pos)
+        if not workspace.contains(home, HAND_DOWN, tolerance=1e-6):
+            raise SimError(f"{self.config.source}: [arm] home_tool_pos {home.tolist()} lies outside the [workspace]")
+        return workspace
 
     def _shoulder_position(self) -> np.ndarray:
         """World position of joint 2's axis: the centre of the reach shell."""

@@ -15,7 +15,6 @@ import numpy as np
 import pinocchio as pin
 from dm_control.entities.manipulators.kinova import assets_path
 
-from sim.errors import SimError
 from sim.scene import Scene
 
 JACO_ARM_XML = os.path.join(assets_path.KINOVA_ROOT, "jaco_arm.xml")
@@ -56,7 +55,7 @@ class ArmKinematics:
                 return q
             jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL)
             q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
-        raise SimError(f"{JACO_ARM_XML}: no joint solution for tool pose at {np.round(position, 3).tolist()}")
+        raise ValueError(f"no joint solution puts the tool at {np.round(position, 3).tolist()}")
 
 
 def arm_kinematics(scene: Scene) -> ArmKinematics:

@@ -6,6 +6,7 @@ import pytest
 
 from bomi.cli import main
 from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
+from sim.env import ArmSim
 from sim.errors import SimError
 from sim.scene import build_scene
 
@@ -95,3 +96,16 @@ def test_cli_rejects_bad_config_for_sim_check(tmp_path, capsys):
     assert main(["sim-check", "--config", str(path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(path) in err and "[physics] substeps: missing" in err
+
+
+@pytest.mark.parametrize("home, complaint", [
+    ("[0.0, -1.5, 0.22]", "no joint solution"),       # beyond the arm's reach
+    ("[0.0, -0.42, 0.005]", "outside the [workspace]"),  # the hand would be in the table
+])
+def test_unusable_home_pose_is_a_config_error(tmp_path, home, complaint):
+    path = tmp_path / "sim.toml"
+    shutil.copy(DEFAULT_CONFIG, path)
+    edit(path, "home_tool_pos = [0.0, -0.42, 0.22]", f"home_tool_pos = {home}")
+    with pytest.raises(SimError) as info:
+        ArmSim(load_config(path))
+    assert str(info.value).startswith(f"{path}: [arm] home_tool_pos") and complaint in str(info.value)
