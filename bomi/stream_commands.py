@@ -136,8 +136,8 @@ class FusedRows:
     """Rows of frames (by node id) -> recording samples (by node index), each frame fused once."""
 
     calibrations: dict[int, NodeCalibration]  # by node index
-    _fusion: dict[int, NodeFusion] = field(default_factory=dict)
-    _last: dict[int, tuple[ImuFrame, NodeSample]] = field(default_factory=dict)
+    _fusion: dict[int, NodeFusion] = field(init=False, repr=False)
+    _last: dict[int, tuple[ImuFrame, NodeSample]] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._fusion = {imu_node_id(i): NodeFusion(cal) for i, cal in self.calibrations.items()}
@@ -147,6 +147,7 @@ class FusedRows:
         return tuple(self._fusion)
 
     def samples(self, row: dict[int, ImuFrame]) -> dict[int, NodeSample]:
+        """The row's raw values and fused angles, keyed by node index."""
         out = {}
         for node_id, frame in row.items():
             last = self._last.get(node_id)

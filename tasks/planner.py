@@ -141,6 +141,7 @@ class Memory:
     axis: int | None = None  # single-axis channel: the axis being worked on
     touch_since: float | None = None  # when the fingers started touching the cube being grasped
     turning: bool = False  # a wrist turn goes on until the hand is well lined up
+    descending: bool = False  # a descent goes on while the hand stays roughly over the goal
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
 
 
@@ -226,7 +227,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
             return Action("open", f"release cube {held + 1}")
         carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
         label = f"carry cube {held + 1}"
-        return _approach(hand, release, carry_z, p, label, on_arrival=Action("open", f"release cube {held + 1}"))
+        return _approach(hand, release, carry_z, p, label, Action("open", f"release cube {held + 1}"),
+                         memory.descending)
 
     k = next(k for k in range(len(view.cube_pos)) if k != bottom)
     cube = view.cube_pos[k]
@@ -241,14 +243,16 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     yaw_tolerance = math.radians(p.yaw_deg) / (4 if memory.turning else 1)
     if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
         return Action("turn", f"turn to cube {k + 1}", turn=turn)
-    return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", on_arrival=Action("close", f"grasp cube {k + 1}"))
+    return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", Action("close", f"grasp cube {k + 1}"),
+                     memory.descending)
 
 
 def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, label: str,
-              on_arrival: Action) -> Action:
-    """Rise to the travel height if low and far, travel over the goal, go down, then act."""
+              on_arrival: Action, descending: bool) -> Action:
+    """Rise to the travel height if low and far, travel over the goal, go down, then act.
+    A descent already under way tolerates twice the alignment error."""
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
-    if xy_off > p.align:
+    if xy_off > p.align * (2 if descending else 1):
         if hand[2] < travel_z - 4 * p.stop and xy_off > 4 * p.align:
             return Action("move", f"{label}: rise", np.r_[hand[:2], travel_z])
         return Action("move", f"{label}: travel", np.r_[goal[:2], hand[2]])
@@ -276,7 +280,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     velocity = hand_velocity(view, memory)
     memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
     action = next_action(view, memory, p)
-    memory = replace(memory, turning=action.kind == "turn")
+    memory = replace(memory, turning=action.kind == "turn", descending=action.goal.endswith("descend"))
     need = _MODE_FOR.get(action.kind)
     if need is not None and need is not view.mode:
         return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
@@ -392,7 +396,8 @@ class ScriptedUser:
             self._waiting_since = view.t
         ready = max(self._waiting_since + self.params.reaction_time,
                     self._stopped_at + self.params.pause_between_moves)
-        if view.t + 1e-9 < ready:
+        coasting = float(np.linalg.norm(velocity)) > STILL_SPEED and view.t - self._stopped_at < MAX_WAIT
+        if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
             return replace(REST, goal=wanted.goal)
         self.current, self._waiting_since = wanted, None
         return wanted
@@ -405,7 +410,7 @@ class ScriptedUser:
 
     def _learn_coasting(self, view: View, speed: float) -> None:
         """Once the hand has come to rest (or a new move began), update the anticipation."""
-        if self._coasting is None or (speed > COASTING_MIN_SPEED / 3 and self.current.is_rest):
+        if self._coasting is None or (speed > STILL_SPEED and self.current.is_rest):
             return
         t0, start, speed0 = self._coasting
         seconds = float(np.linalg.norm(view.hand_pos - start)) / speed0
@@ -414,6 +419,8 @@ class ScriptedUser:
 
 
 COASTING_MIN_SPEED = 0.02  # m/s: slower moves teach nothing about stopping
+STILL_SPEED = 0.005  # m/s: the person sees the hand at rest
+MAX_WAIT = 3.0  # s: gives up waiting for the hand to come to rest
 MAX_ANTICIPATION = 2.0  # s
 
 
