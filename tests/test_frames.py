@@ -1,6 +1,7 @@
 """Frame encoding/parsing against hardware.md §1, hand-computed values and a naive reference."""
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
 import pytest
@@ -152,7 +153,8 @@ def noisy_streams(draw) -> list[Piece]:
     for seq in range(first_seq, first_seq + draw(st.integers(1, 40))):
         for node_id in node_ids + [30]:
             fate = draw(st.sampled_from(["ok"] * 6 + ["drop", "corrupt", "truncate", "garbage", "false start"]))
-            frame = encode_imu_frame(ImuFrame(node_id, 16, seq % 256, draw(vector3), draw(vector3), draw(vector3)))
+            values = struct.unpack(">9h", draw(st.binary(min_size=18, max_size=18)))
+            frame = encode_imu_frame(ImuFrame(node_id, 16, seq % 256, values[0:3], values[3:6], values[6:9]))
             if fate == "drop":
                 continue
             if fate == "truncate":
