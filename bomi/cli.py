@@ -12,7 +12,7 @@ import sys
 from bomi.errors import BomiError
 from sim.errors import SimError
 
-COMMAND_MODULES: list[str] = ["sim.commands", "bomi.stream_commands", "bomi.chain_commands"]
+COMMAND_MODULES: list[str] = ["sim.commands", "bomi.stream_commands", "bomi.chain_commands", "tasks.commands"]
 
 
 def build_parser() -> argparse.ArgumentParser:

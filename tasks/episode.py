@@ -260,14 +260,15 @@ def intended_direction(mode: Mode, intent: StickIntent) -> np.ndarray:
 
 def run_episode(channel, *, operator: str, participant: str, seed: int,
                 operator_file: Path | str = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
-                video: Path | None = None, sim: ArmSim | None = None) -> EpisodeLog:
-    """Advance the task at the control rate until success or failure; optionally film it."""
+                video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None) -> EpisodeLog:
+    """Advance the task at the control rate until success or failure; optionally film it
+    (played ``video_speedup`` times faster than simulated time)."""
     sim = sim or ArmSim()
     task = StackingTask(sim, task_config)
     task.reset(seed)
     user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes)
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
-    film = _Film(sim, video) if video is not None else None
+    film = _Film(sim, video, video_speedup) if video is not None else None
     started = time.perf_counter()
     try:
         while True:
@@ -282,7 +283,7 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
             rows["touching"].append(view.touching)
             sim.step(state)
             if film is not None:
-                film.tick(describe(sim.mode, state) + f"  | {intent.goal}")
+                film.tick(f"{view.t:6.1f} s  " + describe(sim.mode, state) + f"  | {intent.goal}")
             outcome = task.outcome()
             if outcome.done:
                 break
@@ -301,10 +302,10 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
 class _Film:
     """Every n-th control tick rendered with a caption into an MP4."""
 
-    def __init__(self, sim: ArmSim, path: Path):
+    def __init__(self, sim: ArmSim, path: Path, speedup: float):
         render = sim.config.render
         self.sim = sim
-        self.every = max(1, round(sim.config.physics.control_hz / render.fps))
+        self.every = max(1, round(speedup * sim.config.physics.control_hz / render.fps))
         self.renderer = FrameRenderer(sim.model, render.camera, render.width, render.height)
         self.writer = VideoWriter(Path(path), render.fps)
         self.ticks = 0

@@ -1,0 +1,228 @@
+"""`bomi run-task`, `bomi benchmark`, `bomi demo`: stacking episodes from the command line."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from bomi.errors import BomiError
+from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
+from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.stacking import TaskConfig
+from tasks.timeline import timeline_figure
+
+# What the paper reports for the assembly task (Fall et al.): mean completion times, the BoMI's
+# real-time accuracy and its longest run of misclassified outputs.
+PAPER = {"bomi_time_s": 138.0, "joystick_time_s": 58.0, "realtime_accuracy": 0.992, "longest_error_run_ms": 290.0}
+
+
+@dataclass(frozen=True)
+class EpisodeJob:
+    operator: str
+    participant: str
+    seed: int
+    time_limit: float = 600.0
+    operator_file: str = str(DEFAULT_OPERATOR_FILE)
+
+
+def run_job(job: EpisodeJob, video: Path | None = None):
+    """One episode (calibration first for the BoMI); returns its log."""
+    channel = JoystickChannel() if job.operator == "joystick" else calibrated_channel(job.participant, job.seed)
+    return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
+                       operator_file=job.operator_file, task_config=TaskConfig(time_limit=job.time_limit),
+                       video=video)
+
+
+def _summary_of(job: EpisodeJob) -> dict:
+    return summarize(run_job(job))
+
+
+# ------------------------------------------------------------------------------------ tables
+def _mean(values: list) -> float | None:
+    values = [v for v in values if v is not None]
+    return statistics.fmean(values) if values else None
+
+
+def aggregate(records: list[dict]) -> list[dict]:
+    """One row per (participant, operator): successes and mean metrics over its episodes."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in records:
+        groups.setdefault((r["participant"], r["operator"]), []).append(r)
+    rows = []
+    for (participant, operator), rs in sorted(groups.items()):
+        done = [r for r in rs if r["success"]]
+        times = [r["completion_time"] for r in done]
+        rows.append({
+            "participant": participant, "operator": operator, "episodes": len(rs), "successes": len(done),
+            "completion_time_mean": _mean(times),
+            "completion_time_sd": statistics.stdev(times) if len(times) > 1 else None,
+            "realtime_accuracy": _mean([r.get("realtime_accuracy") for r in rs]),
+            "longest_error_run_ms": max((r["longest_error_run_ms"] for r in rs
+                                         if r.get("longest_error_run_ms") is not None), default=None),
+            "mode_switches": _mean([r["mode_switches"] for r in rs]),
+            "unintended_displacement_mm": _mean([r["unintended_displacement_mm"] for r in rs]),
+            "latency_ms_mean": _mean([r.get("latency_ms_mean") for r in rs]),
+            "cube_drops": sum(r["cube_drops"] for r in rs),
+            "realtime_factor": _mean([r["realtime_factor"] for r in rs]),
+        })
+    return rows
+
+
+def comparison(rows: list[dict]) -> list[dict]:
+    """Per participant: our BoMI/joystick time ratio, accuracy and longest error run beside the paper's."""
+    by = {(r["participant"], r["operator"]): r for r in rows}
+    out = []
+    for participant in sorted({r["participant"] for r in rows}):
+        bomi, joy = by.get((participant, "bomi")), by.get((participant, "joystick"))
+        ratio = None
+        if bomi and joy and bomi["completion_time_mean"] and joy["completion_time_mean"]:
+            ratio = bomi["completion_time_mean"] / joy["completion_time_mean"]
+        out.append({"participant": participant, "time_ratio": ratio,
+                     "paper_time_ratio": PAPER["bomi_time_s"] / PAPER["joystick_time_s"],
+                     "realtime_accuracy": bomi["realtime_accuracy"] if bomi else None,
+                     "paper_realtime_accuracy": PAPER["realtime_accuracy"],
+                     "longest_error_run_ms": bomi["longest_error_run_ms"] if bomi else None,
+                     "paper_longest_error_run_ms": PAPER["longest_error_run_ms"]})
+    return out
+
+
+def _fmt(value, spec: str = ".1f") -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def markdown_tables(rows: list[dict]) -> str:
+    lines = ["| participant | operator | successes | completion time (s) | real-time accuracy | longest error run (ms) "
+             "| mode switches | unintended displacement (mm) | latency from onset (ms) | drops | x real time |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        sd = f" ± {r['completion_time_sd']:.1f}" if r["completion_time_sd"] is not None else ""
+        acc = _fmt(None if r["realtime_accuracy"] is None else 100 * r["realtime_accuracy"], ".1f")
+        lines.append(f"| {r['participant']} | {r['operator']} | {r['successes']}/{r['episodes']} "
+                     f"| {_fmt(r['completion_time_mean'])}{sd} | {acc}{' %' if acc != '-' else ''} "
+                     f"| {_fmt(r['longest_error_run_ms'], '.0f')} | {_fmt(r['mode_switches'])} "
+                     f"| {_fmt(r['unintended_displacement_mm'], '.0f')} | {_fmt(r['latency_ms_mean'], '.0f')} "
+                     f"| {r['cube_drops']} | {_fmt(r['realtime_factor'])} |")
+    lines += ["", "| participant | BoMI / joystick time | paper | real-time accuracy | paper | longest error run (ms) "
+              "| paper |", "|---|---|---|---|---|---|---|"]
+    for c in comparison(rows):
+        acc = None if c["realtime_accuracy"] is None else 100 * c["realtime_accuracy"]
+        lines.append(f"| {c['participant']} | {_fmt(c['time_ratio'], '.2f')} | {c['paper_time_ratio']:.2f} "
+                     f"| {_fmt(acc)} % | {100 * c['paper_realtime_accuracy']:.1f} % "
+                     f"| {_fmt(c['longest_error_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} |")
+    return "\n".join(lines)
+
+
+def run_many(jobs: list[EpisodeJob], workers: int) -> list[dict]:
+    """Episodes in parallel processes, with a progress bar; results in job order."""
+    results: dict[int, dict] = {}
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(_summary_of, job): i for i, job in enumerate(jobs)}
+        for future in tqdm(as_completed(futures), total=len(jobs), desc="episodes", unit="ep"):
+            results[futures[future]] = future.result()
+    return [results[i] for i in range(len(jobs))]
+
+
+def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, time_limit: float,
+                   operator_file: str) -> list[EpisodeJob]:
+    """Every (participant, operator, seed); the joystick operator needs no participant body, but is
+    run per participant so every table row has its own episodes."""
+    return [EpisodeJob(op, p, s, time_limit, operator_file) for p in participants for op in operators
+            for s in range(seeds)]
+
+
+def write_json(path: Path, payload) -> None:
+    Path(path).write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+
+
+# ------------------------------------------------------------------------------------ commands
+def _names(text: str, allowed: tuple[str, ...] | None, what: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise BomiError(f"--{what}: empty list")
+    if allowed is not None:
+        bad = [n for n in names if n not in allowed]
+        if bad:
+            raise BomiError(f"--{what}: unknown {', '.join(bad)} (expected {', '.join(allowed)})")
+    return names
+
+
+def _check_outputs(*paths: Path | None) -> None:
+    for path in paths:
+        if path is not None and not Path(path).parent.is_dir():
+            raise BomiError(f"{path}: directory {Path(path).parent} does not exist")
+
+
+def cmd_run_task(args: argparse.Namespace) -> int:
+    _check_outputs(args.video, args.plot, args.json)
+    load_operator(args.operator_file)  # a bad file fails before any simulation
+    job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file))
+    log = run_job(job, video=args.video)
+    summary = summarize(log)
+    print(markdown_tables(aggregate([summary])))
+    if args.plot:
+        timeline_figure([log], args.plot)
+    if args.json:
+        write_json(args.json, summary)
+    return 0 if log.success else 1
+
+
+def cmd_benchmark(args: argparse.Namespace) -> int:
+    _check_outputs(args.json)
+    load_operator(args.operator_file)
+    if args.seeds < 1:
+        raise BomiError("--seeds must be at least 1")
+    jobs = benchmark_jobs(_names(args.participants, None, "participants"), _names(args.operators, OPERATORS, "operators"),
+                          args.seeds, args.time_limit, str(args.operator_file))
+    records = run_many(jobs, args.jobs)
+    rows = aggregate(records)
+    print(markdown_tables(rows))
+    if args.json:
+        write_json(args.json, {"paper": PAPER, "rows": rows, "comparison": comparison(rows), "episodes": records})
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    joystick = run_job(EpisodeJob("joystick", "P1", args.seed))
+    bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=out / "bomi_episode.mp4")
+    summaries = [summarize(joystick), summarize(bomi)]
+    print(markdown_tables(aggregate(summaries)))
+    timeline_figure([joystick, bomi], out / "timeline.png")
+    write_json(out / "demo.json", {"paper": PAPER, "episodes": summaries})
+    print(f"wrote {out / 'timeline.png'}, {out / 'bomi_episode.mp4'}, {out / 'demo.json'}")
+    return 0
+
+
+def register(subparsers) -> None:
+    run = subparsers.add_parser("run-task", help="one stacking episode with the joystick or the BoMI operator")
+    run.add_argument("--operator", choices=OPERATORS, required=True)
+    run.add_argument("--participant", default="P1")
+    run.add_argument("--seed", type=int, default=0)
+    run.add_argument("--time-limit", type=float, default=600.0, help="seconds of simulated time (default 600)")
+    run.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
+    run.add_argument("--video", type=Path, help="MP4 of the episode")
+    run.add_argument("--plot", type=Path, help="timeline figure (PNG)")
+    run.add_argument("--json", type=Path, help="metrics of the episode")
+    run.set_defaults(func=cmd_run_task)
+
+    bench = subparsers.add_parser("benchmark", help="many episodes in parallel; table beside the paper's figures")
+    bench.add_argument("--participants", default="P1")
+    bench.add_argument("--operators", default="joystick,bomi")
+    bench.add_argument("--seeds", type=int, default=20)
+    bench.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    bench.add_argument("--time-limit", type=float, default=600.0)
+    bench.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
+    bench.add_argument("--json", type=Path)
+    bench.set_defaults(func=cmd_benchmark)
+
+    demo = subparsers.add_parser("demo", help="one joystick and one BoMI episode of P1: table, timeline figure, MP4")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--out", type=Path, default=Path("demo_out"))
+    demo.set_defaults(func=cmd_demo)
