@@ -15,11 +15,10 @@ from dataclasses import dataclass, field
 import serial
 
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, ImuFrame
+from bomi.frames import FRAME_SIZE, FrameParser, ImuFrame
 
 BASE_STATION_BAUD = 1_998_848
 READ_TIMEOUT_S = 0.05
-READ_SIZE = 4096
 
 
 def _stderr(message: str) -> None:
@@ -86,7 +85,8 @@ class SerialSource:
         self.open()
         while True:
             try:
-                yield self.port.read(max(1, self.port.in_waiting))
+                # at least a frame: socket:// reports 1 byte waiting whatever is there
+                yield self.port.read(max(FRAME_SIZE, self.port.in_waiting))
             except (serial.SerialException, OSError) as exc:
                 self._reconnect(exc)
 

@@ -54,17 +54,20 @@ class Workspace:
         return self.floor - float((self.hand_box @ rotation[2]).min())
 
     def clamp(self, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-        """The nearest allowed point (box and floor, then the shell; the shell wins where they disagree)."""
-        lower = self.lower.copy()
-        lower[2] = max(lower[2], self.lowest_tool_height(rotation))
-        point = np.minimum(np.maximum(point, lower), np.maximum(lower, self.upper))
+        """The nearest allowed point: onto the reach shell, then into the box and above the floor.
+
+        The box and the floor come last, so they always hold (the table is solid); where they
+        disagree with the shell, the shell gives way.
+        """
         offset = point - self.shoulder
         distance = math.sqrt(offset @ offset)
         if distance > self.reach_max:
-            return self.shoulder + offset * (self.reach_max / distance)
-        if 0 < distance < self.reach_min:
-            return self.shoulder + offset * (self.reach_min / distance)
-        return point
+            point = self.shoulder + offset * (self.reach_max / distance)
+        elif 0 < distance < self.reach_min:
+            point = self.shoulder + offset * (self.reach_min / distance)
+        lower = self.lower.copy()
+        lower[2] = max(lower[2], self.lowest_tool_height(rotation))
+        return np.minimum(np.maximum(point, lower), np.maximum(lower, self.upper))
 
     def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
         return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
