@@ -23,7 +23,7 @@ from sim.joystick import BUTTONS, FUNCTIONS, TRANSLATION_AXES, JoystickState, Mo
 from sim.render import FrameRenderer, VideoWriter, describe
 from tasks import metrics
 from tasks.imu_synth import Delivery
-from tasks.participant import VirtualParticipant, calibration_session, load_participant, session_recording
+from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
 from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser, StickIntent, load_operator
 from tasks.stacking import StackingTask, TaskConfig
 
@@ -239,10 +239,10 @@ class BomiChannel:
         return move + self.chain.model.spec.window + self.chain.model.post.vote_length
 
 
-def calibrated_channel(participant: str, seed: int) -> BomiChannel:
+def calibrated_channel(participant: str | ParticipantParams, seed: int) -> BomiChannel:
     """The paper's order: the participant performs the calibration protocol, the chain records
     it and trains the LDA with the ``bomi train`` code (``bomi.chain.train``), then the task."""
-    params = load_participant(participant)
+    params = participant if isinstance(participant, ParticipantParams) else load_participant(participant)
     profile = load_profile(params.profile)
     session = calibration_session(params, profile, seed, amplitudes=BODY_RANGE)
     model = train([session_recording(session, profile)], profile)

@@ -1,0 +1,139 @@
+"""The scripted JACO user on hand-made views: which mode, function, deflection and timing it picks."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from bomi.errors import BomiError
+from sim.joystick import Mode
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Memory, ScriptedUser, View, load_operator, mode_button, plan,
+                           placed_cubes)
+
+P = load_operator()
+B = np.array([0.14, -0.45])
+HALF = 0.025
+
+
+def view(hand=(0.0, -0.42, 0.22), cubes=((-0.14, -0.39), (-0.14, -0.51)), mode=Mode.TRANSLATION, closure=0.0,
+         touching=(False, False), t=0.0, cube_z=(HALF, HALF), yaw=(0.0, 0.0)) -> View:
+    return View(t=t, hand_pos=np.array(hand, float), hand_yaw=0.0, closure=closure, mode=mode,
+                cube_pos=tuple(np.array([x, y, z]) for (x, y), z in zip(cubes, cube_z)), cube_yaw=yaw,
+                touching=touching, target_xy=B, table_z=0.0, cube_size=2 * HALF)
+
+
+def test_shipped_operator_file_loads():
+    assert P.coarse == 1.0 and 0 < P.fine < P.coarse and P.reaction_time > 0
+
+
+@pytest.mark.parametrize("text, fault", [
+    ("", "missing table [timing]"),
+    (None, "must be a finite number"),
+    ("negative", "must not be negative"),
+    ("unknown", "unknown key(s) in [timing]: wobble"),
+    ("not toml [", "not valid TOML"),
+])
+def test_bad_operator_file_is_one_clear_error(tmp_path, text, fault):
+    good = DEFAULT_OPERATOR_FILE.read_text()
+    content = {None: good.replace("reaction_time = 0.30", 'reaction_time = "slow"'),
+               "negative": good.replace("reaction_time = 0.30", "reaction_time = -0.3"),
+               "unknown": good.replace("[timing]\n", "[timing]\nwobble = 1\n")}.get(text, text)
+    path = tmp_path / "op.toml"
+    path.write_text(content)
+    with pytest.raises(BomiError) as err:
+        load_operator(path)
+    message = str(err.value)
+    assert str(path) in message and fault in message and "\n" not in message
+
+
+def test_mode_button_takes_the_short_way_round():
+    # cycle translation -> wrist -> fingers -> translation; B1 forward, B2 back
+    assert mode_button(Mode.TRANSLATION, Mode.WRIST) == "B1"
+    assert mode_button(Mode.TRANSLATION, Mode.FINGERS) == "B2"
+    assert mode_button(Mode.FINGERS, Mode.TRANSLATION) == "B1"
+    assert mode_button(Mode.WRIST, Mode.TRANSLATION) == "B2"
+
+
+def test_reach_single_axis_takes_the_largest_error_with_the_right_function():
+    # hand at (0, -0.42), cube 1 at (-0.14, -0.39): x error -0.14 (R = x-), y error +0.03 (B = y+)
+    intent, memory = plan(view(), Memory(), P, combine_axes=False)
+    assert intent.goal == "reach cube 1: travel"
+    assert dict(intent.deflection) == {"R": P.coarse}
+    assert memory.axis == 0
+
+
+def test_reach_joystick_combines_axes_coarse_far_fine_near():
+    intent, _ = plan(view(), Memory(), P, combine_axes=True)
+    # x is 0.14 m away (> slow-down distance: coarse), y 0.03 m (within it: fine)
+    assert dict(intent.deflection) == {"R": P.coarse, "B": P.fine}
+
+
+def test_low_hand_far_from_goal_rises_first():
+    intent, _ = plan(view(hand=(0.10, -0.45, 0.03)), Memory(), P, combine_axes=True)
+    # travel height: hover above the grasp point (0.025 + 0.07) or clear of one cube (0.1): 0.07 m up
+    assert P.hover == 0.07 and P.carry_clearance == 0.05 and P.slow_down_distance > 0.07
+    assert intent.goal == "reach cube 1: rise" and dict(intent.deflection) == {"Rr": P.fine}
+
+
+def test_over_the_cube_it_descends_then_switches_to_fingers_and_closes():
+    above = view(hand=(-0.14, -0.39, 0.15))
+    intent, _ = plan(above, Memory(), P, combine_axes=False)
+    assert intent.goal == "reach cube 1: descend" and set(intent.deflection) == {"Lr"}
+    at_grasp = view(hand=(-0.14, -0.39, HALF + P.grasp_offset))
+    intent, _ = plan(at_grasp, Memory(), P, combine_axes=False)
+    assert intent.button == "B2" and not intent.deflection  # translation -> fingers: one press back
+    intent, _ = plan(replace(at_grasp, mode=Mode.FINGERS), Memory(), P, combine_axes=False)
+    assert dict(intent.deflection) == {"F": P.coarse}  # F closes in finger mode
+
+
+def test_a_cube_counts_as_held_only_after_the_squeeze_time():
+    grasping = view(hand=(-0.14, -0.39, HALF), mode=Mode.FINGERS, closure=0.6, touching=(True, False), t=10.0)
+    intent, memory = plan(grasping, Memory(), P, combine_axes=False)
+    assert intent.goal == "grasp cube 1"  # still squeezing
+    later = replace(grasping, t=10.0 + P.squeeze_time + 0.01, mode=Mode.TRANSLATION)
+    intent, _ = plan(later, memory, P, combine_axes=False)
+    assert intent.goal == "carry cube 1: rise" and set(intent.deflection) == {"Rr"}
+
+
+def test_carrying_aims_the_cube_not_the_hand_at_b():
+    # the hand holds cube 1 13 mm off its centre (along x); the cube must end over B
+    grip = np.array([0.013, 0.0, 0.0])
+    cube = np.array([0.10, -0.45, 0.12])
+    v = view(hand=tuple(cube + grip), cubes=((cube[0], cube[1]), (-0.14, -0.51)), cube_z=(cube[2], HALF),
+             closure=0.7, touching=(True, False), t=5.0)
+    memory = Memory(touch_since=0.0)
+    intent, _ = plan(v, memory, P, combine_axes=False)
+    assert intent.goal == "carry cube 1: travel" and set(intent.deflection) == {"L"}  # x+ toward B
+    over_b = replace(v, hand_pos=np.r_[B + grip[:2], cube[2]], cube_pos=(np.r_[B, cube[2]], v.cube_pos[1]))
+    intent, _ = plan(over_b, memory, P, combine_axes=False)
+    assert intent.goal == "carry cube 1: descend"
+
+
+def test_stacked_cubes_are_recognised_and_the_user_rests_after_retreating():
+    stacked = view(hand=(0.14, -0.45, 0.30), cubes=(tuple(B), tuple(B + 0.004)), cube_z=(HALF, 3 * HALF))
+    assert placed_cubes(stacked, P) == (0, 1)
+    intent, _ = plan(stacked, Memory(), P, combine_axes=False)
+    assert intent.is_rest and intent.goal == "done"
+    off = replace(stacked, cube_pos=(stacked.cube_pos[0], stacked.cube_pos[1] + [0.03, 0, 0]))
+    assert placed_cubes(off, P) == (0, None)
+
+
+def test_a_cube_turned_past_the_tolerance_gets_a_wrist_turn_toward_it():
+    turned = view(hand=(-0.14, -0.39, 0.15), yaw=(math.radians(30.0), 0.0), mode=Mode.WRIST)
+    intent, _ = plan(turned, Memory(), P, combine_axes=False)
+    assert intent.goal == "turn to cube 1" and set(intent.deflection) == {"Rr"}  # Rr turns about z+
+    # 30 deg off and 60 deg off are the same cube face seen the other way: turn back instead
+    intent, _ = plan(replace(turned, cube_yaw=(math.radians(60.0), 0.0)), Memory(), P, combine_axes=False)
+    assert set(intent.deflection) == {"Lr"}
+
+
+def test_scripted_user_reacts_late_to_new_moves_and_stops_at_once():
+    user = ScriptedUser(P, combine_axes=False)
+    first = user.decide(view(t=0.0))
+    assert first.is_rest  # reaction time not over
+    assert user.decide(view(t=P.reaction_time / 2)).is_rest
+    moving = user.decide(view(t=P.reaction_time + 1e-6))
+    assert dict(moving.deflection) == {"R": P.coarse}
+    # the hand arrives over the cube: the user lets go in the same tick
+    arrived = user.decide(view(hand=(-0.14, -0.39, 0.22), t=P.reaction_time + 0.1))
+    assert not arrived.deflection
