@@ -78,7 +78,7 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         ys.append(prepared.labels[prepared.pure])
         ends = prepared.ends[prepared.pure]
         for k, i in enumerate(spec.nodes):
-            gammas[i].append(gamma(prepared.states[ends, k * _WIDTH:k * _WIDTH + 3]))
+            gammas[i].append(gamma(*prepared.states[ends, k * _WIDTH:k * _WIDTH + 3].T))
     x, y = np.concatenate(xs), np.concatenate(ys)
     unknown = sorted(set(y.tolist()) - {cls.label for cls in profile.classes})
     if unknown:
@@ -125,7 +125,7 @@ def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProce
 
 
 # ------------------------------------------------------------------------------------- streaming
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Decision:
     label: int
     name: str
@@ -141,7 +141,8 @@ class OnlineChain:
     """One sample at a time: per-node fusion, then a tick with at most one Decision per node-1 sample.
 
     The other nodes contribute their latest state; no decision is made until every node has
-    reported once and the window is full.
+    reported once and the window is full. Node states are kept as Python floats (the same IEEE
+    arithmetic as the batch form's arrays) because per-sample numpy calls dominate the cost.
     """
 
     def __init__(self, model: Model, profile: Profile):
@@ -154,19 +155,25 @@ class OnlineChain:
         self._slot = {node: k for k, node in enumerate(self.nodes)}
         calibrations = {n.index: n.calibration for n in profile.nodes}
         self._fusion = {node: NodeFusion(calibrations[node]) for node in self.nodes}
-        self._state = np.zeros(len(self.nodes) * _WIDTH)
+        self._state = [0.0] * (len(self.nodes) * _WIDTH)
+        self._components = model.spec.components.tolist()
+        self._classes = {cls.label: cls for cls in profile.classes}
         self._seen: set[int] = set()
-        self._neutral = np.zeros((len(self.nodes), 3))
-        self._window = WindowBuffer(model.spec.window, len(model.spec.components), model.spec.stride)
+        self._neutral = [(0.0, 0.0, 0.0)] * len(self.nodes)
+        self._window = WindowBuffer(model.spec.window, len(self._components), model.spec.stride)
         self._vote = MajorityVote(model.post.vote_length)
         self._calibration: dict[int, list] | None = None
         self.ticks = 0
 
     # neutral-offset calibration
+    @property
+    def neutral(self) -> dict[int, tuple[float, float, float]]:
+        return {node: self._neutral[k] for node, k in self._slot.items()}
+
     def set_neutral(self, offsets: Mapping[int, Sequence[float]]) -> None:
         """Neutral (pitch, roll, yaw) per node index; the window restarts."""
         for node, offset in offsets.items():
-            self._neutral[self._slot[node]] = offset
+            self._neutral[self._slot[node]] = tuple(float(v) for v in offset)
         self._window.reset()
 
     def begin_neutral_calibration(self) -> None:
@@ -193,9 +200,12 @@ class OnlineChain:
         if self._calibration is not None:
             return self._collect_neutral(node, angles)
         base = slot * _WIDTH
-        self._state[base:base + 3] = angles
-        self._state[base:base + 3] -= self._neutral[slot]
-        self._state[base + 3:base + 6] = gyro
+        neutral = self._neutral[slot]
+        state = self._state
+        state[base] = float(angles[0]) - neutral[0]
+        state[base + 1] = float(angles[1]) - neutral[1]
+        state[base + 2] = float(angles[2]) - neutral[2]
+        state[base + 3], state[base + 4], state[base + 5] = float(gyro[0]), float(gyro[1]), float(gyro[2])
         self._seen.add(node)
         if node != self.nodes[0] or len(self._seen) < len(self.nodes):
             return None
@@ -212,22 +222,22 @@ class OnlineChain:
     def _tick(self) -> Decision | None:
         index = self.ticks
         self.ticks += 1
-        window = self._window.push(self._state[self.model.spec.components])
+        state = self._state
+        window = self._window.push(np.array([state[i] for i in self._components]))
         if window is None:
             return None
         prob = posteriors(self.model, features(self.model.spec.kind, window[None]))[0]
         best = int(prob.argmax())
         confidence = float(prob[best])
-        raw = int(self.model.classes[best])
         threshold = self.model.post.rejection_threshold
         is_rejected = threshold is not None and confidence < threshold
-        label = self._vote.push(NEUTRAL_LABEL if is_rejected else raw)
-        cls = self.profile.class_of(label)
+        label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(self.model.classes[best]))
+        cls = self._classes[label]
         amplitude = self.model.amplitude.get(label)
         g = 0.0
         if amplitude is not None:
             base = self._slot[amplitude.node] * _WIDTH
-            g = float(gamma(self._state[base:base + 3]))
+            g = float(gamma(state[base], state[base + 1], state[base + 2]))
         return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
                         rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
 

@@ -73,10 +73,11 @@ def linear_parameters(lda: LinearDiscriminantAnalysis) -> tuple[np.ndarray, np.n
 
 def posteriors(model: Model, features: np.ndarray) -> np.ndarray:
     """(n, F) -> (n, K) class posteriors: softmax of the linear discriminant scores."""
-    scores = features @ model.coef.T + model.intercept
-    scores -= scores.max(axis=1, keepdims=True)
+    scores = features @ model.coef.T
+    scores += model.intercept
+    scores -= np.maximum.reduce(scores, axis=1, keepdims=True)
     np.exp(scores, out=scores)
-    scores /= scores.sum(axis=1, keepdims=True)
+    scores /= np.add.reduce(scores, axis=1, keepdims=True)
     return scores
 
 
@@ -136,9 +137,9 @@ def decide(model: Model, features: np.ndarray, post: PostProcessing | None = Non
                           labels=labels)
 
 
-def gamma(angles: np.ndarray) -> np.ndarray:
-    """sqrt(pitch^2 + roll^2 + yaw^2) of (..., 3) neutral-subtracted angles."""
-    return np.sqrt(np.sum(np.square(angles), axis=-1))
+def gamma(pitch, roll, yaw):
+    """sqrt(pitch^2 + roll^2 + yaw^2) of neutral-subtracted angles (floats or arrays alike)."""
+    return np.sqrt(pitch * pitch + roll * roll + yaw * yaw)
 
 
 def amplitude_ranges(gammas: dict[int, np.ndarray], labels: np.ndarray, class_nodes: dict[int, int]) -> dict[int, AmplitudeRange]:

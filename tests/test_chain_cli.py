@@ -48,7 +48,7 @@ def test_streaming_equals_batch_on_a_real_recording(p1_days, p1_profile, day1_fv
     assert np.allclose([d.confidence for d in streamed], batch.confidence, rtol=0, atol=1e-12)
     # proportional output: gamma of the class's node at the tick, nu within [0, 1]
     d = next(d for d in streamed if d.label == 7)
-    assert d.function == "B1" and d.gamma == gamma(prepared.states[d.sample_index, 6:9])
+    assert d.function == "B1" and d.gamma == gamma(*prepared.states[d.sample_index, 6:9])
     assert 0.0 <= d.nu <= 1.0 and all(0.0 <= x.nu <= 1.0 for x in streamed)
     if post.rejection_threshold is None:
         assert evaluate(model, rec, p1_profile.neutral_samples).accuracy == pytest.approx(
@@ -82,7 +82,7 @@ def test_neutral_calibration_from_samples(p1_days, p1_profile, day1_fv1_model):
         for node in (1, 2, 3):
             assert chain.push_angles(node, rec.nodes[node].angles[k], rec.nodes[node].gyro[k]) is None
     assert not chain.calibrating
-    assert np.allclose(chain._neutral, recording_neutral(rec, (1, 2, 3), 100), rtol=0, atol=1e-12)
+    assert np.allclose([chain.neutral[i] for i in (1, 2, 3)], recording_neutral(rec, (1, 2, 3), 100), rtol=0, atol=1e-12)
 
 
 def test_cross_validation_folds_and_references(p1_days):

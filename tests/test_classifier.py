@@ -49,7 +49,8 @@ def test_decide_applies_rejection_before_vote():
 
 
 def test_proportional_output_by_hand():
-    assert gamma(np.array([[3.0, 4.0, 12.0], [0, 0, 0]])).tolist() == [13.0, 0.0]
+    assert gamma(np.array([3.0, 0]), np.array([4.0, 0]), np.array([12.0, 0])).tolist() == [13.0, 0.0]
+    assert gamma(-3.0, 4.0, 12.0) == 13.0
     r = AmplitudeRange(node=1, gamma_min=5.0, gamma_max=25.0)
     assert proportional(15.0, r) == 0.5
     assert proportional(40.0, r) == 1.0 and proportional(5.0, r) == 0.0
