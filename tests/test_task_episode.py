@@ -1,0 +1,118 @@
+"""The stacking task's verdicts on placed cubes, a whole joystick episode, and the run-task command."""
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from bomi.cli import main
+from sim.env import ArmSim
+from sim.joystick import JoystickState
+from tasks.episode import JoystickChannel, run_episode, summarize
+from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, start_poses
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return ArmSim()
+
+
+def place(sim: ArmSim, positions, yaw_deg=(0.0, 0.0)):
+    for address, pos, yaw in zip(sim.scene.cube_qpos, positions, np.radians(yaw_deg)):
+        sim.data.qpos[address:address + 3] = pos
+        sim.data.qpos[address + 3:address + 7] = (np.cos(yaw / 2), 0, 0, np.sin(yaw / 2))
+    sim.data.qvel[:] = 0.0  # just reset: nothing else moves
+    mujoco.mj_forward(sim.model, sim.data)
+
+
+def hold_still(task: StackingTask, seconds: float):
+    outcome = None
+    for _ in range(int(round(seconds / task.sim.dt))):
+        task.sim.step(JoystickState())
+        outcome = task.outcome()
+        if outcome.done:
+            break
+    return outcome
+
+
+def test_start_poses_are_seeded_jitter_around_a(sim):
+    config = TaskConfig()
+    a, b = start_poses(sim, config, 7), start_poses(sim, config, 7)
+    np.testing.assert_array_equal(a, b)
+    assert not np.allclose(a, start_poses(sim, config, 8))
+    offsets = a[:, :2] - sim.default_cube_positions()
+    assert np.all(np.abs(offsets) <= config.start_jitter)
+    assert np.all(np.abs(np.degrees(a[:, 2])) <= config.start_yaw_deg)
+
+
+def test_tilt_of_a_cube_is_measured_from_its_nearest_face():
+    half_turn = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0])  # 90 deg about x: still flat
+    assert cube_tilt_deg(half_turn) == pytest.approx(0.0, abs=1e-9)
+    tilted = np.array([np.cos(np.radians(6)), np.sin(np.radians(6)), 0, 0])  # 12 deg about x
+    assert cube_tilt_deg(tilted) == pytest.approx(12.0)
+
+
+def test_a_stack_at_b_that_stays_still_for_a_second_is_a_success(sim):
+    task = StackingTask(sim)
+    task.reset(0)
+    b = task.target_pos[:2]
+    place(sim, [(b[0], b[1], 0.025), (b[0] + 0.005, b[1], 0.0755)])
+    outcome = hold_still(task, 1.5)
+    assert outcome.success and outcome.completion_time < 0.2
+
+
+def test_a_top_cube_20mm_off_is_not_a_stack(sim):
+    task = StackingTask(sim)
+    task.reset(0)
+    b = task.target_pos[:2]
+    place(sim, [(b[0], b[1], 0.025), (b[0] + 0.020, b[1], 0.0755)])
+    outcome = hold_still(task, 1.5)
+    assert not outcome.done and not task.stacked()
+
+
+def test_a_cube_off_the_table_fails_the_episode(sim):
+    task = StackingTask(sim)
+    task.reset(0)
+    place(sim, [(0.9, -0.3, -0.2), (-0.14, -0.51, 0.025)])
+    outcome = hold_still(task, 0.1)
+    assert outcome.done and not outcome.success and "cube 1 knocked off the table" in outcome.failure
+
+
+def test_time_limit_fails_the_episode(sim):
+    task = StackingTask(sim, TaskConfig(time_limit=0.5))
+    task.reset(0)
+    outcome = hold_still(task, 1.0)
+    assert outcome.done and outcome.failure == "time limit 0.5 s"
+
+
+def test_joystick_operator_stacks_the_cubes_on_a_fixed_seed(sim):
+    log = run_episode(JoystickChannel(), operator="joystick", participant="P1", seed=0, sim=sim,
+                      task_config=TaskConfig(time_limit=120.0))
+    summary = summarize(log)
+    assert summary["success"], summary["failure"]
+    assert 10.0 < summary["completion_time"] < 120.0
+    # two grasps and two releases in finger mode, and back to translation each time
+    assert summary["button_presses"] >= 4 and summary["mode_switches"] == summary["button_presses"]
+    assert summary["cube_drops"] == 0
+    bottom, top = np.argsort(log.cube_pos[-1, :, 2])
+    assert np.linalg.norm(log.cube_pos[-1, top, :2] - log.cube_pos[-1, bottom, :2]) <= 0.015
+    assert "realtime_accuracy" not in summary  # no classifier in this channel
+
+
+def test_run_task_writes_json_and_plot(tmp_path, capsys):
+    out, plot = tmp_path / "run.json", tmp_path / "timeline.png"
+    code = main(["run-task", "--operator", "joystick", "--seed", "1", "--time-limit", "120",
+                 "--json", str(out), "--plot", str(plot)])
+    record = json.loads(out.read_text())
+    assert code == 0 and record["success"] is True and record["completion_time"] > 0
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| P1 | joystick | 1/1 |" in capsys.readouterr().out
+
+
+def test_run_task_with_a_bad_operator_file_is_one_line_and_writes_nothing(tmp_path, capsys):
+    bad, out = tmp_path / "op.toml", tmp_path / "run.json"
+    bad.write_text("[timing]\nreaction_time = 0.3\n")
+    code = main(["run-task", "--operator", "joystick", "--operator-file", str(bad), "--json", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and not out.exists()
+    assert err.startswith("bomi: error:") and str(bad) in err and "\n" not in err
