@@ -13,23 +13,30 @@ from sim.check import check_all
 from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
 from sim.env import ArmSim
 from sim.errors import SimError
-from sim.joystick import JoystickState
+from sim.joystick import JoystickState, script_states
 from sim.render import VideoWriter, describe, write_png
 
-# The scripted motion of ``bomi render``: (seconds, stick state) segments; a segment's buttons are
-# pressed once, at its first tick, while its functions are held throughout.
+# The scripted motion of ``bomi render``: pick the first cube up at A and put it down at B, with
+# the stick alone. (seconds, stick state) segments; a segment's buttons are pressed once, at its
+# first tick, while its functions are held throughout.
+PRESS_B1 = (0.1, JoystickState(pressed=frozenset({"B1"})))
+PRESS_B2 = (0.1, JoystickState(pressed=frozenset({"B2"})))
 DEMO_SCRIPT: tuple[tuple[float, JoystickState], ...] = (
     (0.5, JoystickState()),
-    (1.0, JoystickState({"R": 0.7})),
-    (0.8, JoystickState({"Lr": 0.8})),
-    (0.1, JoystickState(pressed=frozenset({"B1"}))),
-    (1.0, JoystickState({"Rr": 0.8})),
-    (0.1, JoystickState(pressed=frozenset({"B1"}))),
-    (1.2, JoystickState({"F": 1.0})),
-    (1.0, JoystickState({"B": 1.0})),
-    (0.1, JoystickState(pressed=frozenset({"B2"}))),
-    (0.1, JoystickState(pressed=frozenset({"B2"}))),
-    (1.0, JoystickState({"L": 1.0, "Rr": 0.5})),
+    (0.7, JoystickState({"R": 1.0})),          # x- 14 cm: above the first cube
+    (0.3, JoystickState({"B": 0.5})),          # y+ 3 cm
+    (0.95, JoystickState({"Lr": 1.0})),        # down 19 cm
+    PRESS_B1, PRESS_B1,                        # translation -> wrist -> fingers
+    (1.5, JoystickState({"F": 1.0})),          # close
+    PRESS_B1,                                  # fingers -> translation
+    (1.0, JoystickState({"Rr": 0.5})),         # lift 10 cm
+    (1.4, JoystickState({"L": 1.0})),          # x+ 28 cm: over B
+    (0.6, JoystickState({"F": 0.5})),          # y- 6 cm
+    (0.8, JoystickState({"Lr": 0.5})),         # down 8 cm
+    PRESS_B2,                                  # translation -> fingers
+    (1.2, JoystickState({"B": 1.0})),          # open
+    PRESS_B1,                                  # fingers -> translation
+    (1.0, JoystickState({"Rr": 1.0})),         # up
     (0.5, JoystickState()),
 )
 
@@ -80,24 +87,20 @@ def run_render(args: argparse.Namespace) -> int:
         if not path.parent.is_dir():
             raise SimError(f"{path}: directory {path.parent} does not exist")
     sim = ArmSim(load_config(args.config), args.models)
-    fps = sim.config.render.fps
-    ticks_per_frame = max(1, round(sim.config.physics.control_hz / fps))
-    total = sum(round(seconds * sim.config.physics.control_hz) for seconds, _ in DEMO_SCRIPT)
+    control_hz = sim.config.physics.control_hz
+    ticks_per_frame = max(1, round(control_hz / sim.config.render.fps))
+    total = sum(round(seconds * control_hz) for seconds, _ in DEMO_SCRIPT)
     frame = None
 
     def write_video(tmp: Path) -> None:
         nonlocal frame
-        with VideoWriter(tmp, fps=sim.config.physics.control_hz / ticks_per_frame) as video, \
-                tqdm(total=total, desc="render", unit="tick") as progress:
-            tick = 0
-            for seconds, state in DEMO_SCRIPT:
-                for i in range(round(seconds * sim.config.physics.control_hz)):
-                    sim.step(state if i == 0 else JoystickState(state.deflection))
-                    if tick % ticks_per_frame == 0:
-                        frame = sim.render(describe(sim.mode, state))
-                        video.append(frame)
-                    tick += 1
-                    progress.update()
+        with VideoWriter(tmp, fps=control_hz / ticks_per_frame) as video:
+            for tick, state in enumerate(tqdm(script_states(DEMO_SCRIPT, control_hz), total=total,
+                                              desc="render", unit="tick")):
+                sim.step(state)
+                if tick % ticks_per_frame == 0:
+                    frame = sim.render(describe(sim.mode, state))
+                    video.append(frame)
 
     try:
         _write_atomic(args.out, write_video)

@@ -14,6 +14,7 @@ function holds still.
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -112,3 +113,10 @@ class JoystickInterpreter:
             return ArmCommand(zero, self.wrist_speed * combine(state.deflection, WRIST_AXES), 0.0)
         finger = sum(FINGER_DIRECTION.get(name, 0.0) * amount for name, amount in state.deflection.items())
         return ArmCommand(zero, zero, float(np.clip(finger, -1.0, 1.0)))
+
+
+def script_states(script: Iterable[tuple[float, JoystickState]], control_hz: float) -> Iterator[JoystickState]:
+    """One state per control tick from (seconds, state) segments; buttons press at a segment's first tick."""
+    for seconds, state in script:
+        for tick in range(round(seconds * control_hz)):
+            yield state if tick == 0 else JoystickState(state.deflection)

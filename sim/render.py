@@ -6,6 +6,7 @@ it rarely changes. MP4 goes through imageio's ffmpeg plugin (imageio-ffmpeg ship
 """
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -49,7 +50,12 @@ class FrameRenderer:
             raise SimError(f"scene has no camera named {camera!r}")
         self.camera = camera
         self.width = width
-        self.renderer = mujoco.Renderer(model, height=height, width=width)
+        try:
+            self.renderer = mujoco.Renderer(model, height=height, width=width)
+        except mujoco.FatalError as exc:
+            raise SimError(f"cannot open an offscreen OpenGL context ({exc}); MUJOCO_GL="
+                           f"{os.environ.get('MUJOCO_GL', '')!r} must name a headless backend (egl, osmesa) "
+                           "before mujoco is first imported") from None
 
     def render(self, data: mujoco.MjData, caption: str | None = None) -> np.ndarray:
         self.renderer.update_scene(data, camera=self.camera)

@@ -1,4 +1,5 @@
 """Cartesian velocity control in the full physics: tracking, holding still, walls, joint limits, grasp."""
+import sim  # noqa: F401  -- first: sim/__init__ selects headless EGL before mujoco loads
 import dataclasses
 
 import mujoco
@@ -6,9 +7,10 @@ import numpy as np
 import pytest
 
 from sim.check import enter_mode, hold, measure
+from sim.commands import DEMO_SCRIPT
 from sim.config import load_config
 from sim.env import ArmSim
-from sim.joystick import FUNCTIONS, JoystickState, Mode
+from sim.joystick import FUNCTIONS, JoystickState, Mode, script_states
 
 
 @pytest.fixture(scope="module")
@@ -147,3 +149,17 @@ def move_to(sim: ArmSim, goal: np.ndarray, speed: float = 0.15, tolerance: float
         velocity *= min(1.0, speed / np.linalg.norm(velocity))
         sim.step_twist(velocity)
     raise AssertionError(f"did not reach {goal}: at {sim.tool_position}")
+
+
+def test_the_demo_script_carries_a_cube_from_a_to_b_with_the_stick_alone(sim):
+    """End to end through the joystick path: modes, buttons, translation and fingers."""
+    sim.reset()
+    start = sim.cube_positions
+    for state in script_states(DEMO_SCRIPT, sim.config.physics.control_hz):
+        sim.step(state)
+    carried, other = sim.cube_positions
+    assert np.linalg.norm(carried[:2] - sim.scene.location_b) < 0.03
+    assert carried[2] == pytest.approx(sim.scene.cube_half_size, abs=0.003)  # resting on the table
+    assert np.linalg.norm(other - start[1]) < 0.002
+    assert not sim.cube_in_grasp().any()
+    assert (sim.button_presses, sim.mode_switches) == (5, 5)

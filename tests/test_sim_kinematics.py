@@ -1,4 +1,5 @@
 """Pinocchio kinematics of the tool frame against MuJoCo's own site pose and Jacobian."""
+import sim  # noqa: F401  -- first: sim/__init__ selects headless EGL before mujoco loads
 import mujoco
 import numpy as np
 import pytest

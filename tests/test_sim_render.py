@@ -63,7 +63,7 @@ def test_png_and_mp4_round_trip(sim, tmp_path):
 def test_cli_render_writes_mp4_and_png(tmp_path, capsys):
     out, png = tmp_path / "run.mp4", tmp_path / "run.png"
     assert main(["render", "--out", str(out), "--png", str(png)]) == 0
-    assert "mode switches 4, button presses 4" in capsys.readouterr().out
+    assert "mode switches 5, button presses 5" in capsys.readouterr().out
     assert imageio.get_reader(out).count_frames() > 100
     assert imageio.imread(png).shape[2] == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.mp4", "run.png"]  # no leftovers
