@@ -4,8 +4,8 @@ Functions F, B, R, L, Rr, Lr each carry a deflection in [0, 1]; several may be h
 3-axis stick combines axes). Buttons B1 and B2 are press events. Modes, as on the real arm:
 
 - translation: F/B/R/L/Rr/Lr move the hand along y-, y+, x-, x+, z+, z- at ``full_speed * deflection``;
-- wrist: the same functions turn the hand about the same axes' rotations through the tool point
-  (F/B tip the fingers toward y-/y+, R/L toward x-/x+, Rr/Lr turn about z+/z-) at ``wrist_speed``;
+- wrist: the same functions turn the hand about the tool point at ``wrist_speed * deflection``
+  (F/B tip the fingers toward y-/y+, R/L toward x-/x+, Rr/Lr turn it about z+/z-);
 - fingers: F closes, B opens the three fingers; the other functions do nothing.
 
 B1 cycles translation -> wrist -> fingers -> translation; B2 cycles the other way. Holding no
