@@ -8,6 +8,7 @@ Writes benchmarks/results/streaming_cost.md and .json.
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -98,12 +99,14 @@ def main() -> None:
               "classes": int(len(model.classes)), "budget_us": BUDGET_US, "stages": rows,
               "meets_budget": total["median_us"] <= BUDGET_US["median"] and total["p99_us"] <= BUDGET_US["p99"],
               "machine": {"python": platform.python_version(), "processor": platform.machine(),
-                          "numpy": np.__version__}}
+                          "numpy": np.__version__, "cpus": os.cpu_count(),
+                          "load_average_1min_after_run": os.getloadavg()[0]}}
     lines = ["| stage (per sample of 3 nodes) | median (us) | p99 (us) | samples |", "|---|---|---|---|"]
     lines += [f"| {name} | {r['median_us']:.1f} | {r['p99_us']:.1f} | {r['samples']} |" for name, r in rows.items()]
     table = (f"Streaming cost, P1 profile, {model.spec.kind} ({record['n_features']} features, "
              f"{record['classes']} classes), day-2 raw columns replayed; budget median <= 50 us, p99 <= 200 us "
-             f"for the whole chain: {'met' if record['meets_budget'] else 'NOT met'}.\n\n" + "\n".join(lines) + "\n")
+             f"for the whole chain: {'met' if record['meets_budget'] else 'NOT met'} "
+             f"(machine load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs).\n\n" + "\n".join(lines) + "\n")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "streaming_cost.json").write_text(json.dumps(record, indent=1) + "\n")
     (RESULTS / "streaming_cost.md").write_text(table)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, decide, fit_lda, gamma,
-                             linear_parameters, posteriors, proportional, reject, rejected)
+                             linear_parameters, posteriors, proportional, rejected)
 from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
 from bomi.fusion import NodeFusion, neutral_offsets
@@ -277,13 +277,9 @@ class CrossValidation:
     truth: np.ndarray
     prob: np.ndarray
 
-    def predicted(self, threshold: float | None = None) -> np.ndarray:
-        prob_max = self.prob.max(axis=1)
-        return reject(self.classes[self.prob.argmax(axis=1)], prob_max, threshold)
-
     @property
     def accuracy(self) -> float:
-        return float(np.mean(self.predicted() == self.truth))
+        return float(np.mean(self.classes[self.prob.argmax(axis=1)] == self.truth))
 
     def rejected_share(self, threshold: float | None) -> float:
         return float(np.mean(rejected(self.prob.max(axis=1), threshold)))

@@ -13,7 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from bomi.chain import Evaluation, Selection, cross_validate, evaluate, select_settings, train
-from bomi.classifier import Model, PostProcessing
+from bomi.classifier import PostProcessing
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.features import FEATURE_KINDS, FeatureSpec

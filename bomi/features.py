@@ -16,7 +16,6 @@ import numpy as np
 
 FEATURE_KINDS = ("FV1", "FV2", "FV3")
 NODE_STATE = ("pitch", "roll", "yaw", "gyro_x", "gyro_y", "gyro_z")
-_FV3_STATS = ("min", "max", "mean", "abssum")
 
 
 def component_index(n_nodes: int, kind: str) -> np.ndarray:
@@ -28,18 +27,6 @@ def component_index(n_nodes: int, kind: str) -> np.ndarray:
     if kind != "FV1":
         index += [node * width + k for node in range(n_nodes) for k in (3, 4, 5)]
     return np.array(index, dtype=np.intp)
-
-
-def component_names(nodes: tuple[int, ...], kind: str) -> list[str]:
-    flat = [f"{name}{node}" for node in nodes for name in NODE_STATE]
-    return [flat[i] for i in component_index(len(nodes), kind)]
-
-
-def feature_names(nodes: tuple[int, ...], kind: str) -> list[str]:
-    components = component_names(nodes, kind)
-    if kind != "FV3":
-        return components
-    return [f"{stat}_{half}({c})" for half in ("a", "b") for stat in _FV3_STATS for c in components]
 
 
 def sliding_windows(samples: np.ndarray, length: int = 8, stride: int = 1) -> np.ndarray:

@@ -58,12 +58,6 @@ class Profile:
     def node_indices(self) -> tuple[int, ...]:
         return tuple(node.index for node in self.nodes)
 
-    def class_of(self, label: int) -> ClassConfig:
-        for cls in self.classes:
-            if cls.label == label:
-                return cls
-        raise KeyError(label)
-
     @property
     def class_nodes(self) -> dict[int, int]:
         return {cls.label: cls.node for cls in self.classes if cls.node is not None}
