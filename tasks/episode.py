@@ -60,6 +60,7 @@ class EpisodeLog:
     completion_time: float | None
     failure: str | None
     wall_time: float
+    cpu_time: float  # this process's CPU seconds: the speed on one core, whatever else runs
     decisions: DecisionTrace | None = None
     class_names: tuple[str, ...] = ()
     neutral: int = 0
@@ -79,7 +80,9 @@ def summarize(log: EpisodeLog) -> dict:
         "failure": log.failure,
         "sim_time": sim_time,
         "wall_time": log.wall_time,
+        "cpu_time": log.cpu_time,
         "realtime_factor": sim_time / log.wall_time if log.wall_time > 0 else None,
+        "realtime_factor_cpu": sim_time / log.cpu_time if log.cpu_time > 0 else None,
         "mode_switches": metrics.count_changes(log.mode),
         "button_presses": log.presses,
         "unintended_displacement_mm": metrics.unintended_displacement_mm(log.hand_pos, log.intended_dir),
@@ -133,6 +136,7 @@ WARMUP_S = 12.0  # the fusion's yaw settles in about 600 samples (hardware.md)
 # Motion amplitudes the participant calibrates with and then uses: half to full range, so that
 # the calibrated gamma range (nu = 0 .. 1) spans the leans used in the task.
 BODY_RANGE = (0.5, 1.0)
+LEAN_STEP = 0.15  # how much further the participant leans when a posture is not recognised
 
 
 class BomiChannel:
@@ -141,7 +145,8 @@ class BomiChannel:
     Participant time runs ``lead`` seconds ahead of the task: the warm-up and the neutral-offset
     calibration happen before the task's clock starts.  One class at a time: the participant
     holds a posture for as long as the same function is wanted (its amplitude chosen at the start
-    of the move, as a person picks how far to lean).
+    of the move, as a person picks how far to lean), and leans further when the arm does not
+    respond to it.
     """
 
     combine_axes = False
@@ -150,13 +155,17 @@ class BomiChannel:
         self.participant, self.chain, self.profile = participant, chain, profile
         self.parser = FrameParser()
         self._label_of = {cls.function: cls.label for cls in profile.classes}
+        self._function_of = {cls.label: cls.function for cls in profile.classes}
+        self._since = 0.0  # when the posture held now was taken up
+        # how long the person waits for a posture to take effect before leaning further
+        self._patience = participant.params.reaction_s + participant.params.onset_s + 0.5
         self._last_sample: dict[int, int] = {}
         self._function: str = "neutral"
         self._nu = 0.0
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
         self._queue: list[Delivery] = []  # generated frames not yet arrived
         # An intent set at t moves the body from t + reaction_s: samples may be made that far ahead.
-        self._lookahead = 0.5 * participant.params.reaction_s
+        self._lookahead = 0.95 * participant.params.reaction_s
         self._asked_until = -np.inf
         self.lead = 0.0
         self._feed(participant.advance(WARMUP_S), record=False)
@@ -208,8 +217,14 @@ class BomiChannel:
 
     def command(self, intent: StickIntent, t: float, t_end: float) -> JoystickState:
         label, amplitude = self.intent_class(intent)
-        if label != self.participant.intent[0]:
+        held, held_amplitude = self.participant.intent
+        if label != held:
             self.participant.set_intent(label, amplitude, self.lead + t)
+            self._since = t
+        elif label != NEUTRAL_LABEL and self._function != self._function_of[label] and held_amplitude < 1.0 \
+                and t - self._since > self._patience:  # nothing happens: lean further
+            self.participant.set_intent(label, min(1.0, held_amplitude + LEAN_STEP), self.lead + t)
+            self._since = t
         decision = self._feed(self._arrived(self.lead + t, self.lead + t_end))
         previous = self._function
         if decision is not None:
@@ -269,7 +284,7 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
     user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes)
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
     film = _Film(sim, video, video_speedup) if video is not None else None
-    started = time.perf_counter()
+    started, started_cpu = time.perf_counter(), time.process_time()
     try:
         while True:
             view = task.view()
@@ -296,7 +311,8 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
         touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
-        wall_time=time.perf_counter() - started, **channel.log_fields())
+        wall_time=time.perf_counter() - started, cpu_time=time.process_time() - started_cpu,
+        **channel.log_fields())
 
 
 class _Film:
