@@ -118,7 +118,7 @@ def _read_mat_columns(path: Path) -> dict[str, np.ndarray]:
 
 def _read_csv_columns(path: Path) -> dict[str, np.ndarray]:
     try:
-        with open(path, newline="", encoding="utf-8") as handle:
+        with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: tolerate a byte-order mark
             rows = list(csv.reader(handle))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise BomiError(f"{path}: not a readable CSV file ({exc})") from None

@@ -47,6 +47,13 @@ def test_csv_round_trip_is_exact(tmp_path):
     assert list(tmp_path.iterdir()) == [path]  # no temporary file left behind
 
 
+def test_csv_with_byte_order_mark_and_spaces(tmp_path):
+    path = tmp_path / "excel.csv"
+    path.write_text("\ufeff" + GOOD_HEADER + "\n" + row().replace(",2,", ", 2 ,"), encoding="utf-8")
+    rec = read_recording(path)
+    assert rec.time.tolist() == [0.0] and rec.nodes[2].angles.tolist() == [[1.0, 2.0, 3.0]]
+
+
 def test_csv_without_labels_or_time(tmp_path):
     rec = small_recording(labelled=False)
     rec.time = None
