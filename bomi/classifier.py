@@ -101,6 +101,8 @@ class MajorityVote:
         self._history: deque[int] = deque(maxlen=length)
 
     def push(self, label: int) -> int:
+        if self._history.maxlen == 1:   # vote off: the common case, kept cheap for the stream
+            return label
         self._history.append(label)
         counts: dict[int, int] = {}
         for item in self._history:
