@@ -28,7 +28,8 @@ SAMPLE_RATE_HZ = 1.0 / DT
 SPLIT_HZ = 1.0                 # below: slow sway; above: tremor
 EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
 MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
-TREMOR_POWER_BAND = (0.1, 0.9)  # the tremor band holds this central share of the tremor power
+SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where it falls below this share of the peak
+MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
 ASSUMED_ONSET_S = 0.8          # min-jerk onset of a posture (not measurable here, see docs)
 ASSUMED_REACTION_S = 0.4       # cue-to-movement delay (likewise)
 
@@ -68,12 +69,6 @@ def split_sway_tremor(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return sway[keep], tremor[keep]
 
 
-def power_band(freqs: np.ndarray, psd: np.ndarray, shares: tuple[float, float]) -> tuple[float, float]:
-    """The frequencies at which the cumulative power reaches the two shares."""
-    cumulative = np.cumsum(psd) / np.sum(psd)
-    return float(np.interp(shares[0], cumulative, freqs)), float(np.interp(shares[1], cumulative, freqs))
-
-
 @dataclass
 class Fit:
     """Everything the profile stores, arrays are (nodes, 3) unless noted."""
@@ -83,26 +78,50 @@ class Fit:
     neutral_rep_std: np.ndarray
     neutral_sway_std: np.ndarray
     neutral_tremor_std: np.ndarray
-    tremor_band_hz: tuple[float, float]
-    tremor_peak_hz: float
+    tremor_spectrum: tuple[np.ndarray, np.ndarray]   # frequencies (Hz), power relative to the peak
     postures: dict[int, np.ndarray]
     rep_std: dict[int, np.ndarray]
+    day_gain_log_std: dict[int, float]
     day_std: dict[int, np.ndarray]
     sway_std: dict[int, np.ndarray]
     tremor_std: dict[int, np.ndarray]
 
 
-def _rms(parts: list[np.ndarray]) -> np.ndarray:
-    """Pooled RMS over lists of (n, 3) pieces; NaN where nothing usable."""
-    return np.sqrt(np.mean(np.concatenate(parts) ** 2, axis=0)) if parts else np.full(3, np.nan)
+def _typical(stds: list[np.ndarray]) -> np.ndarray:
+    """Median over blocks of per-block standard deviations (robust to the stitching jumps); NaN if none."""
+    return np.median(stds, axis=0) if stds else np.full(3, np.nan)
+
+
+def motion_spectrum(freqs: np.ndarray, psd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The tremor spectrum relative to its peak, up to where it first falls below SPECTRUM_FLOOR past the peak.
+
+    The fused angles' power beyond is not body motion: the gyroscopes see only 0.8-1.3 deg/s in
+    holds, which the tremor up to there already accounts for (see docs/virtual_participant.md).
+    """
+    relative = psd / psd.max()
+    peak = int(np.argmax(relative))
+    end = peak + int(np.argmax(relative[peak:] < SPECTRUM_FLOOR))
+    return freqs[:end + 1], np.r_[relative[:end], 0.0]
+
+
+def isotropic_yaw(stds: np.ndarray) -> np.ndarray:
+    """(nodes, 3) stds with yaw set to the mean of pitch and roll.
+
+    The recordings' fused yaw is not the host fusion's (dataset README) and its wobble within
+    holds is not seen by the gyroscopes (0.8-1.3 deg/s), so it is not body motion.
+    """
+    out = np.array(stds, dtype=float)
+    out[:, 2] = out[:, :2].mean(axis=1)
+    return out
 
 
 def fit_recordings(recordings: list[Recording]) -> Fit:
     """Measure the participant from one recording per day (all with the same nodes and labels)."""
     n_nodes = len(recordings[0].node_indices)
     deltas: dict[tuple[int, int], list[np.ndarray]] = {}     # (label, day) -> per-repetition deltas
+    levels: dict[tuple[int, int], list[np.ndarray]] = {}     # (label, day) -> per-repetition block medians
     neutral_levels: dict[int, list[np.ndarray]] = {}          # day -> c0 block medians
-    sway: dict[tuple[int, int], list[np.ndarray]] = {}        # (label, node) -> pieces
+    sway: dict[tuple[int, int], list[np.ndarray]] = {}        # (label, node) -> per-block std (3,)
     tremor: dict[tuple[int, int], list[np.ndarray]] = {}
     spectra: list[np.ndarray] = []
     for day, rec in enumerate(tqdm(recordings, desc="fitting days", unit="day"), start=1):
@@ -116,14 +135,15 @@ def fit_recordings(recordings: list[Recording]) -> Fit:
             around = [medians[j] for j in (k - 1, k + 1) if 0 <= j < len(blocks) and blocks[j].label == 0]
             if around:   # delta from the neutral before and after: robust to the slow yaw drift
                 deltas.setdefault((block.label, day), []).append(level - np.mean(around, axis=0))
+                levels.setdefault((block.label, day), []).append(level)
         for block in blocks:
             for node in range(n_nodes):
                 x = angles[block.start:block.stop, node]
                 if repeated_fraction(x) > MAX_REPEATED_ROWS or len(x) <= 4 * EDGE_SAMPLES:
                     continue
                 s, t = split_sway_tremor(x)
-                sway.setdefault((block.label, node), []).append(s)
-                tremor.setdefault((block.label, node), []).append(t)
+                sway.setdefault((block.label, node), []).append(s.std(axis=0))
+                tremor.setdefault((block.label, node), []).append(t.std(axis=0))
                 if node == 0:
                     spectra.append(scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=128, axis=0)[1].sum(axis=1))
     freqs = scipy.signal.welch(np.zeros(256), fs=SAMPLE_RATE_HZ, nperseg=128)[0]
@@ -131,21 +151,33 @@ def fit_recordings(recordings: list[Recording]) -> Fit:
     labels = sorted({label for label, _ in deltas})
 
     def per_node(table: dict, label: int) -> np.ndarray:
-        return np.array([_rms(table.get((label, node), [])) for node in range(n_nodes)])
+        return np.array([_typical(table.get((label, node), [])) for node in range(n_nodes)])
 
     per_day = {label: [np.array(deltas[(label, d)]) for d in range(1, len(recordings) + 1) if (label, d) in deltas]
                for label in labels}
-    within = [reps - reps.mean(axis=0) for days in per_day.values() for reps in days if len(reps) > 1]
+    # repetition spread: of the held level itself (not of the delta, which adds the neutrals' spread)
+    per_day_levels = {label: [np.array(levels[(label, d)]) for d in range(1, len(recordings) + 1)
+                              if (label, d) in levels] for label in labels}
+    within = [reps - reps.mean(axis=0) for days in per_day_levels.values() for reps in days if len(reps) > 1]
     pooled_rep_var = np.mean(np.concatenate(within) ** 2, axis=0)
-    postures, rep_std, day_std = {}, {}, {}
+    postures, rep_std, day_gain, day_std = {}, {}, {}, {}
     for label, days in per_day.items():
-        postures[label] = np.median(np.concatenate(days), axis=0)
-        own = [reps - reps.mean(axis=0) for reps in days if len(reps) > 1]
+        posture = postures[label] = np.median(np.concatenate(days), axis=0)
+        own = [reps - reps.mean(axis=0) for reps in per_day_levels[label] if len(reps) > 1]
         rep_var = np.mean(np.concatenate(own) ** 2, axis=0) if own else pooled_rep_var
         reps_per_day = np.mean([len(reps) for reps in days])
-        # var(day means) = day var + rep var / reps per day
-        day_var = np.var([reps.mean(axis=0) for reps in days], axis=0, ddof=1) - rep_var / reps_per_day
+        # a day's mean posture = gain x nominal posture + an offset; the gain is log-normal. It is
+        # fitted on the angles the feature vectors use: not the yaw of nodes 2.. (unreliable here)
+        day_means = np.array([reps.mean(axis=0) for reps in days])
+        used = np.ones_like(posture)
+        used[1:, 2] = 0.0
+        gains = np.einsum("dij,ij->d", day_means, posture * used) / np.sum((posture * used) ** 2)
+        gains = np.clip(gains, MIN_DAY_GAIN, None)
+        offsets = day_means - gains[:, None, None] * posture
+        # var(day offsets) = day var + rep var / reps per day
+        day_var = np.var(offsets, axis=0, ddof=1) - rep_var / reps_per_day
         rep_std[label] = np.sqrt(rep_var)
+        day_gain[label] = float(np.std(np.log(gains), ddof=1))
         day_std[label] = np.sqrt(np.clip(day_var, 0.0, None))
     day_neutrals = [np.array(levels) for levels in neutral_levels.values()]
     neutral_within = np.concatenate([lv - lv.mean(axis=0) for lv in day_neutrals])
@@ -153,15 +185,15 @@ def fit_recordings(recordings: list[Recording]) -> Fit:
         days=len(recordings),
         neutral_deg=np.median(day_neutrals[0], axis=0),
         neutral_rep_std=np.sqrt(np.mean(neutral_within ** 2, axis=0)),
-        neutral_sway_std=per_node(sway, 0),
-        neutral_tremor_std=per_node(tremor, 0),
-        tremor_band_hz=power_band(freqs, mean_psd, TREMOR_POWER_BAND),
-        tremor_peak_hz=float(freqs[np.argmax(mean_psd)]),
+        neutral_sway_std=isotropic_yaw(per_node(sway, 0)),
+        neutral_tremor_std=isotropic_yaw(per_node(tremor, 0)),
+        tremor_spectrum=motion_spectrum(freqs, mean_psd),
         postures=postures,
         rep_std=rep_std,
+        day_gain_log_std=day_gain,
         day_std=day_std,
-        sway_std={label: per_node(sway, label) for label in labels},
-        tremor_std={label: per_node(tremor, label) for label in labels},
+        sway_std={label: isotropic_yaw(per_node(sway, label)) for label in labels},
+        tremor_std={label: isotropic_yaw(per_node(tremor, label)) for label in labels},
     )
 
 
@@ -187,9 +219,9 @@ def fit_toml(fit: Fit, source: str) -> str:
         f"reaction_s = {ASSUMED_REACTION_S}   # assumed",
         "max_amplitude = 1.0",
         "",
-        "[tremor]",
-        f"band_hz = [{fit.tremor_band_hz[0]:.2f}, {fit.tremor_band_hz[1]:.2f}]   "
-        f"# 10-90 % of the head's tremor power; peak {fit.tremor_peak_hz:.2f} Hz",
+        "[tremor]   # mean power spectrum of the head's tremor (fused pitch and roll above 1 Hz) in holds",
+        "frequencies_hz = [" + ", ".join(f"{f:.3f}" for f in fit.tremor_spectrum[0]) + "]",
+        "relative_power = [" + ", ".join(f"{p:.4f}" for p in fit.tremor_spectrum[1]) + "]",
         "",
         "[neutral]",
         f"angles_deg = {_toml_matrix(fit.neutral_deg)}   # day 1, absolute",
@@ -204,6 +236,7 @@ def fit_toml(fit: Fit, source: str) -> str:
             f"label = {label}",
             f"posture_deg = {_toml_matrix(posture)}",
             f"rep_std_deg = {_toml_matrix(fit.rep_std[label])}",
+            f"day_gain_log_std = {fit.day_gain_log_std[label]:.3f}",
             f"day_std_deg = {_toml_matrix(fit.day_std[label])}",
             f"sway_std_deg = {_toml_matrix(_fill_missing(fit.sway_std[label], fit.neutral_sway_std))}",
             f"tremor_std_deg = {_toml_matrix(_fill_missing(fit.tremor_std[label], fit.neutral_tremor_std))}",

@@ -9,9 +9,10 @@ from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.f
 Every modelling assumption is listed in docs/virtual_participant.md.
 
 TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset_s``,
-``reaction_s``, ``max_amplitude`` (0..1]; ``[tremor] band_hz = [lo, hi]``; ``[neutral]`` with
+``reaction_s``, ``max_amplitude`` (0..1]; ``[tremor]`` with ``frequencies_hz`` and ``relative_power``
+(the tremor's power spectrum shape); ``[neutral]`` with
 ``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg``; one
-``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_std_deg``,
+``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_gain_log_std``, ``day_std_deg``,
 ``sway_std_deg``, ``tremor_std_deg``; optional ``[spasm]`` with ``rate_per_s``, ``max_deg``,
 ``duration_s``, ``nodes``. Every ``*_deg`` value is a (nodes x 3) matrix of (pitch, roll, yaw).
 """
@@ -41,7 +42,8 @@ NEUTRAL_LABEL = 0
 _TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
              "classes", "spasm"}
 _NEUTRAL_KEYS = {"angles_deg", "rep_std_deg", "sway_std_deg", "tremor_std_deg"}
-_CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_std_deg", "sway_std_deg", "tremor_std_deg"}
+_CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_gain_log_std", "day_std_deg", "sway_std_deg",
+               "tremor_std_deg"}
 _SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
 
 
@@ -52,7 +54,8 @@ class ClassMotion:
     label: int
     posture_deg: np.ndarray      # (nodes, 3)
     rep_std_deg: np.ndarray      # repetition-to-repetition std of the posture
-    day_std_deg: np.ndarray      # session-to-session (day-to-day) std of the posture
+    day_gain_log_std: float      # a session's (day's) posture is exp(N(0, this)) x the nominal one ...
+    day_std_deg: np.ndarray      # ... plus an offset of this std
     sway_std_deg: np.ndarray     # slow wander while holding (below SWAY_CUTOFF_HZ)
     tremor_std_deg: np.ndarray   # tremor while holding (in the tremor band)
 
@@ -75,7 +78,7 @@ class ParticipantParams:
     onset_s: float
     reaction_s: float
     max_amplitude: float
-    tremor_band_hz: tuple[float, float]
+    tremor_spectrum: tuple[np.ndarray, np.ndarray]   # frequencies (Hz), relative power
     neutral: ClassMotion         # label 0: angles_deg absolute, rep_std = neutral-to-neutral std
     classes: dict[int, ClassMotion]
     spasm: Spasm | None
@@ -144,7 +147,8 @@ def _motion(table: dict, label: int, where: str, n_nodes: int, posture_key: str 
         label=label,
         posture_deg=_matrix(table, posture_key, where, n_nodes, nonnegative=False),
         rep_std_deg=_matrix(table, "rep_std_deg", where, n_nodes, nonnegative=True),
-        day_std_deg=_matrix(table, "day_std_deg", where, n_nodes, nonnegative=True) if "day_std_deg" in table else zeros,
+        day_gain_log_std=_number(table, "day_gain_log_std", where, 0.0, 2.0) if label else 0.0,
+        day_std_deg=_matrix(table, "day_std_deg", where, n_nodes, nonnegative=True) if label else zeros,
         sway_std_deg=_matrix(table, "sway_std_deg", where, n_nodes, nonnegative=True),
         tremor_std_deg=_matrix(table, "tremor_std_deg", where, n_nodes, nonnegative=True),
     )
@@ -158,11 +162,17 @@ def _parse(data: dict, source: str) -> ParticipantParams:
     neutral_table = _check_keys(data["neutral"], _NEUTRAL_KEYS, _NEUTRAL_KEYS, "[neutral]")
     n_nodes = _matrix(neutral_table, "angles_deg", "[neutral]", None, nonnegative=False).shape[0]
     neutral = _motion(neutral_table, NEUTRAL_LABEL, "[neutral]", n_nodes, posture_key="angles_deg")
-    tremor = _check_keys(data["tremor"], {"band_hz"}, {"band_hz"}, "[tremor]")
-    band = tremor["band_hz"]
-    if (not isinstance(band, list) or len(band) != 2 or not all(isinstance(f, (int, float)) for f in band)
-            or not 0 < band[0] < band[1] < SAMPLE_RATE_HZ / 2):
-        raise ValueError(f"[tremor]: band_hz must be [low, high] with 0 < low < high < {SAMPLE_RATE_HZ / 2} Hz")
+    tremor = _check_keys(data["tremor"], {"frequencies_hz", "relative_power"}, {"frequencies_hz", "relative_power"},
+                         "[tremor]")
+    try:
+        freqs, power = (np.array(tremor[k], dtype=float) for k in ("frequencies_hz", "relative_power"))
+    except (TypeError, ValueError):
+        freqs = power = np.array([])
+    if (freqs.ndim != 1 or freqs.shape != power.shape or len(freqs) < 3 or freqs[0] != 0
+            or np.any(np.diff(freqs) <= 0) or freqs[-1] > SAMPLE_RATE_HZ / 2
+            or np.any(power < 0) or not np.any(power > 0)):
+        raise ValueError("[tremor]: frequencies_hz must rise from 0 to at most "
+                         f"{SAMPLE_RATE_HZ / 2} Hz, with as many non-negative relative_power values, not all 0")
     if not isinstance(data["classes"], list) or not data["classes"]:
         raise ValueError("'classes' must be a non-empty list of [[classes]] tables")
     classes: dict[int, ClassMotion] = {}
@@ -186,7 +196,7 @@ def _parse(data: dict, source: str) -> ParticipantParams:
         onset_s=_number(data, "onset_s", "participant", DT, 10.0),
         reaction_s=_number(data, "reaction_s", "participant", 0.0, 10.0),
         max_amplitude=_number(data, "max_amplitude", "participant", 0.01, 1.0),
-        tremor_band_hz=(float(band[0]), float(band[1])), neutral=neutral, classes=classes, spasm=spasm,
+        tremor_spectrum=(freqs, power), neutral=neutral, classes=classes, spasm=spasm,
         source=source)
 
 
@@ -212,33 +222,40 @@ def minimum_jerk(s: np.ndarray) -> np.ndarray:
 
 @dataclass
 class ColouredNoise:
-    """Unit-variance Gaussian noise through a fixed filter, streamed (filter state kept between calls)."""
+    """Unit-variance Gaussian noise through a fixed filter (b, a), streamed (filter state kept between calls)."""
 
-    sos: np.ndarray
+    b: np.ndarray
+    a: np.ndarray
     channels: int
     rng: np.random.Generator
     gain: float = field(init=False)
     state: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        impulse = scipy.signal.sosfilt(self.sos, np.r_[1.0, np.zeros(8191)])
+        impulse = scipy.signal.lfilter(self.b, self.a, np.r_[1.0, np.zeros(8191)])
         self.gain = 1.0 / float(np.sqrt(np.sum(impulse ** 2)))
-        self.state = np.zeros((self.sos.shape[0], 2, self.channels))
+        self.state = np.zeros((max(len(self.a), len(self.b)) - 1, self.channels))
         # start in the stationary regime: run the filter over a few seconds of noise first
         self.next(int(10 * SAMPLE_RATE_HZ))
 
     def next(self, n: int) -> np.ndarray:
-        out, self.state = scipy.signal.sosfilt(self.sos, self.rng.standard_normal((n, self.channels)), axis=0,
+        out, self.state = scipy.signal.lfilter(self.b, self.a, self.rng.standard_normal((n, self.channels)), axis=0,
                                                zi=self.state)
         return out * self.gain
 
 
-def sway_filter() -> np.ndarray:
-    return scipy.signal.butter(2, SWAY_CUTOFF_HZ, "low", fs=SAMPLE_RATE_HZ, output="sos")
+def sway_filter() -> tuple[np.ndarray, np.ndarray]:
+    """Fourth-order Butterworth low-pass at SWAY_CUTOFF_HZ (little leakage into the tremor band)."""
+    return scipy.signal.butter(4, SWAY_CUTOFF_HZ, "low", fs=SAMPLE_RATE_HZ)
 
 
-def tremor_filter(band_hz: tuple[float, float]) -> np.ndarray:
-    return scipy.signal.butter(2, band_hz, "bandpass", fs=SAMPLE_RATE_HZ, output="sos")
+def tremor_filter(spectrum: tuple[np.ndarray, np.ndarray], taps: int = 255) -> tuple[np.ndarray, np.ndarray]:
+    """FIR filter whose power response follows the tremor spectrum (amplitude = sqrt of power)."""
+    freqs, power = spectrum
+    nyquist = SAMPLE_RATE_HZ / 2
+    if freqs[-1] < nyquist:
+        freqs, power = np.r_[freqs, nyquist], np.r_[power, 0.0]
+    return scipy.signal.firwin2(taps, freqs, np.sqrt(power), fs=SAMPLE_RATE_HZ), np.array([1.0])
 
 
 @dataclass(frozen=True)
@@ -284,11 +301,11 @@ class VirtualParticipant:
         self.params, self.profile, self.noise, self.link = params, profile, noise, link
         self._rng = np.random.default_rng(seed)
         channels = params.n_nodes * 3
-        self._sway = ColouredNoise(sway_filter(), channels, self._rng)
-        self._tremor = ColouredNoise(tremor_filter(params.tremor_band_hz), channels, self._rng)
-        self._day_offset = {label: self._rng.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
-        self._neutral_now = self._draw_neutral()
-        rest = self._neutral_now
+        self._sway = ColouredNoise(*sway_filter(), channels, self._rng)
+        self._tremor = ColouredNoise(*tremor_filter(params.tremor_spectrum), channels, self._rng)
+        self._day_posture = {label: np.exp(self._rng.normal(0.0, m.day_gain_log_std)) * m.posture_deg
+                             + self._rng.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
+        rest = self._target(NEUTRAL_LABEL, 0.0)
         self._segments: list[Segment] = [Segment(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
         n_spasm_nodes = len(params.spasm.nodes) if params.spasm else 0
         self._spasm_onsets = np.empty(0)
@@ -301,17 +318,13 @@ class VirtualParticipant:
         self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
 
     # -- intents
-    def _draw_neutral(self) -> np.ndarray:
-        neutral = self.params.neutral
-        return neutral.posture_deg + self._rng.normal(0.0, neutral.rep_std_deg)
-
     def _target(self, label: int, amplitude: float) -> np.ndarray:
+        """A fresh repetition's posture: the session's neutral + amplitude x (day posture + repetition offset)."""
+        neutral = self.params.neutral
         if label == NEUTRAL_LABEL:
-            self._neutral_now = self._draw_neutral()
-            return self._neutral_now
-        motion = self.params.classes[label]
-        excursion = motion.posture_deg + self._day_offset[label] + self._rng.normal(0.0, motion.rep_std_deg)
-        return self._neutral_now + amplitude * self.params.max_amplitude * excursion
+            return neutral.posture_deg + self._rng.normal(0.0, neutral.rep_std_deg)
+        excursion = self._day_posture[label] + self._rng.normal(0.0, self.params.classes[label].rep_std_deg)
+        return neutral.posture_deg + amplitude * self.params.max_amplitude * excursion
 
     @property
     def time_s(self) -> float:

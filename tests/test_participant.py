@@ -25,7 +25,8 @@ def still(params, **changes):
     """The participant without any variability, sway, tremor or spasm (exact postures)."""
     def quiet(motion):
         zero = np.zeros_like(motion.posture_deg)
-        return dataclasses.replace(motion, rep_std_deg=zero, day_std_deg=zero, sway_std_deg=zero, tremor_std_deg=zero)
+        return dataclasses.replace(motion, rep_std_deg=zero, day_gain_log_std=0.0, day_std_deg=zero, sway_std_deg=zero,
+                                   tremor_std_deg=zero)
     return dataclasses.replace(params, neutral=quiet(params.neutral),
                                classes={k: quiet(m) for k, m in params.classes.items()}, spasm=None, **changes)
 
@@ -54,10 +55,11 @@ def bad_copy(tmp_path: Path, old: str, new: str) -> Path:
     ("onset_s = 0.8", "onset_s = -1", "'onset_s' must be a number"),
     ("onset_s = 0.8", "", "missing key(s) onset_s"),
     ("max_amplitude = 1.0", "max_amplitude = 1.0\nspeed = 3", "unknown key(s) speed"),
-    ("band_hz = [0.55, 5.54]", "band_hz = [6.0, 5.0]", "band_hz must be [low, high]"),
+    ("frequencies_hz = [0.000, 0.488", "frequencies_hz = [0.488, 0.000", "frequencies_hz must rise from 0"),
     ("label = 2", "label = 1", "'label' must be a positive integer not used before"),
-    ("rep_std_deg = [[1.004", "rep_std_deg = [[-1.004", "cannot be negative"),
-    ("posture_deg = [[27.929, -3.173, -0.964], ", "posture_deg = [", "must be a 3 x 3 matrix"),
+    ("rep_std_deg = [[", "rep_std_deg = [[-", "cannot be negative"),
+    ("posture_deg = [[", "posture_deg = [[1.0], [", "must be a 3 x 3 matrix"),
+    ("posture_deg = [[", "posture_deg = [[1, 2, 3], [", "must be a 3 x 3 matrix"),
     ('name = "P1"', 'name = "P1', "not valid TOML"),
 ])
 def test_bad_participant_files_name_the_file_and_the_problem(tmp_path, old, new, message):
@@ -129,10 +131,10 @@ def test_tremor_and_sway_have_the_profiled_size_and_band(p1):
     vp.advance(200.0)
     tremor = vp.truth().angles[:, 0, 0] - neutral.posture_deg[0, 0]
     assert tremor.std() == pytest.approx(params.neutral.tremor_std_deg[0, 0], rel=0.1)
-    freqs, psd = scipy.signal.welch(tremor, fs=1 / DT, nperseg=512)
-    low, high = params.tremor_band_hz
-    inside = psd[(freqs >= low) & (freqs <= high)].sum() / psd.sum()
-    assert inside > 0.75
+    freqs, psd = scipy.signal.welch(tremor, fs=1 / DT, nperseg=256)
+    profile_freqs, profile_power = params.tremor_spectrum
+    assert psd[freqs > profile_freqs[-1] + 0.5].sum() / psd.sum() < 0.02       # nothing beyond the spectrum
+    assert abs(freqs[np.argmax(psd)] - profile_freqs[np.argmax(profile_power)]) < 0.5   # same peak
 
 
 def test_spasms_are_bursts_up_to_ten_degrees():
@@ -213,7 +215,7 @@ def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
     chain = OnlineChain(model, profile)
     vp = VirtualParticipant(params, profile, seed=11)
     parser = FrameParser()
-    schedule = {14.0: 1, 19.0: 0, 24.0: 4, 29.0: 0, 34.0: 7, 39.0: 0}
+    schedule = {14.0: 1, 19.0: 0, 24.0: 4, 29.0: 0, 34.0: 2, 39.0: 0}
     decisions = []
     for step in range(1, 60 * 44):
         t = step / 60.0
@@ -227,7 +229,7 @@ def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
             if abs(t - when) < 1e-9:
                 vp.set_intent(label, 1.0, t)
     times, labels = map(np.array, zip(*decisions))
-    for start, label in [(16.0, 1), (21.0, 0), (26.0, 4), (31.0, 0), (36.0, 7), (41.0, 0)]:
+    for start, label in [(16.0, 1), (21.0, 0), (26.0, 4), (31.0, 0), (36.0, 2), (41.0, 0)]:
         hold = labels[(times > start) & (times < start + 3.0)]
         assert np.mean(hold == label) > 0.9, (label, np.bincount(hold))
 
@@ -243,9 +245,11 @@ def test_fit_helpers_on_synthetic_signals():
     assert tremor[:, 1].std() == pytest.approx(0.5 / np.sqrt(2), rel=0.05)       # 5 Hz goes to tremor
     assert tremor[:, 0].std() < 0.1 and sway[:, 0].std() > 1.0                   # 0.2 Hz stays in sway
     assert np.abs(sway[:, 2]).max() < 1e-9                                       # constant: neither
-    freqs = np.linspace(0, 10, 11)
-    # flat spectrum: cumulative share k/11 at k Hz, so 10 % at 0.1 Hz and 90 % at 8.9 Hz
-    assert fit_participant.power_band(freqs, np.ones(11), (0.1, 0.9)) == pytest.approx((0.1, 8.9))
+    freqs = np.arange(8.0)
+    kept_freqs, kept = fit_participant.motion_spectrum(freqs, np.array([0.5, 2, 4, 1, 0.3, 0.5, 0.1, 0.1]))
+    # relative: 0.125 0.5 1 0.25 0.075 ...: first below 10 % after the peak at 4 Hz, which becomes the zero end
+    assert kept_freqs.tolist() == [0, 1, 2, 3, 4] and kept.tolist() == [0.125, 0.5, 1, 0.25, 0]
+    assert fit_participant.isotropic_yaw(np.array([[1.0, 3.0, 9.0]])).tolist() == [[1.0, 3.0, 2.0]]
     assert fit_participant.repeated_fraction(np.array([[1, 2], [1, 2], [1, 3], [1, 3]])) == pytest.approx(2 / 3)
 
 
