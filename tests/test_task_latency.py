@@ -1,8 +1,9 @@
 """Latency regression (issue #4, item 6) on a fixed seed, through the BoMI operator's real path.
 
-The virtual P1 steps into each posture (a one-sample move instead of the fitted 0.8 s
-minimum-jerk), so the motion onset is a single sample and every sample of delay after it is the
-chain's: window, vote.  The wall-clock measurements themselves live in benchmarks/.
+The virtual P1 moves briskly into each posture (a 4-sample minimum-jerk move instead of the
+fitted 0.8 s), so that the delay from motion onset is the body's move plus the chain's own:
+once the body holds the posture, a full window and the vote must be enough.  The wall-clock
+measurements themselves live in benchmarks/.
 """
 import time
 from dataclasses import replace
@@ -18,13 +19,14 @@ from tasks.participant import VirtualParticipant, load_participant
 from tasks.planner import StickIntent
 
 SEED = 3
+MOVE_SAMPLES = 4
 MOVES = [StickIntent({fn: 1.0}) for fn in ("F", "B", "R", "L", "Rr", "Lr")] + \
         [StickIntent(button=b) for b in ("B1", "B2")]
 
 
 @pytest.fixture(scope="module")
 def stepping_p1():
-    return replace(load_participant("P1"), onset_s=DT)
+    return replace(load_participant("P1"), onset_s=MOVE_SAMPLES * DT)
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +46,8 @@ def test_decision_latency_from_motion_onset_is_within_window_plus_vote(channel):
     model = channel.chain.model
     bound = model.spec.window + model.post.vote_length
     assert len(latency) == len(MOVES)  # every motion was recognised
-    assert latency.max() <= bound, f"latencies {latency.tolist()} exceed window + vote = {bound} samples"
+    algorithmic = latency - MOVE_SAMPLES
+    assert algorithmic.max() <= bound, f"latencies {latency.tolist()} exceed move + window + vote = {bound} samples"
 
 
 def test_per_sample_cost_of_the_whole_chain_is_under_a_millisecond(channel, stepping_p1):
