@@ -10,6 +10,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, decide, fit_lda, gamma,
                              linear_parameters, posteriors, proportional, rejected)
@@ -293,6 +294,12 @@ def cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinkag
     per neutral ``references`` entry (default: that same calibration). Windows straddling a label
     change or a chunk boundary are left out.
     """
+    with threadpool_limits(limits=1, user_api="blas"):  # many small products: see classifier.fit_lda
+        return _cross_validate(rec, profile, spec, shrinkages, n_folds, references)
+
+
+def _cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinkages: Sequence[float | str | None],
+                    n_folds: int, references: Sequence[np.ndarray] | None) -> list[CrossValidation]:
     labels = rec.require_labels()
     trained = prepare(rec, spec, profile.neutral_samples)
     folds = segment_folds(labels, n_folds)

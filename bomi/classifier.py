@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+from threadpoolctl import threadpool_limits
 
 from bomi.features import FeatureSpec
 
@@ -58,10 +59,13 @@ class Model:
 
 
 def fit_lda(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None) -> LinearDiscriminantAnalysis:
-    """sklearn LDA; 'svd' without shrinkage, 'lsqr' with it (svd does not support shrinkage)."""
-    if shrinkage is None:
-        return LinearDiscriminantAnalysis(solver="svd").fit(features, labels)
-    return LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage).fit(features, labels)
+    """sklearn LDA with the least-squares solver (supports shrinkage; ~8x faster than 'svd' on FV3).
+
+    BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
+    threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage).fit(features, labels)
 
 
 def linear_parameters(lda: LinearDiscriminantAnalysis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bomi.chain import (OnlineChain, evaluate, neutral_references, node_states, prepare, recording_neutral,
-                        segment_folds, window_features)
+                        segment_folds, select_settings, window_features)
 from bomi.chain_commands import PAPER_DAY1_MODEL, fused_recording
 from bomi.classifier import PostProcessing, decide, gamma
 from bomi.cli import main
@@ -149,3 +149,13 @@ def test_command_errors_are_one_line(tmp_path, capsys):
     assert "m.pkl: output must end in .json or .npz" in errors[1]
     assert "no such profile file" in errors[2]
     assert not list(tmp_path.iterdir())
+
+
+def test_p1_profile_ships_the_day1_selection(p1_days, p1_profile):
+    """P1.toml's LDA shrinkage is what the drift-aware cross-validation on day 1 alone chooses."""
+    chosen = select_settings(p1_days[1], p1_profile, p1_profile.spec)
+    assert chosen.shrinkage == p1_profile.shrinkage
+    assert chosen.drift_accuracy[chosen.shrinkage] == max(chosen.drift_accuracy.values())
+    assert chosen.drift_rejected[chosen.rejection_threshold] <= 0.01
+    # re-referencing with later neutral postures is what separates the candidates: unshrunk FV3 suffers
+    assert chosen.drift_accuracy[None] < chosen.drift_accuracy[chosen.shrinkage] - 0.003
