@@ -45,14 +45,15 @@ class EarthField:
     strength_lsb: float = 5000.0
     inclination_deg: float = 70.0
 
-    def at_zero_heading(self, cal: NodeCalibration) -> np.ndarray:
-        """The corrected field in level axes (x down) at heading 0, in the node's corrected units.
-
-        The soft-iron matrix sets the units; its cube-root determinant is its mean gain.
-        """
-        gain = np.cbrt(abs(np.linalg.det(np.array(cal.soft_iron))))
+    def at_zero_heading(self) -> np.ndarray:
+        """The field in level axes (x down) at heading 0, in raw LSB."""
         dip = np.radians(self.inclination_deg)
-        return self.strength_lsb * gain * np.array([np.sin(dip), -np.cos(dip), 0.0])
+        return self.strength_lsb * np.array([np.sin(dip), -np.cos(dip), 0.0])
+
+
+def corrected_units(cal: NodeCalibration) -> float:
+    """Raw LSB -> the node's corrected magnetometer units: the soft-iron matrix's mean gain (cube-root determinant)."""
+    return float(np.cbrt(abs(np.linalg.det(np.array(cal.soft_iron)))))
 
 
 @dataclass(frozen=True)
@@ -83,35 +84,15 @@ def body_rotation(angles_deg: np.ndarray) -> Rotation:
     return Rotation.from_euler("XZY", np.column_stack([yaw, -pitch_euler, roll]))
 
 
-def gravity_reading(angles_deg: np.ndarray) -> np.ndarray:
-    """Accelerometer at rest in body axes, in g: minus the downward unit vector, (n, 3)."""
-    return -body_rotation(angles_deg).inv().apply([1.0, 0.0, 0.0])
-
-
-def angular_rate(angles_deg: np.ndarray, previous_deg: Sequence[float] | None = None,
-                 dt: float = DT) -> np.ndarray:
-    """Body angular velocity (deg/s, (n, 3)) over each sample interval (backward difference).
-
-    ``previous_deg`` is the orientation one sample before the first row (streaming); without
-    it the first rate is zero.
-    """
-    angles = np.atleast_2d(angles_deg)
-    first = angles[:1] if previous_deg is None else np.atleast_2d(previous_deg)
-    rotations = body_rotation(np.vstack([first, angles]))
-    step = rotations[:-1].inv() * rotations[1:]
-    return np.degrees(step.as_rotvec()) / dt
-
-
-def magnetometer_reading(angles_deg: np.ndarray, cal: NodeCalibration,
-                         field: EarthField = EarthField()) -> np.ndarray:
-    """Corrected magnetometer in body axes whose fusion heading is the given yaw, (n, 3).
+def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField()) -> np.ndarray:
+    """Magnetometer in body axes (raw LSB, undistorted) whose fusion heading is the given yaw, (n, 3).
 
     The fusion compensates tilt with Rz(-pitch) Ry(roll) and reads heading atan2(-zh, -yh), so
     the body field is Ry(-roll) Rz(pitch) Rx(yaw) applied to the zero-heading field.
     """
     pitch, roll, yaw = np.atleast_2d(angles_deg).T
     to_body = Rotation.from_euler("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True)
-    return to_body.apply(field.at_zero_heading(cal))
+    return to_body.apply(field.at_zero_heading())
 
 
 def to_sensor_axes(body_vectors: np.ndarray, cal: NodeCalibration) -> np.ndarray:
@@ -132,25 +113,48 @@ def to_int16(values: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(values), INT16_MIN, INT16_MAX).astype(np.int16)
 
 
+def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rng: np.random.Generator,
+                     noise: SensorNoise = SensorNoise(), field: EarthField = EarthField(),
+                     previous_deg: np.ndarray | None = None,
+                     linear_acc_g: np.ndarray | None = None) -> list[RawImu]:
+    """Raw int16 acc/gyro/mag (sensor axes) of k nodes from their (n, k, 3) fusion angles in degrees.
+
+    Accelerometer: gravity's reaction (+ the optional (n, k, 3) body-axis ``linear_acc_g``).
+    Gyroscope: the body angular velocity over each sample interval (backward difference);
+    ``previous_deg`` (k, 3) is the orientation one sample before the first row (streaming),
+    without it the first rate is zero. Magnetometer: see ``magnetometer_reading``, then the
+    node's distortion. All nodes share one set of rotations (the costly part).
+    """
+    angles = np.asarray(angles_deg, dtype=float)
+    n, k, _ = angles.shape
+    first = angles[:1] if previous_deg is None else np.asarray(previous_deg, dtype=float).reshape(1, k, 3)
+    rotations = body_rotation(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
+    now = rotations[k:]
+    acc_body = -now.inv().apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
+    if linear_acc_g is not None:
+        acc_body = acc_body + linear_acc_g
+    rate = np.degrees((rotations[:-k].inv() * now).as_rotvec()).reshape(n, k, 3) / DT
+    field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
+    out = []
+    for node, cal in enumerate(cals):
+        acc = to_sensor_axes(acc_body[:, node], cal) * ACC_LSB_PER_G
+        gyro = to_sensor_axes(rate[:, node], cal) * GYRO_LSB_PER_DEG_S
+        mag = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * corrected_units(cal), cal), cal)
+        out.append(RawImu(
+            acc=to_int16(acc + rng.normal(0.0, noise.acc_lsb, (n, 3))),
+            gyro=to_int16(gyro + rng.normal(0.0, noise.gyro_lsb, (n, 3))),
+            mag=to_int16(mag + rng.normal(0.0, noise.mag_lsb, (n, 3))),
+        ))
+    return out
+
+
 def synthesize_raw(angles_deg: np.ndarray, cal: NodeCalibration, rng: np.random.Generator,
                    noise: SensorNoise = SensorNoise(), field: EarthField = EarthField(),
-                   previous_deg: Sequence[float] | None = None,
-                   linear_acc_g: np.ndarray | None = None) -> RawImu:
-    """Raw int16 acc/gyro/mag (sensor axes) for an (n, 3) trajectory of fusion angles in degrees.
-
-    ``linear_acc_g`` is an optional (n, 3) body-axis linear acceleration in g added to gravity.
-    """
-    angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))
-    n = len(angles)
-    acc_body = gravity_reading(angles) + (0.0 if linear_acc_g is None else linear_acc_g)
-    acc = to_sensor_axes(acc_body, cal) * ACC_LSB_PER_G
-    gyro = to_sensor_axes(angular_rate(angles, previous_deg), cal) * GYRO_LSB_PER_DEG_S
-    mag = distort_magnetometer(to_sensor_axes(magnetometer_reading(angles, cal, field), cal), cal)
-    return RawImu(
-        acc=to_int16(acc + rng.normal(0.0, noise.acc_lsb, (n, 3))),
-        gyro=to_int16(gyro + rng.normal(0.0, noise.gyro_lsb, (n, 3))),
-        mag=to_int16(mag + rng.normal(0.0, noise.mag_lsb, (n, 3))),
-    )
+                   previous_deg: Sequence[float] | None = None) -> RawImu:
+    """One node: raw int16 acc/gyro/mag (sensor axes) for an (n, 3) trajectory of fusion angles."""
+    angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))[:, None]
+    previous = None if previous_deg is None else np.reshape(previous_deg, (1, 3))
+    return synthesize_nodes(angles, [cal], rng, noise, field, previous)[0]
 
 
 @dataclass(frozen=True)

@@ -32,11 +32,12 @@ from bomi.fusion import DT, NodeFusion
 from bomi.frames import FrameParser, imu_index
 from bomi.profiles import Profile
 from bomi.recording import NodeData, Recording
-from tasks.imu_synth import Delivery, LinkModel, RawImu, SensorNoise, deliver, synthesize_raw
+from tasks.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
 
 PARTICIPANT_DIR = Path(__file__).resolve().parent / "participants"
 SAMPLE_RATE_HZ = 1.0 / DT
 SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the P1 fit
+SPASM_DRAW_S = 10.0           # spasm onsets are drawn this far ahead at a time
 NEUTRAL_LABEL = 0
 
 _TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
@@ -312,7 +313,7 @@ class VirtualParticipant:
         self._spasm_sizes = np.empty((0, n_spasm_nodes, 3))
         self._spasm_until = 0.0                 # spasm onsets are drawn up to this time
         self._generated = 0                     # samples generated so far (sample k at time k * DT)
-        self._last_angles: dict[int, np.ndarray] = {}
+        self._last_angles: np.ndarray | None = None     # (nodes, 3) angles of the last sample
         self._last_arrival: dict[int, float] = {}
         self._pending = _merge()
         self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -351,29 +352,28 @@ class VirtualParticipant:
         self._segments.append(Segment(t0, self.params.onset_s, start, self._target(label, amplitude), label,
                                       amplitude))
 
+    def _segment_index(self, t: np.ndarray) -> np.ndarray:
+        """Index of the segment in force at each time of ``t``."""
+        return np.maximum(np.searchsorted([s.t0 for s in self._segments], t, side="right") - 1, 0)
+
     def _posture_at(self, t: np.ndarray) -> np.ndarray:
-        """Deliberate posture (no sway/tremor/spasm) at times ``t`` (non-decreasing), (n, nodes, 3)."""
-        starts = np.array([s.t0 for s in self._segments])
-        which = np.searchsorted(starts, t, side="right") - 1
+        """Deliberate posture (no sway/tremor/spasm) at times ``t``, (n, nodes, 3)."""
+        which = self._segment_index(t)
         out = np.empty((len(t), self.params.n_nodes, 3))
         for k in np.unique(which):
-            mask = which == k
-            out[mask] = self._segments[max(k, 0)].at(t[mask])
+            out[which == k] = self._segments[k].at(t[which == k])
         return out
 
     def _noise_scale(self, t: np.ndarray, attribute: str) -> np.ndarray:
         """Per-sample std (n, nodes, 3) of sway or tremor, blended from the old to the new class over each move."""
-        starts = np.array([s.t0 for s in self._segments])
-        which = np.searchsorted(starts, t, side="right") - 1
+        which = self._segment_index(t)
         out = np.empty((len(t), self.params.n_nodes, 3))
         for k in np.unique(which):
-            mask = which == k
-            seg = self._segments[max(k, 0)]
-            before = self._segments[max(k - 1, 0)].label
-            old = getattr(self.params.motion(before), attribute)
+            seg = self._segments[k]
+            old = getattr(self.params.motion(self._segments[max(k - 1, 0)].label), attribute)
             new = getattr(self.params.motion(seg.label), attribute)
-            s = seg.progress(t[mask])[:, None, None]
-            out[mask] = (1 - s) * old[None] + s * new[None]
+            progress = seg.progress(t[which == k])[:, None, None]
+            out[which == k] = (1 - progress) * old[None] + progress * new[None]
         return out
 
     def _spasms(self, t: np.ndarray) -> np.ndarray:
@@ -383,16 +383,18 @@ class VirtualParticipant:
         if spasm is None or spasm.rate_per_s == 0 or len(t) == 0:
             return out
         while self._spasm_until < t[-1]:
-            n_new = self._rng.poisson(spasm.rate_per_s * 10.0)
-            onsets = np.sort(self._rng.uniform(self._spasm_until, self._spasm_until + 10.0, n_new))
+            n_new = self._rng.poisson(spasm.rate_per_s * SPASM_DRAW_S)
+            onsets = np.sort(self._rng.uniform(self._spasm_until, self._spasm_until + SPASM_DRAW_S, n_new))
             size = self._rng.uniform(-1.0, 1.0, (n_new, len(spasm.nodes), 3))
             size *= spasm.max_deg / np.maximum(np.abs(size).max(axis=(1, 2), keepdims=True), 1e-9)
             size *= self._rng.uniform(0.3, 1.0, (n_new, 1, 1))
             self._spasm_onsets = np.concatenate([self._spasm_onsets, onsets])
             self._spasm_sizes = np.concatenate([self._spasm_sizes, size])
-            self._spasm_until += 10.0
+            self._spasm_until += SPASM_DRAW_S
         nodes = np.array(spasm.nodes) - 1
-        for onset, size in zip(self._spasm_onsets, self._spasm_sizes):
+        recent = slice(np.searchsorted(self._spasm_onsets, t[0] - spasm.duration_s),
+                       np.searchsorted(self._spasm_onsets, t[-1], side="right"))
+        for onset, size in zip(self._spasm_onsets[recent], self._spasm_sizes[recent]):
             phase = (t - onset) / spasm.duration_s
             active = (phase >= 0) & (phase <= 1)
             if active.any():
@@ -413,19 +415,17 @@ class VirtualParticipant:
                   + self._sway.next(n).reshape(shape) * self._noise_scale(t, "sway_std_deg")
                   + self._tremor.next(n).reshape(shape) * self._noise_scale(t, "tremor_std_deg")
                   + self._spasms(t))
-        raw = {}
-        for k, node in enumerate(self.profile.nodes):
-            raw[node.index] = synthesize_raw(angles[:, k], node.calibration, self._rng, self.noise,
-                                             previous_deg=self._last_angles.get(node.index))
-            self._last_angles[node.index] = angles[-1, k]
+        raws = synthesize_nodes(angles, [node.calibration for node in self.profile.nodes], self._rng, self.noise,
+                                previous_deg=self._last_angles)
+        self._last_angles = angles[-1]
+        raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
         fresh = deliver(raw, index, t, self._rng, self.link, not_before_s=self._last_arrival)
         for node in np.unique(fresh.node_index):
             self._last_arrival[int(node)] = float(fresh.arrival_s[fresh.node_index == node].max())
         self._pending = _merge(self._pending, fresh)
-        labels = np.array([s.label for s in self._segments])
-        amplitudes = np.array([s.amplitude for s in self._segments])
-        which = np.searchsorted([s.t0 for s in self._segments], t, side="right") - 1
-        self._truth.append((t, labels[np.maximum(which, 0)], amplitudes[np.maximum(which, 0)], angles))
+        which = self._segment_index(t)
+        self._truth.append((t, np.array([self._segments[k].label for k in which]),
+                            np.array([self._segments[k].amplitude for k in which]), angles))
         self._generated = n_total
 
     def deliveries(self, t_end: float) -> Delivery:

@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from bomi.frames import FrameParser
 from bomi.fusion import GYRO_DEG_PER_LSB, NodeCalibration, fuse
-from tasks.imu_synth import (ACC_LSB_PER_G, LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer,
+from tasks.imu_synth import (LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
                              synthesize_raw, to_int16)
 
 NO_NOISE = SensorNoise(0.0, 0.0, 0.0)
@@ -150,3 +150,15 @@ def test_no_loss_link_delivers_everything():
     early, late = out.until(1.0)
     assert early.arrival_s.max() <= 1.0 < late.arrival_s.min()
     assert early.stream() + late.stream() == out.stream()
+
+
+def test_several_nodes_at_once_equal_one_node_at_a_time():
+    rng = np.random.default_rng(9)
+    angles = rng.normal(0.0, 20.0, (30, 3, 3))
+    previous = rng.normal(0.0, 20.0, (3, 3))
+    cals = [HEADSET, UNCALIBRATED, ODD]
+    together = synthesize_nodes(angles, cals, rng, NO_NOISE, previous_deg=previous)
+    for node, cal in enumerate(cals):
+        alone = synthesize_raw(angles[:, node], cal, rng, NO_NOISE, previous_deg=previous[node])
+        for name in ("acc", "gyro", "mag"):
+            np.testing.assert_array_equal(getattr(together[node], name), getattr(alone, name))
