@@ -72,8 +72,11 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
     spec = spec or profile.spec
     shrinkage = profile.shrinkage if shrinkage is ... else shrinkage
     xs, ys, gammas = [], [], {i: [] for i in spec.nodes}
+    known = {cls.label for cls in profile.classes}
     for rec in recordings:
-        rec.require_labels()
+        unknown = sorted(set(rec.require_labels().tolist()) - known)
+        if unknown:
+            raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of profile {profile.name}")
         prepared = prepare(rec, spec, profile.neutral_samples)
         xs.append(prepared.features[prepared.pure])
         ys.append(prepared.labels[prepared.pure])
@@ -81,9 +84,6 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         for k, i in enumerate(spec.nodes):
             gammas[i].append(gamma(*prepared.states[ends, k * _WIDTH:k * _WIDTH + 3].T))
     x, y = np.concatenate(xs), np.concatenate(ys)
-    unknown = sorted(set(y.tolist()) - {cls.label for cls in profile.classes})
-    if unknown:
-        raise BomiError(f"{recordings[0].source}: label(s) {unknown} are not classes of profile {profile.name}")
     if len(np.unique(y)) < 3:
         raise BomiError(f"{recordings[0].source}: training needs at least three classes, found {np.unique(y).tolist()}")
     classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))

@@ -144,10 +144,13 @@ def test_command_errors_are_one_line(tmp_path, capsys):
     assert main(["train", str(missing), "--out", str(tmp_path / "m.pkl")]) == 2
     assert main(["evaluate", "--train", str(missing), "--test", str(missing), "--profile", "P9",
                  "--png", str(tmp_path / "c.png")]) == 2
+    day1 = str(data_dir() / "day1_testp.mat")
+    assert main(["train", day1, "--profile", "P4", "--out", str(tmp_path / "m.json")]) == 2
     errors = capsys.readouterr().err.splitlines()
     assert errors[0] == f"bomi: error: {missing}: no such recording file"
     assert "m.pkl: output must end in .json or .npz" in errors[1]
     assert "no such profile file" in errors[2]
+    assert errors[3] == f"bomi: error: {day1}: label(s) [6, 7, 8] are not classes of profile P4"
     assert not list(tmp_path.iterdir())
 
 
