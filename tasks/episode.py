@@ -176,8 +176,8 @@ class BomiChannel:
             self._feed(participant.advance(t), record=False)
         self.lead = t
 
-    def _feed(self, data: bytes, record: bool = True) -> Decision | None:
-        latest = None
+    def _feed(self, data: bytes, record: bool = True) -> list[Decision]:
+        decisions = []
         for frame in self.parser.feed(data):
             node = imu_index(frame.node_id)
             if node is None:
@@ -186,13 +186,13 @@ class BomiChannel:
             sample = self._last_sample[node] = last + (frame.counter - last) % 256
             decision = self.chain.push(node, frame.acc, frame.gyro, frame.mag)
             if decision is not None:
-                latest = decision
+                decisions.append(decision)
                 if record:
                     self._rows.append((sample, decision.label, decision.gamma, decision.nu))
-        return latest
+        return decisions
 
     def _arrived(self, now: float, t_end: float) -> bytes:
-        """Frames arriving by ``t_end``; samples are made in chunks (cheaper, same result)."""
+        """Frames arriving by ``t_end``; samples are made in chunks (cheaper; the same arrival times)."""
         if now + self._lookahead / 2 > self._asked_until:  # ask before the frames are due
             self._asked_until = max(t_end, now + self._lookahead)
             self._queue.append(self.participant.deliveries(self._asked_until))
@@ -225,16 +225,14 @@ class BomiChannel:
                 and t - self._since > self._patience:  # nothing happens: lean further
             self.participant.set_intent(label, min(1.0, held_amplitude + LEAN_STEP), self.lead + t)
             self._since = t
-        decision = self._feed(self._arrived(self.lead + t, self.lead + t_end))
-        previous = self._function
-        if decision is not None:
-            self._function = decision.function
-            self._nu = decision.nu
+        pressed = set()
+        for decision in self._feed(self._arrived(self.lead + t, self.lead + t_end)):
+            if decision.function in BUTTONS and decision.function != self._function:
+                pressed.add(decision.function)  # a button class presses on its rising edge
+            self._function, self._nu = decision.function, decision.nu
         if self._function in FUNCTIONS and self._nu > 0:
-            return JoystickState({self._function: min(1.0, self._nu)})
-        if self._function in BUTTONS and self._function != previous:
-            return JoystickState(pressed=frozenset({self._function}))
-        return JoystickState()
+            return JoystickState({self._function: min(1.0, self._nu)}, frozenset(pressed))
+        return JoystickState(pressed=frozenset(pressed))
 
     def log_fields(self) -> dict:
         truth = self.participant.truth()

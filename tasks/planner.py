@@ -126,10 +126,6 @@ class StickIntent:
     def is_rest(self) -> bool:
         return not self.deflection and self.button is None
 
-    def gesture(self) -> tuple[frozenset[str], str | None]:
-        """The move irrespective of how far the stick is pushed."""
-        return self.functions, self.button
-
 
 REST = StickIntent()
 
