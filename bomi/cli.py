@@ -1,7 +1,8 @@
 """The `bomi` command line: the one place that wires bomi/, sim/ and tasks/ together.
 
 Each command module exposes ``register(subparsers)`` which adds its sub-commands and sets
-``func`` on them; ``func(args)`` returns the process exit code.
+``func`` on them; ``func(args)`` returns the process exit code. Only the module that owns
+the command being run is imported, so `bomi train` does not pay for loading MuJoCo.
 """
 from __future__ import annotations
 
@@ -12,19 +13,33 @@ import sys
 from bomi.errors import BomiError
 from sim.errors import SimError
 
-COMMAND_MODULES: list[str] = ["sim.commands", "bomi.stream_commands", "bomi.chain_commands", "tasks.commands"]
+# module -> the sub-commands its register() adds (tests/test_cli.py checks they agree)
+COMMAND_MODULES: dict[str, tuple[str, ...]] = {
+    "bomi.chain_commands": ("train", "evaluate", "reproduce", "fuse"),
+    "bomi.stream_commands": ("emulate", "capture", "record"),
+    "sim.commands": ("sim-check", "render"),
+    "tasks.commands": ("run-task", "benchmark", "demo"),
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _modules_for(argv: list[str]) -> list[str]:
+    """The command module of the first positional argument, or all of them (for help and errors)."""
+    command = next((arg for arg in argv if not arg.startswith("-")), None)
+    owners = [module for module, commands in COMMAND_MODULES.items() if command in commands]
+    return owners or list(COMMAND_MODULES)
+
+
+def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bomi", description=__doc__.splitlines()[0])
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    for name in COMMAND_MODULES if modules is None else modules:
         importlib.import_module(name).register(subparsers)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(_modules_for(argv)).parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except (BomiError, SimError) as exc:

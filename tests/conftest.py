@@ -1,7 +1,12 @@
 """Shared fixtures: the published P1 recordings (read once per session) and day-1 models."""
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# Headless rendering: must be set before anything imports mujoco.
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 from bomi.chain import train
 from bomi.dataset import data_dir
