@@ -116,3 +116,21 @@ def test_run_task_with_a_bad_operator_file_is_one_line_and_writes_nothing(tmp_pa
     err = capsys.readouterr().err.strip()
     assert code == 2 and not out.exists()
     assert err.startswith("bomi: error:") and str(bad) in err and "\n" not in err
+
+
+def test_benchmark_runs_episodes_in_worker_processes_and_compares_with_the_paper(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    code = main(["benchmark", "--participants", "P1", "--operators", "joystick", "--seeds", "2", "--jobs", "2",
+                 "--time-limit", "120", "--json", str(out)])
+    record = json.loads(out.read_text())
+    assert code == 0 and [e["seed"] for e in record["episodes"]] == [0, 1]
+    row, = record["rows"]
+    assert row["successes"] == 2 and row["episodes"] == 2
+    times = [e["completion_time"] for e in record["episodes"]]
+    assert row["completion_time_mean"] == pytest.approx(sum(times) / 2)
+    assert record["paper"]["bomi_time_s"] == 138.0 and "| 2.38 |" in capsys.readouterr().out
+
+
+def test_benchmark_rejects_an_unknown_operator(capsys):
+    assert main(["benchmark", "--operators", "joystick,telepathy", "--seeds", "1"]) == 2
+    assert "unknown telepathy" in capsys.readouterr().err
