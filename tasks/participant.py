@@ -28,10 +28,11 @@ import numpy as np
 import scipy.signal
 
 from bomi.errors import BomiError
-from bomi.fusion import DT, NodeFusion
-from bomi.frames import FrameParser, imu_index
+from bomi.fusion import DT
+from bomi.frames import FrameParser, RowAssembler
 from bomi.profiles import Profile
-from bomi.recording import NodeData, Recording
+from bomi.recording import NodeData, NodeSample, Recording
+from bomi.stream_commands import FusedRows
 from tasks.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
 
 PARTICIPANT_DIR = Path(__file__).resolve().parent / "participants"
@@ -525,47 +526,48 @@ def calibration_session(params: ParticipantParams, profile: Profile, seed: int, 
 
 
 # ------------------------------------------------------------------------------ recording it
-def sample_indices(counters: Sequence[int]) -> np.ndarray:
-    """Unwrap a node's 8-bit packet counters into sample indices (first frame: its counter)."""
-    steps = np.diff(np.asarray(counters, dtype=int)) % 256
-    return np.concatenate([[counters[0]], counters[0] + np.cumsum(steps)]).astype(int) if len(counters) else \
-        np.empty(0, int)
+def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recording, np.ndarray]:
+    """Parse base-station bytes into fused rows exactly as ``bomi record`` does; also each row's sample index.
 
-
-def record_stream(stream: bytes, profile: Profile, n_samples: int, source: str) -> Recording:
-    """Parse base-station bytes and fuse each node, one row per sample index, as the host records.
-
-    Each node is fused frame by frame (``bomi.fusion.NodeFusion``, as live); a lost sample
-    repeats the node's previous row, as the published recordings do.
+    Rows come from ``bomi.frames.RowAssembler`` (frames paired by arrival, a lost frame's node
+    repeats its previous sample) and ``FusedRows`` (each frame fused once by ``NodeFusion``). The
+    sample index of a row (to label it) is that of its newest frame, from the unwrapped packet counters.
     """
-    per_node: dict[int, list] = {node.index: [] for node in profile.nodes}
+    ids = tuple(node.node_id for node in profile.nodes)
+    assembler = RowAssembler(ids)
+    fused = FusedRows({node.index: node.calibration for node in profile.nodes})
+    latest: dict[int, tuple[int, int]] = {}          # node id -> (counter, sample index) of its last frame
+    index_of: dict[tuple[int, int], int] = {}        # (node id, counter) -> sample index of that frame
+    rows: list[dict[int, NodeSample]] = []
+    row_index: list[int] = []
     for frame in FrameParser().feed(stream):
-        index = imu_index(frame.node_id)
-        if index in per_node:
-            per_node[index].append(frame)
-    nodes = {}
-    for node in profile.nodes:
-        frames = per_node[node.index]
-        if not frames:
-            raise BomiError(f"{source}: no frame of node {node.index} (id {node.node_id})")
-        fusion = NodeFusion(node.calibration)
-        angles = np.array([fusion.update(f.acc, f.gyro, f.mag) for f in frames])
-        columns = {"acc": np.array([f.acc for f in frames], float), "gyro": np.array([f.gyro for f in frames], float),
-                   "mag": np.array([f.mag for f in frames], float), "angles": angles}
-        received = sample_indices([f.counter for f in frames])
-        latest = np.clip(np.searchsorted(received, np.arange(n_samples), side="right") - 1, 0, None)
-        nodes[node.index] = NodeData(**{name: values[latest] for name, values in columns.items()})
-    return Recording(nodes=nodes, labels=None, time=np.arange(n_samples) * DT, source=source)
+        if frame.node_id not in ids:
+            continue
+        last = latest.get(frame.node_id)
+        index = frame.counter if last is None else last[1] + (frame.counter - last[0]) % 256
+        latest[frame.node_id] = (frame.counter, index)
+        index_of[(frame.node_id, frame.counter)] = index
+        row = assembler.push(frame)
+        if row is not None:
+            rows.append(fused.samples(row))
+            row_index.append(max(index_of[(f.node_id, f.counter)] for f in row.values()))
+    if not rows:
+        raise BomiError(f"{source}: no complete row of nodes {list(profile.node_indices)} in the stream")
+    nodes = {node.index: NodeData(*(np.array([getattr(r[node.index], name) for r in rows], dtype=float)
+                                    for name in ("acc", "gyro", "mag", "angles")))
+             for node in profile.nodes}
+    indices = np.array(row_index)
+    return Recording(nodes=nodes, labels=None, time=indices * DT, source=source), indices
 
 
 def session_recording(session: CalibrationSession, profile: Profile, holds_only: bool = True) -> Recording:
-    """The session as the chain records it, labelled with the cue; warm-up cut.
+    """The session as ``bomi record`` would record it, labelled with the cue; warm-up cut.
 
     ``holds_only`` keeps just the held postures, like the published (post-processed) recordings;
-    otherwise every sample after the warm-up is kept, transitions labelled with their cue.
+    otherwise every row after the warm-up is kept, transitions labelled with their cue.
     """
     source = f"virtual {session.participant} (seed {session.seed})"
-    full = record_stream(session.delivery.stream(), profile, len(session.cue), source)
-    keep = session.recorded & (session.holding if holds_only else True)
+    full, index = record_stream(session.delivery.stream(), profile, source)
+    keep = session.recorded[index] & (session.holding[index] if holds_only else True)
     nodes = {i: NodeData(d.acc[keep], d.gyro[keep], d.mag[keep], d.angles[keep]) for i, d in full.nodes.items()}
-    return Recording(nodes=nodes, labels=session.cue[keep], time=full.time[keep], source=source)
+    return Recording(nodes=nodes, labels=session.cue[index][keep], time=full.time[keep], source=source)
