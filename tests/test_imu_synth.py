@@ -162,3 +162,14 @@ def test_several_nodes_at_once_equal_one_node_at_a_time():
         alone = synthesize_raw(angles[:, node], cal, rng, NO_NOISE, previous_deg=previous[node])
         for name in ("acc", "gyro", "mag"):
             np.testing.assert_array_equal(getattr(together[node], name), getattr(alone, name))
+
+
+def test_linear_acceleration_tilts_the_accelerometer_angles():
+    # 0.1 g along body y at zero tilt: acc = (-1, 0.1, 0) g, so pitch settles at atan2(-0.1, 1)
+    n = 400
+    linear = np.zeros((n, 1, 3))
+    linear[:, 0, 1] = 0.1
+    raw = synthesize_nodes(np.zeros((n, 1, 3)), [UNCALIBRATED], np.random.default_rng(0), NO_NOISE,
+                           linear_acc_g=linear)[0]
+    pitch, roll, _ = fused(raw, UNCALIBRATED)[-1]
+    assert pitch == pytest.approx(np.degrees(np.arctan2(-0.1, 1.0)), abs=0.01) and abs(roll) < 0.01
