@@ -19,6 +19,7 @@ COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "bomi.stream_commands": ("emulate", "capture", "record"),
     "sim.commands": ("sim-check", "render"),
     "tasks.commands": ("run-task", "benchmark", "demo"),
+    "tasks.live_commands": ("live",),
 }
 
 

@@ -12,7 +12,7 @@ import select
 import socket
 import time
 import tty
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Protocol
 from urllib.parse import urlsplit
@@ -83,26 +83,33 @@ def raw_samples(rec: Recording) -> dict[int, np.ndarray]:
 def frame_chunks(raw: dict[int, np.ndarray], config: EmulatorConfig,
                  stats: EmulatorStats) -> Iterator[tuple[float, bytes]]:
     """(send time in s, bytes of every node's frame for one sample), with loss and corruption."""
+    return block_chunks([raw], config, stats)
+
+
+def block_chunks(blocks: Iterable[dict[int, np.ndarray]], config: EmulatorConfig,
+                 stats: EmulatorStats) -> Iterator[tuple[float, bytes]]:
+    """:func:`frame_chunks` of consecutive blocks of raw samples (e.g. made as they are played)."""
     rng = np.random.default_rng(config.seed)
-    length = len(next(iter(raw.values())))
-    for k in range(length):
-        frames = []
-        for index, values in raw.items():
-            if rng.random() < config.loss:
-                stats.frames_dropped += 1
-                continue
-            row = values[k].tolist()
-            frames.append(encode_imu_frame(
-                ImuFrame(imu_node_id(index), config.period_ms, k % 256, tuple(row[0:3]), tuple(row[3:6]), tuple(row[6:9]))))
-        stats.frames_sent += len(frames)
-        stats.samples += 1
-        chunk = bytearray(b"".join(frames))
-        if config.corrupt:
-            hit = np.flatnonzero(rng.random(len(chunk)) < config.corrupt)
-            for i, flip in zip(hit.tolist(), rng.integers(1, 256, hit.size).tolist()):
-                chunk[i] ^= flip
-            stats.bytes_corrupted += hit.size
-        yield k / config.rate_hz, bytes(chunk)
+    k = 0
+    for raw in blocks:
+        for rows in zip(*(values.tolist() for values in raw.values())):
+            frames = []
+            for index, row in zip(raw, rows):
+                if rng.random() < config.loss:
+                    stats.frames_dropped += 1
+                    continue
+                frames.append(encode_imu_frame(ImuFrame(imu_node_id(index), config.period_ms, k % 256,
+                                                        tuple(row[0:3]), tuple(row[3:6]), tuple(row[6:9]))))
+            stats.frames_sent += len(frames)
+            stats.samples += 1
+            chunk = bytearray(b"".join(frames))
+            if config.corrupt:
+                hit = np.flatnonzero(rng.random(len(chunk)) < config.corrupt)
+                for i, flip in zip(hit.tolist(), rng.integers(1, 256, hit.size).tolist()):
+                    chunk[i] ^= flip
+                stats.bytes_corrupted += hit.size
+            yield k / config.rate_hz, bytes(chunk)
+            k += 1
 
 
 class Sink(Protocol):

@@ -4,17 +4,18 @@ from __future__ import annotations
 import argparse
 import itertools
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from bomi.chain import train
-from bomi.emulator import EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
+from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
-from bomi.fusion import NodeCalibration, NodeFusion
+from bomi.fusion import DT, NodeCalibration, NodeFusion
 from bomi.model_io import save_model
 from bomi.profiles import NEUTRAL_FUNCTION, ClassConfig, Profile, load_profile
 from bomi.recording import NodeSample, RecordingWriter, read_recording
@@ -32,17 +33,24 @@ TimedFrame = tuple[float, ImuFrame]
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     emulate = subparsers.add_parser(
-        "emulate", help="play a recording as base-station frames onto a pty, socket or port",
-        description="Play a recording's raw samples as base-station frames at the real rate. "
+        "emulate", help="play a recording or a virtual participant as base-station frames onto a pty, socket or port",
+        description="Play a recording's raw samples, or a virtual participant performing the calibration "
+                    "protocol of `bomi record` (neutral, then each class held --hold s with --neutral s of "
+                    "neutral between, 3 times), as base-station frames at the real rate. "
                     "With --to pty the pseudo-terminal's path is printed on stdout.")
-    emulate.add_argument("--recording", required=True, type=Path, help="recording (.csv) with whole raw values")
+    what = emulate.add_mutually_exclusive_group(required=True)
+    what.add_argument("--recording", type=Path, help="recording (.csv) with whole raw values")
+    what.add_argument("--participant", help="virtual participant (P1, P4, P5 or a TOML file)")
     emulate.add_argument("--to", required=True, metavar="PORT_OR_URL",
                          help="'pty', socket://HOST:PORT (listens for one client), or a port / pyserial URL")
     emulate.add_argument("--rate", type=float, default=62.5, help="samples per second per node (default 62.5)")
     emulate.add_argument("--loss", type=float, default=0.0, help="probability of dropping a frame (real: 0.09)")
     emulate.add_argument("--corrupt", type=float, default=0.0, help="probability of altering a byte")
-    emulate.add_argument("--seed", type=int, default=0, help="seed of loss and corruption")
+    emulate.add_argument("--seed", type=int, default=0, help="seed of loss, corruption and the participant's session")
     emulate.add_argument("--duration", type=float, help="stop after this many seconds of recording")
+    emulate.add_argument("--hold", type=float, default=5.0, help="--participant: seconds each motion is held")
+    emulate.add_argument("--neutral", type=float, default=5.0,
+                         help="--participant: seconds of neutral posture between motions")
     emulate.add_argument("--linger", type=float, default=5.0,
                          help="pty: after the end, wait up to this many seconds for the reader to close")
     emulate.add_argument("--baud", type=int, default=BASE_STATION_BAUD, help="baud rate of a real port")
@@ -110,24 +118,44 @@ def _note(message: str) -> None:
 # ------------------------------------------------------------------------------------ emulate
 def run_emulate(args: argparse.Namespace) -> int:
     config = EmulatorConfig(rate_hz=args.rate, loss=args.loss, corrupt=args.corrupt, seed=args.seed)
-    raw = raw_samples(read_recording(args.recording))
-    if args.duration is not None:
-        samples = max(1, int(args.duration * config.rate_hz))
-        raw = {index: values[:samples] for index, values in raw.items()}
-    samples = len(next(iter(raw.values())))
+    what, nodes, samples, blocks = (_recording_blocks if args.participant is None else _participant_blocks)(args)
     sink = open_sink(args.to, args.linger, args.baud)
     print(sink.description, flush=True)
-    _note(f"emulate: {args.recording}: {len(raw)} node(s), {samples} samples at {config.rate_hz:g} Hz "
+    _note(f"emulate: {what}: {nodes} node(s), {samples} samples at {config.rate_hz:g} Hz "
           f"-> {sink.description}; waiting for a reader")
     sink.wait_for_reader()
     stats = EmulatorStats()
-    chunks = tqdm(frame_chunks(raw, config, stats), total=samples, unit="sample", disable=None, file=sys.stderr)
+    chunks = tqdm(block_chunks(blocks, config, stats), total=samples, unit="sample", disable=None, file=sys.stderr)
     completed = play(iter(chunks), sink)
     chunks.close()
-    _note(f"emulate: {'end of recording' if completed else 'the reader went away'}: {stats.samples} samples, "
+    _note(f"emulate: {'end of stream' if completed else 'the reader went away'}: {stats.samples} samples, "
           f"{stats.frames_sent} frames sent, {stats.frames_dropped} dropped, {stats.bytes_corrupted} bytes corrupted")
     sink.finish()
     return 0
+
+
+RawBlocks = tuple[str, int, int, Iterable[dict[int, np.ndarray]]]  # what, nodes, samples, blocks
+
+
+def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
+    raw = raw_samples(read_recording(args.recording))
+    if args.duration is not None:
+        samples = max(1, int(args.duration * args.rate))
+        raw = {index: values[:samples] for index, values in raw.items()}
+    return str(args.recording), len(raw), len(next(iter(raw.values()))), [raw]
+
+
+def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
+    """The participant performs the calibration protocol; samples are made while they are played."""
+    from tasks.live import participant_blocks  # the CLI reaches across: tasks/ composes bomi/ and sim/
+    from tasks.participant import load_participant
+    params = load_participant(args.participant)
+    profile = load_profile(params.profile)
+    cues = calibration_schedule(profile, hold_s=args.hold, neutral_s=args.neutral)
+    end_s = cues[-1].end_s if args.duration is None else min(args.duration, cues[-1].end_s)
+    what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol, {end_s:g} s"
+    return (what, len(profile.nodes), int(end_s / DT) + 1,
+            participant_blocks(params, profile, args.seed, cues, end_s))
 
 
 # ------------------------------------------------------------------------------ rows of samples

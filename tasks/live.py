@@ -1,0 +1,359 @@
+"""The live loop: a base-station stream drives the simulated arm at its 60 Hz control rate.
+
+    SerialSource -> OnlineChain -> Decision -> sanitizer -> DecisionStick -> Watchdog -> ArmSim.step
+
+The arm never knows where the stick came from. Ticks are paced by the wall clock; each tick reads
+whatever bytes arrived (without blocking), feeds their frames to the chain, and steps the arm once.
+Safety: when no frame has arrived for ``Watchdog.timeout_s`` the tick's stick is zero (the
+command is zero on the first tick after the timeout) and the last decision is forgotten, so the
+arm moves again only on decisions made from fresh frames; decisions with an unknown class, a
+NaN or an out-of-range value are dropped before the stick (and counted).
+
+Log (``--log L``, JSON lines, one object per control tick):
+``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``lost``
+(frames lost so far, from the packet counters), ``stale`` (the watchdog held the arm),
+``calibrating`` (neutral calibration still collecting), ``decisions`` (the chain's decisions
+this tick: label, name, function, confidence, rejected, gamma, nu, sample_index), ``dropped``
+(decisions the sanitizer refused: sample_index, reason), ``deflection`` and ``pressed`` (the
+stick sent to the arm), ``mode`` (after the tick), ``linear`` (m/s), ``angular`` (rad/s) and
+``finger`` (the arm's command); ``neutral`` (offsets per node index, degrees) on the tick they
+take effect.
+
+Also here: a virtual participant on the wire (``participant_blocks``), which ``bomi emulate
+--participant`` plays: the participant follows the cues of ``bomi record``'s calibration protocol.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import IO, Protocol
+
+import numpy as np
+
+from bomi.chain import Decision, OnlineChain
+from bomi.errors import BomiError
+from bomi.frames import FrameParser, imu_index
+from bomi.profiles import NEUTRAL_FUNCTION, Profile
+from bomi.serial_source import SerialSource
+from bomi.stream_commands import Segment
+from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState
+from tasks.episode import rising_edge
+from tasks.imu_synth import Delivery, LinkModel
+from tasks.participant import NEUTRAL_LABEL, ParticipantParams, VirtualParticipant
+
+WATCHDOG_TIMEOUT_S = 0.1
+STATUS_PERIOD_S = 0.5
+
+
+# ---------------------------------------------------------------------------------- safety
+@dataclass
+class Watchdog:
+    """Expired when no frame has arrived for ``timeout_s`` (or none ever has). Pure: times are passed in."""
+
+    timeout_s: float = WATCHDOG_TIMEOUT_S
+    last_frame_s: float | None = None
+    trips: int = 0          # times it went from fresh to expired
+    _was_expired: bool = field(default=True, repr=False)
+
+    def frames_arrived(self, now: float) -> None:
+        self.last_frame_s = now
+
+    def expired(self, now: float) -> bool:
+        expired = self.last_frame_s is None or now - self.last_frame_s >= self.timeout_s
+        self.trips += expired and not self._was_expired
+        self._was_expired = expired
+        return expired
+
+
+def refusal(decision: Decision, functions: Mapping[int, str]) -> str | None:
+    """Why ``decision`` must not reach the arm (None if it may). ``functions``: label -> function of the profile."""
+    if functions.get(decision.label) != decision.function or decision.function not in (*FUNCTIONS, *BUTTONS,
+                                                                                         NEUTRAL_FUNCTION):
+        return f"unknown class {decision.label} ({decision.function})"
+    values = {"confidence": decision.confidence, "gamma": decision.gamma, "nu": decision.nu}
+    for name, value in values.items():
+        if not math.isfinite(value):
+            return f"{name} is {value}"
+    if not 0.0 <= decision.nu <= 1.0:
+        return f"nu {decision.nu} outside [0, 1]"
+    if not 0.0 <= decision.confidence <= 1.0:
+        return f"confidence {decision.confidence} outside [0, 1]"
+    return None
+
+
+class DecisionStick:
+    """Decisions -> the stick, as tasks.episode.BomiChannel maps them: the latest decision's function
+    deflected by its nu (held until the next decision); a B1/B2 class presses its button on its rising edge."""
+
+    def __init__(self) -> None:
+        self.release()
+
+    def release(self) -> None:
+        """Forget the last decision: the stick is centred until a new one comes."""
+        self.function, self.nu = NEUTRAL_FUNCTION, 0.0
+
+    def update(self, decisions: Iterable[Decision]) -> JoystickState:
+        pressed: set[str] = set()
+        for decision in decisions:
+            pressed |= rising_edge(decision.function if decision.function in BUTTONS else None, self.function)
+            self.function, self.nu = decision.function, decision.nu
+        if self.function in FUNCTIONS and self.nu > 0:
+            return JoystickState({self.function: min(1.0, self.nu)}, frozenset(pressed))
+        return JoystickState(pressed=frozenset(pressed))
+
+
+# ---------------------------------------------------------------------------------- one tick
+@dataclass
+class Tick:
+    """What one control tick read, decided and commanded."""
+
+    tick: int
+    t: float
+    frames: int
+    lost: int
+    stale: bool
+    calibrating: bool
+    decisions: list[Decision]
+    dropped: list[tuple[int, str]]
+    state: JoystickState
+    mode: str
+    command: ArmCommand
+    neutral: dict[int, tuple[float, float, float]] | None = None
+
+    def record(self) -> dict:
+        """The tick as one JSON-ready log object (columns in the module docstring)."""
+        out = {"tick": self.tick, "t": self.t, "frames": self.frames, "lost": self.lost, "stale": self.stale,
+               "calibrating": self.calibrating, "decisions": [asdict(d) for d in self.decisions],
+               "dropped": [{"sample_index": i, "reason": r} for i, r in self.dropped],
+               "deflection": dict(self.state.deflection), "pressed": sorted(self.state.pressed), "mode": self.mode,
+               "linear": self.command.linear.tolist(), "angular": self.command.angular.tolist(),
+               "finger": float(self.command.finger)}
+        if self.neutral is not None:
+            out["neutral"] = {str(node): list(offset) for node, offset in self.neutral.items()}
+        return out
+
+
+class Arm(Protocol):
+    """What the loop needs of sim.env.ArmSim."""
+
+    dt: float
+
+    def step(self, state: JoystickState) -> ArmCommand: ...
+
+    @property
+    def mode(self): ...
+
+
+class Display(Protocol):
+    def running(self) -> bool: ...
+
+    def sync(self) -> None: ...
+
+
+class Headless:
+    def running(self) -> bool:
+        return True
+
+    def sync(self) -> None:
+        """Nothing to draw."""
+
+
+class PassiveViewer:
+    """MuJoCo's interactive viewer, following the simulation (closing its window ends the run)."""
+
+    def __init__(self, model, data):
+        import mujoco.viewer  # needs a display; imported only when one is there
+        self._handle = mujoco.viewer.launch_passive(model, data)
+
+    def running(self) -> bool:
+        return self._handle.is_running()
+
+    def sync(self) -> None:
+        self._handle.sync()
+
+    def close(self) -> None:
+        self._handle.close()
+
+
+def has_display(environ: Mapping[str, str] = os.environ) -> bool:
+    return bool(environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY"))
+
+
+# ---------------------------------------------------------------------------------- status
+def status_text(tick: Tick, parser: FrameParser, decision: Decision | None, calibrating: bool) -> str:
+    """Rate, lost packets, current class, confidence, mode, commanded speed."""
+    rates = [stats.rate_hz for stats in parser.nodes.values()]
+    sent = sum(stats.frames + stats.lost for stats in parser.nodes.values())
+    lost = f"lost {parser.total_lost} ({100 * parser.total_lost / sent if sent else 0:.1f} %)"
+    if calibrating:
+        what = "calibrating neutral, hold still"
+    elif decision is None:
+        what = "no decision yet"
+    else:
+        what = f"c{decision.label} {decision.function} conf {decision.confidence:.2f}"
+    speed = (f"{100 * np.linalg.norm(tick.command.linear):.1f} cm/s" if tick.mode == "translation" else
+             f"{np.degrees(np.linalg.norm(tick.command.angular)):.0f} deg/s" if tick.mode == "wrist" else
+             f"fingers {tick.command.finger:+.2f}")
+    guard = "STOPPED: no frames" if tick.stale else "ok"
+    return (f"{tick.t:6.1f} s | {(sum(rates) / len(rates) if rates else 0):5.1f} Hz | {lost} | {what} | "
+            f"{tick.mode} | {speed} | {guard}")
+
+
+@dataclass
+class StatusLine:
+    """A status line about every ``period_s``: rewritten in place on a terminal, one line each otherwise."""
+
+    out: IO[str] = sys.stderr
+    period_s: float = STATUS_PERIOD_S
+    _next: float = 0.0
+
+    def show(self, t: float, text: Callable[[], str]) -> None:
+        if t < self._next:
+            return
+        self._next = t + self.period_s
+        if self.out.isatty():
+            self.out.write("\r" + text().ljust(100))
+        else:
+            self.out.write(text() + "\n")
+        self.out.flush()
+
+    def close(self) -> None:
+        if self.out.isatty():
+            self.out.write("\n")
+
+
+# ---------------------------------------------------------------------------------- the loop
+@dataclass
+class LiveSummary:
+    ticks: int = 0
+    frames: int = 0
+    decisions: int = 0
+    dropped: int = 0
+    stale_ticks: int = 0
+    watchdog_trips: int = 0
+    neutral: dict[int, tuple[float, float, float]] | None = None
+
+
+def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: float | None = None,
+             neutral: Mapping[int, Sequence[float]] | None = None, log: IO[str] | None = None,
+             status: StatusLine | None = None, display: Display = Headless(),
+             watchdog: Watchdog | None = None, on_neutral: Callable[[dict], None] = lambda offsets: None,
+             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> LiveSummary:
+    """Drive ``arm`` from ``source`` until ``duration_s`` (or the display closes).
+
+    Neutral offsets: ``neutral`` if given, else the first ``profile.neutral_samples`` samples.
+    ``on_neutral`` is told the offsets once they hold. ``log`` gets one JSON line per tick.
+    """
+    watchdog = watchdog or Watchdog()
+    stick = DecisionStick()
+    functions = {cls.label: cls.function for cls in chain.profile.classes}
+    summary = LiveSummary()
+    if neutral is None:
+        chain.begin_neutral_calibration()
+    else:
+        chain.set_neutral(neutral)
+        summary.neutral = chain.neutral
+        on_neutral(summary.neutral)
+    batches = source.batches()
+    last_decision: Decision | None = None
+    start = clock()
+    due = start
+    while display.running():
+        wait = due - clock()
+        if wait > 0:
+            sleep(wait)
+        now = clock()
+        if duration_s is not None and now - start >= duration_s:
+            break
+        due = max(due + arm.dt, now)  # a late tick does not make the next ones hurry
+        _, frames = next(batches)
+        decisions, dropped = [], []
+        for frame in frames:
+            decision = chain.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
+            if decision is None:
+                continue
+            reason = refusal(decision, functions)
+            if reason is None:
+                decisions.append(decision)
+            else:
+                dropped.append((decision.sample_index, reason))
+        if frames:
+            watchdog.frames_arrived(now)
+        stale = watchdog.expired(now)
+        if stale:
+            stick.release()
+            state = JoystickState()
+        else:
+            state = stick.update(decisions)
+        command = arm.step(state)
+        display.sync()
+        new_neutral = None
+        if summary.neutral is None and not chain.calibrating:
+            new_neutral = summary.neutral = chain.neutral
+            on_neutral(new_neutral)
+        tick = Tick(summary.ticks, now - start, len(frames), source.parser.total_lost, stale, chain.calibrating,
+                    decisions, dropped, state, arm.mode.value, command, new_neutral)
+        if log is not None:
+            log.write(json.dumps(tick.record()) + "\n")
+        last_decision = decisions[-1] if decisions else last_decision
+        if status is not None:
+            status.show(tick.t, lambda: status_text(tick, source.parser, last_decision, chain.calibrating))
+        summary.ticks += 1
+        summary.frames += len(frames)
+        summary.decisions += len(decisions)
+        summary.dropped += len(dropped)
+        summary.stale_ticks += stale
+    summary.watchdog_trips = watchdog.trips
+    return summary
+
+
+def open_log(path: Path) -> IO[str]:
+    """A new log file (never replaces one)."""
+    try:
+        return path.open("x", encoding="utf-8")
+    except FileExistsError:
+        raise BomiError(f"{path}: file exists, not overwriting it") from None
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot write the log ({exc.strerror})") from None
+
+
+# ------------------------------------------------------------------ a virtual participant on the wire
+LOSSLESS_LINK = LinkModel(loss_fraction=0.0)  # the emulator applies its own --loss
+
+
+def participant_blocks(params: ParticipantParams, profile: Profile, seed: int, cues: Sequence[Segment],
+                       end_s: float, block_s: float = 1.0) -> Iterator[dict[int, np.ndarray]]:
+    """Raw samples (per node index, (m, 9) mag, gyro, acc) of a virtual participant following ``cues``,
+    made ``block_s`` at a time up to ``end_s``. At each cue's start the participant takes up its class
+    (full amplitude; after its reaction time), as someone following ``bomi record``'s prompts."""
+    vp = VirtualParticipant(params, profile, seed, link=LOSSLESS_LINK)
+    pending = [cue for cue in cues if cue.start_s < end_s]
+    t = 0.0
+    while t < end_s:
+        t = min(t + block_s, end_s)
+        parts = []
+        while pending and pending[0].start_s <= t:
+            cue = pending.pop(0)
+            parts.append(vp.deliveries(cue.start_s))
+            vp.set_intent(cue.label, 0.0 if cue.label == NEUTRAL_LABEL else 1.0, cue.start_s)
+        parts += [vp.deliveries(t), vp.flush()]
+        yield raw_block(parts)
+
+
+def raw_block(deliveries: Sequence[Delivery]) -> dict[int, np.ndarray]:
+    """Decode lossless deliveries into per-node raw rows (mag, gyro, acc) in sample order."""
+    frames = FrameParser().feed(b"".join(d.stream() for d in deliveries))
+    values = np.array([frame.mag + frame.gyro + frame.acc for frame in frames], dtype=np.int64).reshape(-1, 9)
+    node_index = np.concatenate([d.node_index for d in deliveries])
+    sample_index = np.concatenate([d.sample_index for d in deliveries])
+    block = {}
+    for node in np.unique(node_index).tolist():
+        mine = np.flatnonzero(node_index == node)
+        block[node] = values[mine[np.argsort(sample_index[mine], kind="stable")]]
+    return block

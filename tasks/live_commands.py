@@ -1,0 +1,83 @@
+"""`bomi live`: the simulated arm driven by a live base-station stream (see tasks.live)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from bomi.chain import OnlineChain, recording_neutral
+from bomi.errors import BomiError
+from bomi.model_io import load_model
+from bomi.profiles import load_profile
+from bomi.recording import read_recording
+from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
+from sim.env import ArmSim
+from tasks.live import Headless, PassiveViewer, StatusLine, has_display, open_log, run_live
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    live = subparsers.add_parser(
+        "live", help="drive the simulated arm from a live base-station stream",
+        description="Frames -> BoMI chain -> joystick -> simulated JACO at 60 Hz, in MuJoCo's viewer (or "
+                    "headless). Neutral offsets come from the first samples (hold still) unless --neutral-from "
+                    "gives a recording. The arm stops when no frame arrives for 100 ms.")
+    live.add_argument("--port", required=True, metavar="PORT_OR_URL",
+                      help="serial port, pty path or pyserial URL (socket://, loop://)")
+    live.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
+    live.add_argument("--model", required=True, type=Path, help="model file (.json/.npz) trained for the profile")
+    live.add_argument("--headless", action="store_true", help="no viewer window")
+    live.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C or the "
+                                                     "viewer closes)")
+    live.add_argument("--log", type=Path, help="JSON-lines log of every control tick (must not exist)")
+    live.add_argument("--neutral-from", type=Path, metavar="RECORDING",
+                      help="take the neutral offsets from the first samples of this recording")
+    live.add_argument("--baud", type=int, default=BASE_STATION_BAUD)
+    live.add_argument("--retries", type=int, default=RetryPolicy.attempts,
+                      help="reconnection attempts after the stream is lost")
+    live.set_defaults(func=run)
+
+
+def _print_neutral(offsets: dict) -> None:
+    text = ", ".join(f"node {node}: ({', '.join(f'{v:.2f}' for v in offset)})" for node, offset in offsets.items())
+    print(f"live: neutral offsets (pitch, roll, yaw deg) {text}", file=sys.stderr, flush=True)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.duration is not None and args.duration <= 0:
+        raise BomiError(f"--duration {args.duration:g}: must be positive")
+    profile = load_profile(args.profile)
+    model = load_model(args.model)
+    unknown = sorted(set(model.classes.tolist()) - {cls.label for cls in profile.classes})
+    if unknown:
+        raise BomiError(f"{args.model}: class(es) {unknown} are not classes of profile {profile.name}")
+    chain = OnlineChain(model, profile)
+    neutral = None
+    if args.neutral_from is not None:
+        offsets = recording_neutral(read_recording(args.neutral_from), model.spec.nodes, profile.neutral_samples)
+        neutral = dict(zip(model.spec.nodes, offsets.tolist()))
+    sim = ArmSim()
+    display = Headless()
+    if not args.headless:
+        if has_display():
+            display = PassiveViewer(sim.model, sim.data)
+        else:
+            print("live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless", file=sys.stderr)
+    log = open_log(args.log) if args.log is not None else None
+    # timeout 0: a tick reads what has arrived and never waits for more
+    source = SerialSource(args.port, baudrate=args.baud, timeout_s=0.0, retry=RetryPolicy(attempts=args.retries))
+    status = StatusLine()
+    try:
+        with source:
+            summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
+                               status=status, display=display, on_neutral=_print_neutral)
+    finally:
+        status.close()
+        if log is not None:
+            log.close()
+        if isinstance(display, PassiveViewer):
+            display.close()
+        sim.close()
+    print(f"live: {summary.ticks} ticks, {summary.frames} frames, {summary.decisions} decisions, "
+          f"{summary.dropped} dropped by the sanitizer, watchdog stopped the arm {summary.watchdog_trips} time(s) "
+          f"({summary.stale_ticks} ticks); {source.parser.summary()}")
+    return 0
