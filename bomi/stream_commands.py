@@ -128,7 +128,7 @@ def run_emulate(args: argparse.Namespace) -> int:
     chunks = tqdm(block_chunks(blocks, config, stats), total=samples, unit="sample", disable=None, file=sys.stderr)
     completed = play(iter(chunks), sink)
     chunks.close()
-    _note(f"emulate: {'end of stream' if completed else 'the reader went away'}: {stats.samples} samples, "
+    _note(f"emulate: {'end of recording' if completed else 'the reader went away'}: {stats.samples} samples, "
           f"{stats.frames_sent} frames sent, {stats.frames_dropped} dropped, {stats.bytes_corrupted} bytes corrupted")
     sink.finish()
     return 0
