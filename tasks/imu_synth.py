@@ -113,7 +113,7 @@ def to_int16(values: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(values), INT16_MIN, INT16_MAX).astype(np.int16)
 
 
-def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rng: np.random.Generator,
+def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rngs: Sequence[np.random.Generator],
                      noise: SensorNoise = SensorNoise(), field: EarthField = EarthField(),
                      previous_deg: np.ndarray | None = None,
                      linear_acc_g: np.ndarray | None = None) -> list[RawImu]:
@@ -123,7 +123,9 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     Gyroscope: the body angular velocity over each sample interval (backward difference);
     ``previous_deg`` (k, 3) is the orientation one sample before the first row (streaming),
     without it the first rate is zero. Magnetometer: see ``magnetometer_reading``, then the
-    node's distortion. All nodes share one set of rotations (the costly part).
+    node's distortion. All nodes share one set of rotations (the costly part). Each node's
+    noise comes from its own generator, sample by sample, so a trajectory cut into pieces gets
+    the same noise as in one piece.
     """
     angles = np.asarray(angles_deg, dtype=float)
     n, k, _ = angles.shape
@@ -135,16 +137,14 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
         acc_body = acc_body + linear_acc_g
     rate = np.degrees((rotations[:-k].inv() * now).as_rotvec()).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
+    scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
     out = []
-    for node, cal in enumerate(cals):
+    for node, (cal, rng) in enumerate(zip(cals, rngs, strict=True)):
         acc = to_sensor_axes(acc_body[:, node], cal) * ACC_LSB_PER_G
         gyro = to_sensor_axes(rate[:, node], cal) * GYRO_LSB_PER_DEG_S
         mag = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * corrected_units(cal), cal), cal)
-        out.append(RawImu(
-            acc=to_int16(acc + rng.normal(0.0, noise.acc_lsb, (n, 3))),
-            gyro=to_int16(gyro + rng.normal(0.0, noise.gyro_lsb, (n, 3))),
-            mag=to_int16(mag + rng.normal(0.0, noise.mag_lsb, (n, 3))),
-        ))
+        values = np.hstack([acc, gyro, mag]) + rng.standard_normal((n, 9)) * scale
+        out.append(RawImu(acc=to_int16(values[:, 0:3]), gyro=to_int16(values[:, 3:6]), mag=to_int16(values[:, 6:9])))
     return out
 
 
@@ -154,7 +154,7 @@ def synthesize_raw(angles_deg: np.ndarray, cal: NodeCalibration, rng: np.random.
     """One node: raw int16 acc/gyro/mag (sensor axes) for an (n, 3) trajectory of fusion angles."""
     angles = np.atleast_2d(np.asarray(angles_deg, dtype=float))[:, None]
     previous = None if previous_deg is None else np.reshape(previous_deg, (1, 3))
-    return synthesize_nodes(angles, [cal], rng, noise, field, previous)[0]
+    return synthesize_nodes(angles, [cal], [rng], noise, field, previous)[0]
 
 
 @dataclass(frozen=True)
@@ -193,22 +193,26 @@ class Delivery:
 
 
 def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_time_s: np.ndarray,
-            rng: np.random.Generator, link: LinkModel = LinkModel(),
+            rngs: Mapping[int, np.random.Generator], link: LinkModel = LinkModel(),
             not_before_s: Mapping[int, float] | None = None,
             period_ms: int = DEFAULT_PERIOD_MS) -> Delivery:
     """Encode each node's samples as 32-byte frames, drop ~``loss_fraction`` of them, interleave by arrival.
 
     ``sample_index`` (n,) numbers the samples on the nodes' clock (it also gives the packet
-    counter, modulo 256); ``sample_time_s`` (n,) is when they were taken. ``not_before_s`` gives
-    per node the arrival time of its last frame of an earlier call (streaming keeps order).
+    counter, modulo 256); ``sample_time_s`` (n,) is when they were taken. ``rngs`` holds one
+    generator per node, drawn sample by sample (so samples cut into pieces fare as in one piece).
+    ``not_before_s`` gives per node the arrival time of its last frame of an earlier call.
     """
     times, nodes, indices, frames = [], [], [], []
     for node, raw in sorted(raw_by_node.items()):
-        kept = rng.random(len(raw)) >= link.loss_fraction
-        sent = sample_time_s + link.latency_s + rng.exponential(link.jitter_s, len(raw))
-        arrival = np.ceil(np.maximum.accumulate(sent) / link.burst_s) * link.burst_s
+        draws = rngs[node].random((len(raw), 2))
+        kept = draws[:, 0] >= link.loss_fraction
+        sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[:, 1])   # exponential jitter
+        kept_index = np.flatnonzero(kept)          # lost frames hold nothing up
+        arrival = np.empty(len(raw))
+        arrival[kept_index] = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
         arrival = np.maximum(arrival, (not_before_s or {}).get(node, -np.inf))
-        for k in np.flatnonzero(kept):
+        for k in kept_index:
             frame = ImuFrame(imu_node_id(node), period_ms, int(sample_index[k]) % 256,
                              tuple(int(v) for v in raw.mag[k]), tuple(int(v) for v in raw.gyro[k]),
                              tuple(int(v) for v in raw.acc[k]))

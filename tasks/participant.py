@@ -301,10 +301,16 @@ class VirtualParticipant:
                  noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()):
         check_against_profile(params, profile)
         self.params, self.profile, self.noise, self.link = params, profile, noise, link
-        self._rng = np.random.default_rng(seed)
+        # one generator per purpose (and per node for sensors and link), each drawn in sample
+        # order: the output does not depend on how the caller slices time into advance() calls
+        body, sway, tremor, spasm, *per_node = (np.random.default_rng(s) for s in
+                                                np.random.SeedSequence(seed).spawn(4 + 2 * len(profile.nodes)))
+        self._rng, self._spasm_rng = body, spasm
+        self._sensor_rngs = per_node[:len(profile.nodes)]
+        self._link_rngs = {node.index: rng for node, rng in zip(profile.nodes, per_node[len(profile.nodes):])}
         channels = params.n_nodes * 3
-        self._sway = ColouredNoise(*sway_filter(), channels, self._rng)
-        self._tremor = ColouredNoise(*tremor_filter(params.tremor_spectrum), channels, self._rng)
+        self._sway = ColouredNoise(*sway_filter(), channels, sway)
+        self._tremor = ColouredNoise(*tremor_filter(params.tremor_spectrum), channels, tremor)
         self._day_posture = {label: np.exp(self._rng.normal(0.0, m.day_gain_log_std)) * m.posture_deg
                              + self._rng.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
         rest = self._target(NEUTRAL_LABEL, 0.0)
@@ -384,11 +390,11 @@ class VirtualParticipant:
         if spasm is None or spasm.rate_per_s == 0 or len(t) == 0:
             return out
         while self._spasm_until < t[-1]:
-            n_new = self._rng.poisson(spasm.rate_per_s * SPASM_DRAW_S)
-            onsets = np.sort(self._rng.uniform(self._spasm_until, self._spasm_until + SPASM_DRAW_S, n_new))
-            size = self._rng.uniform(-1.0, 1.0, (n_new, len(spasm.nodes), 3))
+            n_new = self._spasm_rng.poisson(spasm.rate_per_s * SPASM_DRAW_S)
+            onsets = np.sort(self._spasm_rng.uniform(self._spasm_until, self._spasm_until + SPASM_DRAW_S, n_new))
+            size = self._spasm_rng.uniform(-1.0, 1.0, (n_new, len(spasm.nodes), 3))
             size *= spasm.max_deg / np.maximum(np.abs(size).max(axis=(1, 2), keepdims=True), 1e-9)
-            size *= self._rng.uniform(0.3, 1.0, (n_new, 1, 1))
+            size *= self._spasm_rng.uniform(0.3, 1.0, (n_new, 1, 1))
             self._spasm_onsets = np.concatenate([self._spasm_onsets, onsets])
             self._spasm_sizes = np.concatenate([self._spasm_sizes, size])
             self._spasm_until += SPASM_DRAW_S
@@ -416,11 +422,11 @@ class VirtualParticipant:
                   + self._sway.next(n).reshape(shape) * self._noise_scale(t, "sway_std_deg")
                   + self._tremor.next(n).reshape(shape) * self._noise_scale(t, "tremor_std_deg")
                   + self._spasms(t))
-        raws = synthesize_nodes(angles, [node.calibration for node in self.profile.nodes], self._rng, self.noise,
-                                previous_deg=self._last_angles)
+        raws = synthesize_nodes(angles, [node.calibration for node in self.profile.nodes], self._sensor_rngs,
+                                self.noise, previous_deg=self._last_angles)
         self._last_angles = angles[-1]
         raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
-        fresh = deliver(raw, index, t, self._rng, self.link, not_before_s=self._last_arrival)
+        fresh = deliver(raw, index, t, self._link_rngs, self.link, not_before_s=self._last_arrival)
         for node in np.unique(fresh.node_index):
             self._last_arrival[int(node)] = float(fresh.arrival_s[fresh.node_index == node].max())
         self._pending = _merge(self._pending, fresh)

@@ -105,11 +105,15 @@ def make_raw(n: int, seed: int) -> dict[int, RawImu]:
             for node in (1, 2, 3)}
 
 
+def generators(seed: int) -> dict[int, np.random.Generator]:
+    return {node: np.random.default_rng([seed, node]) for node in (1, 2, 3)}
+
+
 def test_delivery_loses_frames_but_counters_advance_and_values_survive():
     n = 3000
     raw = make_raw(n, 0)
     index = np.arange(n)
-    out = deliver(raw, index, index / 62.5, np.random.default_rng(5))
+    out = deliver(raw, index, index / 62.5, generators(5))
     parser = FrameParser()
     frames = parser.feed(out.stream())
     assert len(frames) == len(out.frames)
@@ -129,7 +133,7 @@ def test_delivery_is_bursty_ordered_interleaved_and_seeded():
     n = 1000
     raw = make_raw(n, 1)
     index = np.arange(n)
-    out = deliver(raw, index, index / 62.5, np.random.default_rng(7))
+    out = deliver(raw, index, index / 62.5, generators(7))
     assert np.all(np.diff(out.arrival_s) >= 0)
     for node in (1, 2, 3):
         assert np.all(np.diff(out.sample_index[out.node_index == node]) > 0)   # a node never overtakes itself
@@ -137,15 +141,32 @@ def test_delivery_is_bursty_ordered_interleaved_and_seeded():
         assert np.all(arrival >= out.sample_index[out.node_index == node] / 62.5)  # nothing arrives before it is sampled
     assert len(out.arrival_s) / len(np.unique(out.arrival_s)) > 4           # bursts: several frames per arrival
     assert len(set(out.node_index[:12].tolist())) == 3                        # nodes interleaved
-    again = deliver(raw, index, index / 62.5, np.random.default_rng(7))
-    other = deliver(raw, index, index / 62.5, np.random.default_rng(8))
+    again = deliver(raw, index, index / 62.5, generators(7))
+    other = deliver(raw, index, index / 62.5, generators(8))
     assert again.stream() == out.stream() and other.stream() != out.stream()
+
+
+def test_delivery_in_pieces_equals_delivery_in_one_piece():
+    raw = make_raw(500, 3)
+    index = np.arange(500)
+    whole = deliver(raw, index, index / 62.5, generators(4))
+    rngs, last, parts = generators(4), {}, []
+    for piece in np.array_split(index, [1, 7, 90, 91, 300]):
+        part = deliver({n: RawImu(r.acc[piece], r.gyro[piece], r.mag[piece]) for n, r in raw.items()},
+                       piece, piece / 62.5, rngs, not_before_s=last)
+        last.update({int(n): float(part.arrival_s[part.node_index == n].max()) for n in np.unique(part.node_index)})
+        parts.append(part)
+    arrival = np.concatenate([p.arrival_s for p in parts])
+    frames = [f for p in parts for f in p.frames]
+    order = np.argsort(arrival, kind="stable")
+    assert [frames[i] for i in order] == whole.frames
+    np.testing.assert_array_equal(arrival[order], whole.arrival_s)
 
 
 def test_no_loss_link_delivers_everything():
     raw = make_raw(200, 2)
     index = np.arange(200)
-    out = deliver(raw, index, index / 62.5, np.random.default_rng(0), LinkModel(loss_fraction=0.0))
+    out = deliver(raw, index, index / 62.5, generators(0), LinkModel(loss_fraction=0.0))
     assert len(out.frames) == 600
     early, late = out.until(1.0)
     assert early.arrival_s.max() <= 1.0 < late.arrival_s.min()
@@ -157,7 +178,7 @@ def test_several_nodes_at_once_equal_one_node_at_a_time():
     angles = rng.normal(0.0, 20.0, (30, 3, 3))
     previous = rng.normal(0.0, 20.0, (3, 3))
     cals = [HEADSET, UNCALIBRATED, ODD]
-    together = synthesize_nodes(angles, cals, rng, NO_NOISE, previous_deg=previous)
+    together = synthesize_nodes(angles, cals, [rng] * 3, NO_NOISE, previous_deg=previous)
     for node, cal in enumerate(cals):
         alone = synthesize_raw(angles[:, node], cal, rng, NO_NOISE, previous_deg=previous[node])
         for name in ("acc", "gyro", "mag"):
@@ -169,7 +190,7 @@ def test_linear_acceleration_tilts_the_accelerometer_angles():
     n = 400
     linear = np.zeros((n, 1, 3))
     linear[:, 0, 1] = 0.1
-    raw = synthesize_nodes(np.zeros((n, 1, 3)), [UNCALIBRATED], np.random.default_rng(0), NO_NOISE,
+    raw = synthesize_nodes(np.zeros((n, 1, 3)), [UNCALIBRATED], [np.random.default_rng(0)], NO_NOISE,
                            linear_acc_g=linear)[0]
     pitch, roll, _ = fused(raw, UNCALIBRATED)[-1]
     assert pitch == pytest.approx(np.degrees(np.arctan2(-0.1, 1.0)), abs=0.01) and abs(roll) < 0.01

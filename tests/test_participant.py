@@ -149,6 +149,20 @@ def test_spasms_are_bursts_up_to_ten_degrees():
 
 
 # --------------------------------------------------------------------------------------- frames
+@pytest.mark.parametrize("name", ["P1", "P4"])
+def test_stream_does_not_depend_on_how_time_is_sliced(name):
+    params = load_participant(name)
+    profile = load_profile(name)
+    one, many = VirtualParticipant(params, profile, seed=5), VirtualParticipant(params, profile, seed=5)
+    for vp in (one, many):                      # intents known in advance, so both see the same ones
+        vp.set_intent(3 if name == "P1" else 2, 0.7, 2.0)
+    whole = one.advance(8.0)
+    pieces = b"".join(many.advance(t) for t in np.r_[np.arange(1, 480) / 60.0, [8.0]])
+    assert whole == pieces
+    np.testing.assert_allclose(one.truth().angles, many.truth().angles, atol=1e-9)   # filter round-off only
+
+
+
 def test_stream_parses_with_about_nine_percent_loss_and_nothing_from_the_future(p1):
     params, profile = p1
     vp = VirtualParticipant(params, profile, seed=1)
