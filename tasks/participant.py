@@ -271,12 +271,13 @@ class Segment:
     label: int
     amplitude: float
 
-    def at(self, t: np.ndarray) -> np.ndarray:
-        s = minimum_jerk((t - self.t0) / self.duration)
-        return self.start[None] + s[:, None, None] * (self.target - self.start)[None]
-
     def progress(self, t: np.ndarray) -> np.ndarray:
+        """Share of the move done at times ``t`` (0 before, 1 after)."""
         return minimum_jerk((t - self.t0) / self.duration)
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """Posture at times ``t``, (n, nodes, 3)."""
+        return self.start[None] + self.progress(t)[:, None, None] * (self.target - self.start)[None]
 
 
 @dataclass(frozen=True)
