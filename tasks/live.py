@@ -155,6 +155,8 @@ class Display(Protocol):
 
     def sync(self) -> None: ...
 
+    def close(self) -> None: ...
+
 
 class Headless:
     def running(self) -> bool:
@@ -162,6 +164,9 @@ class Headless:
 
     def sync(self) -> None:
         """Nothing to draw."""
+
+    def close(self) -> None:
+        """Nothing to release."""
 
 
 class PassiveViewer:
@@ -209,7 +214,7 @@ def status_text(tick: Tick, parser: FrameParser, decision: Decision | None, cali
 class StatusLine:
     """A status line about every ``period_s``: rewritten in place on a terminal, one line each otherwise."""
 
-    out: IO[str] = sys.stderr
+    out: IO[str] = field(default_factory=lambda: sys.stderr)
     period_s: float = STATUS_PERIOD_S
     _next: float = 0.0
 

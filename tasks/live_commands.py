@@ -42,6 +42,15 @@ def _print_neutral(offsets: dict) -> None:
     print(f"live: neutral offsets (pitch, roll, yaw deg) {text}", file=sys.stderr, flush=True)
 
 
+def _display(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
+    if headless:
+        return Headless()
+    if not has_display():
+        print("live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless", file=sys.stderr)
+        return Headless()
+    return PassiveViewer(sim.model, sim.data)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.duration is not None and args.duration <= 0:
         raise BomiError(f"--duration {args.duration:g}: must be positive")
@@ -55,27 +64,23 @@ def run(args: argparse.Namespace) -> int:
     if args.neutral_from is not None:
         offsets = recording_neutral(read_recording(args.neutral_from), model.spec.nodes, profile.neutral_samples)
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
+    if args.log is not None and args.log.exists():
+        raise BomiError(f"{args.log}: file exists, not overwriting it")
     sim = ArmSim()
-    display = Headless()
-    if not args.headless:
-        if has_display():
-            display = PassiveViewer(sim.model, sim.data)
-        else:
-            print("live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless", file=sys.stderr)
-    log = open_log(args.log) if args.log is not None else None
     # timeout 0: a tick reads what has arrived and never waits for more
     source = SerialSource(args.port, baudrate=args.baud, timeout_s=0.0, retry=RetryPolicy(attempts=args.retries))
-    status = StatusLine()
+    status, log, display = StatusLine(), None, Headless()
     try:
         with source:
+            log = open_log(args.log) if args.log is not None else None
+            display = _display(args.headless, sim)
             summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
                                status=status, display=display, on_neutral=_print_neutral)
     finally:
         status.close()
         if log is not None:
             log.close()
-        if isinstance(display, PassiveViewer):
-            display.close()
+        display.close()
         sim.close()
     print(f"live: {summary.ticks} ticks, {summary.frames} frames, {summary.decisions} decisions, "
           f"{summary.dropped} dropped by the sanitizer, watchdog stopped the arm {summary.watchdog_trips} time(s) "

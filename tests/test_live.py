@@ -1,0 +1,299 @@
+"""`bomi live`: watchdog, sanitizer and stick by hand; the loop on an injected clock; emulator -> pty -> live."""
+from __future__ import annotations
+
+import io
+import json
+import subprocess
+import sys
+import threading
+from dataclasses import asdict, replace
+
+import numpy as np
+import pytest
+
+from bomi.chain import Decision, OnlineChain, train
+from bomi.cli import main
+from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
+from bomi.frames import FrameParser, ImuFrame
+from bomi.fusion import DT
+from bomi.model_io import save_model
+from bomi.profiles import load_profile
+from bomi.stream_commands import calibration_schedule
+from sim.joystick import JoystickInterpreter, JoystickState
+from tasks.live import DecisionStick, Watchdog, participant_blocks, refusal, run_live
+from tasks.participant import calibration_session, load_participant, session_recording
+
+CONTROL_DT = 1 / 60
+FULL_SPEED = 0.2
+
+
+def decision(label: int = 1, function: str = "F", nu: float = 0.5, confidence: float = 0.9, index: int = 0) -> Decision:
+    return Decision(label=label, name="x", function=function, confidence=confidence, rejected=False, gamma=10.0,
+                    nu=nu, sample_index=index)
+
+
+# ------------------------------------------------------------------------------------ watchdog
+def test_watchdog_expires_after_100_ms_of_silence_and_needs_fresh_frames():
+    dog = Watchdog(timeout_s=0.1)
+    assert dog.expired(0.0)                  # nothing ever arrived
+    dog.frames_arrived(1.0)
+    assert not dog.expired(1.0)
+    assert not dog.expired(1.099)
+    assert dog.expired(1.1)
+    assert dog.expired(5.0)                  # time alone never resumes
+    assert dog.trips == 1
+    dog.frames_arrived(5.0)
+    assert not dog.expired(5.05)
+    assert dog.expired(5.2)
+    assert dog.trips == 2
+
+
+# ----------------------------------------------------------------------------------- sanitizer
+FUNCTIONS_P1 = {cls.label: cls.function for cls in load_profile("P1").classes}
+
+
+@pytest.mark.parametrize("bad, reason", [
+    (decision(label=42), "unknown class 42 (F)"),
+    (decision(label=1, function="B"), "unknown class 1 (B)"),       # label and function disagree
+    (decision(nu=float("nan")), "nu is nan"),
+    (decision(confidence=float("nan")), "confidence is nan"),
+    (replace(decision(), gamma=float("inf")), "gamma is inf"),
+    (decision(nu=1.5), "nu 1.5 outside [0, 1]"),
+    (decision(nu=-0.1), "nu -0.1 outside [0, 1]"),
+    (decision(confidence=1.2), "confidence 1.2 outside [0, 1]"),
+])
+def test_sanitizer_refuses_unknown_classes_nan_and_out_of_range(bad, reason):
+    assert refusal(bad, FUNCTIONS_P1) == reason
+
+
+def test_sanitizer_lets_valid_decisions_through():
+    assert FUNCTIONS_P1[1] == "F" and FUNCTIONS_P1[0] == "neutral"
+    assert refusal(decision(), FUNCTIONS_P1) is None
+    assert refusal(decision(label=0, function="neutral", nu=0.0), FUNCTIONS_P1) is None
+    assert refusal(decision(nu=1.0, confidence=1.0), FUNCTIONS_P1) is None
+
+
+# --------------------------------------------------------------------------------------- stick
+def test_stick_deflects_by_nu_and_presses_buttons_on_rising_edges():
+    buttons = {cls.function: cls.label for cls in load_profile("P1").classes}
+    b1 = decision(label=buttons["B1"], function="B1", nu=0.0)
+    stick = DecisionStick()
+    assert stick.update([decision(nu=0.25)]) == JoystickState({"F": 0.25})
+    assert stick.update([]) == JoystickState({"F": 0.25})                 # held until the next decision
+    assert stick.update([b1, b1]) == JoystickState(pressed=frozenset({"B1"}))  # one press per edge
+    assert stick.update([b1]) == JoystickState()
+    assert stick.update([decision(), b1]) == JoystickState(pressed=frozenset({"B1"}))
+    stick.update([decision(nu=0.7)])
+    stick.release()
+    assert stick.update([]) == JoystickState()
+
+
+# ------------------------------------------------------------------------ the loop, injected clock
+class FakeClock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += seconds
+
+
+class ScriptedSource:
+    """Per tick a number of frames (content irrelevant: the chain is scripted too)."""
+
+    def __init__(self, frames_per_tick: list[int]):
+        self.parser = FrameParser()
+        self._script = frames_per_tick
+
+    def batches(self):
+        frame = ImuFrame(10, 16, 0, (0, 0, 0), (0, 0, 0), (0, 0, 0))
+        for t, n in enumerate(self._script):
+            yield t, [frame] * n
+        while True:
+            yield 0, []
+
+
+class ScriptedChain:
+    """Returns the scripted decisions, one per pushed frame."""
+
+    def __init__(self, decisions: list[Decision | None]):
+        self.profile = load_profile("P1")
+        self._decisions = iter(decisions)
+        self.calibrating = False
+        self.neutral = {1: (0.0, 0.0, 0.0)}
+
+    def set_neutral(self, offsets) -> None:
+        pass
+
+    def push(self, node, acc, gyro, mag) -> Decision | None:
+        return next(self._decisions)
+
+
+class StickArm:
+    """The arm's joystick logic alone: records what reaches it."""
+
+    dt = CONTROL_DT
+
+    def __init__(self):
+        self.joystick = JoystickInterpreter(FULL_SPEED, 1.0)
+        self.states: list[JoystickState] = []
+
+    def step(self, state: JoystickState):
+        self.states.append(state)
+        return self.joystick.update(state)
+
+    @property
+    def mode(self):
+        return self.joystick.mode
+
+
+def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_decisions():
+    # ticks 0-29 a frame each, 30-49 silence, 50-59 frames again
+    script = [1] * 30 + [0] * 20 + [1] * 10
+    b = next(cls.label for cls in load_profile("P1").classes if cls.function == "B")
+    decisions = ([decision(nu=0.5)] * 10 + [decision(label=b, function="B", nu=float("nan")), decision(label=99)]
+                 + [decision(nu=0.5)] * 18 + [None] + [decision(nu=0.75)] * 9)
+    clock, arm, log = FakeClock(), StickArm(), io.StringIO()
+    summary = run_live(ScriptedSource(script), ScriptedChain(decisions), arm, duration_s=60 * CONTROL_DT,
+                       neutral={1: (0.0, 0.0, 0.0)}, log=log, clock=clock, sleep=clock.sleep)
+    ticks = [json.loads(line) for line in log.getvalue().splitlines()]
+    assert summary.ticks == len(ticks) == 60
+    speed = [np.linalg.norm(tick["linear"]) for tick in ticks]
+    # before the silence: F at nu 0.5; the NaN B and the unknown class never reach the arm
+    assert speed[:30] == pytest.approx([0.5 * FULL_SPEED] * 30)
+    assert [d["reason"] for d in ticks[10]["dropped"] + ticks[11]["dropped"]] == ["nu is nan", "unknown class 99 (F)"]
+    assert ticks[10]["deflection"] == ticks[11]["deflection"] == {"F": 0.5}
+    assert summary.dropped == 2
+    # silence: moving while the last frame is < 100 ms old, zero from the first tick after that
+    last_frame_t = ticks[29]["t"]
+    for tick, v in zip(ticks[30:50], speed[30:50]):
+        age = tick["t"] - last_frame_t
+        assert tick["stale"] == (age >= 0.1 - 1e-9)
+        assert (v == 0) == tick["stale"]
+    first_stale = next(tick for tick in ticks if tick["stale"])
+    assert 0.1 - 1e-9 <= first_stale["t"] - last_frame_t < 0.1 + CONTROL_DT
+    assert all(state == JoystickState() for state in arm.states[first_stale["tick"]:50])
+    # fresh frames without a decision do not restart the old motion; the next decision does
+    assert not ticks[50]["stale"] and speed[50] == 0
+    assert speed[51:] == pytest.approx([0.75 * FULL_SPEED] * 9)
+    assert summary.watchdog_trips == 1
+
+
+# -------------------------------------------------------------------- emulator -> pty -> bomi live
+SEED = 0
+
+
+@pytest.fixture(scope="module")
+def p1_model_file(tmp_path_factory):
+    """A model trained on the virtual P1's short calibration session (another day: seed 1)."""
+    params, profile = load_participant("P1"), load_profile("P1")
+    session = calibration_session(params, profile, 1, repetitions=1, hold_s=2.0, neutral_s=2.0)
+    path = tmp_path_factory.mktemp("model") / "p1.json"
+    save_model(path, train([session_recording(session, profile)], profile))
+    return path
+
+
+def offline_decisions(model_path, hold_s: float, neutral_s: float, end_s: float) -> list[dict]:
+    """The same participant's raw samples straight into an OnlineChain, neutral from its first samples."""
+    from bomi.model_io import load_model
+    params, profile = load_participant("P1"), load_profile("P1")
+    blocks = participant_blocks(params, profile, SEED, calibration_schedule(profile, hold_s=hold_s,
+                                                                            neutral_s=neutral_s), end_s)
+    chain = OnlineChain(load_model(model_path), profile)
+    chain.begin_neutral_calibration()
+    out = []
+    for block in blocks:
+        for rows in zip(*(values.tolist() for values in block.values())):
+            for node, row in zip(block, rows):
+                made = chain.push(node, tuple(row[6:9]), tuple(row[3:6]), tuple(row[0:3]))
+                if made is not None:
+                    out.append(asdict(made))
+    return out
+
+
+def read_log(path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_path, p1_model_file, capsys):
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "bomi", "emulate", "--participant", "P1", "--to", "pty", "--loss", "0",
+         "--hold", "2", "--neutral", "2", "--duration", "12", "--seed", str(SEED)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = emulator.stdout.readline().strip()
+        assert path.startswith("/dev/pts/")
+        log = tmp_path / "live.jsonl"
+        assert main(["live", "--port", path, "--profile", "P1", "--model", str(p1_model_file), "--headless",
+                     "--duration", "5", "--log", str(log), "--retries", "0"]) == 0
+        emulator.wait(timeout=30)
+    finally:
+        emulator.kill()
+    out = capsys.readouterr()
+    assert "live: neutral offsets" in out.err
+    assert " Hz | lost 0 (0.0 %) | " in out.err                      # status lines
+    ticks = read_log(log)
+    assert 0.9 * 300 < len(ticks) <= 301                              # 60 Hz for 5 s
+    live = [d for tick in ticks for d in tick["decisions"]]
+    assert len(live) > 150
+    assert live == offline_decisions(p1_model_file, 2.0, 2.0, 12.0)[:len(live)]
+    # the F cue at 2 s: recognised once the head is up, and the arm is driven by it
+    first_f = next(d for d in live if d["function"] == "F")
+    assert 2.0 < (first_f["sample_index"] + load_profile("P1").neutral_samples) * DT < 4.0  # counted after calibration
+    assert max(np.linalg.norm(tick["linear"]) for tick in ticks) > 0.5 * FULL_SPEED
+
+
+def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_file, capsys):
+    params, profile = load_participant("P1"), load_profile("P1")
+    cues = calibration_schedule(profile, hold_s=4.0, neutral_s=2.0)    # F from 2 s (held ~3.2-6.4 s)
+    sink = PtySink(linger_s=1.0)
+    chunks = block_chunks(participant_blocks(params, profile, SEED, cues, 8.0), EmulatorConfig(), EmulatorStats())
+    paused = ((t + 0.5 if t >= 4.5 else t, data) for t, data in chunks)   # 0.5 s of silence at 4.5 s
+
+    def emulate():
+        sink.wait_for_reader()
+        play(paused, sink)
+        sink.finish()
+
+    thread = threading.Thread(target=emulate, daemon=True)
+    thread.start()
+    log = tmp_path / "live.jsonl"
+    assert main(["live", "--port", sink.description, "--profile", "P1", "--model", str(p1_model_file),
+                 "--headless", "--duration", "6.5", "--log", str(log), "--retries", "0"]) == 0
+    thread.join(timeout=10)
+    ticks = read_log(log)
+    arrived = [tick for tick in ticks if tick["frames"]]
+    gaps = [(b["t"] - a["t"], a, b) for a, b in zip(arrived, arrived[1:])]
+    _, before, after = max(gaps, key=lambda gap: gap[0])
+    assert after["t"] - before["t"] > 0.4
+    speed = {tick["tick"]: np.linalg.norm(tick["linear"]) for tick in ticks}
+    assert speed[before["tick"]] > 0                                   # moving (F) when the stream stopped
+    silent = [tick for tick in ticks if before["t"] < tick["t"] < after["t"]]
+    for tick in silent:
+        stale = tick["t"] - before["t"] >= 0.1
+        assert tick["stale"] == stale
+        if stale:
+            assert speed[tick["tick"]] == 0 and tick["angular"] == [0, 0, 0] and tick["finger"] == 0
+    first_stale = next(tick for tick in silent if tick["stale"])
+    assert first_stale["t"] - before["t"] < 0.1 + 1.5 * CONTROL_DT      # within one control tick
+    assert any(speed[tick["tick"]] > 0 for tick in ticks if tick["t"] > after["t"])   # resumes with the stream
+    assert "watchdog stopped the arm 1 time(s)" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------- bad input
+def test_live_refuses_bad_files_in_one_line_and_overwrites_nothing(tmp_path, p1_model_file, capsys):
+    bad_model = tmp_path / "bad.json"
+    bad_model.write_text("{not json")
+    assert main(["live", "--port", "loop://", "--profile", "P1", "--model", str(bad_model), "--headless"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"bomi: error: {bad_model}") and err.count("\n") == 1
+    log = tmp_path / "old.jsonl"
+    log.write_text("keep me\n")
+    assert main(["live", "--port", "loop://", "--profile", "P1", "--model", str(p1_model_file), "--headless",
+                 "--log", str(log)]) == 2
+    assert capsys.readouterr().err == f"bomi: error: {log}: file exists, not overwriting it\n"
+    assert log.read_text() == "keep me\n"
+    assert main(["emulate", "--participant", "P9", "--to", "pty"]) == 2
+    assert "no such participant file" in capsys.readouterr().err
