@@ -21,13 +21,12 @@ from tqdm import tqdm
 
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
-from bomi.fusion import DT
 from bomi.recording import Recording, read_recording
+from tasks.participant import SAMPLE_RATE_HZ, SWAY_CUTOFF_HZ
 
-SAMPLE_RATE_HZ = 1.0 / DT
-SPLIT_HZ = 1.0                 # below: slow sway; above: tremor
 EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
 MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
+WELCH_SEGMENT = 128            # samples per Welch segment of the tremor spectrum (0.49 Hz bins)
 SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where it falls below this share of the peak
 MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
 ASSUMED_ONSET_S = 0.8          # min-jerk onset of a posture (not measurable here, see docs)
@@ -61,8 +60,8 @@ def repeated_fraction(x: np.ndarray) -> float:
 
 
 def split_sway_tremor(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A hold's (n, 3) angles -> slow sway around the hold's median and tremor (above SPLIT_HZ), edges dropped."""
-    b, a = scipy.signal.butter(2, SPLIT_HZ / (SAMPLE_RATE_HZ / 2), "high")
+    """A hold's (n, 3) angles -> slow sway around the hold's median and tremor (above SWAY_CUTOFF_HZ), edges dropped."""
+    b, a = scipy.signal.butter(2, SWAY_CUTOFF_HZ, "high", fs=SAMPLE_RATE_HZ)
     tremor = scipy.signal.filtfilt(b, a, x, axis=0)
     sway = x - tremor - np.median(x, axis=0)
     keep = slice(EDGE_SAMPLES, -EDGE_SAMPLES)
@@ -145,8 +144,8 @@ def fit_recordings(recordings: list[Recording]) -> Fit:
                 sway.setdefault((block.label, node), []).append(s.std(axis=0))
                 tremor.setdefault((block.label, node), []).append(t.std(axis=0))
                 if node == 0:
-                    spectra.append(scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=128, axis=0)[1].sum(axis=1))
-    freqs = scipy.signal.welch(np.zeros(256), fs=SAMPLE_RATE_HZ, nperseg=128)[0]
+                    spectra.append(scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=WELCH_SEGMENT, axis=0)[1].sum(axis=1))
+    freqs = np.fft.rfftfreq(WELCH_SEGMENT, 1.0 / SAMPLE_RATE_HZ)
     mean_psd = np.mean(spectra, axis=0)
     labels = sorted({label for label, _ in deltas})
 

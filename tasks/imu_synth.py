@@ -29,7 +29,6 @@ from bomi.fusion import DT, GYRO_DEG_PER_LSB, NodeCalibration
 
 ACC_LSB_PER_G = 1000.0 / 0.061          # LSM9DS0 at +-2 g: 0.061 mg/LSB
 GYRO_LSB_PER_DEG_S = 1.0 / GYRO_DEG_PER_LSB
-SAMPLE_RATE_HZ = 1.0 / DT
 INT16_MIN, INT16_MAX = -32768, 32767
 
 
