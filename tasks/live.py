@@ -13,7 +13,8 @@ Log (``--log L``, JSON lines, one object per control tick):
 ``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``lost``
 (frames lost so far, from the packet counters), ``stale`` (the watchdog held the arm),
 ``calibrating`` (neutral calibration still collecting), ``decisions`` (the chain's decisions
-this tick: label, name, function, confidence, rejected, gamma, nu, sample_index), ``dropped``
+this tick: label, name, function, confidence, rejected, gamma, nu, sample_index = node-1 samples
+counted from the end of the neutral calibration), ``dropped``
 (decisions the sanitizer refused: sample_index, reason), ``deflection`` and ``pressed`` (the
 stick sent to the arm), ``mode`` (after the tick), ``linear`` (m/s), ``angular`` (rad/s) and
 ``finger`` (the arm's command); ``neutral`` (offsets per node index, degrees) on the tick they

@@ -20,7 +20,7 @@ from bomi.model_io import save_model
 from bomi.profiles import load_profile
 from bomi.stream_commands import calibration_schedule
 from sim.joystick import JoystickInterpreter, JoystickState
-from tasks.live import DecisionStick, Watchdog, participant_blocks, refusal, run_live
+from tasks.live import DecisionStick, StatusLine, Watchdog, has_display, participant_blocks, refusal, run_live
 from tasks.participant import calibration_session, load_participant, session_recording
 
 CONTROL_DT = 1 / 60
@@ -86,6 +86,28 @@ def test_stick_deflects_by_nu_and_presses_buttons_on_rising_edges():
     stick.update([decision(nu=0.7)])
     stick.release()
     assert stick.update([]) == JoystickState()
+
+
+# ------------------------------------------------------------------------------ status, display
+class Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize("stream, expected", [(io.StringIO(), "0\n0.5\n1\n"), (Terminal(), "\r0\r0.5\r1\n")])
+def test_status_line_about_twice_a_second_in_place_on_a_terminal(stream, expected):
+    status = StatusLine(stream, period_s=0.5)
+    for k in range(61):
+        t = k / 60
+        status.show(t, lambda: f"{t:.2g}")
+    status.close()
+    assert stream.getvalue().replace(" ", "") == expected
+
+
+def test_display_is_looked_for_in_the_environment():
+    assert not has_display({})
+    assert not has_display({"DISPLAY": ""})
+    assert has_display({"DISPLAY": ":0"}) and has_display({"WAYLAND_DISPLAY": "wayland-0"})
 
 
 # ------------------------------------------------------------------------ the loop, injected clock
