@@ -267,7 +267,9 @@ def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_p
     assert max(np.linalg.norm(tick["linear"]) for tick in ticks) > 0.5 * FULL_SPEED
 
 
-def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_file, capsys):
+def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_file, capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     params, profile = load_participant("P1"), load_profile("P1")
     cues = calibration_schedule(profile, hold_s=4.0, neutral_s=2.0)    # F from 2 s (held ~3.2-6.4 s)
     sink = PtySink(linger_s=1.0)
@@ -283,7 +285,7 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     thread.start()
     log = tmp_path / "live.jsonl"
     assert main(["live", "--port", sink.description, "--profile", "P1", "--model", str(p1_model_file),
-                 "--headless", "--duration", "6.5", "--log", str(log), "--retries", "0"]) == 0
+                 "--duration", "6.5", "--log", str(log), "--retries", "0"]) == 0  # no display: headless
     thread.join(timeout=10)
     ticks = read_log(log)
     arrived = [tick for tick in ticks if tick["frames"]]
@@ -301,7 +303,9 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     first_stale = next(tick for tick in silent if tick["stale"])
     assert first_stale["t"] - before["t"] < 0.1 + 1.5 * CONTROL_DT      # within one control tick
     assert any(speed[tick["tick"]] > 0 for tick in ticks if tick["t"] > after["t"])   # resumes with the stream
-    assert "watchdog stopped the arm 1 time(s)" in capsys.readouterr().out
+    out = capsys.readouterr()
+    assert "live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless" in out.err
+    assert "watchdog stopped the arm 1 time(s)" in out.out
 
 
 # ------------------------------------------------------------------------------------- bad input
@@ -317,5 +321,8 @@ def test_live_refuses_bad_files_in_one_line_and_overwrites_nothing(tmp_path, p1_
                  "--log", str(log)]) == 2
     assert capsys.readouterr().err == f"bomi: error: {log}: file exists, not overwriting it\n"
     assert log.read_text() == "keep me\n"
+    assert main(["live", "--port", "loop://", "--profile", "P1", "--model", str(p1_model_file), "--headless",
+                 "--neutral-from", str(tmp_path / "none.csv")]) == 2
+    assert capsys.readouterr().err.startswith(f"bomi: error: {tmp_path / 'none.csv'}")
     assert main(["emulate", "--participant", "P9", "--to", "pty"]) == 2
     assert "no such participant file" in capsys.readouterr().err
