@@ -10,7 +10,7 @@ only as in the published files), streamed as base-station frames, parsed and fus
 session in turn is the training day and every other one a test day, i.e. the all-pairs protocol,
 which is the like-for-like comparison for the bar.
 Also compares the hold statistics the chain sees (fused-angle tremor, gyroscope spread) and the
-frame loss. Writes benchmarks/results/virtual_vs_real.{md,json,png}.
+frame loss. Writes benchmarks/results/virtual_vs_real.{md,json,png} and virtual_session.png (a session's\nfirst 90 s: true body angles against the angles fused from its frames).
 """
 from __future__ import annotations
 
@@ -52,6 +52,37 @@ def hold_statistics(rec: Recording) -> dict[str, list[float]]:
             gyro[i].append(node.gyro[block.start:block.stop].std(axis=0).mean())
     return {"tremor_deg": [float(np.median(tremor[i])) for i in rec.node_indices],
             "gyro_lsb": [float(np.median(gyro[i])) for i in rec.node_indices]}
+
+
+def plot_session(session, profile, path: Path, span_s: float = 90.0) -> None:
+    """The first ``span_s`` recorded seconds of a virtual session: true vs fused angles per node, cues shaded."""
+    rec = session_recording(session, profile, holds_only=False)
+    start = session.truth.time_s[session.recorded][0]
+    rows = rec.time < start + span_s
+    truth = session.truth.time_s < start + span_s
+    truth &= session.recorded
+    fig, axes = plt.subplots(len(profile.nodes), 1, figsize=(9, 2.2 * len(profile.nodes)), sharex=True)
+    for k, (ax, node) in enumerate(zip(axes, profile.nodes)):
+        for j, (name, colour) in enumerate(zip(("pitch", "roll", "yaw"), ("C0", "C1", "C2"))):
+            ax.plot(session.truth.time_s[truth] - start, session.truth.angles[truth, k, j], color=colour, lw=2,
+                    alpha=0.35, label=f"{name} true" if k == 0 else None)
+            ax.plot(rec.time[rows] - start, rec.nodes[node.index].angles[rows, j], color=colour, lw=0.8,
+                    label=f"{name} fused from frames" if k == 0 else None)
+        cue = session.cue[truth]
+        t = session.truth.time_s[truth] - start
+        for c in np.unique(cue[cue > 0]):
+            ax.fill_between(t, 0, 1, where=cue == c, transform=ax.get_xaxis_transform(), alpha=0.08, color="k")
+        ax.set_ylabel(f"node {node.index}\n{node.site} (deg)", fontsize=8)
+    changes = np.flatnonzero(np.diff(session.cue[truth]) > 0) + 1
+    for i in changes:
+        axes[0].annotate(f"c{session.cue[truth][i]}", (session.truth.time_s[truth][i] - start, 1.0),
+                         xycoords=("data", "axes fraction"), fontsize=8, va="bottom")
+    axes[0].legend(fontsize=7, ncol=3, loc="lower left")
+    axes[-1].set_xlabel("time after warm-up (s); grey: cued motion")
+    fig.suptitle(f"Virtual {session.participant}, seed {session.seed}: body angles and what the chain fuses", y=1.0)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -162,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     ax.legend(loc="lower left")
     fig.tight_layout()
     fig.savefig(RESULTS / "virtual_vs_real.png", dpi=120)
+    plot_session(sessions[0], profile, RESULTS / "virtual_session.png")
     print("\n".join(lines))
     return 0
 
