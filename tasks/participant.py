@@ -108,6 +108,8 @@ def load_participant(path_or_name: str | Path) -> ParticipantParams:
         return _parse(data, str(path))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise BomiError(f"{path}: not valid TOML ({exc})") from None
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
     except ValueError as exc:
         raise BomiError(f"{path}: {exc}") from None
 

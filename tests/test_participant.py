@@ -79,6 +79,10 @@ def test_participant_must_fit_the_profile(p1, tmp_path):
                            load_profile("P1"), seed=0)
     with pytest.raises(BomiError, match="no such participant file"):
         load_participant(tmp_path / "missing.toml")
+    binary = tmp_path / "binary.toml"
+    binary.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(BomiError, match="binary.toml: not valid TOML"):
+        load_participant(binary)
 
 
 # ------------------------------------------------------------------------------- motion model
