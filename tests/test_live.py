@@ -257,7 +257,7 @@ def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_p
     assert "live: neutral offsets" in out.err
     assert " Hz | lost 0 (0.0 %) | " in out.err                      # status lines
     ticks = read_log(log)
-    assert 0.9 * 300 < len(ticks) <= 301                              # 60 Hz for 5 s
+    assert 0.8 * 300 < len(ticks) <= 301                              # 60 Hz for 5 s (late ticks are skipped)
     live = [d for tick in ticks for d in tick["decisions"]]
     assert len(live) > 150
     assert live == offline_decisions(p1_model_file, 2.0, 2.0, 12.0)[:len(live)]
@@ -296,12 +296,14 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     assert speed[before["tick"]] > 0                                   # moving (F) when the stream stopped
     silent = [tick for tick in ticks if before["t"] < tick["t"] < after["t"]]
     for tick in silent:
-        stale = tick["t"] - before["t"] >= 0.1
-        assert tick["stale"] == stale
-        if stale:
+        age = tick["t"] - before["t"]
+        if abs(age - 0.1) > 1e-6:
+            assert tick["stale"] == (age > 0.1)
+        if tick["stale"]:
             assert speed[tick["tick"]] == 0 and tick["angular"] == [0, 0, 0] and tick["finger"] == 0
+    # the zero command comes on the first control tick past 100 ms of silence
     first_stale = next(tick for tick in silent if tick["stale"])
-    assert first_stale["t"] - before["t"] < 0.1 + 1.5 * CONTROL_DT      # within one control tick
+    assert ticks[first_stale["tick"] - 1]["t"] - before["t"] < 0.1 <= first_stale["t"] - before["t"] + 1e-6
     assert any(speed[tick["tick"]] > 0 for tick in ticks if tick["t"] > after["t"])   # resumes with the stream
     out = capsys.readouterr()
     assert "live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless" in out.err
