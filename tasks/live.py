@@ -30,6 +30,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -188,6 +189,17 @@ class PassiveViewer:
 
 def has_display(environ: Mapping[str, str] = os.environ) -> bool:
     return bool(environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY"))
+
+
+def display_opens() -> bool:
+    """Whether GLFW (the viewer's window library) can reach the display; the viewer would exit the process."""
+    import glfw
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        opened = glfw.init()
+    if opened:
+        glfw.terminate()
+    return bool(opened)
 
 
 # ---------------------------------------------------------------------------------- status

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -12,7 +13,7 @@ from bomi.profiles import load_profile
 from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
-from tasks.live import Headless, PassiveViewer, StatusLine, has_display, open_log, run_live
+from tasks.live import Headless, PassiveViewer, StatusLine, display_opens, has_display, open_log, run_live
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -47,6 +48,10 @@ def _display(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
         return Headless()
     if not has_display():
         print("live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless", file=sys.stderr)
+        return Headless()
+    if not display_opens():
+        where = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+        print(f"live: cannot open the display {where}: running headless", file=sys.stderr)
         return Headless()
     return PassiveViewer(sim.model, sim.data)
 

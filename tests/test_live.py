@@ -20,7 +20,8 @@ from bomi.model_io import save_model
 from bomi.profiles import load_profile
 from bomi.stream_commands import calibration_schedule
 from sim.joystick import JoystickInterpreter, JoystickState
-from tasks.live import DecisionStick, StatusLine, Watchdog, has_display, participant_blocks, refusal, run_live
+from tasks.live import (DecisionStick, StatusLine, Watchdog, display_opens, has_display, participant_blocks, refusal,
+                        run_live)
 from tasks.participant import calibration_session, load_participant, session_recording
 
 CONTROL_DT = 1 / 60
@@ -108,6 +109,14 @@ def test_display_is_looked_for_in_the_environment():
     assert not has_display({})
     assert not has_display({"DISPLAY": ""})
     assert has_display({"DISPLAY": ":0"}) and has_display({"WAYLAND_DISPLAY": "wayland-0"})
+
+
+def test_an_unreachable_display_means_headless(tmp_path, p1_model_file, monkeypatch, capsys):
+    monkeypatch.setenv("DISPLAY", ":4242")
+    assert not display_opens()
+    assert main(["live", "--port", "loop://", "--profile", "P1", "--model", str(p1_model_file),
+                 "--duration", "0.2"]) == 0
+    assert "live: cannot open the display :4242: running headless" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------ the loop, injected clock
