@@ -4,7 +4,8 @@
 
 The arm never knows where the stick came from. Ticks are paced by the wall clock; each tick reads
 whatever bytes arrived (without blocking), feeds their frames to the chain, and steps the arm once.
-Safety: when no frame has arrived for ``Watchdog.timeout_s`` the tick's stick is zero (the
+Safety: the safety key's standby holds the arm until its control event (its calibration event
+takes the neutral posture anew); when no frame has arrived for ``Watchdog.timeout_s`` the tick's stick is zero (the
 command is zero on the first tick after the timeout) and the last decision is forgotten, so the
 arm moves again only on decisions made from fresh frames; decisions with an unknown class, a
 NaN or an out-of-range value are dropped before the stick (and counted).
@@ -12,6 +13,7 @@ NaN or an out-of-range value are dropped before the stick (and counted).
 Log (``--log L``, JSON lines, one object per control tick):
 ``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``lost``
 (frames lost so far, from the packet counters), ``stale`` (the watchdog held the arm),
+``standby`` (the safety key holds the arm),
 ``calibrating`` (neutral calibration still collecting), ``decisions`` (the chain's decisions
 this tick: label, name, function, confidence, rejected, gamma, nu, sample_index = node-1 samples
 counted from the end of the neutral calibration), ``dropped``
@@ -40,7 +42,7 @@ import numpy as np
 
 from bomi.chain import Decision, OnlineChain
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, imu_index
+from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
 from bomi.profiles import NEUTRAL_FUNCTION, Profile
 from bomi.serial_source import SerialSource
 from bomi.stream_commands import Segment
@@ -88,6 +90,26 @@ def refusal(decision: Decision, functions: Mapping[int, str]) -> str | None:
     return None
 
 
+@dataclass
+class SafetySwitch:
+    """The safety key's events in order: standby holds the arm until control."""
+
+    standby: bool = False
+    seen: int = 0
+
+    def update(self, events: Sequence[SafetyKeyEvent]) -> bool:
+        """Apply the events not seen yet; True if one asks for a new neutral calibration."""
+        calibrate = False
+        for event in events[self.seen:]:
+            if event.event == SafetyKey.STANDBY:
+                self.standby = True
+            elif event.event == SafetyKey.CONTROL:
+                self.standby = False
+            calibrate |= event.event == SafetyKey.CALIBRATION
+        self.seen = len(events)
+        return calibrate
+
+
 class DecisionStick:
     """Decisions -> the stick, as tasks.episode.BomiChannel maps them: the latest decision's function
     deflected by its nu (held until the next decision); a B1/B2 class presses its button on its rising edge."""
@@ -119,6 +141,7 @@ class Tick:
     frames: int
     lost: int
     stale: bool
+    standby: bool
     calibrating: bool
     decisions: list[Decision]
     dropped: list[tuple[int, str]]
@@ -130,7 +153,8 @@ class Tick:
     def record(self) -> dict:
         """The tick as one JSON-ready log object (columns in the module docstring)."""
         out = {"tick": self.tick, "t": self.t, "frames": self.frames, "lost": self.lost, "stale": self.stale,
-               "calibrating": self.calibrating, "decisions": [asdict(d) for d in self.decisions],
+               "standby": self.standby, "calibrating": self.calibrating,
+               "decisions": [asdict(d) for d in self.decisions],
                "dropped": [{"sample_index": i, "reason": r} for i, r in self.dropped],
                "deflection": dict(self.state.deflection), "pressed": sorted(self.state.pressed), "mode": self.mode,
                "linear": self.command.linear.tolist(), "angular": self.command.angular.tolist(),
@@ -217,7 +241,7 @@ def status_text(tick: Tick, parser: FrameParser, decision: Decision | None, cali
     speed = (f"{100 * np.linalg.norm(tick.command.linear):.1f} cm/s" if tick.mode == "translation" else
              f"{np.degrees(np.linalg.norm(tick.command.angular)):.0f} deg/s" if tick.mode == "wrist" else
              f"fingers {tick.command.finger:+.2f}")
-    guard = "STOPPED: no frames" if tick.stale else "ok"
+    guard = "STOPPED: no frames" if tick.stale else "STANDBY (safety key)" if tick.standby else "ok"
     return (f"{tick.t:6.1f} s | {(sum(rates) / len(rates) if rates else 0):5.1f} Hz | {lost} | {what} | "
             f"{tick.mode} | {speed} | {guard}")
 
@@ -253,8 +277,25 @@ class LiveSummary:
     decisions: int = 0
     dropped: int = 0
     stale_ticks: int = 0
+    standby_ticks: int = 0
     watchdog_trips: int = 0
     neutral: dict[int, tuple[float, float, float]] | None = None
+
+
+def decide(chain: OnlineChain, frames: Iterable[ImuFrame],
+           functions: Mapping[int, str]) -> tuple[list[Decision], list[tuple[int, str]]]:
+    """The frames through the chain: the decisions that may reach the arm, and (sample, reason) of the others."""
+    decisions, dropped = [], []
+    for frame in frames:
+        decision = chain.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
+        if decision is None:
+            continue
+        reason = refusal(decision, functions)
+        if reason is None:
+            decisions.append(decision)
+        else:
+            dropped.append((decision.sample_index, reason))
+    return decisions, dropped
 
 
 def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: float | None = None,
@@ -268,7 +309,7 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
     ``on_neutral`` is told the offsets once they hold. ``log`` gets one JSON line per tick.
     """
     watchdog = watchdog or Watchdog()
-    stick = DecisionStick()
+    stick, safety = DecisionStick(), SafetySwitch()
     functions = {cls.label: cls.function for cls in chain.profile.classes}
     summary = LiveSummary()
     if neutral is None:
@@ -290,20 +331,14 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
             break
         due = max(due + arm.dt, now)  # a late tick does not make the next ones hurry
         _, frames = next(batches)
-        decisions, dropped = [], []
-        for frame in frames:
-            decision = chain.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
-            if decision is None:
-                continue
-            reason = refusal(decision, functions)
-            if reason is None:
-                decisions.append(decision)
-            else:
-                dropped.append((decision.sample_index, reason))
+        decisions, dropped = decide(chain, frames, functions)
         if frames:
             watchdog.frames_arrived(now)
+        if safety.update(source.parser.safety_events):
+            chain.begin_neutral_calibration()
+            summary.neutral = None
         stale = watchdog.expired(now)
-        if stale:
+        if stale or safety.standby:
             stick.release()
             state = JoystickState()
         else:
@@ -314,8 +349,8 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
         if summary.neutral is None and not chain.calibrating:
             new_neutral = summary.neutral = chain.neutral
             on_neutral(new_neutral)
-        tick = Tick(summary.ticks, now - start, len(frames), source.parser.total_lost, stale, chain.calibrating,
-                    decisions, dropped, state, arm.mode.value, command, new_neutral)
+        tick = Tick(summary.ticks, now - start, len(frames), source.parser.total_lost, stale, safety.standby,
+                    chain.calibrating, decisions, dropped, state, arm.mode.value, command, new_neutral)
         if log is not None:
             log.write(json.dumps(tick.record()) + "\n")
         last_decision = decisions[-1] if decisions else last_decision
@@ -326,6 +361,7 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
         summary.decisions += len(decisions)
         summary.dropped += len(dropped)
         summary.stale_ticks += stale
+        summary.standby_ticks += safety.standby
     summary.watchdog_trips = watchdog.trips
     return summary
 

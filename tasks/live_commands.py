@@ -89,5 +89,5 @@ def run(args: argparse.Namespace) -> int:
         sim.close()
     print(f"live: {summary.ticks} ticks, {summary.frames} frames, {summary.decisions} decisions, "
           f"{summary.dropped} dropped by the sanitizer, watchdog stopped the arm {summary.watchdog_trips} time(s) "
-          f"({summary.stale_ticks} ticks); {source.parser.summary()}")
+          f"({summary.stale_ticks} ticks), safety-key standby {summary.standby_ticks} ticks; {source.parser.summary()}")
     return 0

@@ -14,7 +14,7 @@ import pytest
 from bomi.chain import Decision, OnlineChain, train
 from bomi.cli import main
 from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
-from bomi.frames import FrameParser, ImuFrame
+from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_safety_key_frame
 from bomi.fusion import DT
 from bomi.model_io import save_model
 from bomi.profiles import load_profile
@@ -132,15 +132,18 @@ class FakeClock:
 
 
 class ScriptedSource:
-    """Per tick a number of frames (content irrelevant: the chain is scripted too)."""
+    """Per tick a number of frames (content irrelevant: the chain is scripted too) and safety-key events."""
 
-    def __init__(self, frames_per_tick: list[int]):
+    def __init__(self, frames_per_tick: list[int], safety_keys: dict[int, SafetyKey] | None = None):
         self.parser = FrameParser()
         self._script = frames_per_tick
+        self._keys = safety_keys or {}
 
     def batches(self):
         frame = ImuFrame(10, 16, 0, (0, 0, 0), (0, 0, 0), (0, 0, 0))
         for t, n in enumerate(self._script):
+            if t in self._keys:
+                self.parser.feed(encode_safety_key_frame(self._keys[t], t))
             yield t, [frame] * n
         while True:
             yield 0, []
@@ -210,6 +213,22 @@ def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_deci
     assert not ticks[50]["stale"] and speed[50] == 0
     assert speed[51:] == pytest.approx([0.75 * FULL_SPEED] * 9)
     assert summary.watchdog_trips == 1
+
+
+def test_safety_key_standby_holds_the_arm_until_control_and_calibration_restarts_the_neutral():
+    keys = {5: SafetyKey.STANDBY, 10: SafetyKey.CONTROL, 15: SafetyKey.CALIBRATION}
+    chain = ScriptedChain([decision(nu=0.5)] * 20)
+    calibrations = []
+    chain.begin_neutral_calibration = lambda: calibrations.append(True)
+    clock, log = FakeClock(), io.StringIO()
+    summary = run_live(ScriptedSource([1] * 20, keys), chain, StickArm(), duration_s=20 * CONTROL_DT,
+                       neutral={1: (0.0, 0.0, 0.0)}, log=log, clock=clock, sleep=clock.sleep)
+    ticks = [json.loads(line) for line in log.getvalue().splitlines()]
+    assert [tick["standby"] for tick in ticks] == [False] * 5 + [True] * 5 + [False] * 10
+    speed = [np.linalg.norm(tick["linear"]) for tick in ticks]
+    assert speed == pytest.approx([0.1] * 5 + [0.0] * 5 + [0.1] * 10)
+    assert calibrations == [True] and summary.standby_ticks == 5
+    assert [tick["tick"] for tick in ticks if "neutral" in tick] == [15]     # the new offsets are announced
 
 
 # -------------------------------------------------------------------- emulator -> pty -> bomi live
