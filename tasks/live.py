@@ -4,20 +4,19 @@
 
 The arm never knows where the stick came from. Ticks are paced by the wall clock; each tick reads
 whatever bytes arrived (without blocking), feeds their frames to the chain, and steps the arm once.
-Safety: the safety key's standby holds the arm until its control event (its calibration event
-takes the neutral posture anew); when no frame has arrived for ``Watchdog.timeout_s`` the tick's stick is zero (the
+Safety: when no frame has arrived for ``Watchdog.timeout_s`` the tick's stick is zero (the
 command is zero on the first tick after the timeout) and the last decision is forgotten, so the
 arm moves again only on decisions made from fresh frames; decisions with an unknown class, a
-NaN or an out-of-range value are dropped before the stick (and counted).
+NaN or an out-of-range value are dropped before the stick (and counted); the safety key's
+standby holds the arm until its control event (its calibration event retakes the neutral posture).
 
 Log (``--log L``, JSON lines, one object per control tick):
 ``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``lost``
 (frames lost so far, from the packet counters), ``stale`` (the watchdog held the arm),
-``standby`` (the safety key holds the arm),
-``calibrating`` (neutral calibration still collecting), ``decisions`` (the chain's decisions
-this tick: label, name, function, confidence, rejected, gamma, nu, sample_index = node-1 samples
-counted from the end of the neutral calibration), ``dropped``
-(decisions the sanitizer refused: sample_index, reason), ``deflection`` and ``pressed`` (the
+``standby`` (the safety key held the arm), ``calibrating`` (neutral calibration still
+collecting), ``decisions`` (the chain's decisions this tick: label, name, function, confidence,
+rejected, gamma, nu, sample_index = node-1 samples counted from the end of the neutral
+calibration), ``dropped`` (decisions the sanitizer refused: sample_index, reason), ``deflection`` and ``pressed`` (the
 stick sent to the arm), ``mode`` (after the tick), ``linear`` (m/s), ``angular`` (rad/s) and
 ``finger`` (the arm's command); ``neutral`` (offsets per node index, degrees) on the tick they
 take effect.
@@ -227,12 +226,12 @@ def display_opens() -> bool:
 
 
 # ---------------------------------------------------------------------------------- status
-def status_text(tick: Tick, parser: FrameParser, decision: Decision | None, calibrating: bool) -> str:
+def status_text(tick: Tick, parser: FrameParser, decision: Decision | None) -> str:
     """Rate, lost packets, current class, confidence, mode, commanded speed."""
     rates = [stats.rate_hz for stats in parser.nodes.values()]
     sent = sum(stats.frames + stats.lost for stats in parser.nodes.values())
     lost = f"lost {parser.total_lost} ({100 * parser.total_lost / sent if sent else 0:.1f} %)"
-    if calibrating:
+    if tick.calibrating:
         what = "calibrating neutral, hold still"
     elif decision is None:
         what = "no decision yet"
@@ -355,7 +354,7 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
             log.write(json.dumps(tick.record()) + "\n")
         last_decision = decisions[-1] if decisions else last_decision
         if status is not None:
-            status.show(tick.t, lambda: status_text(tick, source.parser, last_decision, chain.calibrating))
+            status.show(tick.t, lambda: status_text(tick, source.parser, last_decision))
         summary.ticks += 1
         summary.frames += len(frames)
         summary.decisions += len(decisions)

@@ -14,14 +14,14 @@ import pytest
 from bomi.chain import Decision, OnlineChain, train
 from bomi.cli import main
 from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
-from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_safety_key_frame
+from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame
 from bomi.fusion import DT
 from bomi.model_io import save_model
 from bomi.profiles import load_profile
 from bomi.stream_commands import calibration_schedule
-from sim.joystick import JoystickInterpreter, JoystickState
-from tasks.live import (DecisionStick, StatusLine, Watchdog, display_opens, has_display, participant_blocks, refusal,
-                        run_live)
+from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
+from tasks.live import (DecisionStick, StatusLine, Tick, Watchdog, display_opens, has_display, participant_blocks,
+                        refusal, run_live, status_text)
 from tasks.participant import calibration_session, load_participant, session_recording
 
 CONTROL_DT = 1 / 60
@@ -103,6 +103,20 @@ def test_status_line_about_twice_a_second_in_place_on_a_terminal(stream, expecte
         status.show(t, lambda: f"{t:.2g}")
     status.close()
     assert stream.getvalue().replace(" ", "") == expected
+
+
+def test_status_text_by_hand():
+    parser = FrameParser()
+    parser.feed(encode_imu_frame(ImuFrame(10, 16, 0, (0, 0, 0), (0, 0, 0), (0, 0, 0))), now=0.0)
+    parser.feed(encode_imu_frame(ImuFrame(10, 16, 4, (0, 0, 0), (0, 0, 0), (0, 0, 0))), now=0.5)  # 3 lost
+    command = ArmCommand(np.array([0.0, -0.12, 0.0]), np.zeros(3), 0.0)
+    tick = Tick(30, 0.5, 1, 3, False, False, False, [], [], JoystickState({"F": 0.6}), "translation", command)
+    assert status_text(tick, parser, decision(nu=0.6, confidence=0.875)) == \
+        "   0.5 s |   2.0 Hz | lost 3 (60.0 %) | c1 F conf 0.88 | translation | 12.0 cm/s | ok"
+    stale = replace(tick, stale=True, calibrating=True, mode="wrist",
+                    command=ArmCommand(np.zeros(3), np.array([0.0, 0.0, np.radians(30)]), 0.0))
+    assert status_text(stale, parser, None).endswith(
+        "| calibrating neutral, hold still | wrist | 30 deg/s | STOPPED: no frames")
 
 
 def test_display_is_looked_for_in_the_environment():
