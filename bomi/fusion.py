@@ -12,6 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bomi.frames import ImuFrame, imu_index, imu_node_id
+from bomi.recording import NodeSample
+
 GYRO_DEG_PER_LSB = 2000.0 / 32768.0
 DT = 1.0 / 62.5
 GYRO_WEIGHT = 0.92
@@ -136,3 +139,30 @@ def fuse(acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,
 def neutral_offsets(angles: np.ndarray, samples: int = 100) -> np.ndarray:
     """Neutral-offset calibration: mean (pitch, roll, yaw) over the first ``samples`` rows of neutral posture."""
     return np.asarray(angles, dtype=float)[:samples].mean(axis=0)
+
+
+@dataclass
+class FusedRows:
+    """Rows of frames (by node id) -> recording samples (by node index), each frame fused once."""
+
+    calibrations: dict[int, NodeCalibration]  # by node index
+    _fusion: dict[int, NodeFusion] = field(init=False, repr=False)
+    _last: dict[int, tuple[ImuFrame, NodeSample]] = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._fusion = {imu_node_id(i): NodeFusion(cal) for i, cal in self.calibrations.items()}
+
+    @property
+    def node_ids(self) -> tuple[int, ...]:
+        return tuple(self._fusion)
+
+    def samples(self, row: dict[int, ImuFrame]) -> dict[int, NodeSample]:
+        """The row's raw values and fused angles, keyed by node index."""
+        out = {}
+        for node_id, frame in row.items():
+            last = self._last.get(node_id)
+            if last is None or last[0] is not frame:  # a held frame is not fused twice
+                angles = self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag)
+                last = self._last[node_id] = (frame, NodeSample(frame.acc, frame.gyro, frame.mag, angles))
+            out[imu_index(node_id)] = last[1]
+        return out

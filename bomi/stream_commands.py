@@ -5,7 +5,6 @@ import argparse
 import itertools
 import sys
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +14,11 @@ from bomi.chain import train
 from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
-from bomi.fusion import DT, NodeCalibration, NodeFusion
+from bomi.fusion import DT, FusedRows, NodeCalibration
 from bomi.model_io import save_model
-from bomi.profiles import NEUTRAL_FUNCTION, ClassConfig, Profile, load_profile
-from bomi.recording import NodeSample, RecordingWriter, read_recording
+from bomi.profiles import load_profile
+from bomi.protocol import Segment, calibration_schedule
+from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
@@ -158,34 +158,6 @@ def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
             participant_blocks(params, profile, args.seed, cues, end_s))
 
 
-# ------------------------------------------------------------------------------ rows of samples
-@dataclass
-class FusedRows:
-    """Rows of frames (by node id) -> recording samples (by node index), each frame fused once."""
-
-    calibrations: dict[int, NodeCalibration]  # by node index
-    _fusion: dict[int, NodeFusion] = field(init=False, repr=False)
-    _last: dict[int, tuple[ImuFrame, NodeSample]] = field(default_factory=dict, init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        self._fusion = {imu_node_id(i): NodeFusion(cal) for i, cal in self.calibrations.items()}
-
-    @property
-    def node_ids(self) -> tuple[int, ...]:
-        return tuple(self._fusion)
-
-    def samples(self, row: dict[int, ImuFrame]) -> dict[int, NodeSample]:
-        """The row's raw values and fused angles, keyed by node index."""
-        out = {}
-        for node_id, frame in row.items():
-            last = self._last.get(node_id)
-            if last is None or last[0] is not frame:  # a held frame is not fused twice
-                angles = self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag)
-                last = self._last[node_id] = (frame, NodeSample(frame.acc, frame.gyro, frame.mag, angles))
-            out[imu_index(node_id)] = last[1]
-        return out
-
-
 def _timed_frames(batches: Iterator[tuple[float, list[ImuFrame]]], backlog: Sequence[TimedFrame],
                   progress: tqdm, parser: FrameParser) -> Iterator[TimedFrame]:
     yield from backlog
@@ -254,39 +226,6 @@ def run_capture(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------ record
-@dataclass(frozen=True)
-class Segment:
-    """One cue of the calibration protocol: hold ``label`` (or neutral) from start_s to end_s."""
-
-    label: int
-    prompt: str
-    start_s: float
-    end_s: float
-
-
-def calibration_schedule(profile: Profile, *, repetitions: int = 3, sequences: int = 1,
-                         amplitudes: Sequence[float] = (1.0,), hold_s: float = 5.0,
-                         neutral_s: float = 5.0) -> list[Segment]:
-    """Neutral, then every motion class (at every amplitude) in label order, each held ``hold_s``
-    and followed by ``neutral_s`` of neutral; the class sequence ``repetitions`` times per sequence."""
-    neutral = next(cls for cls in profile.classes if cls.function == NEUTRAL_FUNCTION)
-    motions = [cls for cls in profile.classes if cls.function != NEUTRAL_FUNCTION]
-    cues = [(cls, amp) for _ in range(sequences * repetitions) for cls in motions for amp in amplitudes]
-    segments, t = [Segment(neutral.label, _prompt(neutral, None), 0.0, neutral_s)], neutral_s
-    for cls, amp in cues:
-        segments.append(Segment(cls.label, _prompt(cls, amp if len(amplitudes) > 1 else None), t, t + hold_s))
-        segments.append(Segment(neutral.label, _prompt(neutral, None), t + hold_s, t + hold_s + neutral_s))
-        t += hold_s + neutral_s
-    return segments
-
-
-def _prompt(cls: ClassConfig, amplitude: float | None) -> str:
-    if cls.function == NEUTRAL_FUNCTION:
-        return f"relax: {cls.name}"
-    extent = "" if amplitude is None else f" at {100 * amplitude:.0f} % of your range"
-    return f"HOLD c{cls.label} {cls.function}: {cls.name}{extent}"
-
-
 def _cue(segments: list[Segment], k: int, t: float) -> str:
     """What the terminal shows at time t of segment k: the cue, time left, a countdown to the next."""
     segment = segments[k]

@@ -44,7 +44,7 @@ from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
 from bomi.profiles import NEUTRAL_FUNCTION, Profile
 from bomi.serial_source import SerialSource
-from bomi.stream_commands import Segment
+from bomi.protocol import Segment
 from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState
 from tasks.episode import rising_edge
 from tasks.imu_synth import Delivery, LinkModel

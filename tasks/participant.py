@@ -28,11 +28,11 @@ import numpy as np
 import scipy.signal
 
 from bomi.errors import BomiError
-from bomi.fusion import DT
+from bomi.fusion import DT, FusedRows
 from bomi.frames import FrameParser, RowAssembler
 from bomi.profiles import Profile
+from bomi.protocol import protocol_order
 from bomi.recording import NodeData, NodeSample, Recording
-from bomi.stream_commands import FusedRows
 from tasks.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
 
 PARTICIPANT_DIR = Path(__file__).resolve().parent / "participants"
@@ -489,11 +489,6 @@ class CalibrationSession:
     cue: np.ndarray
     holding: np.ndarray
     recorded: np.ndarray
-
-
-def protocol_order(labels: Sequence[int], repetitions: int, amplitudes: Sequence[float]) -> list[tuple[int, float]]:
-    """Every class at every amplitude, class after class, the whole sequence ``repetitions`` times."""
-    return [(label, amp) for _ in range(repetitions) for label in labels for amp in amplitudes]
 
 
 def calibration_session(params: ParticipantParams, profile: Profile, seed: int, repetitions: int = 3,

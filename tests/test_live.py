@@ -18,7 +18,7 @@ from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, enco
 from bomi.fusion import DT
 from bomi.model_io import save_model
 from bomi.profiles import load_profile
-from bomi.stream_commands import calibration_schedule
+from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.live import (DecisionStick, StatusLine, Tick, Watchdog, display_opens, has_display, participant_blocks,
                         refusal, run_live, status_text)

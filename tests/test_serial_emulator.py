@@ -347,7 +347,7 @@ def posture_recording(labels: list[int], samples_each: int, seed: int = 0) -> Re
 
 def test_calibration_schedule_of_p1():
     from bomi.profiles import load_profile
-    from bomi.stream_commands import calibration_schedule
+    from bomi.protocol import calibration_schedule
 
     profile = load_profile("P1")
     sequence = calibration_schedule(profile)
