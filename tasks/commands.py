@@ -11,6 +11,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from bomi.classifier import PostProcessing
 from bomi.errors import BomiError
 from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
@@ -19,6 +20,10 @@ from tasks.timeline import timeline_figure
 
 # What the paper reports for the assembly task (Fall et al.): mean completion times, the BoMI's
 # real-time accuracy and its longest run of misclassified outputs.
+# Majority vote over this many decisions on the simulated BoMI (the profiles ship with it off):
+# it removes the one- and two-decision blips that would otherwise press B1/B2 by mistake.
+DEFAULT_VOTE = 5
+
 PAPER = {"bomi_time_s": 138.0, "joystick_time_s": 58.0, "realtime_accuracy": 0.992, "longest_error_run_ms": 290.0}
 
 
@@ -29,11 +34,15 @@ class EpisodeJob:
     seed: int
     time_limit: float = 600.0
     operator_file: str = str(DEFAULT_OPERATOR_FILE)
+    vote_length: int = DEFAULT_VOTE
 
 
 def run_job(job: EpisodeJob, video: Path | None = None):
     """One episode (calibration first for the BoMI); returns its log."""
-    channel = JoystickChannel() if job.operator == "joystick" else calibrated_channel(job.participant, job.seed)
+    if job.operator == "joystick":
+        channel = JoystickChannel()
+    else:
+        channel = calibrated_channel(job.participant, job.seed, PostProcessing(vote_length=job.vote_length))
     return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
                        operator_file=job.operator_file, task_config=TaskConfig(time_limit=job.time_limit),
                        video=video)
@@ -129,10 +138,10 @@ def run_many(jobs: list[EpisodeJob], workers: int) -> list[dict]:
 
 
 def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, time_limit: float,
-                   operator_file: str) -> list[EpisodeJob]:
+                   operator_file: str, vote_length: int = DEFAULT_VOTE) -> list[EpisodeJob]:
     """Every (participant, operator, seed); the joystick operator needs no participant body, but is
     run per participant so every table row has its own episodes."""
-    return [EpisodeJob(op, p, s, time_limit, operator_file) for p in participants for op in operators
+    return [EpisodeJob(op, p, s, time_limit, operator_file, vote_length) for p in participants for op in operators
             for s in range(seeds)]
 
 
@@ -161,7 +170,8 @@ def _check_outputs(*paths: Path | None) -> None:
 def cmd_run_task(args: argparse.Namespace) -> int:
     _check_outputs(args.video, args.plot, args.json)
     load_operator(args.operator_file)  # a bad file fails before any simulation
-    job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file))
+    job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file),
+                     args.vote)
     log = run_job(job, video=args.video)
     summary = summarize(log)
     print(markdown_tables(aggregate([summary])))
@@ -178,7 +188,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     if args.seeds < 1:
         raise BomiError("--seeds must be at least 1")
     jobs = benchmark_jobs(_names(args.participants, None, "participants"), _names(args.operators, OPERATORS, "operators"),
-                          args.seeds, args.time_limit, str(args.operator_file))
+                          args.seeds, args.time_limit, str(args.operator_file), args.vote)
     records = run_many(jobs, args.jobs)
     rows = aggregate(records)
     print(markdown_tables(rows))
@@ -200,6 +210,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _vote(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError("must be at least 1")
+    return value
+
+
 def register(subparsers) -> None:
     run = subparsers.add_parser("run-task", help="one stacking episode with the joystick or the BoMI operator")
     run.add_argument("--operator", choices=OPERATORS, required=True)
@@ -207,6 +224,7 @@ def register(subparsers) -> None:
     run.add_argument("--seed", type=int, default=0)
     run.add_argument("--time-limit", type=float, default=600.0, help="seconds of simulated time (default 600)")
     run.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
+    run.add_argument("--vote", type=_vote, default=DEFAULT_VOTE, help=f"BoMI majority vote length (default {DEFAULT_VOTE})")
     run.add_argument("--video", type=Path, help="MP4 of the episode")
     run.add_argument("--plot", type=Path, help="timeline figure (PNG)")
     run.add_argument("--json", type=Path, help="metrics of the episode")
@@ -219,6 +237,7 @@ def register(subparsers) -> None:
     bench.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     bench.add_argument("--time-limit", type=float, default=600.0)
     bench.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
+    bench.add_argument("--vote", type=_vote, default=DEFAULT_VOTE, help=f"BoMI majority vote length (default {DEFAULT_VOTE})")
     bench.add_argument("--json", type=Path)
     bench.set_defaults(func=cmd_benchmark)
 

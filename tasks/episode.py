@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from bomi.chain import Decision, OnlineChain, train
-from bomi.classifier import NEUTRAL_LABEL
+from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.frames import FrameParser, imu_index
 from bomi.fusion import DT
 from bomi.profiles import Profile, load_profile
@@ -158,7 +158,7 @@ class BomiChannel:
         self._function_of = {cls.label: cls.function for cls in profile.classes}
         self._since = 0.0  # when the posture held now was taken up
         # how long the person waits for a posture to take effect before leaning further
-        self._patience = participant.params.reaction_s + participant.params.onset_s + 0.5
+        self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
         self._last_sample: dict[int, int] = {}
         self._function: str = "neutral"
         self._nu = 0.0
@@ -252,13 +252,24 @@ class BomiChannel:
         return move + self.chain.model.spec.window + self.chain.model.post.vote_length
 
 
-def calibrated_channel(participant: str | ParticipantParams, seed: int) -> BomiChannel:
+def calibration_order(params: ParticipantParams, profile: Profile, repetitions: int = 3) -> list[tuple[int, float]]:
+    """The protocol's (class, amplitude) sequence: proportional classes at both ends of the body
+    range (so gamma's calibrated range spans the leans used), button classes at full range only
+    (they are always pressed that way; half-range examples would bring them near neutral)."""
+    functions = {cls.label: cls.function for cls in profile.classes}
+    return [(label, amplitude) for _ in range(repetitions) for label in sorted(params.classes)
+            for amplitude in (BODY_RANGE if functions[label] in FUNCTIONS else (1.0,))]
+
+
+def calibrated_channel(participant: str | ParticipantParams, seed: int, post: PostProcessing | None = None
+                       ) -> BomiChannel:
     """The paper's order: the participant performs the calibration protocol, the chain records
-    it and trains the LDA with the ``bomi train`` code (``bomi.chain.train``), then the task."""
+    it and trains the LDA with the ``bomi train`` code (``bomi.chain.train``), then the task.
+    ``post`` overrides the profile's post-processing (rejection, majority vote)."""
     params = participant if isinstance(participant, ParticipantParams) else load_participant(participant)
     profile = load_profile(params.profile)
-    session = calibration_session(params, profile, seed, amplitudes=BODY_RANGE)
-    model = train([session_recording(session, profile)], profile)
+    session = calibration_session(params, profile, seed, order=calibration_order(params, profile))
+    model = train([session_recording(session, profile)], profile, post=post)
     return BomiChannel(VirtualParticipant(params, profile, seed), OnlineChain(model, profile), profile)
 
 

@@ -31,6 +31,7 @@ class OperatorParams:
     pause_between_moves: float
     anticipation: float
     squeeze_time: float
+    button_patience: float
     coarse: float
     fine: float
     slow_down_distance: float
@@ -39,6 +40,7 @@ class OperatorParams:
     placed: float
     target_zone: float
     yaw_deg: float
+    tilt_deg: float
     hover: float
     carry_clearance: float
     grasp_offset: float
@@ -48,9 +50,9 @@ class OperatorParams:
 
 
 _SECTIONS = {
-    "timing": ("reaction_time", "pause_between_moves", "anticipation", "squeeze_time"),
+    "timing": ("reaction_time", "pause_between_moves", "anticipation", "squeeze_time", "button_patience"),
     "deflection": ("coarse", "fine", "slow_down_distance"),
-    "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg"),
+    "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg", "tilt_deg"),
     "heights": ("hover", "carry_clearance", "grasp_offset", "release_gap", "retreat"),
     "fingers": ("open_closure",),
 }
@@ -100,6 +102,7 @@ class View:
     t: float
     hand_pos: np.ndarray  # (3,) pinch point, world frame, m
     hand_yaw: float  # rad, heading of the hand about the vertical
+    hand_tilt: np.ndarray  # (2,) rad: rotation about world x and y that would point the hand straight down
     closure: float  # fingers, 0 open .. 1 closed
     mode: Mode  # the arm's current joystick mode
     cube_pos: tuple[np.ndarray, ...]  # (3,) centre of each cube
@@ -192,7 +195,7 @@ class Action:
     kind: str  # "move" | "turn" | "open" | "close" | "rest"
     goal: str
     point: np.ndarray | None = None  # for "move"
-    turn: float = 0.0  # for "turn", rad
+    turn: np.ndarray | None = None  # for "turn": wanted rotation about world x, y, z (rad)
 
 
 def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
@@ -202,6 +205,11 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
     held = held_cube(view, memory, p)
     open_hand = view.closure <= p.open_closure
+
+    tilt_tolerance = math.radians(p.tilt_deg) / (2 if memory.turning else 1)
+    at_cube = any(view.touching) and not open_hand
+    if not at_cube and np.max(np.abs(view.hand_tilt)) > tilt_tolerance:  # e.g. after a stray wrist command
+        return Action("turn", "level the hand", turn=np.r_[view.hand_tilt, 0.0])
 
     if top is not None:  # both cubes stacked: let go, rise, rest
         if not open_hand:
@@ -236,9 +244,9 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
         return Action("open", "open hand")
     hover_z = max(grasp[2] + p.hover, stack_top + p.carry_clearance + view.cube_size)
     turn = yaw_error(view, k)
-    yaw_tolerance = math.radians(p.yaw_deg) / (4 if memory.turning else 1)
+    yaw_tolerance = math.radians(p.yaw_deg) / (2 if memory.turning else 1)
     if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
-        return Action("turn", f"turn to cube {k + 1}", turn=turn)
+        return Action("turn", f"turn to cube {k + 1}", turn=np.array([0.0, 0.0, turn]))
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", Action("close", f"grasp cube {k + 1}"),
                      memory.descending)
 
@@ -286,9 +294,11 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
                                         memory.axis, holding or {})
         return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
     memory = replace(memory, axis=None)
-    if action.kind == "turn":
-        fn = _function_for(WRIST_AXES, np.array([0.0, 0.0, math.copysign(1.0, action.turn)]))
-        return StickIntent({fn: p.fine}, goal=action.goal), memory
+    if action.kind == "turn":  # one rotation axis at a time, the largest first
+        axis = int(np.argmax(np.abs(action.turn)))
+        direction = np.zeros(3)
+        direction[axis] = math.copysign(1.0, action.turn[axis])
+        return StickIntent({_function_for(WRIST_AXES, direction): p.fine}, goal=action.goal), memory
     if action.kind in ("open", "close"):
         closing = 1.0 if action.kind == "close" else -1.0
         fn = next(fn for fn, sign in FINGER_DIRECTION.items() if sign == closing)
@@ -369,6 +379,8 @@ class ScriptedUser:
     anticipation: float | None = None
     _waiting_since: float | None = None
     _stopped_at: float = -math.inf
+    _started: float = 0.0  # when the current move began
+    _relax_until: float = -math.inf
     _coasting: tuple[float, np.ndarray, float] | None = None  # (t, hand, speed) when a move was let go
 
     def __post_init__(self) -> None:
@@ -380,6 +392,10 @@ class ScriptedUser:
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation)
+        if self.current.button is not None and view.t - self._started > self.params.button_patience:
+            # the press did nothing: let go, relax as long again, then press anew
+            wanted = replace(REST, goal=wanted.goal)
+            self._relax_until = view.t + self.params.button_patience
         if wanted.is_rest or _continues(self.current, wanted):
             if wanted.is_rest and not self.current.is_rest:
                 self._let_go(view, velocity)
@@ -391,11 +407,11 @@ class ScriptedUser:
         if self._waiting_since is None:
             self._waiting_since = view.t
         ready = max(self._waiting_since + self.params.reaction_time,
-                    self._stopped_at + self.params.pause_between_moves)
+                    self._stopped_at + self.params.pause_between_moves, self._relax_until)
         coasting = float(np.linalg.norm(velocity)) > STILL_SPEED and view.t - self._stopped_at < MAX_WAIT
         if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
             return replace(REST, goal=wanted.goal)
-        self.current, self._waiting_since = wanted, None
+        self.current, self._waiting_since, self._started = wanted, None, view.t
         return wanted
 
     def _let_go(self, view: View, velocity: np.ndarray) -> None:

@@ -50,6 +50,16 @@ def cube_tilt_deg(quat: np.ndarray) -> float:
     return math.degrees(math.acos(min(1.0, float(np.max(np.abs(world_z_in_cube))))))
 
 
+def levelling_rotation(tool_z: np.ndarray) -> np.ndarray:
+    """(x, y) of the rotation vector that turns the tool's z axis to point straight down."""
+    down = np.array([0.0, 0.0, -1.0])
+    axis = np.cross(tool_z, down)
+    sin, cos = float(np.linalg.norm(axis)), float(np.dot(tool_z, down))
+    if sin < 1e-12:
+        return np.zeros(2)
+    return (axis * math.atan2(sin, cos) / sin)[:2]
+
+
 def start_poses(sim: ArmSim, config: TaskConfig, seed: int) -> np.ndarray:
     """(n, 3) cube starts (x, y, yaw): the configured spots at A moved by a seeded jitter."""
     rng = np.random.default_rng(seed)
@@ -86,6 +96,7 @@ class StackingTask:
             t=sim.time,
             hand_pos=sim.tool_position,
             hand_yaw=math.atan2(rotation[1, 0], rotation[0, 0]),
+            hand_tilt=levelling_rotation(rotation[:, 2]),
             closure=sim.finger_closure,
             mode=sim.mode,
             cube_pos=tuple(sim.cube_positions),

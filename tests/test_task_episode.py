@@ -9,7 +9,7 @@ from bomi.cli import main
 from sim.env import ArmSim
 from sim.joystick import JoystickState
 from tasks.episode import JoystickChannel, run_episode, summarize
-from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, start_poses
+from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses
 
 
 @pytest.fixture(scope="module")
@@ -50,6 +50,15 @@ def test_tilt_of_a_cube_is_measured_from_its_nearest_face():
     assert cube_tilt_deg(half_turn) == pytest.approx(0.0, abs=1e-9)
     tilted = np.array([np.cos(np.radians(6)), np.sin(np.radians(6)), 0, 0])  # 12 deg about x
     assert cube_tilt_deg(tilted) == pytest.approx(12.0)
+
+
+def test_levelling_rotation_turns_the_tool_axis_straight_down():
+    assert np.allclose(levelling_rotation(np.array([0.0, 0.0, -1.0])), 0.0)
+    a = np.radians(20.0)
+    tool_z = np.array([np.sin(a), 0.0, -np.cos(a)])  # tipped toward x+
+    rotvec = np.r_[levelling_rotation(tool_z), 0.0]
+    rotated = np.cos(a) * tool_z + np.sin(a) * np.cross(rotvec / a, tool_z)  # Rodrigues, axis _|_ tool_z
+    assert np.allclose(rotated, [0.0, 0.0, -1.0]) and np.isclose(np.linalg.norm(rotvec), a)
 
 
 def test_a_stack_at_b_that_stays_still_for_a_second_is_a_success(sim):

@@ -17,7 +17,7 @@ HALF = 0.025
 
 def view(hand=(0.0, -0.42, 0.22), cubes=((-0.14, -0.39), (-0.14, -0.51)), mode=Mode.TRANSLATION, closure=0.0,
          touching=(False, False), t=0.0, cube_z=(HALF, HALF), yaw=(0.0, 0.0)) -> View:
-    return View(t=t, hand_pos=np.array(hand, float), hand_yaw=0.0, closure=closure, mode=mode,
+    return View(t=t, hand_pos=np.array(hand, float), hand_yaw=0.0, hand_tilt=np.zeros(2), closure=closure, mode=mode,
                 cube_pos=tuple(np.array([x, y, z]) for (x, y), z in zip(cubes, cube_z)), cube_yaw=yaw,
                 touching=touching, target_xy=B, table_z=0.0, cube_size=2 * HALF)
 
@@ -137,3 +137,12 @@ def test_scripted_user_reacts_late_to_new_moves_and_stops_at_once():
     # the hand arrives over the cube: the user lets go in the same tick
     arrived = user.decide(view(hand=(-0.14, -0.39, 0.22), t=P.reaction_time + 0.1))
     assert not arrived.deflection
+
+
+def test_a_tilted_hand_is_levelled_in_wrist_mode_about_the_largest_axis():
+    tilted = replace(view(mode=Mode.WRIST), hand_tilt=np.array([0.05, -math.radians(20.0)]))
+    intent, _ = plan(tilted, Memory(), P, combine_axes=False)
+    # rotate about world y-: WRIST_AXES gives L = (0, -1, 0)
+    assert intent.goal == "level the hand" and set(intent.deflection) == {"L"}
+    intent, _ = plan(replace(tilted, mode=Mode.TRANSLATION), Memory(), P, combine_axes=False)
+    assert intent.button == "B1"
