@@ -257,7 +257,7 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     A descent already under way tolerates twice the alignment error."""
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
     if xy_off > p.align * (2 if descending else 1):
-        if hand[2] < travel_z - 4 * p.stop and xy_off > 4 * p.align:
+        if hand[2] < travel_z - 4 * p.stop and xy_off > 2 * p.align:
             return Action("move", f"{label}: rise", np.r_[hand[:2], travel_z])
         return Action("move", f"{label}: travel", np.r_[goal[:2], hand[2]])
     if abs(hand[2] - goal[2]) > p.stop:
