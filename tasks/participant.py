@@ -18,7 +18,6 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 """
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
+from bomi.config_files import load_toml
 from bomi.errors import BomiError
 from bomi.fusion import DT, FusedRows
 from bomi.frames import FrameParser, RowAssembler
@@ -97,21 +97,7 @@ class ParticipantParams:
 # ------------------------------------------------------------------------------------- loading
 def load_participant(path_or_name: str | Path) -> ParticipantParams:
     """Load and validate a participant file, or a shipped one by name (P1, P4, P5)."""
-    path = Path(path_or_name)
-    if not path.suffix and (PARTICIPANT_DIR / f"{path_or_name}.toml").is_file():
-        path = PARTICIPANT_DIR / f"{path_or_name}.toml"
-    if not path.is_file():
-        names = ", ".join(sorted(p.stem for p in PARTICIPANT_DIR.glob("*.toml")))
-        raise BomiError(f"{path}: no such participant file (shipped participants: {names})")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-        return _parse(data, str(path))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
-    except OSError as exc:
-        raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
-    except ValueError as exc:
-        raise BomiError(f"{path}: {exc}") from None
+    return load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse)
 
 
 def _check_keys(table: Any, allowed: set[str], required: set[str], where: str) -> dict:

@@ -6,13 +6,12 @@ h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`
 """
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
-from bomi.errors import BomiError
+from bomi.config_files import load_toml
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration
 
@@ -65,21 +64,7 @@ class Profile:
 
 def load_profile(path_or_name: str | Path) -> Profile:
     """Load and validate a profile file, or a shipped one by name (P1, P4, P5)."""
-    path = Path(path_or_name)
-    shipped = PROFILE_DIR / f"{path_or_name}.toml"
-    if not path.suffix and shipped.is_file():
-        path = shipped
-    if not path.is_file():
-        names = ", ".join(sorted(p.stem for p in PROFILE_DIR.glob("*.toml")))
-        raise BomiError(f"{path}: no such profile file (shipped profiles: {names})")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
-    try:
-        return _parse(data, str(path))
-    except ValueError as exc:
-        raise BomiError(f"{path}: {exc}") from None
+    return load_toml(path_or_name, PROFILE_DIR, "profile", _parse)
 
 
 def _check_keys(table: dict, allowed: set[str], where: str) -> None:
