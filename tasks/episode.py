@@ -19,13 +19,14 @@ from bomi.frames import FrameParser, imu_index
 from bomi.fusion import DT
 from bomi.profiles import Profile, load_profile
 from sim.env import ArmSim
-from sim.joystick import BUTTONS, FUNCTIONS, TRANSLATION_AXES, JoystickState, Mode, combine
+from sim.joystick import FUNCTIONS, TRANSLATION_AXES, JoystickState, Mode, combine
 from sim.render import FrameRenderer, VideoWriter, describe
 from tasks import metrics
 from tasks.imu_synth import Delivery
 from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
 from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser, StickIntent, load_operator
 from tasks.stacking import StackingTask, TaskConfig
+from tasks.stick import DecisionStick, rising_edge
 
 OPERATORS = ("joystick", "bomi")
 
@@ -110,11 +111,6 @@ def summarize(log: EpisodeLog) -> dict:
     return out
 
 
-def rising_edge(button: str | None, previous: str | None) -> frozenset[str]:
-    """A button counts as pressed only on the tick it goes down."""
-    return frozenset({button}) if button is not None and button != previous else frozenset()
-
-
 class JoystickChannel:
     """The person's decision goes straight to the stick (a 3-axis stick may combine axes)."""
 
@@ -160,8 +156,7 @@ class BomiChannel:
         # how long the person waits for a posture to take effect before leaning further
         self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
         self._last_sample: dict[int, int] = {}
-        self._function: str = "neutral"
-        self._nu = 0.0
+        self.stick = DecisionStick()
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
         self._queue: list[Delivery] = []  # generated frames not yet arrived
         # An intent set at t moves the body from t + reaction_s: samples may be made that far ahead.
@@ -221,18 +216,11 @@ class BomiChannel:
         if label != held:
             self.participant.set_intent(label, amplitude, self.lead + t)
             self._since = t
-        elif label != NEUTRAL_LABEL and self._function != self._function_of[label] and held_amplitude < 1.0 \
+        elif label != NEUTRAL_LABEL and self.stick.function != self._function_of[label] and held_amplitude < 1.0 \
                 and t - self._since > self._patience:  # nothing happens: lean further
             self.participant.set_intent(label, min(1.0, held_amplitude + LEAN_STEP), self.lead + t)
             self._since = t
-        pressed = set()
-        for decision in self._feed(self._arrived(self.lead + t, self.lead + t_end)):
-            if decision.function in BUTTONS and decision.function != self._function:
-                pressed.add(decision.function)  # a button class presses on its rising edge
-            self._function, self._nu = decision.function, decision.nu
-        if self._function in FUNCTIONS and self._nu > 0:
-            return JoystickState({self._function: min(1.0, self._nu)}, frozenset(pressed))
-        return JoystickState(pressed=frozenset(pressed))
+        return self.stick.update(self._feed(self._arrived(self.lead + t, self.lead + t_end)))
 
     def log_fields(self) -> dict:
         truth = self.participant.truth()

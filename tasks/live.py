@@ -42,11 +42,11 @@ import numpy as np
 from bomi.chain import Decision, OnlineChain
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
-from bomi.profiles import NEUTRAL_FUNCTION, Profile
+from bomi.profiles import Profile
 from bomi.serial_source import SerialSource
 from bomi.protocol import Segment
-from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState
-from tasks.episode import rising_edge
+from sim.joystick import ArmCommand, JoystickState
+from tasks.stick import DecisionStick
 from tasks.imu_synth import Delivery, LinkModel
 from tasks.participant import NEUTRAL_LABEL, ParticipantParams, VirtualParticipant
 
@@ -107,27 +107,6 @@ class SafetySwitch:
             calibrate |= event.event == SafetyKey.CALIBRATION
         self.seen = len(events)
         return calibrate
-
-
-class DecisionStick:
-    """Decisions -> the stick, as tasks.episode.BomiChannel maps them: the latest decision's function
-    deflected by its nu (held until the next decision); a B1/B2 class presses its button on its rising edge."""
-
-    def __init__(self) -> None:
-        self.release()
-
-    def release(self) -> None:
-        """Forget the last decision: the stick is centred until a new one comes."""
-        self.function, self.nu = NEUTRAL_FUNCTION, 0.0
-
-    def update(self, decisions: Iterable[Decision]) -> JoystickState:
-        pressed: set[str] = set()
-        for decision in decisions:
-            pressed |= rising_edge(decision.function if decision.function in BUTTONS else None, self.function)
-            self.function, self.nu = decision.function, decision.nu
-        if self.function in FUNCTIONS and self.nu > 0:
-            return JoystickState({self.function: min(1.0, self.nu)}, frozenset(pressed))
-        return JoystickState(pressed=frozenset(pressed))
 
 
 # ---------------------------------------------------------------------------------- one tick

@@ -20,7 +20,8 @@ from bomi.model_io import save_model
 from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
-from tasks.live import (DecisionStick, StatusLine, Tick, Watchdog, display_opens, has_display, participant_blocks,
+from tasks.stick import DecisionStick
+from tasks.live import (StatusLine, Tick, Watchdog, display_opens, has_display, participant_blocks,
                         refusal, run_live, status_text)
 from tasks.participant import calibration_session, load_participant, session_recording
 
