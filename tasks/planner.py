@@ -11,14 +11,13 @@ BoMI gives one class at a time).
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
-from bomi.errors import BomiError
+from bomi.config_files import load_toml
 from sim.joystick import BUTTON_STEP, FINGER_DIRECTION, MODE_CYCLE, TRANSLATION_AXES, WRIST_AXES, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
@@ -60,38 +59,37 @@ _MAY_BE_NEGATIVE = {"grasp_offset"}
 
 
 def load_operator(path: Path | str = DEFAULT_OPERATOR_FILE) -> OperatorParams:
-    """Read and validate an operator TOML file; raise BomiError naming the file and the fault."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise BomiError(f"{path}: cannot read operator file ({exc.strerror})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+    """Read and validate an operator TOML file (a path, or a shipped one by name); raise BomiError
+    naming the file and the fault."""
+    return load_toml(path, DEFAULT_OPERATOR_FILE.parent, "operator", _parse_operator)
+
+
+def _parse_operator(data: dict, source: str) -> OperatorParams:
+    """The operator tables as OperatorParams; ValueError names what is wrong (load_toml adds the file)."""
     values: dict[str, float] = {}
     for section, keys in _SECTIONS.items():
         table = data.get(section)
         if not isinstance(table, dict):
-            raise BomiError(f"{path}: missing table [{section}]")
+            raise ValueError(f"missing table [{section}]")
         unknown = set(table) - set(keys)
         if unknown:
-            raise BomiError(f"{path}: unknown key(s) in [{section}]: {', '.join(sorted(unknown))}")
+            raise ValueError(f"unknown key(s) in [{section}]: {', '.join(sorted(unknown))}")
         for key in keys:
             value = table.get(key)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise BomiError(f"{path}: [{section}] {key} must be a finite number, got {value!r}")
+                raise ValueError(f"[{section}] {key} must be a finite number, got {value!r}")
             if value < 0 and key not in _MAY_BE_NEGATIVE:
-                raise BomiError(f"{path}: [{section}] {key} must not be negative, got {value}")
+                raise ValueError(f"[{section}] {key} must not be negative, got {value}")
             values[key] = float(value)
     unknown_sections = set(data) - set(_SECTIONS)
     if unknown_sections:
-        raise BomiError(f"{path}: unknown table(s): {', '.join(sorted(unknown_sections))}")
+        raise ValueError(f"unknown table(s): {', '.join(sorted(unknown_sections))}")
     if not 0 < values["fine"] <= values["coarse"] <= 1:
-        raise BomiError(f"{path}: [deflection] needs 0 < fine <= coarse <= 1")
+        raise ValueError("[deflection] needs 0 < fine <= coarse <= 1")
     if not 0 < values["open_closure"] < 1:
-        raise BomiError(f"{path}: [fingers] open_closure must lie strictly between 0 and 1")
+        raise ValueError("[fingers] open_closure must lie strictly between 0 and 1")
     if values["stop"] <= 0 or values["align"] <= 0 or values["placed"] <= 0:
-        raise BomiError(f"{path}: [tolerance] stop, align and placed must be positive")
+        raise ValueError("[tolerance] stop, align and placed must be positive")
     return OperatorParams(**values)
 
 

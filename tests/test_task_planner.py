@@ -46,6 +46,12 @@ def test_bad_operator_file_is_one_clear_error(tmp_path, text, fault):
     assert str(path) in message and fault in message and "\n" not in message
 
 
+def test_operator_file_by_shipped_name_and_missing_file(tmp_path):
+    assert load_operator("operator") == P
+    with pytest.raises(BomiError, match="no such operator file"):
+        load_operator(tmp_path / "absent.toml")
+
+
 def test_mode_button_takes_the_short_way_round():
     # cycle translation -> wrist -> fingers -> translation; B1 forward, B2 back
     assert mode_button(Mode.TRANSLATION, Mode.WRIST) == "B1"
