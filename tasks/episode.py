@@ -119,7 +119,7 @@ class JoystickChannel:
     def __init__(self) -> None:
         self._button: str | None = None
 
-    def command(self, intent: StickIntent, t: float, t_end: float) -> JoystickState:
+    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None) -> JoystickState:
         pressed = rising_edge(intent.button, self._button)
         self._button = intent.button
         return JoystickState(dict(intent.deflection), pressed)
@@ -133,6 +133,42 @@ WARMUP_S = 12.0  # the fusion's yaw settles in about 600 samples (hardware.md)
 # the calibrated gamma range (nu = 0 .. 1) spans the leans used in the task.
 BODY_RANGE = (0.5, 1.0)
 LEAN_STEP = 0.15  # how much further the participant leans when a posture is not recognised
+LEARN_MIN_SPEED = 0.05  # fraction of full speed: a slower response teaches nothing (the class was missed)
+LEARNING_RATE = 0.5  # how much of the latest speed error the participant corrects in their lean
+MAX_ZERO = 0.9
+
+
+@dataclass
+class LeanFeel:
+    """The participant's feel for one proportional class: a wanted deflection d asks for a lean of
+    zero + (1 - zero) x d, never below the least lean calibrated (``floor``).  ``zero`` (the lean at
+    which the arm would just not move) is learnt: after a slower-than-full move, lowered when the
+    arm went faster than wanted, raised when it went slower."""
+
+    zero: float = BODY_RANGE[0]
+    floor: float = BODY_RANGE[0]
+
+    def lean_for(self, deflection: float) -> float:
+        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, self.floor, 1.0))
+
+    def learn(self, wanted: float, seen: float) -> None:
+        """``wanted`` and ``seen`` (the arm's top speed in the posture's direction) as fractions of
+        full speed; a full-speed move teaches nothing (any lean past the top gives full speed)."""
+        if wanted < 1.0:
+            self.zero = float(np.clip(self.zero - LEARNING_RATE * (seen - wanted), 0.0, MAX_ZERO))
+
+
+@dataclass
+class _HeldPosture:
+    """A proportional posture being watched: what the arm does while it is held and until its
+    effect has worked through the chain after it is let go."""
+
+    label: int
+    wanted: float  # deflection
+    direction: np.ndarray  # the hand direction its function moves in
+    since: float
+    until: float = np.inf
+    fastest: float = 0.0
 
 
 class BomiChannel:
@@ -153,6 +189,11 @@ class BomiChannel:
         self._label_of = {cls.function: cls.label for cls in profile.classes}
         self._function_of = {cls.label: cls.function for cls in profile.classes}
         self._since = 0.0  # when the posture held now was taken up
+        # the participant's feel for each proportional translation class (how far to lean for how fast)
+        self.feel = {cls.label: LeanFeel() for cls in profile.classes if cls.function in TRANSLATION_AXES}
+        self._watched: list[_HeldPosture] = []  # the posture held now, and those whose effect is still on its way
+        # from taking up (or letting go of) a posture to the arm's response: reaction + the body's move
+        self._lag = participant.params.reaction_s + participant.params.onset_s
         # how long the person waits for a posture to take effect before leaning further
         self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
         self._last_sample: dict[int, int] = {}
@@ -208,19 +249,43 @@ class BomiChannel:
         if not intent.deflection:
             return NEUTRAL_LABEL, 0.0
         (function, deflection), = intent.deflection.items()
-        return self._label_of[function], BODY_RANGE[0] + (BODY_RANGE[1] - BODY_RANGE[0]) * float(deflection)
+        label = self._label_of[function]
+        feel = self.feel.get(label, LeanFeel())
+        return label, feel.lean_for(float(deflection))
 
-    def command(self, intent: StickIntent, t: float, t_end: float) -> JoystickState:
+    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None) -> JoystickState:
+        """``seen``: the hand's velocity as a fraction of full speed (None when the arm is not in
+        translation mode): what the participant watches to learn how far to lean."""
         label, amplitude = self.intent_class(intent)
         held, held_amplitude = self.participant.intent
+        self._watch(t, seen)
         if label != held:
+            for w in self._watched:
+                w.until = min(w.until, t + self._lag)
             self.participant.set_intent(label, amplitude, self.lead + t)
             self._since = t
+            if label in self.feel:
+                direction = np.asarray(TRANSLATION_AXES[self._function_of[label]], dtype=float)
+                (wanted,) = intent.deflection.values()
+                self._watched.append(_HeldPosture(label, float(wanted), direction, since=t))
         elif label != NEUTRAL_LABEL and self.stick.function != self._function_of[label] and held_amplitude < 1.0 \
                 and t - self._since > self._patience:  # nothing happens: lean further
             self.participant.set_intent(label, min(1.0, held_amplitude + LEAN_STEP), self.lead + t)
             self._since = t
+            self._watched = [w for w in self._watched if w.until < np.inf]  # that lean is not the one chosen
         return self.stick.update(self._feed(self._arrived(self.lead + t, self.lead + t_end)))
+
+    def _watch(self, t: float, seen: np.ndarray | None) -> None:
+        """Follow the arm's response to the watched postures; once one's effect is over, learn from
+        it if the posture was held long enough to be reached and the arm answered it."""
+        for w in list(self._watched):
+            if seen is not None and w.since + self._lag <= t < w.until:
+                w.fastest = max(w.fastest, float(np.dot(seen, w.direction)))
+            if t < w.until:
+                continue
+            if w.until - w.since >= 2 * self._lag and w.fastest > LEARN_MIN_SPEED:
+                self.feel[w.label].learn(w.wanted, w.fastest)
+            self._watched.remove(w)
 
     def log_fields(self) -> dict:
         truth = self.participant.truth()
@@ -281,12 +346,17 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
     user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes)
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
     film = _Film(sim, video, video_speedup) if video is not None else None
+    full_speed, previous = sim.config.control.full_speed, None
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
         while True:
             view = task.view()
             intent = user.decide(view)
-            state = channel.command(intent, view.t, view.t + sim.dt)
+            seen = None
+            if previous is not None and view.mode is Mode.TRANSLATION:
+                seen = (view.hand_pos - previous) / (sim.dt * full_speed)
+            previous = view.hand_pos
+            state = channel.command(intent, view.t, view.t + sim.dt, seen)
             rows["t"].append(view.t)
             rows["hand"].append(view.hand_pos)
             rows["dir"].append(intended_direction(view.mode, intent))

@@ -34,6 +34,8 @@ class OperatorParams:
     coarse: float
     fine: float
     slow_down_distance: float
+    coast_share: float
+    full_speed: float
     stop: float
     align: float
     placed: float
@@ -50,7 +52,7 @@ class OperatorParams:
 
 _SECTIONS = {
     "timing": ("reaction_time", "pause_between_moves", "anticipation", "squeeze_time", "button_patience"),
-    "deflection": ("coarse", "fine", "slow_down_distance"),
+    "deflection": ("coarse", "fine", "slow_down_distance", "coast_share", "full_speed"),
     "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg", "tilt_deg"),
     "heights": ("hover", "carry_clearance", "grasp_offset", "release_gap", "retreat"),
     "fingers": ("open_closure",),
@@ -165,11 +167,24 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
 
 
 def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
-    """The cube the hand has been squeezing for the squeeze time, if any."""
+    """The cube the hand has been squeezing for the squeeze time, if any (the one nearest the pinch
+    point when the fingers touch more than one, e.g. a cube lying against the other)."""
     if memory.touch_since is None or view.t - memory.touch_since < p.squeeze_time:
         return None
     touching = [k for k, touch in enumerate(view.touching) if touch]
-    return touching[0] if len(touching) == 1 and view.closure > p.open_closure else None
+    if not touching or view.closure <= p.open_closure:
+        return None
+    return min(touching, key=lambda k: float(np.linalg.norm(view.cube_pos[k] - view.hand_pos)))
+
+
+def cube_to_take(view: View, bottom: int | None) -> int:
+    """The next cube to pick up: the first not placed at B, unless another lies on top of it."""
+    candidates = [k for k in range(len(view.cube_pos)) if k != bottom]
+    k = candidates[0]
+    for other in candidates[1:]:
+        if view.cube_pos[other][2] > view.cube_pos[k][2] + view.cube_size / 2:
+            k = other
+    return k
 
 
 def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
@@ -178,9 +193,14 @@ def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
     return (err + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
 
 
-def deflection_for(distance: float, p: OperatorParams) -> float:
-    """Coarse far from the goal, fine within the slow-down distance."""
-    return p.coarse if distance > p.slow_down_distance else p.fine
+def deflection_for(distance: float, p: OperatorParams, anticipation: float) -> float:
+    """Fine within the slow-down distance; beyond it as fast as lets the hand coast (``anticipation``
+    seconds of the speed) no further than ``coast_share`` of the distance, up to coarse: a person who
+    has learnt that the arm goes on for a while after letting go does not go full speed into a short
+    move."""
+    if distance <= p.slow_down_distance:
+        return p.fine
+    return float(np.clip(p.coast_share * distance / (p.full_speed * max(anticipation, 1e-9)), p.fine, p.coarse))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -232,7 +252,7 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
         return _approach(hand, release, carry_z, p, label, Action("open", f"release cube {held + 1}"),
                          memory.descending)
 
-    k = next(k for k in range(len(view.cube_pos)) if k != bottom)
+    k = cube_to_take(view, bottom)
     cube = view.cube_pos[k]
     grasp = np.r_[cube[:2], cube[2] + p.grasp_offset]
     at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= p.align and abs(hand[2] - grasp[2]) <= 2 * p.stop)
@@ -288,7 +308,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
         return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
     if action.kind == "move":
         lead = p.anticipation if anticipation is None else anticipation
-        deflection, axis = _translation(view.hand_pos, velocity * lead, action.point, p, combine_axes,
+        deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,
                                         memory.axis, holding or {})
         return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
     memory = replace(memory, axis=None)
@@ -310,16 +330,18 @@ def _remember_touch(view: View, memory: Memory) -> Memory:
     return memory if memory.touch_since is not None else replace(memory, touch_since=view.t)
 
 
-def _translation(hand: np.ndarray, coast: np.ndarray, point: np.ndarray, p: OperatorParams, combine_axes: bool,
-                 axis: int | None, holding: Mapping[str, float]) -> tuple[dict[str, float], int | None]:
+def _translation(hand: np.ndarray, velocity: np.ndarray, lead: float, point: np.ndarray, p: OperatorParams,
+                 combine_axes: bool, axis: int | None, holding: Mapping[str, float]
+                 ) -> tuple[dict[str, float], int | None]:
     """Joystick functions (and their deflections) that bring the hand to ``point``.
 
-    An axis being moved stops when the hand would coast (``coast``: the travel expected after
-    letting go) to within the stop tolerance of its goal; an idle axis
+    An axis being moved stops when the hand would coast (``lead`` seconds of its ``velocity``: the
+    travel expected after letting go) to within the stop tolerance of its goal; an idle axis
     starts again only when it is off by twice the stop tolerance (no dithering), unless nothing
     else would move the hand toward a goal the plan still wants.
     """
     error = point - hand
+    coast = velocity * lead
     moving = []
     for i in range(3):
         fn = _function_along(i, error[i])
@@ -338,7 +360,7 @@ def _translation(hand: np.ndarray, coast: np.ndarray, point: np.ndarray, p: Oper
         if axis not in moving:
             axis = max(moving, key=lambda i: abs(error[i]))
         moving = [axis]
-    return {_function_along(i, error[i]): deflection_for(abs(error[i]), p) for i in moving}, axis
+    return {_function_along(i, error[i]): deflection_for(abs(error[i]), p, lead) for i in moving}, axis
 
 
 def _function_along(axis: int, signed: float) -> str:
@@ -380,6 +402,9 @@ class ScriptedUser:
     _started: float = 0.0  # when the current move began
     _relax_until: float = -math.inf
     _coasting: tuple[float, np.ndarray, float] | None = None  # (t, hand, speed) when a move was let go
+    settle: float = 0.0  # learnt: how long the hand keeps (or starts) moving after a move is let go
+    _last_moving: float = -math.inf  # when the hand was last seen moving
+    _released_move: bool = False  # the last thing let go was a stick move (not a button)
 
     def __post_init__(self) -> None:
         if self.anticipation is None:
@@ -387,6 +412,8 @@ class ScriptedUser:
 
     def decide(self, view: View) -> StickIntent:
         velocity = hand_velocity(view, self.memory)
+        if float(np.linalg.norm(velocity)) > STILL_SPEED:
+            self._last_moving = view.t
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation)
@@ -405,18 +432,28 @@ class ScriptedUser:
         if self._waiting_since is None:
             self._waiting_since = view.t
         ready = max(self._waiting_since + self.params.reaction_time,
-                    self._stopped_at + self.params.pause_between_moves, self._relax_until)
+                    self._stopped_at + max(self.params.pause_between_moves, self.settle), self._relax_until)
         coasting = float(np.linalg.norm(velocity)) > STILL_SPEED and view.t - self._stopped_at < MAX_WAIT
         if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
             return replace(REST, goal=wanted.goal)
+        self._learn_settling()
         self.current, self._waiting_since, self._started = wanted, None, view.t
         return wanted
 
     def _let_go(self, view: View, velocity: np.ndarray) -> None:
         self._stopped_at = view.t
+        self._released_move = bool(self.current.deflection)
         speed = float(np.linalg.norm(velocity))
         if view.mode is Mode.TRANSLATION and speed > COASTING_MIN_SPEED:
             self._coasting = (view.t, view.hand_pos, speed)
+
+    def _learn_settling(self) -> None:
+        """Before a new move: update how long the hand went on moving after the last stick move was
+        let go (through a BoMI the arm answers late; the person learns to watch it settle first)."""
+        if self._released_move and math.isfinite(self._stopped_at):
+            seen = min(max(0.0, self._last_moving - self._stopped_at), MAX_WAIT)
+            self.settle = 0.5 * self.settle + 0.5 * seen
+        self._released_move = False
 
     def _learn_coasting(self, view: View, speed: float) -> None:
         """Once the hand has come to rest (or a new move began), update the anticipation."""
