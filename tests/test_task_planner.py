@@ -7,8 +7,8 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Memory, ScriptedUser, View, load_operator, mode_button, plan,
-                           placed_cubes)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Memory, ScriptedUser, View, cube_to_take, deflection_for, held_cube,
+                           load_operator, mode_button, plan, placed_cubes)
 
 P = load_operator()
 B = np.array([0.14, -0.45])
@@ -152,3 +152,54 @@ def test_a_tilted_hand_is_levelled_in_wrist_mode_about_the_largest_axis():
     assert intent.goal == "level the hand" and set(intent.deflection) == {"L"}
     intent, _ = plan(replace(tilted, mode=Mode.TRANSLATION), Memory(), P, combine_axes=False)
     assert intent.button == "B1"
+
+
+def test_beyond_the_slow_down_distance_the_speed_lets_the_hand_coast_only_part_of_the_way():
+    assert deflection_for(P.slow_down_distance, P, anticipation=1.0) == P.fine
+    # 0.20 m to go, 1 s of coasting: 0.5 x 0.20 m / (0.20 m/s x 1 s) = 0.5
+    expected = P.coast_share * 0.20 / (P.full_speed * 1.0)
+    assert deflection_for(0.20, P, anticipation=1.0) == pytest.approx(expected)
+    assert 0.2 < expected < 1.0
+    assert deflection_for(0.09, P, anticipation=2.0) == P.fine  # floor: never slower than fine
+    assert deflection_for(0.09, P, anticipation=0.08) == P.coarse  # a joystick stops at once: full speed
+
+
+def test_the_cube_lying_on_the_other_is_taken_first_and_the_touched_cube_nearest_the_pinch_is_held():
+    flat = view()
+    assert cube_to_take(flat, bottom=None) == 0
+    assert cube_to_take(flat, bottom=0) == 1
+    piled = view(cubes=((0.10, -0.45), (0.11, -0.45)), cube_z=(HALF, 3 * HALF))
+    assert cube_to_take(piled, bottom=None) == 1
+    both = replace(piled, hand_pos=np.array([0.11, -0.45, 3 * HALF]), touching=(True, True), closure=0.6, t=5.0)
+    assert held_cube(both, Memory(touch_since=0.0), P) == 1
+    assert held_cube(replace(both, closure=0.1), Memory(touch_since=0.0), P) is None  # open fingers hold nothing
+
+
+def _run_until_moving(user: ScriptedUser, hand, t: float) -> float:
+    while not user.decide(view(hand=tuple(hand), t=t)).deflection:
+        t += 1 / 60
+    return t
+
+
+def test_scripted_user_learns_to_let_a_late_arm_settle_before_the_next_move():
+    user = ScriptedUser(P, combine_axes=False)
+    over_cube = np.array([-0.14, -0.39, 0.22])
+    t = _run_until_moving(user, (0.0, -0.42, 0.22), 0.0)  # reaction time, then R toward cube 1
+    stopped = t + 0.1
+    assert not user.decide(view(hand=tuple(over_cube), t=stopped)).deflection  # over the cube: let go
+    # like a BoMI, the arm answers late: the hand goes on for 1.0 s after letting go (past the cube)
+    hand, k = over_cube.copy(), 1
+    while k / 60 <= 1.0:
+        hand = hand + [-0.05 / 60, 0.0, 0.0]
+        assert not user.decide(view(hand=tuple(hand), t=stopped + k / 60)).deflection  # watches it go on
+        k += 1
+    restart = _run_until_moving(user, hand, stopped + k / 60)  # back toward the cube once at rest
+    assert user.settle == pytest.approx(0.5, abs=0.03)  # half of the 1.0 s seen, learnt from 0
+    # next time the hand looks still right after letting go, the user waits the learnt settle time
+    stopped_again = restart + 0.1
+    assert not user.decide(view(hand=tuple(over_cube), t=stopped_again)).deflection  # back over the cube
+    learnt = user.settle
+    descend = _run_until_moving(user, over_cube, stopped_again + 1 / 60)
+    assert user.current.goal == "reach cube 1: descend"
+    assert descend >= stopped_again + learnt - 1e-9 > stopped_again + max(P.reaction_time, P.pause_between_moves)
+    assert user.settle == pytest.approx(learnt / 2)  # this time the hand stayed put: learnt back down
