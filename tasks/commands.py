@@ -23,6 +23,9 @@ from tasks.timeline import timeline_figure
 # Majority vote over this many decisions on the simulated BoMI (the profiles ship with it off):
 # it removes the one- and two-decision blips that would otherwise press B1/B2 by mistake.
 DEFAULT_VOTE = 5
+# The demo's MP4 plays this many times faster than simulated time: a long BoMI episode stays a
+# short film (and quick to render).
+DEMO_VIDEO_SPEEDUP = 8.0
 
 PAPER = {"bomi_time_s": 138.0, "joystick_time_s": 58.0, "realtime_accuracy": 0.992, "longest_error_run_ms": 290.0}
 
@@ -37,15 +40,15 @@ class EpisodeJob:
     vote_length: int = DEFAULT_VOTE
 
 
-def run_job(job: EpisodeJob, video: Path | None = None):
-    """One episode (calibration first for the BoMI); returns its log."""
+def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4.0):
+    """One episode (calibration first for the BoMI); returns its log (and films it if ``video``)."""
     if job.operator == "joystick":
         channel = JoystickChannel()
     else:
         channel = calibrated_channel(job.participant, job.seed, PostProcessing(vote_length=job.vote_length))
     return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
                        operator_file=job.operator_file, task_config=TaskConfig(time_limit=job.time_limit),
-                       video=video)
+                       video=video, video_speedup=video_speedup)
 
 
 def _summary_of(job: EpisodeJob) -> dict:
@@ -201,7 +204,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     joystick = run_job(EpisodeJob("joystick", "P1", args.seed))
-    bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=out / "bomi_episode.mp4")
+    bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=out / "bomi_episode.mp4",
+                   video_speedup=DEMO_VIDEO_SPEEDUP)
     summaries = [summarize(joystick), summarize(bomi)]
     print(markdown_tables(aggregate(summaries)))
     timeline_figure([joystick, bomi], out / "timeline.png")
