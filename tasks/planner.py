@@ -142,6 +142,7 @@ class Memory:
     turning: bool = False  # a wrist turn goes on until the hand is well lined up
     descending: bool = False  # a descent goes on while the hand stays roughly over the goal
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
+    stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
 
 
 # ---------------------------------------------------------------------------------------------
@@ -250,12 +251,14 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
         carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
         label = f"carry cube {held + 1}"
         return _approach(hand, release, carry_z, p, label, Action("open", f"release cube {held + 1}"),
-                         memory.descending)
+                         memory.descending, memory.stalled)
 
     k = cube_to_take(view, bottom)
     cube = view.cube_pos[k]
     grasp = np.r_[cube[:2], cube[2] + p.grasp_offset]
-    at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= p.align and abs(hand[2] - grasp[2]) <= 2 * p.stop)
+    # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
+    at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= 2 * p.align
+                and (abs(hand[2] - grasp[2]) <= 2 * p.stop or memory.stalled))
     if at_grasp and (view.touching[k] or not open_hand):
         return Action("close", f"grasp cube {k + 1}")
     if not open_hand:
@@ -266,19 +269,19 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
         return Action("turn", f"turn to cube {k + 1}", turn=np.array([0.0, 0.0, turn]))
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", Action("close", f"grasp cube {k + 1}"),
-                     memory.descending)
+                     memory.descending, memory.stalled)
 
 
 def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, label: str,
-              on_arrival: Action, descending: bool) -> Action:
+              on_arrival: Action, descending: bool, stalled: bool = False) -> Action:
     """Rise to the travel height if low and far, travel over the goal, go down, then act.
-    A descent already under way tolerates twice the alignment error."""
+    A descent already under way tolerates twice the alignment error; a stalled one has arrived."""
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
     if xy_off > p.align * (2 if descending else 1):
         if hand[2] < travel_z - 4 * p.stop and xy_off > 2 * p.align:
             return Action("move", f"{label}: rise", np.r_[hand[:2], travel_z])
         return Action("move", f"{label}: travel", np.r_[goal[:2], hand[2]])
-    if abs(hand[2] - goal[2]) > p.stop:
+    if abs(hand[2] - goal[2]) > p.stop and not stalled:
         return Action("move", f"{label}: descend", np.r_[hand[:2] if xy_off <= p.stop else goal[:2], goal[2]])
     return on_arrival
 
@@ -302,7 +305,9 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     velocity = hand_velocity(view, memory)
     memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
     action = next_action(view, memory, p)
-    memory = replace(memory, turning=action.kind == "turn", descending=action.goal.endswith("descend"))
+    descending = action.goal.endswith("descend")
+    memory = replace(memory, turning=action.kind == "turn", descending=descending,
+                     stalled=memory.stalled and (descending or action.kind in ("open", "close")))
     need = _MODE_FOR.get(action.kind)
     if need is not None and need is not view.mode:
         return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
@@ -405,6 +410,7 @@ class ScriptedUser:
     settle: float = 0.0  # learnt: how long the hand keeps (or starts) moving after a move is let go
     _last_moving: float = -math.inf  # when the hand was last seen moving
     _released_move: bool = False  # the last thing let go was a stick move (not a button)
+    _height_seen: tuple[float, float] = (-math.inf, 0.0)  # (since when, hand height) during a descent
 
     def __post_init__(self) -> None:
         if self.anticipation is None:
@@ -415,6 +421,7 @@ class ScriptedUser:
         if float(np.linalg.norm(velocity)) > STILL_SPEED:
             self._last_moving = view.t
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
+        self._watch_descent(view)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation)
         if self.current.button is not None and view.t - self._started > self.params.button_patience:
@@ -447,6 +454,18 @@ class ScriptedUser:
         if view.mode is Mode.TRANSLATION and speed > COASTING_MIN_SPEED:
             self._coasting = (view.t, view.hand_pos, speed)
 
+    def _watch_descent(self, view: View) -> None:
+        """A descent pushed on for ``STALL_TIME`` without the hand going lower is stalled (the cube
+        or the fingers rest on something): the person takes it as arrived."""
+        if not self.current.goal.endswith("descend"):
+            self._height_seen = (view.t, float(view.hand_pos[2]))
+            return
+        since, height = self._height_seen
+        if height - view.hand_pos[2] > self.params.stop:
+            self._height_seen = (view.t, float(view.hand_pos[2]))
+        elif view.t - since > STALL_TIME:
+            self.memory = replace(self.memory, stalled=True)
+
     def _learn_settling(self) -> None:
         """Before a new move: update how long the hand went on moving after the last stick move was
         let go (through a BoMI the arm answers late; the person learns to watch it settle first)."""
@@ -469,6 +488,7 @@ COASTING_MIN_SPEED = 0.02  # m/s: slower moves teach nothing about stopping
 STILL_SPEED = 0.005  # m/s: the person sees the hand at rest
 MAX_WAIT = 3.0  # s: gives up waiting for the hand to come to rest
 MAX_ANTICIPATION = 2.0  # s
+STALL_TIME = 5.0  # s: longer than a BoMI participant takes to lean further when a posture goes unrecognised
 
 
 def _continues(current: StickIntent, wanted: StickIntent) -> bool:

@@ -203,3 +203,34 @@ def test_scripted_user_learns_to_let_a_late_arm_settle_before_the_next_move():
     assert user.current.goal == "reach cube 1: descend"
     assert descend >= stopped_again + learnt - 1e-9 > stopped_again + max(P.reaction_time, P.pause_between_moves)
     assert user.settle == pytest.approx(learnt / 2)  # this time the hand stayed put: learnt back down
+
+
+def test_a_descent_that_stalls_counts_as_arrived_and_the_fingers_close_slightly_off_centre():
+    above = (-0.14 + 0.02, -0.39, HALF + 0.03)  # 2 cm off in x (within twice align), 3 cm too high
+    moving = Memory(descending=True)
+    intent, _ = plan(view(hand=above), moving, P, combine_axes=False)
+    assert intent.goal == "reach cube 1: descend"
+    intent, memory = plan(view(hand=above), replace(moving, stalled=True), P, combine_axes=False)
+    assert intent.goal == "grasp cube 1: fingers mode" and memory.stalled
+    intent, _ = plan(view(hand=above, mode=Mode.FINGERS, closure=0.3), memory, P, combine_axes=False)
+    assert intent.goal == "grasp cube 1"  # keeps closing there
+    at_height = (-0.14 + 0.02, -0.39, HALF)
+    intent, _ = plan(view(hand=at_height, mode=Mode.FINGERS), moving, P, combine_axes=False)
+    assert intent.goal == "grasp cube 1"  # arrived at the bottom of a descent 2 cm off: close
+    intent, _ = plan(view(hand=at_height, mode=Mode.FINGERS, closure=0.3), Memory(), P, combine_axes=False)
+    assert intent.goal == "grasp cube 1"  # and keep closing
+
+
+def test_scripted_user_takes_a_descent_that_does_not_go_lower_as_stalled():
+    user = ScriptedUser(P, combine_axes=False)
+    over = (-0.14, -0.39, 0.15)
+    t = _run_until_moving(user, over, 0.0)
+    assert user.current.goal == "reach cube 1: descend"
+    while t < 4.9:
+        t += 1 / 60
+        user.decide(view(hand=over, t=t))
+    assert not user.memory.stalled
+    while t < 5.5:
+        t += 1 / 60
+        intent = user.decide(view(hand=over, t=t))
+    assert user.memory.stalled and intent.goal.startswith("grasp cube 1")
