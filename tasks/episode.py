@@ -16,6 +16,7 @@ import numpy as np
 from bomi.chain import Decision, OnlineChain, train
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.frames import FrameParser, imu_index
+from bomi.errors import BomiError
 from bomi.fusion import DT
 from bomi.profiles import Profile, load_profile
 from sim.env import ArmSim
@@ -187,6 +188,10 @@ class BomiChannel:
         self.participant, self.chain, self.profile = participant, chain, profile
         self.parser = FrameParser()
         self._label_of = {cls.function: cls.label for cls in profile.classes}
+        missing = [f for f in (*FUNCTIONS, "B1") if f not in self._label_of]
+        if missing:  # the scripted user needs every direction and a mode button
+            raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
+                            "the scripted stacking user needs F, B, R, L, Rr, Lr and B1")
         self._function_of = {cls.label: cls.function for cls in profile.classes}
         self._since = 0.0  # when the posture held now was taken up
         # the participant's feel for each proportional translation class (how far to lean for how fast)

@@ -143,3 +143,10 @@ def test_benchmark_runs_episodes_in_worker_processes_and_compares_with_the_paper
 def test_benchmark_rejects_an_unknown_operator(capsys):
     assert main(["benchmark", "--operators", "joystick,telepathy", "--seeds", "1"]) == 2
     assert "unknown telepathy" in capsys.readouterr().err
+
+
+def test_bomi_run_with_a_profile_lacking_directions_is_a_one_line_error(capsys):
+    from bomi.cli import main
+    assert main(["run-task", "--operator", "bomi", "--participant", "P4", "--seed", "1", "--time-limit", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no class for Rr, Lr" in err[0]
