@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from bomi.profiles import load_profile
 from tasks import fit_participant
 from tasks.participant import (PARTICIPANT_DIR, CalibrationSession, VirtualParticipant, calibration_session,
                                load_participant, minimum_jerk, session_recording)
+from helpers import edited_copy
 
 P1_TOML = PARTICIPANT_DIR / "P1.toml"
 
@@ -43,14 +43,6 @@ def test_shipped_participants_match_their_bomi_profiles(name):
     VirtualParticipant(params, load_profile(params.profile), seed=0)   # checks nodes and classes
 
 
-def bad_copy(tmp_path: Path, old: str, new: str) -> Path:
-    text = P1_TOML.read_text()
-    assert old in text
-    path = tmp_path / "bad.toml"
-    path.write_text(text.replace(old, new, 1))
-    return path
-
-
 @pytest.mark.parametrize("old, new, message", [
     ("onset_s = 0.8", "onset_s = -1", "'onset_s' must be a number"),
     ("onset_s = 0.8", "", "missing key(s) onset_s"),
@@ -63,7 +55,7 @@ def bad_copy(tmp_path: Path, old: str, new: str) -> Path:
     ('name = "P1"', 'name = "P1', "not valid TOML"),
 ])
 def test_bad_participant_files_name_the_file_and_the_problem(tmp_path, old, new, message):
-    path = bad_copy(tmp_path, old, new)
+    path = edited_copy(P1_TOML, tmp_path / "bad.toml", old, new)
     with pytest.raises(BomiError) as err:
         load_participant(path)
     assert str(path) in str(err.value) and message in str(err.value)

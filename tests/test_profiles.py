@@ -6,6 +6,7 @@ import pytest
 from bomi.errors import BomiError
 from bomi.fusion import NodeCalibration
 from bomi.profiles import PROFILE_DIR, load_profile
+from helpers import edited_copy
 
 
 def test_p1_matches_the_dataset_readme():
@@ -28,14 +29,6 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
     assert load_profile(PROFILE_DIR / f"{name}.toml") == profile
 
 
-def variant(tmp_path, old: str, new: str):
-    text = (PROFILE_DIR / "P1.toml").read_text()
-    assert old in text
-    path = tmp_path / "bad.toml"
-    path.write_text(text.replace(old, new, 1))
-    return path
-
-
 @pytest.mark.parametrize("old, new, message", [
     ('function = "F"', 'function = "Up"', "classes[1]: function must be one of"),
     ("label = 2", "label = 1", "duplicate label"),
@@ -55,7 +48,7 @@ def variant(tmp_path, old: str, new: str):
     ('name = "P1"', 'name = "P1', "not valid TOML"),
 ])
 def test_invalid_profiles_name_file_and_problem(tmp_path, old, new, message):
-    path = variant(tmp_path, old, new)
+    path = edited_copy(PROFILE_DIR / "P1.toml", tmp_path / "bad.toml", old, new)
     with pytest.raises(BomiError) as info:
         load_profile(path)
     assert str(path) in str(info.value) and message in str(info.value)
