@@ -163,10 +163,15 @@ def amplitude_ranges(gammas: dict[int, np.ndarray], labels: np.ndarray, class_no
 
 
 def proportional(gamma_value: float, amplitude: AmplitudeRange | None) -> float:
-    """nu = |gamma - gamma_min| / (gamma_max - gamma_min), clipped to [0, 1]; 0 for the neutral class."""
+    """nu = (gamma - gamma_min) / (gamma_max - gamma_min), clipped to [0, 1]; 0 for the neutral class.
+
+    The paper writes |gamma - gamma_min|; taken literally, a motion smaller than the least
+    calibrated one would drive the arm faster the smaller it gets (and every return to neutral
+    through another class's region would move the arm).  Below gamma_min the output is 0.
+    """
     if amplitude is None:
         return 0.0
     span = amplitude.gamma_max - amplitude.gamma_min
     if span <= 0.0:
         return 1.0
-    return min(1.0, abs(gamma_value - amplitude.gamma_min) / span)
+    return min(1.0, max(0.0, gamma_value - amplitude.gamma_min) / span)

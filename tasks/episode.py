@@ -133,43 +133,27 @@ WARMUP_S = 12.0  # the fusion's yaw settles in about 600 samples (hardware.md)
 # Motion amplitudes the participant calibrates with and then uses: half to full range, so that
 # the calibrated gamma range (nu = 0 .. 1) spans the leans used in the task.
 BODY_RANGE = (0.5, 1.0)
-LEAN_STEP = 0.15  # how much further the participant leans when a posture is not recognised
-LEARN_MIN_SPEED = 0.05  # fraction of full speed: a slower response teaches nothing (the class was missed)
-LEARNING_RATE = 0.5  # how much of the latest speed error the participant corrects in their lean
+LEAN_STEP = 0.15  # how much further (or less far) the participant leans to correct a move
+SPEED_SMOOTHING_S = 0.3  # the person judges the arm's speed over about this long
+TOO_SLOW, TOO_FAST = 0.5, 2.0  # seen / wanted speed ratios that make the participant change their lean
 MAX_ZERO = 0.9
 
 
 @dataclass
 class LeanFeel:
     """The participant's feel for one proportional class: a wanted deflection d asks for a lean of
-    zero + (1 - zero) x d, never below the least lean calibrated (``floor``).  ``zero`` (the lean at
-    which the arm would just not move) is learnt: after a slower-than-full move, lowered when the
-    arm went faster than wanted, raised when it went slower."""
+    zero + (1 - zero) x d, never below the least lean calibrated.  ``zero`` (the lean at which the
+    arm would just not move) is learnt from the leans that worked: after correcting a move to
+    ``lean`` for a wanted ``d``, the next move of that class starts from there."""
 
     zero: float = BODY_RANGE[0]
-    floor: float = BODY_RANGE[0]
 
     def lean_for(self, deflection: float) -> float:
-        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, self.floor, 1.0))
+        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, BODY_RANGE[0], 1.0))
 
-    def learn(self, wanted: float, seen: float) -> None:
-        """``wanted`` and ``seen`` (the arm's top speed in the posture's direction) as fractions of
-        full speed; a full-speed move teaches nothing (any lean past the top gives full speed)."""
-        if wanted < 1.0:
-            self.zero = float(np.clip(self.zero - LEARNING_RATE * (seen - wanted), 0.0, MAX_ZERO))
-
-
-@dataclass
-class _HeldPosture:
-    """A proportional posture being watched: what the arm does while it is held and until its
-    effect has worked through the chain after it is let go."""
-
-    label: int
-    wanted: float  # deflection
-    direction: np.ndarray  # the hand direction its function moves in
-    since: float
-    until: float = np.inf
-    fastest: float = 0.0
+    def learn(self, lean: float, deflection: float) -> None:
+        if deflection < 1.0:
+            self.zero = float(np.clip((lean - deflection) / (1.0 - deflection), 0.0, MAX_ZERO))
 
 
 class BomiChannel:
@@ -193,13 +177,13 @@ class BomiChannel:
             raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
                             "the scripted stacking user needs F, B, R, L, Rr, Lr and B1")
         self._function_of = {cls.label: cls.function for cls in profile.classes}
-        self._since = 0.0  # when the posture held now was taken up
+        self._since = 0.0  # when the posture held now was taken up (or last changed)
         # the participant's feel for each proportional translation class (how far to lean for how fast)
         self.feel = {cls.label: LeanFeel() for cls in profile.classes if cls.function in TRANSLATION_AXES}
-        self._watched: list[_HeldPosture] = []  # the posture held now, and those whose effect is still on its way
-        # from taking up (or letting go of) a posture to the arm's response: reaction + the body's move
-        self._lag = participant.params.reaction_s + participant.params.onset_s
-        # how long the person waits for a posture to take effect before leaning further
+        self._wanted = 0.0  # deflection wanted from the posture held now
+        self._speed = 0.0  # the arm's speed along the held posture's direction, as the person judges it
+        # how long the person waits for a posture (or a change of lean) to take effect before
+        # leaning further: reaction + the body's move + a second of watching
         self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
         self._last_sample: dict[int, int] = {}
         self.stick = DecisionStick()
@@ -260,37 +244,41 @@ class BomiChannel:
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None) -> JoystickState:
         """``seen``: the hand's velocity as a fraction of full speed (None when the arm is not in
-        translation mode): what the participant watches to learn how far to lean."""
+        translation mode): what the participant watches to judge whether to lean further or less."""
         label, amplitude = self.intent_class(intent)
         held, held_amplitude = self.participant.intent
-        self._watch(t, seen)
+        self._wanted = float(next(iter(intent.deflection.values()), 0.0))
         if label != held:
-            for w in self._watched:
-                w.until = min(w.until, t + self._lag)
-            self.participant.set_intent(label, amplitude, self.lead + t)
-            self._since = t
-            if label in self.feel:
-                direction = np.asarray(TRANSLATION_AXES[self._function_of[label]], dtype=float)
-                (wanted,) = intent.deflection.values()
-                self._watched.append(_HeldPosture(label, float(wanted), direction, since=t))
-        elif label != NEUTRAL_LABEL and self.stick.function != self._function_of[label] and held_amplitude < 1.0 \
-                and t - self._since > self._patience:  # nothing happens: lean further
-            self.participant.set_intent(label, min(1.0, held_amplitude + LEAN_STEP), self.lead + t)
-            self._since = t
-            self._watched = [w for w in self._watched if w.until < np.inf]  # that lean is not the one chosen
+            self._take_up(label, amplitude, t)
+            self._speed = 0.0
+        elif label != NEUTRAL_LABEL:
+            lean = self._corrected_lean(label, held_amplitude, t, seen)
+            if lean != held_amplitude:
+                self._take_up(label, lean, t)
+                if label in self.feel:
+                    self.feel[label].learn(lean, self._wanted)
         return self.stick.update(self._feed(self._arrived(self.lead + t, self.lead + t_end)))
 
-    def _watch(self, t: float, seen: np.ndarray | None) -> None:
-        """Follow the arm's response to the watched postures; once one's effect is over, learn from
-        it if the posture was held long enough to be reached and the arm answered it."""
-        for w in list(self._watched):
-            if seen is not None and w.since + self._lag <= t < w.until:
-                w.fastest = max(w.fastest, float(np.dot(seen, w.direction)))
-            if t < w.until:
-                continue
-            if w.until - w.since >= 2 * self._lag and w.fastest > LEARN_MIN_SPEED:
-                self.feel[w.label].learn(w.wanted, w.fastest)
-            self._watched.remove(w)
+    def _take_up(self, label: int, amplitude: float, t: float) -> None:
+        self.participant.set_intent(label, amplitude, self.lead + t)
+        self._since = t
+
+    def _corrected_lean(self, label: int, lean: float, t: float, seen: np.ndarray | None) -> float:
+        """The lean the participant holds now: further when the chain has not answered the posture
+        for a while, or (proportional classes) when the arm goes much slower than wanted; less far
+        when it goes much faster.  Each correction is given the patience to take effect."""
+        function = self._function_of[label]
+        answered = self.stick.function == function
+        if answered and seen is not None and function in TRANSLATION_AXES:
+            along = float(np.dot(seen, TRANSLATION_AXES[function]))
+            self._speed += (along - self._speed) * min(1.0, DT / SPEED_SMOOTHING_S)
+        if t - self._since <= self._patience:
+            return lean
+        if not answered or (label in self.feel and self._speed < TOO_SLOW * self._wanted):
+            return min(1.0, lean + LEAN_STEP)
+        if label in self.feel and self._speed > TOO_FAST * self._wanted:
+            return max(BODY_RANGE[0], lean - LEAN_STEP)
+        return lean
 
     def log_fields(self) -> dict:
         truth = self.participant.truth()

@@ -54,7 +54,7 @@ def test_proportional_output_by_hand():
     r = AmplitudeRange(node=1, gamma_min=5.0, gamma_max=25.0)
     assert proportional(15.0, r) == 0.5
     assert proportional(40.0, r) == 1.0 and proportional(5.0, r) == 0.0
-    assert proportional(1.0, r) == 0.2           # |gamma - gamma_min|, as the paper writes it
+    assert proportional(1.0, r) == 0.0           # below the least calibrated motion: no speed
     assert proportional(7.0, None) == 0.0        # neutral class
     labels = np.array([0, 1, 1, 2, 2, 2])
     ranges = amplitude_ranges({1: np.array([9, 3, 8, 0, 0, 0.0]), 2: np.array([9, 9, 9, 4, 6, 5.0])}, labels,
