@@ -33,7 +33,7 @@ class OperatorParams:
     button_patience: float
     coarse: float
     fine: float
-    slow_down_distance: float
+    turn: float
     coast_share: float
     full_speed: float
     stop: float
@@ -48,14 +48,15 @@ class OperatorParams:
     release_gap: float
     retreat: float
     open_closure: float
+    closed_closure: float
 
 
 _SECTIONS = {
     "timing": ("reaction_time", "pause_between_moves", "anticipation", "squeeze_time", "button_patience"),
-    "deflection": ("coarse", "fine", "slow_down_distance", "coast_share", "full_speed"),
+    "deflection": ("coarse", "fine", "turn", "coast_share", "full_speed"),
     "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg", "tilt_deg"),
     "heights": ("hover", "carry_clearance", "grasp_offset", "release_gap", "retreat"),
-    "fingers": ("open_closure",),
+    "fingers": ("open_closure", "closed_closure"),
 }
 _MAY_BE_NEGATIVE = {"grasp_offset"}
 
@@ -86,10 +87,10 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
     unknown_sections = set(data) - set(_SECTIONS)
     if unknown_sections:
         raise ValueError(f"unknown table(s): {', '.join(sorted(unknown_sections))}")
-    if not 0 < values["fine"] <= values["coarse"] <= 1:
-        raise ValueError("[deflection] needs 0 < fine <= coarse <= 1")
-    if not 0 < values["open_closure"] < 1:
-        raise ValueError("[fingers] open_closure must lie strictly between 0 and 1")
+    if not 0 < values["fine"] <= values["coarse"] <= 1 or not 0 < values["turn"] <= 1:
+        raise ValueError("[deflection] needs 0 < fine <= coarse <= 1 and 0 < turn <= 1")
+    if not 0 < values["open_closure"] < values["closed_closure"] < 1:
+        raise ValueError("[fingers] needs 0 < open_closure < closed_closure < 1")
     if values["stop"] <= 0 or values["align"] <= 0 or values["placed"] <= 0:
         raise ValueError("[tolerance] stop, align and placed must be positive")
     return OperatorParams(**values)
@@ -178,6 +179,11 @@ def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
     return min(touching, key=lambda k: float(np.linalg.norm(view.cube_pos[k] - view.hand_pos)))
 
 
+def missed_grasp(view: View, p: OperatorParams) -> bool:
+    """The fingers have closed on nothing."""
+    return view.closure >= p.closed_closure and not any(view.touching)
+
+
 def cube_to_take(view: View, bottom: int | None) -> int:
     """The next cube to pick up: the first not placed at B, unless another lies on top of it."""
     candidates = [k for k in range(len(view.cube_pos)) if k != bottom]
@@ -195,12 +201,10 @@ def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
 
 
 def deflection_for(distance: float, p: OperatorParams, anticipation: float) -> float:
-    """Fine within the slow-down distance; beyond it as fast as lets the hand coast (``anticipation``
-    seconds of the speed) no further than ``coast_share`` of the distance, up to coarse: a person who
-    has learnt that the arm goes on for a while after letting go does not go full speed into a short
-    move."""
-    if distance <= p.slow_down_distance:
-        return p.fine
+    """As fast as lets the hand coast (``anticipation`` seconds of the speed) no further than
+    ``coast_share`` of the distance, between fine and coarse: a person who has learnt that the arm
+    goes on for a while after letting go does not go full speed into a short move, and makes small
+    corrections slowly enough not to overshoot them."""
     return float(np.clip(p.coast_share * distance / (p.full_speed * max(anticipation, 1e-9)), p.fine, p.coarse))
 
 
@@ -260,6 +264,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= 2 * p.align
                 and (abs(hand[2] - grasp[2]) <= 2 * p.stop or memory.stalled))
     if at_grasp and (view.touching[k] or not open_hand):
+        if missed_grasp(view, p):
+            return Action("open", f"missed cube {k + 1}: open hand")
         return Action("close", f"grasp cube {k + 1}")
     if not open_hand:
         return Action("open", "open hand")
@@ -307,7 +313,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     action = next_action(view, memory, p)
     descending = action.goal.endswith("descend")
     memory = replace(memory, turning=action.kind == "turn", descending=descending,
-                     stalled=memory.stalled and (descending or action.kind in ("open", "close")))
+                     stalled=memory.stalled and (descending or action.kind in ("open", "close"))
+                     and not missed_grasp(view, p))
     need = _MODE_FOR.get(action.kind)
     if need is not None and need is not view.mode:
         return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
@@ -321,7 +328,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
         axis = int(np.argmax(np.abs(action.turn)))
         direction = np.zeros(3)
         direction[axis] = math.copysign(1.0, action.turn[axis])
-        return StickIntent({_function_for(WRIST_AXES, direction): p.fine}, goal=action.goal), memory
+        return StickIntent({_function_for(WRIST_AXES, direction): p.turn}, goal=action.goal), memory
     if action.kind in ("open", "close"):
         closing = 1.0 if action.kind == "close" else -1.0
         fn = next(fn for fn, sign in FINGER_DIRECTION.items() if sign == closing)
@@ -455,9 +462,10 @@ class ScriptedUser:
             self._coasting = (view.t, view.hand_pos, speed)
 
     def _watch_descent(self, view: View) -> None:
-        """A descent pushed on for ``STALL_TIME`` without the hand going lower is stalled (the cube
+        """A descent pushed down for ``STALL_TIME`` without the hand going lower is stalled (the cube
         or the fingers rest on something): the person takes it as arrived."""
-        if not self.current.goal.endswith("descend"):
+        pushing_down = any(TRANSLATION_AXES[fn][2] < 0 for fn in self.current.deflection)
+        if not (self.current.goal.endswith("descend") and pushing_down):
             self._height_seen = (view.t, float(view.hand_pos[2]))
             return
         since, height = self._height_seen
