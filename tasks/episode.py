@@ -161,9 +161,8 @@ class BomiChannel:
 
     Participant time runs ``lead`` seconds ahead of the task: the warm-up and the neutral-offset
     calibration happen before the task's clock starts.  One class at a time: the participant
-    holds a posture for as long as the same function is wanted (its amplitude chosen at the start
-    of the move, as a person picks how far to lean), and leans further when the arm does not
-    respond to it.
+    holds a posture for as long as the same function is wanted, starting from the lean their feel
+    gives for the wanted deflection and correcting it while watching the arm (``_corrected_lean``).
     """
 
     combine_axes = False
