@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, decide, fit_lda, gamma,
-                             linear_parameters, posteriors, proportional, rejected)
+from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, class_amplitude,
+                             decide, fit_lda, linear_parameters, posteriors, proportional, rejected)
 from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
 from bomi.fusion import NodeFusion, neutral_offsets
@@ -71,7 +71,7 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
     """
     spec = spec or profile.spec
     shrinkage = profile.shrinkage if shrinkage is ... else shrinkage
-    xs, ys, gammas = [], [], {i: [] for i in spec.nodes}
+    xs, ys, angles = [], [], {i: [] for i in spec.nodes}
     known = {cls.label for cls in profile.classes}
     for rec in recordings:
         unknown = sorted(set(rec.require_labels().tolist()) - known)
@@ -82,12 +82,13 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         ys.append(prepared.labels[prepared.pure])
         ends = prepared.ends[prepared.pure]
         for k, i in enumerate(spec.nodes):
-            gammas[i].append(gamma(*prepared.states[ends, k * _WIDTH:k * _WIDTH + 3].T))
+            angles[i].append(prepared.states[ends, k * _WIDTH:k * _WIDTH + 3])
     x, y = np.concatenate(xs), np.concatenate(ys)
     if len(np.unique(y)) < 3:
         raise BomiError(f"{recordings[0].source}: training needs at least three classes, found {np.unique(y).tolist()}")
     classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))
-    amplitude = amplitude_ranges({i: np.concatenate(g) for i, g in gammas.items()}, y, profile.class_nodes)
+    amplitude = amplitude_ranges({i: np.concatenate(a) for i, a in angles.items()}, y, profile.class_nodes,
+                                 profile.amplitude)
     return Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
                  post=post or profile.post, shrinkage=shrinkage)
 
@@ -133,7 +134,8 @@ class Decision:
     function: str            # joystick function (F, B, R, L, Rr, Lr, B1, B2) or "neutral"
     confidence: float        # posterior of the LDA's winning class (before post-processing)
     rejected: bool
-    gamma: float             # sqrt(p^2 + r^2 + y^2) of the node carrying the class (0 for neutral)
+    gamma: float             # the class's amplitude (deg) on the node carrying it: sqrt(p^2 + r^2 + y^2), or
+                             # the change along the class's direction (profile [proportional]); 0 for neutral
     nu: float                # proportional output in [0, 1]
     sample_index: int        # index of the tick (node-1 sample) that produced it
 
@@ -238,7 +240,7 @@ class OnlineChain:
         g = 0.0
         if amplitude is not None:
             base = self._slot[amplitude.node] * _WIDTH
-            g = float(gamma(state[base], state[base + 1], state[base + 2]))
+            g = float(class_amplitude(state[base:base + 3], amplitude.direction))
         return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
                         rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
 

@@ -36,13 +36,22 @@ class PostProcessing:
             raise ValueError(f"vote length must be >= 1, got {self.vote_length}")
 
 
+AMPLITUDE_KINDS = ("gamma", "along_class")
+
+
 @dataclass(frozen=True)
 class AmplitudeRange:
-    """The node that carries a class and its gamma range over the class's training samples (degrees)."""
+    """The node that carries a class and its amplitude range over the class's training samples (degrees).
+
+    ``direction`` None: the amplitude is the paper's gamma, the size of the node's angle change.
+    A unit (pitch, roll, yaw) vector: the amplitude is the angle change along the class's mean
+    direction, so a motion toward another class (or a return to neutral from it) has next to none.
+    """
 
     node: int
     gamma_min: float
     gamma_max: float
+    direction: tuple[float, float, float] | None = None
 
 
 @dataclass
@@ -148,17 +157,36 @@ def gamma(pitch, roll, yaw):
     return np.sqrt(pitch * pitch + roll * roll + yaw * yaw)
 
 
-def amplitude_ranges(gammas: dict[int, np.ndarray], labels: np.ndarray, class_nodes: dict[int, int]) -> dict[int, AmplitudeRange]:
-    """Per non-neutral class: min and max of gamma of its node over the class's training samples.
+def class_amplitude(angles: np.ndarray, direction: tuple[float, float, float] | None) -> np.ndarray:
+    """Amplitude of (..., 3) neutral-subtracted angles: gamma, or the component along ``direction``."""
+    angles = np.asarray(angles, dtype=float)
+    if direction is None:
+        return gamma(angles[..., 0], angles[..., 1], angles[..., 2])
+    return angles @ np.asarray(direction)
 
-    ``gammas`` maps node index -> gamma per sample; ``class_nodes`` maps label -> node carrying it.
+
+def amplitude_ranges(angles: dict[int, np.ndarray], labels: np.ndarray, class_nodes: dict[int, int],
+                     kind: str = "gamma") -> dict[int, AmplitudeRange]:
+    """Per non-neutral class: min and max amplitude of its node over the class's training samples.
+
+    ``angles`` maps node index -> (n, 3) neutral-subtracted angles per sample; ``class_nodes`` maps
+    label -> node carrying it; ``kind`` is one of AMPLITUDE_KINDS ("along_class": along the unit
+    mean of the class's angles).
     """
+    if kind not in AMPLITUDE_KINDS:
+        raise ValueError(f"amplitude kind must be one of {', '.join(AMPLITUDE_KINDS)}, got {kind!r}")
     ranges = {}
     for label, node in class_nodes.items():
-        values = gammas[node][labels == label]
-        if label == NEUTRAL_LABEL or values.size == 0:
+        samples = angles[node][labels == label]
+        if label == NEUTRAL_LABEL or len(samples) == 0:
             continue
-        ranges[label] = AmplitudeRange(node=node, gamma_min=float(values.min()), gamma_max=float(values.max()))
+        direction = None
+        if kind == "along_class":
+            mean = samples.mean(axis=0)
+            direction = tuple(float(v) for v in mean / np.linalg.norm(mean))
+        values = class_amplitude(samples, direction)
+        ranges[label] = AmplitudeRange(node=node, gamma_min=float(values.min()), gamma_max=float(values.max()),
+                                       direction=direction)
     return ranges
 
 

@@ -30,7 +30,8 @@ def _metadata(model: Model) -> dict[str, Any]:
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
         "features": {"kind": spec.kind, "nodes": list(spec.nodes), "window": spec.window, "stride": spec.stride},
-        "amplitude": {str(label): {"node": r.node, "gamma_min": r.gamma_min, "gamma_max": r.gamma_max}
+        "amplitude": {str(label): {"node": r.node, "gamma_min": r.gamma_min, "gamma_max": r.gamma_max,
+                                   **({} if r.direction is None else {"direction": list(r.direction)})}
                       for label, r in sorted(model.amplitude.items())},
         "post_processing": {"rejection_threshold": model.post.rejection_threshold,
                             "vote_length": model.post.vote_length},
@@ -92,6 +93,17 @@ def load_model(path: str | os.PathLike) -> Model:
         raise BomiError(f"{path}: not a valid bomi model ({message})") from None
 
 
+def _amplitude_range(label: str, entry: dict) -> AmplitudeRange:
+    """One class's amplitude range; ``direction`` (a unit 3-vector) only for "along_class" models."""
+    direction = entry.get("direction")
+    if direction is not None:
+        direction = tuple(float(v) for v in direction)
+        if len(direction) != 3 or not abs(np.linalg.norm(direction) - 1.0) < 1e-6:
+            raise ValueError(f"amplitude of class {label}: direction must be a unit 3-vector")
+    return AmplitudeRange(node=int(entry["node"]), gamma_min=float(entry["gamma_min"]),
+                          gamma_max=float(entry["gamma_max"]), direction=direction)
+
+
 def _model_from(meta: dict, arrays: dict) -> Model:
     if meta.get("format") != FORMAT_NAME:
         raise ValueError(f"format is {meta.get('format')!r}, expected {FORMAT_NAME!r}")
@@ -111,9 +123,7 @@ def _model_from(meta: dict, arrays: dict) -> Model:
                          f"{len(classes)} classes x {n_features} {spec.kind} features")
     if not (np.all(np.isfinite(coef)) and np.all(np.isfinite(intercept))):
         raise ValueError("non-finite LDA parameters")
-    amplitude = {int(label): AmplitudeRange(node=int(r["node"]), gamma_min=float(r["gamma_min"]),
-                                            gamma_max=float(r["gamma_max"]))
-                 for label, r in meta["amplitude"].items()}
+    amplitude = {int(label): _amplitude_range(label, r) for label, r in meta["amplitude"].items()}
     post = meta["post_processing"]
     return Model(classes=classes.astype(np.int64), coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
                  post=PostProcessing(rejection_threshold=post["rejection_threshold"], vote_length=int(post["vote_length"])),

@@ -9,7 +9,7 @@ import pytest
 from bomi.chain import (OnlineChain, evaluate, neutral_references, node_states, prepare, recording_neutral,
                         segment_folds, select_settings, window_features)
 from bomi.chain_commands import PAPER_DAY1_MODEL, fused_recording
-from bomi.classifier import PostProcessing, decide, gamma
+from bomi.classifier import PostProcessing, decide
 from bomi.cli import main
 from bomi.dataset import data_dir
 from bomi.fusion import NodeCalibration
@@ -46,9 +46,13 @@ def test_streaming_equals_batch_on_a_real_recording(p1_days, p1_profile, day1_fv
     assert [d.label for d in streamed] == batch.labels.tolist()
     assert [d.rejected for d in streamed] == batch.rejected.tolist()
     assert np.allclose([d.confidence for d in streamed], batch.confidence, rtol=0, atol=1e-12)
-    # proportional output: gamma of the class's node at the tick, nu within [0, 1]
+    # proportional output: P1's amplitude is the class node's angle change along the class's mean
+    # direction at the tick (by hand: a dot product), nu within [0, 1]
     d = next(d for d in streamed if d.label == 7)
-    assert d.function == "B1" and d.gamma == gamma(*prepared.states[d.sample_index, 6:9])
+    direction = model.amplitude[7].direction
+    assert p1_profile.amplitude == "along_class" and np.linalg.norm(direction) == pytest.approx(1.0)
+    angles = prepared.states[d.sample_index, 6:9]
+    assert d.function == "B1" and d.gamma == pytest.approx(sum(a * u for a, u in zip(angles, direction)), abs=1e-12)
     assert 0.0 <= d.nu <= 1.0 and all(0.0 <= x.nu <= 1.0 for x in streamed)
     if post.rejection_threshold is None:
         assert evaluate(model, rec, p1_profile.neutral_samples).accuracy == pytest.approx(

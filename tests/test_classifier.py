@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from bomi.chain import prepare
-from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, decide, fit_lda,
-                             gamma, majority_vote, posteriors, proportional, reject)
+from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, class_amplitude, decide,
+                             fit_lda, gamma, majority_vote, posteriors, proportional, reject)
 from bomi.cli import main
 from bomi.errors import BomiError
 from bomi.model_io import FORMAT_VERSION, load_model, save_model
@@ -57,9 +57,26 @@ def test_proportional_output_by_hand():
     assert proportional(1.0, r) == 0.0           # below the least calibrated motion: no speed
     assert proportional(7.0, None) == 0.0        # neutral class
     labels = np.array([0, 1, 1, 2, 2, 2])
-    ranges = amplitude_ranges({1: np.array([9, 3, 8, 0, 0, 0.0]), 2: np.array([9, 9, 9, 4, 6, 5.0])}, labels,
+    pitch_only = lambda values: np.c_[values, np.zeros((len(values), 2))]  # noqa: E731  gamma = |pitch|
+    ranges = amplitude_ranges({1: pitch_only([9, 3, 8, 0, 0, 0.0]), 2: pitch_only([9, 9, 9, 4, 6, -5.0])}, labels,
                               {1: 1, 2: 2})
     assert ranges == {1: AmplitudeRange(1, 3.0, 8.0), 2: AmplitudeRange(2, 4.0, 6.0)}
+
+
+def test_amplitude_along_the_class_direction_by_hand():
+    # class 1 held at (3, 4, 0) and (6, 8, 0) deg: mean direction (0.6, 0.8, 0), amplitudes 5 and 10
+    labels = np.array([0, 1, 1])
+    angles = {1: np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0], [6.0, 8.0, 0.0]])}
+    (r,) = amplitude_ranges(angles, labels, {1: 1}, kind="along_class").values()
+    assert r.direction == pytest.approx((0.6, 0.8, 0.0)) and (r.gamma_min, r.gamma_max) == pytest.approx((5.0, 10.0))
+    # a motion elsewhere: gamma 10 (the paper's amplitude would say full speed), along the class 0.6 x -8 = -4.8
+    across = np.array([0.0, 0.0, 10.0]), np.array([-8.0, 6.0, 0.0])
+    assert class_amplitude(across[0], r.direction) == pytest.approx(0.0)
+    assert class_amplitude(across[1], r.direction) == pytest.approx(0.6 * -8 + 0.8 * 6)
+    assert class_amplitude(across[1], None) == pytest.approx(10.0)
+    assert proportional(float(class_amplitude(np.array([4.5, 6.0, 0.0]), r.direction)), r) == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="amplitude kind"):
+        amplitude_ranges(angles, labels, {1: 1}, kind="norm")
 
 
 def test_post_processing_validation():
@@ -97,6 +114,7 @@ def corrupt(tmp_path, day1_fv1_model, edit):
     (lambda d: d["features"].update(kind="FV9"), "unknown feature vector"),
     (lambda d: d.pop("features"), "missing field 'features'"),
     (lambda d: d["coef"][0].__setitem__(0, "x"), "could not convert"),
+    (lambda d: d["amplitude"]["1"].update(direction=[1.0, 1.0, 0.0]), "class 1: direction must be a unit 3-vector"),
 ])
 def test_bad_model_files_give_clear_errors(tmp_path, day1_fv1_model, edit, message):
     path = corrupt(tmp_path, day1_fv1_model, edit)

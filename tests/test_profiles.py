@@ -19,6 +19,7 @@ def test_p1_matches_the_dataset_readme():
     assert p1.nodes[1].calibration == NodeCalibration.uncalibrated()
     assert p1.spec.kind == "FV3" and p1.spec.window == 8 and p1.spec.stride == 1
     assert p1.post.rejection_threshold is None and p1.post.vote_length == 1   # off by default
+    assert p1.amplitude == "along_class"
 
 
 @pytest.mark.parametrize("name, sites", [("P4", ["head (headband)", "right foot"]),
@@ -41,6 +42,7 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
     ("shrinkage = 0.001", "shrinkage = 2.0", "shrinkage must be in [0, 1]"),
     ("vote_length = 1", "vote_length = 1\nrejection_threshold = 1.2", "rejection threshold must be in (0, 1)"),
     ("vote_length = 1", "vote_lenght = 1", "unknown key(s) vote_lenght"),
+    ('amplitude = "along_class"', 'amplitude = "norm"', "amplitude must be one of gamma, along_class"),
     ("index = 3", "index = 7", "index must be in 1..6"),
     ("node_id = 12", "node_id = 11", "distinct index and node_id"),
     ('site = "left shoulder"', 'site = "left shoulder"\ncalibration = { mounting = [[1, 0, 0], [0, 1, 0], [0, 0, 2]] }',

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bomi.classifier import NEUTRAL_LABEL, PostProcessing
+from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing
 from bomi.config_files import load_toml
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration
@@ -19,7 +19,8 @@ PROFILE_DIR = Path(__file__).resolve().parent
 JOYSTICK_FUNCTIONS = ("F", "B", "R", "L", "Rr", "Lr", "B1", "B2")
 NEUTRAL_FUNCTION = "neutral"
 
-_TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "post_processing"}
+_TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
+             "post_processing"}
 _NODE_KEYS = {"index", "node_id", "site", "calibration"}
 _CALIBRATION_KEYS = {"hard_iron", "soft_iron", "mounting"}
 _CLASS_KEYS = {"label", "name", "function", "node"}
@@ -52,6 +53,7 @@ class Profile:
     neutral_samples: int
     post: PostProcessing
     source: str
+    amplitude: str = "gamma"  # proportional output: one of bomi.classifier.AMPLITUDE_KINDS
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -126,13 +128,20 @@ def _parse(data: dict, source: str) -> Profile:
     if neutral_samples < 1:
         raise ValueError("neutral: samples must be >= 1")
 
+    proportional = _get(data, "proportional", dict, "profile", {})
+    _check_keys(proportional, {"amplitude"}, "proportional")
+    amplitude = _get(proportional, "amplitude", str, "proportional", "gamma")
+    if amplitude not in AMPLITUDE_KINDS:
+        raise ValueError(f"proportional: amplitude must be one of {', '.join(AMPLITUDE_KINDS)}, got {amplitude!r}")
+
     post_table = _get(data, "post_processing", dict, "profile", {})
     _check_keys(post_table, {"rejection_threshold", "vote_length"}, "post_processing")
     post = PostProcessing(rejection_threshold=_get(post_table, "rejection_threshold", (float, int), "post_processing", None),
                           vote_length=_get(post_table, "vote_length", int, "post_processing", 1))
     return Profile(name=_get(data, "name", str, "profile"), description=_get(data, "description", str, "profile", ""),
                    nodes=nodes, classes=tuple(sorted(classes, key=lambda c: c.label)), spec=spec,
-                   shrinkage=shrinkage, neutral_samples=neutral_samples, post=post, source=source)
+                   shrinkage=shrinkage, neutral_samples=neutral_samples, post=post, source=source,
+                   amplitude=amplitude)
 
 
 def _parse_node(table: Any, where: str) -> NodeConfig:
