@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 
 from sim.env import ArmSim
-from sim.joystick import FINGER_DIRECTION, FUNCTIONS, MODE_CYCLE, TRANSLATION_AXES, WRIST_AXES, JoystickState, Mode
+from sim.joystick import JoystickState, Kind, Mode
 
 
 @dataclass(frozen=True)
@@ -45,35 +45,37 @@ def hold(sim: ArmSim, state: JoystickState, seconds: float) -> list[tuple[float,
 
 def measure(sim: ArmSim, mode: Mode, function: str, deflection: float = 1.0,
             seconds: float = 1.0, settle: float = 0.25) -> DirectionResult:
-    """Hold ``function`` at ``deflection`` in ``mode`` from the home pose and measure the motion."""
+    """Hold ``function`` at ``deflection`` in ``mode`` (of the sim's joystick layout) from the home pose
+    and measure the motion."""
+    effect = sim.joystick.layout.effects[mode].get(function)
     sim.reset()
     enter_mode(sim, mode)
-    if mode is Mode.FINGERS and FINGER_DIRECTION.get(function, 0.0) < 0:
+    sign = effect.axis if effect is not None and effect.kind is Kind.FINGERS else 0.0
+    if sign < 0:
         hold(sim, JoystickState({"F": 1.0}), 1.5)  # close first, so that opening can be measured
     start_position = sim.tool_position
     samples = hold(sim, JoystickState({function: deflection}), seconds)
     steady = [s for s in samples if s[0] - samples[0][0] >= settle - 1e-9]
     (t0, p0, r0, c0), (t1, p1, r1, c1) = steady[0], steady[-1]
-    if mode is Mode.TRANSLATION:
-        axis = np.asarray(TRANSLATION_AXES[function])
+    if effect is not None and effect.kind is Kind.LINEAR:
+        axis = np.asarray(effect.axis)
         offsets = np.array([s[1] - start_position for s in samples])
         off_line = offsets - np.outer(offsets @ axis, axis)
         return DirectionResult(mode.value, function, sim.config.control.full_speed * deflection,
                                float((p1 - p0) @ axis / (t1 - t0)), float(np.linalg.norm(off_line, axis=1).max()))
-    if mode is Mode.WRIST:
-        axis = np.asarray(WRIST_AXES[function])
+    if effect is not None and effect.kind is Kind.ANGULAR:
+        axis = np.asarray(effect.axis)
         turned = pin.log3(r1 @ r0.T) @ axis
         drift = max(np.linalg.norm(s[1] - start_position) for s in samples)
         return DirectionResult(mode.value, function, sim.config.control.wrist_speed * deflection,
                                float(turned / (t1 - t0)), float(drift))
     finger_range = np.mean(np.diff(sim.scene.finger_range, axis=1))
-    rate = FINGER_DIRECTION.get(function, 0.0) * deflection * sim.config.control.finger_speed / finger_range
+    rate = sign * deflection * sim.config.control.finger_speed / finger_range
     return DirectionResult(mode.value, function, float(rate), float((c1 - c0) / (t1 - t0)), float("nan"))
 
 
 def check_all(sim: ArmSim, deflection: float = 1.0, seconds: float = 1.0) -> list[DirectionResult]:
-    """Every function in translation and wrist mode, and the finger functions in finger mode."""
-    results = [measure(sim, mode, function, deflection, seconds)
-               for mode in MODE_CYCLE if mode is not Mode.FINGERS for function in FUNCTIONS]
-    results += [measure(sim, Mode.FINGERS, function, deflection, seconds) for function in FINGER_DIRECTION]
-    return results
+    """Every function that does something, mode by mode in the order of the sim's joystick layout."""
+    layout = sim.joystick.layout
+    return [measure(sim, mode, function, deflection, seconds)
+            for mode in layout.modes for function in layout.effects[mode]]

@@ -99,7 +99,7 @@ def run_render(args: argparse.Namespace) -> int:
                                               desc="render", unit="tick")):
                 sim.step(state)
                 if tick % ticks_per_frame == 0:
-                    frame = sim.render(describe(sim.mode, state))
+                    frame = sim.render(describe(sim.mode, state, sim.layout))
                     video.append(frame)
 
     try:

@@ -15,7 +15,7 @@ import pinocchio as pin
 from sim.config import MODELS_DIR, SimConfig, load_config
 from sim.controller import CartesianVelocityController, JointLimits, Workspace
 from sim.errors import SimError
-from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState, Mode
+from sim.joystick import THREE_AXIS, ArmCommand, JoystickInterpreter, JoystickState, Layout, Mode
 from sim.kinematics import arm_kinematics
 from sim.render import FrameRenderer
 from sim.scene import Scene, build_scene
@@ -38,7 +38,7 @@ def joint_limits(scene: Scene) -> JointLimits:
 class ArmSim:
     """The JACO arm, hand and cubes on the table, advanced one control tick at a time."""
 
-    def __init__(self, config: SimConfig | None = None, models_dir: Path = MODELS_DIR):
+    def __init__(self, config: SimConfig | None = None, models_dir: Path = MODELS_DIR, layout: Layout = THREE_AXIS):
         self.config = config or load_config()
         self.scene = build_scene(self.config, models_dir)
         self.model = self.scene.model
@@ -50,7 +50,7 @@ class ArmSim:
         self.workspace = self._workspace()
         self.controller = CartesianVelocityController(self.kinematics, self.limits, self.workspace,
                                                       self.config.control, self.dt)
-        self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed)
+        self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed, layout)
         self.finger_target = np.zeros(3)
         self._renderer: FrameRenderer | None = None
         self.reset()
@@ -198,6 +198,10 @@ class ArmSim:
     @property
     def mode(self) -> Mode:
         return self.joystick.mode
+
+    @property
+    def layout(self) -> Layout:
+        return self.joystick.layout
 
     @property
     def mode_switches(self) -> int:

@@ -1,20 +1,32 @@
-"""The JACO's 3-axis joystick: functions with a deflection, two mode buttons, three modes.
+"""The JACO's joystick: functions with a deflection, two mode buttons, and a *layout* of modes.
 
 Functions F, B, R, L, Rr, Lr each carry a deflection in [0, 1]; several may be held at once (a
-3-axis stick combines axes). Buttons B1 and B2 are press events. Modes, as on the real arm:
+3-axis stick combines axes). Buttons B1 and B2 are press events. A ``Layout`` is data: the cycle
+of modes and, per mode, what each function does (``Effect``: move the hand along an axis, turn it
+about an axis through the tool point, or close/open the fingers); a function absent from a mode
+does nothing there. Two layouts, as on the real arm:
+
+``THREE_AXIS`` (the default; Kinova's 3-axis stick), modes translation -> wrist -> fingers:
 
 - translation: F/B/R/L/Rr/Lr move the hand along y-, y+, x-, x+, z+, z- at ``full_speed * deflection``;
 - wrist: the same functions turn the hand about the tool point at ``wrist_speed * deflection``
   (F/B tip the fingers toward y-/y+, R/L toward x-/x+, Rr/Lr turn it about z+/z-);
 - fingers: F closes, B opens the three fingers; the other functions do nothing.
 
-B1 cycles translation -> wrist -> fingers -> translation; B2 cycles the other way. Holding no
-function holds still.
+``TWO_AXIS`` (Kinova's scheme for a 2-axis input: F, B, R, L only), modes translation -> height
+-> wrist -> fingers:
+
+- translation: F/B/R/L move the hand in xy as above;
+- height: F moves the hand up (z+), B down (z-); R/L turn it about z+/z- (as Rr/Lr in wrist mode);
+- wrist: F/B/R/L tip the hand as in the 3-axis wrist mode;
+- fingers: F closes, B opens.
+
+B1 steps forward through the layout's cycle, B2 backward. Holding no function holds still.
 """
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,11 +37,11 @@ BUTTONS = ("B1", "B2")
 
 class Mode(enum.Enum):
     TRANSLATION = "translation"
+    HEIGHT = "height"
     WRIST = "wrist"
     FINGERS = "fingers"
 
 
-MODE_CYCLE = (Mode.TRANSLATION, Mode.WRIST, Mode.FINGERS)
 BUTTON_STEP = {"B1": 1, "B2": -1}
 
 TRANSLATION_AXES = {
@@ -45,6 +57,93 @@ WRIST_AXES = {
     "Rr": (0.0, 0.0, 1.0), "Lr": (0.0, 0.0, -1.0),
 }
 FINGER_DIRECTION = {"F": 1.0, "B": -1.0}  # +1 closes
+
+
+class Kind(enum.Enum):
+    LINEAR = "move"  # the hand along ``axis`` (world, unit) at full_speed * deflection
+    ANGULAR = "turn"  # the hand about ``axis`` (world, unit) through the tool point at wrist_speed * deflection
+    FINGERS = "fingers"  # the fingers at the rate ``axis`` * deflection (+1 closes)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """What one function does in one mode."""
+
+    kind: Kind
+    axis: tuple[float, float, float] | float
+
+    @property
+    def label(self) -> str:
+        """Short words for captions: "move z+", "turn x-", "close"."""
+        if self.kind is Kind.FINGERS:
+            return "close" if self.axis > 0 else "open"
+        (index,) = np.flatnonzero(self.axis)
+        return f"{self.kind.value} {'xyz'[index]}{'+' if self.axis[index] > 0 else '-'}"
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """A joystick layout: the ordered mode cycle and, per mode, function -> effect."""
+
+    name: str
+    modes: tuple[Mode, ...]
+    effects: Mapping[Mode, Mapping[str, Effect]]
+
+    def __post_init__(self):
+        if set(self.effects) != set(self.modes) or len(set(self.modes)) != len(self.modes):
+            raise ValueError(f"layout {self.name}: every mode of the cycle needs one effect table")
+        if any(set(table) - set(FUNCTIONS) for table in self.effects.values()):
+            raise ValueError(f"layout {self.name}: effects for unknown functions; expected {FUNCTIONS}")
+
+    @property
+    def functions(self) -> tuple[str, ...]:
+        """The functions the layout uses in some mode (the stick directions a user needs)."""
+        return tuple(fn for fn in FUNCTIONS if any(fn in table for table in self.effects.values()))
+
+    def after(self, mode: Mode, button: str) -> Mode:
+        """The mode one press of ``button`` leads to."""
+        return self.modes[(self.modes.index(mode) + BUTTON_STEP[button]) % len(self.modes)]
+
+    def presses(self, current: Mode, wanted: Mode, button: str) -> int:
+        """How many presses of ``button`` lead from ``current`` to ``wanted``."""
+        forward = self.modes.index(wanted) - self.modes.index(current)
+        return (forward * BUTTON_STEP[button]) % len(self.modes)
+
+    def axes(self, mode: Mode, kind: Kind) -> dict[str, tuple[float, float, float] | float]:
+        """Function -> axis of the functions that have an effect of ``kind`` in ``mode``."""
+        return {fn: effect.axis for fn, effect in self.effects[mode].items() if effect.kind is kind}
+
+    def find(self, kind: Kind, axis: tuple[float, float, float] | float) -> tuple[Mode, str]:
+        """The first mode of the cycle, and the function, whose effect is ``kind`` along ``axis`` (a
+        unit axis as the tables give it, or +1/-1 for the fingers)."""
+        for mode in self.modes:
+            for fn, effect in self.effects[mode].items():
+                if effect.kind is kind and effect.axis == axis:
+                    return mode, fn
+        raise ValueError(f"layout {self.name} has no function that does {kind.value} along {axis}")
+
+
+def _effects(kind: Kind, axes: Mapping[str, tuple[float, float, float] | float], functions: Iterable[str]
+             ) -> dict[str, Effect]:
+    return {fn: Effect(kind, axes[fn]) for fn in functions}
+
+
+_FINGERS = _effects(Kind.FINGERS, FINGER_DIRECTION, FINGER_DIRECTION)
+THREE_AXIS = Layout("3-axis", (Mode.TRANSLATION, Mode.WRIST, Mode.FINGERS), {
+    Mode.TRANSLATION: _effects(Kind.LINEAR, TRANSLATION_AXES, FUNCTIONS),
+    Mode.WRIST: _effects(Kind.ANGULAR, WRIST_AXES, FUNCTIONS),
+    Mode.FINGERS: _FINGERS,
+})
+# Kinova's 2-axis scheme: the vertical moves and the turn about it get a mode of their own, R/L
+# turning the way Rr/Lr do in the 3-axis wrist mode.
+TWO_AXIS = Layout("2-axis", (Mode.TRANSLATION, Mode.HEIGHT, Mode.WRIST, Mode.FINGERS), {
+    Mode.TRANSLATION: _effects(Kind.LINEAR, TRANSLATION_AXES, ("F", "B", "R", "L")),
+    Mode.HEIGHT: {"F": Effect(Kind.LINEAR, TRANSLATION_AXES["Rr"]), "B": Effect(Kind.LINEAR, TRANSLATION_AXES["Lr"]),
+                  "R": Effect(Kind.ANGULAR, WRIST_AXES["Rr"]), "L": Effect(Kind.ANGULAR, WRIST_AXES["Lr"])},
+    Mode.WRIST: _effects(Kind.ANGULAR, WRIST_AXES, ("F", "B", "R", "L")),
+    Mode.FINGERS: _FINGERS,
+})
+LAYOUTS = {layout.name: layout for layout in (THREE_AXIS, TWO_AXIS)}
 
 
 @dataclass(frozen=True)
@@ -85,15 +184,16 @@ def combine(deflection: dict[str, float], axes: dict[str, tuple[float, float, fl
 
 
 class JoystickInterpreter:
-    """The arm's mode logic: buttons cycle modes; functions mean what the current mode says."""
+    """The arm's mode logic: buttons step through the layout's modes; functions do what the mode says."""
 
-    def __init__(self, full_speed: float, wrist_speed: float):
+    def __init__(self, full_speed: float, wrist_speed: float, layout: Layout = THREE_AXIS):
         self.full_speed = full_speed
         self.wrist_speed = wrist_speed
+        self.layout = layout
         self.reset()
 
     def reset(self) -> None:
-        self.mode = Mode.TRANSLATION
+        self.mode = self.layout.modes[0]
         self.mode_switches = 0
         self.button_presses = 0
 
@@ -103,16 +203,13 @@ class JoystickInterpreter:
         for button in BUTTONS:
             if button in state.pressed:
                 self.button_presses += 1
-                index = (MODE_CYCLE.index(self.mode) + BUTTON_STEP[button]) % len(MODE_CYCLE)
-                self.mode = MODE_CYCLE[index]
+                self.mode = self.layout.after(self.mode, button)
         self.mode_switches += self.mode is not before
-        zero = np.zeros(3)
-        if self.mode is Mode.TRANSLATION:
-            return ArmCommand(self.full_speed * combine(state.deflection, TRANSLATION_AXES), zero, 0.0)
-        if self.mode is Mode.WRIST:
-            return ArmCommand(zero, self.wrist_speed * combine(state.deflection, WRIST_AXES), 0.0)
-        finger = sum(FINGER_DIRECTION.get(name, 0.0) * amount for name, amount in state.deflection.items())
-        return ArmCommand(zero, zero, float(np.clip(finger, -1.0, 1.0)))
+        fingers = self.layout.axes(self.mode, Kind.FINGERS)
+        finger = sum(fingers[name] * amount for name, amount in state.deflection.items() if name in fingers)
+        return ArmCommand(self.full_speed * combine(state.deflection, self.layout.axes(self.mode, Kind.LINEAR)),
+                          self.wrist_speed * combine(state.deflection, self.layout.axes(self.mode, Kind.ANGULAR)),
+                          float(np.clip(finger, -1.0, 1.0)))
 
 
 def script_states(script: Iterable[tuple[float, JoystickState]], control_hz: float) -> Iterator[JoystickState]:

@@ -17,7 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from sim.errors import SimError
-from sim.joystick import JoystickState, Mode
+from sim.joystick import THREE_AXIS, JoystickState, Layout, Mode
 
 CAPTION_HEIGHT = 32
 
@@ -35,9 +35,12 @@ def caption_strip(text: str, width: int, height: int = CAPTION_HEIGHT) -> np.nda
     return strip
 
 
-def describe(mode: Mode, state: JoystickState) -> str:
-    """Caption text: the mode and the functions held (with deflections) and buttons pressed."""
-    held = " ".join(f"{name}={amount:.2f}" for name, amount in state.deflection.items() if amount > 0)
+def describe(mode: Mode, state: JoystickState, layout: Layout = THREE_AXIS) -> str:
+    """Caption text: the mode, the functions held (with deflections and what they do in the mode of
+    ``layout``) and buttons pressed."""
+    effects = layout.effects[mode]
+    held = " ".join(f"{name}={amount:.2f} ({effects[name].label if name in effects else 'nothing'})"
+                    for name, amount in state.deflection.items() if amount > 0)
     pressed = " ".join(sorted(state.pressed))
     return f"mode: {mode.value:<11}  command: {held or 'none'}{'  pressed: ' + pressed if pressed else ''}"
 

@@ -216,9 +216,10 @@ def status_text(tick: Tick, parser: FrameParser, decision: Decision | None) -> s
         what = "no decision yet"
     else:
         what = f"c{decision.label} {decision.function} conf {decision.confidence:.2f}"
-    speed = (f"{100 * np.linalg.norm(tick.command.linear):.1f} cm/s" if tick.mode == "translation" else
-             f"{np.degrees(np.linalg.norm(tick.command.angular)):.0f} deg/s" if tick.mode == "wrist" else
-             f"fingers {tick.command.finger:+.2f}")
+    linear = f"{100 * np.linalg.norm(tick.command.linear):.1f} cm/s"
+    angular = f"{np.degrees(np.linalg.norm(tick.command.angular)):.0f} deg/s"
+    speed = {"translation": linear, "height": f"{linear} {angular}", "wrist": angular}.get(
+        tick.mode, f"fingers {tick.command.finger:+.2f}")
     guard = "STOPPED: no frames" if tick.stale else "STANDBY (safety key)" if tick.standby else "ok"
     return (f"{tick.t:6.1f} s | {(sum(rates) / len(rates) if rates else 0):5.1f} Hz | {lost} | {what} | "
             f"{tick.mode} | {speed} | {guard}")

@@ -13,6 +13,7 @@ from bomi.profiles import load_profile
 from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
+from sim.joystick import LAYOUTS
 from tasks.live import Headless, PassiveViewer, StatusLine, display_opens, has_display, open_log, run_live
 
 
@@ -71,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
     if args.log is not None and args.log.exists():
         raise BomiError(f"{args.log}: file exists, not overwriting it")
-    sim = ArmSim()
+    sim = ArmSim(layout=LAYOUTS[profile.joystick_layout])  # the layout the profile's classes drive
     # timeout 0: a tick reads what has arrived and never waits for more
     source = SerialSource(args.port, baudrate=args.baud, timeout_s=0.0, retry=RetryPolicy(attempts=args.retries))
     status, log, display = StatusLine(), None, Headless()

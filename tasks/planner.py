@@ -18,7 +18,7 @@ from typing import Mapping
 import numpy as np
 
 from bomi.config_files import load_toml
-from sim.joystick import BUTTON_STEP, FINGER_DIRECTION, MODE_CYCLE, TRANSLATION_AXES, WRIST_AXES, Mode
+from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
 CUBE_SYMMETRY = math.pi / 2  # a cube looks the same every quarter turn
@@ -135,8 +135,21 @@ REST = StickIntent()
 
 
 @dataclass(frozen=True)
+class Controls:
+    """The controls the person has and knows: the arm's joystick layout (which mode moves, turns or
+    grips along which axis, with which function) and the mode buttons they can press."""
+
+    layout: Layout = THREE_AXIS
+    buttons: tuple[str, ...] = BUTTONS
+
+    def __post_init__(self):
+        if not self.buttons or not set(self.buttons) <= set(BUTTONS):
+            raise ValueError(f"controls need one or more of the buttons {BUTTONS}, got {self.buttons}")
+
+
+@dataclass(frozen=True)
 class Memory:
-    """The little the person remembers between glances."""
+    """The little the person remembers between glances (and the controls they have, which do not change)."""
 
     axis: int | None = None  # single-axis channel: the axis being worked on
     touch_since: float | None = None  # when the fingers started touching the cube being grasped
@@ -144,6 +157,7 @@ class Memory:
     descending: bool = False  # a descent goes on while the hand stays roughly over the goal
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
     stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
+    controls: Controls = Controls()  # the same all episode
 
 
 # ---------------------------------------------------------------------------------------------
@@ -315,25 +329,31 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     memory = replace(memory, turning=action.kind == "turn", descending=descending,
                      stalled=memory.stalled and (descending or action.kind in ("open", "close"))
                      and not missed_grasp(view, p))
-    need = _MODE_FOR.get(action.kind)
-    if need is not None and need is not view.mode:
-        return StickIntent(button=mode_button(view.mode, need), goal=f"{action.goal}: {need.value} mode"), memory
     if action.kind == "move":
         lead = p.anticipation if anticipation is None else anticipation
-        deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,
-                                        memory.axis, holding or {})
-        return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
-    memory = replace(memory, axis=None)
-    if action.kind == "turn":  # one rotation axis at a time, the largest first
+        need, deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,
+                                              memory.axis, holding or {}, memory.controls.layout, view.mode)
+    else:
+        (need, deflection), axis = _other_action(action, memory.controls.layout, p), None
+    if need is not None and need is not view.mode:
+        button = mode_button(view.mode, need, memory.controls)
+        return StickIntent(button=button, goal=f"{action.goal}: {need.value} mode"), memory
+    return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
+
+
+def _other_action(action: Action, layout: Layout, p: OperatorParams) -> tuple[Mode | None, dict[str, float]]:
+    """The mode and the stick for a turn (one rotation axis at a time, the largest first), an open
+    or a close; no mode and no stick to rest."""
+    if action.kind == "turn":
         axis = int(np.argmax(np.abs(action.turn)))
-        direction = np.zeros(3)
+        direction = [0.0, 0.0, 0.0]
         direction[axis] = math.copysign(1.0, action.turn[axis])
-        return StickIntent({_function_for(WRIST_AXES, direction): p.turn}, goal=action.goal), memory
+        mode, fn = layout.find(Kind.ANGULAR, tuple(direction))
+        return mode, {fn: p.turn}
     if action.kind in ("open", "close"):
-        closing = 1.0 if action.kind == "close" else -1.0
-        fn = next(fn for fn, sign in FINGER_DIRECTION.items() if sign == closing)
-        return StickIntent({fn: p.coarse}, goal=action.goal), memory
-    return StickIntent(goal=action.goal), memory
+        mode, fn = layout.find(Kind.FINGERS, 1.0 if action.kind == "close" else -1.0)
+        return mode, {fn: p.coarse}
+    return None, {}
 
 
 def _remember_touch(view: View, memory: Memory) -> Memory:
@@ -343,55 +363,56 @@ def _remember_touch(view: View, memory: Memory) -> Memory:
 
 
 def _translation(hand: np.ndarray, velocity: np.ndarray, lead: float, point: np.ndarray, p: OperatorParams,
-                 combine_axes: bool, axis: int | None, holding: Mapping[str, float]
-                 ) -> tuple[dict[str, float], int | None]:
-    """Joystick functions (and their deflections) that bring the hand to ``point``.
+                 combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode
+                 ) -> tuple[Mode, dict[str, float], int | None]:
+    """The mode, and the joystick functions (and their deflections) in it, that bring the hand to ``point``.
 
     An axis being moved stops when the hand would coast (``lead`` seconds of its ``velocity``: the
     travel expected after letting go) to within the stop tolerance of its goal; an idle axis
     starts again only when it is off by twice the stop tolerance (no dithering), unless nothing
-    else would move the hand toward a goal the plan still wants.
+    else would move the hand toward a goal the plan still wants.  Where the layout moves some axes
+    in another mode (2-axis: z in the height mode), the axes of the current ``mode`` are finished
+    first: a switch costs presses.
     """
     error = point - hand
     coast = velocity * lead
+    movers = [_function_along(layout, i, error[i]) for i in range(3)]  # (mode, function) per axis
+    held = {fn for fn in holding if fn in layout.axes(mode, Kind.LINEAR)}  # moving the hand now
     moving = []
-    for i in range(3):
-        fn = _function_along(i, error[i])
-        if fn in holding:
+    for i, (need, fn) in enumerate(movers):
+        if need is mode and fn in held:
             closing_in = max(0.0, coast[i] * math.copysign(1.0, error[i]))
             keep = abs(error[i]) > p.stop + closing_in
         else:
             keep = abs(error[i]) > 2 * p.stop
         if keep:
             moving.append(i)
-    if not moving and not holding:
+    if not moving and not held:
         moving = [int(np.argmax(np.abs(error)))]
     if not moving:
-        return {}, None
-    if not combine_axes:
+        return mode, {}, None
+    moving = [i for i in moving if movers[i][0] is mode] or moving
+    if combine_axes:
+        largest = max(moving, key=lambda i: abs(error[i]))
+        moving = [i for i in moving if movers[i][0] is movers[largest][0]]
+    else:
         if axis not in moving:
             axis = max(moving, key=lambda i: abs(error[i]))
         moving = [axis]
-    return {_function_along(i, error[i]): deflection_for(abs(error[i]), p, lead) for i in moving}, axis
+    return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, lead) for i in moving}, axis
 
 
-def _function_along(axis: int, signed: float) -> str:
-    return _TRANSLATION_FUNCTION[axis, signed >= 0]
+def _function_along(layout: Layout, axis: int, signed: float) -> tuple[Mode, str]:
+    """The mode and the function that move the hand along world ``axis`` in the direction of ``signed``."""
+    direction = [0.0, 0.0, 0.0]
+    direction[axis] = 1.0 if signed >= 0 else -1.0
+    return layout.find(Kind.LINEAR, tuple(direction))
 
 
-def _function_for(axes: Mapping[str, tuple[float, float, float]], direction: np.ndarray) -> str:
-    return next(fn for fn, unit in axes.items() if np.allclose(unit, direction))
-
-
-_TRANSLATION_FUNCTION = {(int(np.flatnonzero(unit)[0]), float(sum(unit)) > 0): fn
-                         for fn, unit in TRANSLATION_AXES.items()}
-_MODE_FOR = {"move": Mode.TRANSLATION, "turn": Mode.WRIST, "open": Mode.FINGERS, "close": Mode.FINGERS}
-
-
-def mode_button(current: Mode, wanted: Mode) -> str:
-    """The button that reaches ``wanted`` from ``current`` in fewer presses."""
-    forward = (MODE_CYCLE.index(wanted) - MODE_CYCLE.index(current)) % len(MODE_CYCLE)
-    presses = {button: (forward * step) % len(MODE_CYCLE) for button, step in BUTTON_STEP.items()}
+def mode_button(current: Mode, wanted: Mode, controls: Controls = Controls()) -> str:
+    """The button among ``controls`` that reaches ``wanted`` from ``current`` in fewer presses (B1 on a tie)."""
+    presses = {button: controls.layout.presses(current, wanted, button)
+               for button in BUTTONS if button in controls.buttons}
     return min(presses, key=presses.get)
 
 
@@ -464,7 +485,9 @@ class ScriptedUser:
     def _watch_descent(self, view: View) -> None:
         """A descent pushed down for ``STALL_TIME`` without the hand going lower is stalled (the cube
         or the fingers rest on something): the person takes it as arrived."""
-        pushing_down = any(TRANSLATION_AXES[fn][2] < 0 for fn in self.current.deflection)
+        effects = self.memory.controls.layout.effects[view.mode]
+        pushing_down = any(fn in effects and effects[fn].kind is Kind.LINEAR and effects[fn].axis[2] < 0
+                           for fn in self.current.deflection)
         if not (self.current.goal.endswith("descend") and pushing_down):
             self._height_seen = (view.t, float(view.hand_pos[2]))
             return

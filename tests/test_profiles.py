@@ -48,14 +48,29 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
     ('site = "left shoulder"', 'site = "left shoulder"\ncalibration = { mounting = [[1, 0, 0], [0, 1, 0], [0, 0, 2]] }',
      "nodes[2].calibration: mounting must be a rotation matrix"),
     ('name = "P1"', 'name = "P1', "not valid TOML"),
+    ('layout = "3-axis"', 'layout = "4-axis"', "joystick: layout must be one of '3-axis', '2-axis', got '4-axis'"),
+    ('layout = "3-axis"', "layout = 2", "joystick: 'layout' has the wrong type"),
+    ('layout = "3-axis"', 'layuot = "3-axis"', "joystick: unknown key(s) layuot"),
 ])
 def test_invalid_profiles_name_file_and_problem(tmp_path, old, new, message):
     path = edited_copy(PROFILE_DIR / "P1.toml", tmp_path / "bad.toml", old, new)
     with pytest.raises(BomiError) as info:
         load_profile(path)
-    assert str(path) in str(info.value) and message in str(info.value)
+    assert str(path) in str(info.value) and message in str(info.value) and "\n" not in str(info.value)
 
 
 def test_unknown_profile_name():
     with pytest.raises(BomiError, match="no such profile file .*P1, P4, P5"):
         load_profile("P9")
+
+
+def test_joystick_layout_is_3_axis_unless_the_profile_says_2_axis(tmp_path):
+    assert [load_profile(name).joystick_layout for name in ("P1", "P4", "P5")] == ["3-axis", "2-axis", "2-axis"]
+    unset = edited_copy(PROFILE_DIR / "P4.toml", tmp_path / "p4.toml", 'layout = "2-axis"', "")
+    assert load_profile(unset).joystick_layout == "3-axis"
+
+
+def test_profile_layout_names_are_the_arms_layouts():
+    from bomi.profiles import JOYSTICK_LAYOUTS
+    from sim.joystick import LAYOUTS
+    assert tuple(LAYOUTS) == JOYSTICK_LAYOUTS

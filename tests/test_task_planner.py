@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from bomi.errors import BomiError
-from sim.joystick import Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Memory, ScriptedUser, View, cube_to_take, deflection_for, held_cube,
-                           load_operator, mode_button, plan, placed_cubes)
+from sim.joystick import THREE_AXIS, TWO_AXIS, Mode
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Memory, ScriptedUser, View, cube_to_take, deflection_for,
+                           held_cube, load_operator, mode_button, plan, placed_cubes)
 
 P = load_operator()
+TWO_AXIS_B1 = Memory(controls=Controls(TWO_AXIS, ("B1",)))  # P4, P5: four directions and one button
 B = np.array([0.14, -0.45])
 HALF = 0.025
 
@@ -58,6 +59,76 @@ def test_mode_button_takes_the_short_way_round():
     assert mode_button(Mode.TRANSLATION, Mode.FINGERS) == "B2"
     assert mode_button(Mode.FINGERS, Mode.TRANSLATION) == "B1"
     assert mode_button(Mode.WRIST, Mode.TRANSLATION) == "B2"
+
+
+def test_mode_button_chooses_only_among_the_buttons_the_user_has():
+    # 2-axis cycle translation -> height -> wrist -> fingers
+    both = Controls(TWO_AXIS)
+    assert mode_button(Mode.TRANSLATION, Mode.FINGERS, both) == "B2"  # one press back instead of three
+    assert mode_button(Mode.TRANSLATION, Mode.WRIST, both) == "B1"  # a tie: two either way
+    assert mode_button(Mode.HEIGHT, Mode.TRANSLATION, both) == "B2"
+    for current, wanted in [(Mode.TRANSLATION, Mode.FINGERS), (Mode.HEIGHT, Mode.TRANSLATION)]:
+        assert mode_button(current, wanted, Controls(TWO_AXIS, ("B1",))) == "B1"
+        assert mode_button(current, wanted, Controls(TWO_AXIS, ("B2",))) == "B2"
+    assert mode_button(Mode.TRANSLATION, Mode.FINGERS, Controls(THREE_AXIS, ("B1",))) == "B1"
+    with pytest.raises(ValueError):
+        Controls(TWO_AXIS, ())
+
+
+def test_two_axis_descent_needs_the_height_mode_and_b_goes_down():
+    above = view(hand=(-0.14, -0.39, 0.15))
+    intent, memory = plan(above, TWO_AXIS_B1, P, combine_axes=False)
+    assert intent.button == "B1" and intent.goal == "reach cube 1: descend: height mode"
+    assert memory.controls is TWO_AXIS_B1.controls  # the controls stay with the person
+    intent, _ = plan(replace(above, mode=Mode.HEIGHT), TWO_AXIS_B1, P, combine_axes=False)
+    assert intent.goal == "reach cube 1: descend" and set(intent.deflection) == {"B"}
+
+
+def test_two_axis_rise_is_f_in_height_mode_and_travel_goes_back_to_translation_with_b1():
+    low = view(hand=(0.10, -0.45, 0.03), mode=Mode.HEIGHT)
+    intent, _ = plan(low, TWO_AXIS_B1, P, combine_axes=True)
+    assert intent.goal == "reach cube 1: rise" and dict(intent.deflection) == {"F": P.coarse}  # 7 cm up
+    high = view(hand=(0.10, -0.45, 0.12), mode=Mode.HEIGHT)  # at the travel height, far from the cube
+    intent, _ = plan(high, TWO_AXIS_B1, P, combine_axes=False)
+    assert intent.goal == "reach cube 1: travel: translation mode" and intent.button == "B1"  # 3 presses on
+    intent, _ = plan(high, Memory(controls=Controls(TWO_AXIS)), P, combine_axes=False)
+    assert intent.button == "B2"  # with both buttons: one press back
+
+
+def test_two_axis_finishes_the_axis_of_the_current_mode_before_switching():
+    # descending onto the cube with x 14 mm off (beyond twice the stop tolerance) and z 12 cm off
+    off = view(hand=(-0.14 + 0.014, -0.39, 0.15))
+    for mode, functions in [(Mode.HEIGHT, {"B"}), (Mode.TRANSLATION, {"R"})]:
+        intent, _ = plan(replace(off, mode=mode), TWO_AXIS_B1, P, combine_axes=False)
+        assert intent.goal == "reach cube 1: descend" and set(intent.deflection) == functions, mode
+    intent, _ = plan(off, Memory(), P, combine_axes=False)
+    assert set(intent.deflection) == {"Lr"}  # 3-axis: the largest error, z, in translation mode
+
+
+def test_two_axis_combined_axes_stay_within_the_current_mode():
+    v = view(hand=(0.0, -0.42, 0.22))
+    intent, _ = plan(v, Memory(controls=Controls(TWO_AXIS)), P, combine_axes=True)
+    assert intent.deflection["R"] == P.coarse and intent.deflection["B"] == pytest.approx(0.5 * 0.03 / (0.20 * 0.08))
+    # descending with x and z wanted: each mode moves its own axis only, however large the other
+    descend = view(hand=(-0.14 + 0.014, -0.39, 0.15))
+    for mode, functions in [(Mode.HEIGHT, {"B"}), (Mode.TRANSLATION, {"R"})]:
+        intent, _ = plan(replace(descend, mode=mode), Memory(controls=Controls(TWO_AXIS)), P, combine_axes=True)
+        assert set(intent.deflection) == functions, mode
+    intent, _ = plan(descend, Memory(), P, combine_axes=True)
+    assert set(intent.deflection) == {"R", "Lr"}  # a 3-axis stick combines them
+
+
+def test_two_axis_turns_about_the_vertical_in_height_mode_and_levels_in_wrist_mode():
+    turned = view(hand=(-0.14, -0.39, 0.15), yaw=(math.radians(30.0), 0.0))
+    intent, _ = plan(turned, TWO_AXIS_B1, P, combine_axes=False)
+    assert intent.button == "B1" and intent.goal == "turn to cube 1: height mode"
+    intent, _ = plan(replace(turned, mode=Mode.HEIGHT), TWO_AXIS_B1, P, combine_axes=False)
+    assert set(intent.deflection) == {"R"}  # R turns about z+ in height mode
+    tilted = replace(view(mode=Mode.HEIGHT), hand_tilt=np.array([0.05, -math.radians(20.0)]))
+    intent, _ = plan(tilted, TWO_AXIS_B1, P, combine_axes=False)
+    assert intent.button == "B1" and intent.goal == "level the hand: wrist mode"
+    intent, _ = plan(replace(tilted, mode=Mode.WRIST), TWO_AXIS_B1, P, combine_axes=False)
+    assert set(intent.deflection) == {"L"}  # about world y-, as in the 3-axis wrist mode
 
 
 def test_reach_single_axis_takes_the_largest_error_with_the_right_function():

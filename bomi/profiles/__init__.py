@@ -1,5 +1,5 @@
 """User profiles (TOML): the nodes worn and where, the classes and their joystick functions, features,
-window, LDA shrinkage and post-processing. ``load_profile("P1")`` resolves the shipped profiles.
+window, LDA shrinkage, post-processing and the joystick layout the classes drive. ``load_profile("P1")`` resolves the shipped profiles.
 
 Node calibration defaults: node 1 (the headset) gets hardware.md's headset constants; other nodes get
 h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`` table says otherwise.
@@ -18,9 +18,12 @@ from bomi.fusion import NodeCalibration
 PROFILE_DIR = Path(__file__).resolve().parent
 JOYSTICK_FUNCTIONS = ("F", "B", "R", "L", "Rr", "Lr", "B1", "B2")
 NEUTRAL_FUNCTION = "neutral"
+# The arm's joystick layouts by name (sim/joystick.py LAYOUTS; bomi/ imports nothing from sim/):
+# "3-axis" needs F, B, R, L, Rr, Lr; "2-axis" (Kinova's mode scheme for four directions) F, B, R, L.
+JOYSTICK_LAYOUTS = ("3-axis", "2-axis")
 
 _TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
-             "post_processing"}
+             "post_processing", "joystick"}
 _NODE_KEYS = {"index", "node_id", "site", "calibration"}
 _CALIBRATION_KEYS = {"hard_iron", "soft_iron", "mounting"}
 _CLASS_KEYS = {"label", "name", "function", "node"}
@@ -54,6 +57,7 @@ class Profile:
     post: PostProcessing
     source: str
     amplitude: str = "gamma"  # proportional output: one of bomi.classifier.AMPLITUDE_KINDS
+    joystick_layout: str = JOYSTICK_LAYOUTS[0]  # one of JOYSTICK_LAYOUTS
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -138,10 +142,16 @@ def _parse(data: dict, source: str) -> Profile:
     _check_keys(post_table, {"rejection_threshold", "vote_length"}, "post_processing")
     post = PostProcessing(rejection_threshold=_get(post_table, "rejection_threshold", (float, int), "post_processing", None),
                           vote_length=_get(post_table, "vote_length", int, "post_processing", 1))
+
+    joystick = _get(data, "joystick", dict, "profile", {})
+    _check_keys(joystick, {"layout"}, "joystick")
+    layout = _get(joystick, "layout", str, "joystick", JOYSTICK_LAYOUTS[0])
+    if layout not in JOYSTICK_LAYOUTS:
+        raise ValueError(f"joystick: layout must be one of {', '.join(map(repr, JOYSTICK_LAYOUTS))}, got {layout!r}")
     return Profile(name=_get(data, "name", str, "profile"), description=_get(data, "description", str, "profile", ""),
                    nodes=nodes, classes=tuple(sorted(classes, key=lambda c: c.label)), spec=spec,
                    shrinkage=shrinkage, neutral_samples=neutral_samples, post=post, source=source,
-                   amplitude=amplitude)
+                   amplitude=amplitude, joystick_layout=layout)
 
 
 def _parse_node(table: Any, where: str) -> NodeConfig:
