@@ -20,12 +20,12 @@ from bomi.errors import BomiError
 from bomi.fusion import DT
 from bomi.profiles import Profile, load_profile
 from sim.env import ArmSim
-from sim.joystick import FUNCTIONS, TRANSLATION_AXES, JoystickState, Mode, combine
+from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState, Kind, Layout, Mode, combine
 from sim.render import FrameRenderer, VideoWriter, describe
 from tasks import metrics
 from tasks.imu_synth import Delivery
 from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
-from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser, StickIntent, load_operator
+from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, Memory, ScriptedUser, StickIntent, load_operator
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, rising_edge
 
@@ -116,11 +116,13 @@ class JoystickChannel:
     """The person's decision goes straight to the stick (a 3-axis stick may combine axes)."""
 
     combine_axes = True
+    controls = Controls()  # the able-bodied baseline: a real 3-axis JACO stick with both buttons
 
     def __init__(self) -> None:
         self._button: str | None = None
 
-    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None) -> JoystickState:
+    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
+                mode: Mode = Mode.TRANSLATION) -> JoystickState:
         pressed = rising_edge(intent.button, self._button)
         self._button = intent.button
         return JoystickState(dict(intent.deflection), pressed)
@@ -156,6 +158,19 @@ class LeanFeel:
             self.zero = float(np.clip((lean - deflection) / (1.0 - deflection), 0.0, MAX_ZERO))
 
 
+def profile_controls(profile: Profile) -> Controls:
+    """The controls a profile's classes give the scripted user: its joystick layout and the mode
+    buttons it has a class for.  The user needs every direction of the layout and B1."""
+    layout = LAYOUTS[profile.joystick_layout]
+    functions = {cls.function for cls in profile.classes}
+    needed = (*layout.functions, "B1")
+    missing = [f for f in needed if f not in functions]
+    if missing:
+        raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
+                        f"the scripted stacking user with the {layout.name} layout needs {', '.join(needed)}")
+    return Controls(layout, tuple(b for b in BUTTONS if b in functions))
+
+
 class BomiChannel:
     """The person's decision becomes a body motion; the stick is whatever the chain decides.
 
@@ -170,15 +185,12 @@ class BomiChannel:
     def __init__(self, participant: VirtualParticipant, chain: OnlineChain, profile: Profile):
         self.participant, self.chain, self.profile = participant, chain, profile
         self.parser = FrameParser()
+        self.controls = profile_controls(profile)
         self._label_of = {cls.function: cls.label for cls in profile.classes}
-        missing = [f for f in (*FUNCTIONS, "B1") if f not in self._label_of]
-        if missing:  # the scripted user needs every direction and a mode button
-            raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
-                            "the scripted stacking user needs F, B, R, L, Rr, Lr and B1")
         self._function_of = {cls.label: cls.function for cls in profile.classes}
         self._since = 0.0  # when the posture held now was taken up (or last changed)
         # the participant's feel for each proportional translation class (how far to lean for how fast)
-        self.feel = {cls.label: LeanFeel() for cls in profile.classes if cls.function in TRANSLATION_AXES}
+        self.feel = {cls.label: LeanFeel() for cls in profile.classes if cls.function in FUNCTIONS}
         self._wanted = 0.0  # deflection wanted from the posture held now
         self._speed = 0.0  # the arm's speed along the held posture's direction, as the person judges it
         # how long the person waits for a posture (or a change of lean) to take effect before
@@ -241,9 +253,10 @@ class BomiChannel:
         feel = self.feel.get(label, LeanFeel())
         return label, feel.lean_for(float(deflection))
 
-    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None) -> JoystickState:
-        """``seen``: the hand's velocity as a fraction of full speed (None when the arm is not in
-        translation mode): what the participant watches to judge whether to lean further or less."""
+    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
+                mode: Mode = Mode.TRANSLATION) -> JoystickState:
+        """``seen``: the hand's velocity as a fraction of full speed, in the arm's ``mode``: what the
+        participant watches to judge whether to lean further or less."""
         label, amplitude = self.intent_class(intent)
         held, held_amplitude = self.participant.intent
         self._wanted = float(next(iter(intent.deflection.values()), 0.0))
@@ -251,7 +264,7 @@ class BomiChannel:
             self._take_up(label, amplitude, t)
             self._speed = 0.0
         elif label != NEUTRAL_LABEL:
-            lean = self._corrected_lean(label, held_amplitude, t, seen)
+            lean = self._corrected_lean(label, held_amplitude, t, seen, mode)
             if lean != held_amplitude:
                 self._take_up(label, lean, t)
                 if label in self.feel:
@@ -262,20 +275,23 @@ class BomiChannel:
         self.participant.set_intent(label, amplitude, self.lead + t)
         self._since = t
 
-    def _corrected_lean(self, label: int, lean: float, t: float, seen: np.ndarray | None) -> float:
+    def _corrected_lean(self, label: int, lean: float, t: float, seen: np.ndarray | None, mode: Mode) -> float:
         """The lean the participant holds now: further when the chain has not answered the posture
         for a while, or (proportional classes) when the arm goes much slower than wanted; less far
-        when it goes much faster.  Each correction is given the patience to take effect."""
+        when it goes much faster (moves of the hand only: a speed the person can see).  Each
+        correction is given the patience to take effect."""
         function = self._function_of[label]
         answered = self.stick.function == function
-        if answered and seen is not None and function in TRANSLATION_AXES:
-            along = float(np.dot(seen, TRANSLATION_AXES[function]))
+        axis = self.controls.layout.axes(mode, Kind.LINEAR).get(function)
+        judged = axis is not None and seen is not None and label in self.feel
+        if answered and judged:
+            along = float(np.dot(seen, axis))
             self._speed += (along - self._speed) * min(1.0, DT / SPEED_SMOOTHING_S)
         if t - self._since <= self._patience:
             return lean
-        if not answered or (label in self.feel and self._speed < TOO_SLOW * self._wanted):
+        if not answered or (judged and self._speed < TOO_SLOW * self._wanted):
             return min(1.0, lean + LEAN_STEP)
-        if label in self.feel and self._speed > TOO_FAST * self._wanted:
+        if judged and self._speed > TOO_FAST * self._wanted:
             return max(BODY_RANGE[0], lean - LEAN_STEP)
         return lean
 
@@ -318,11 +334,9 @@ def calibrated_channel(participant: str | ParticipantParams, seed: int, post: Po
     return BomiChannel(VirtualParticipant(params, profile, seed), OnlineChain(model, profile), profile)
 
 
-def intended_direction(mode: Mode, intent: StickIntent) -> np.ndarray:
-    """Unit hand direction the person wants this tick (zero unless translating)."""
-    if mode is not Mode.TRANSLATION or not intent.deflection:
-        return np.zeros(3)
-    direction = combine(dict(intent.deflection), TRANSLATION_AXES)
+def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.ndarray:
+    """Unit hand direction the person wants this tick (zero unless moving the hand in ``mode`` of ``layout``)."""
+    direction = combine(dict(intent.deflection), layout.axes(mode, Kind.LINEAR))
     norm = np.linalg.norm(direction)
     return direction / norm if norm > 0 else direction
 
@@ -332,10 +346,14 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
                 video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None) -> EpisodeLog:
     """Advance the task at the control rate until success or failure; optionally film it
     (played ``video_speedup`` times faster than simulated time)."""
-    sim = sim or ArmSim()
+    sim = sim or ArmSim(layout=channel.controls.layout)
+    if sim.layout is not channel.controls.layout:
+        raise ValueError(f"the arm has the {sim.layout.name} joystick layout, the operator's controls the "
+                         f"{channel.controls.layout.name} one")
     task = StackingTask(sim, task_config)
     task.reset(seed)
-    user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes)
+    user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes,
+                        memory=Memory(controls=channel.controls))
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
     film = _Film(sim, video, video_speedup) if video is not None else None
     full_speed, previous = sim.config.control.full_speed, None
@@ -344,20 +362,18 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
         while True:
             view = task.view()
             intent = user.decide(view)
-            seen = None
-            if previous is not None and view.mode is Mode.TRANSLATION:
-                seen = (view.hand_pos - previous) / (sim.dt * full_speed)
+            seen = None if previous is None else (view.hand_pos - previous) / (sim.dt * full_speed)
             previous = view.hand_pos
-            state = channel.command(intent, view.t, view.t + sim.dt, seen)
+            state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)
             rows["t"].append(view.t)
             rows["hand"].append(view.hand_pos)
-            rows["dir"].append(intended_direction(view.mode, intent))
+            rows["dir"].append(intended_direction(view.mode, intent, sim.layout))
             rows["mode"].append(view.mode.value)
             rows["cubes"].append(np.array(view.cube_pos))
             rows["touching"].append(view.touching)
             sim.step(state)
             if film is not None:
-                film.tick(f"{view.t:6.1f} s  " + describe(sim.mode, state) + f"  | {intent.goal}")
+                film.tick(f"{view.t:6.1f} s  " + describe(sim.mode, state, sim.layout) + f"  | {intent.goal}")
             outcome = task.outcome()
             if outcome.done:
                 break

@@ -479,7 +479,8 @@ class ScriptedUser:
         self._stopped_at = view.t
         self._released_move = bool(self.current.deflection)
         speed = float(np.linalg.norm(velocity))
-        if view.mode is Mode.TRANSLATION and speed > COASTING_MIN_SPEED:
+        moving = self.memory.controls.layout.axes(view.mode, Kind.LINEAR)
+        if any(fn in moving for fn in self.current.deflection) and speed > COASTING_MIN_SPEED:
             self._coasting = (view.t, view.hand_pos, speed)
 
     def _watch_descent(self, view: View) -> None:

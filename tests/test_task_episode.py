@@ -6,9 +6,13 @@ import numpy as np
 import pytest
 
 from bomi.cli import main
+from bomi.errors import BomiError
+from bomi.profiles import PROFILE_DIR, load_profile
+from helpers import edited_copy
 from sim.env import ArmSim
-from sim.joystick import JoystickState
-from tasks.episode import JoystickChannel, run_episode, summarize
+from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
+from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode, summarize
+from tasks.planner import Controls
 from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses
 
 
@@ -145,8 +149,31 @@ def test_benchmark_rejects_an_unknown_operator(capsys):
     assert "unknown telepathy" in capsys.readouterr().err
 
 
-def test_bomi_run_with_a_profile_lacking_directions_is_a_one_line_error(capsys):
-    from bomi.cli import main
-    assert main(["run-task", "--operator", "bomi", "--participant", "P4", "--seed", "1", "--time-limit", "5"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no class for Rr, Lr" in err[0]
+@pytest.mark.parametrize("old, new, missing", [
+    ('layout = "2-axis"', 'layout = "3-axis"', "no class for Rr, Lr"),  # P4's four directions cannot drive 3 axes
+    ('function = "B1"', 'function = "B2"', "no class for B1"),
+])
+def test_a_profile_lacking_a_class_of_its_layout_is_a_one_line_error(tmp_path, old, new, missing):
+    path = edited_copy(PROFILE_DIR / "P4.toml", tmp_path / "p4.toml", old, new)
+    with pytest.raises(BomiError) as info:
+        profile_controls(load_profile(path))
+    message = str(info.value)
+    assert str(path) in message and missing in message and "\n" not in message
+
+
+def test_profiles_give_their_layout_and_the_buttons_they_have():
+    assert profile_controls(load_profile("P1")) == Controls(THREE_AXIS, ("B1", "B2"))
+    assert profile_controls(load_profile("P4")) == Controls(TWO_AXIS, ("B1",))
+    assert JoystickChannel.controls == Controls(THREE_AXIS, ("B1", "B2"))  # a real 3-axis stick
+
+
+def test_p4_bomi_episode_moves_the_hand_down_in_height_mode():
+    """P4 (four directions and B1) through the 2-axis layout: the hand goes down to a cube.  Seed 0
+    reaches the height mode after about 22 s of travel in xy, and is down at the cube by 30 s."""
+    channel = calibrated_channel("P4", 0)
+    log = run_episode(channel, operator="bomi", participant="P4", seed=0, task_config=TaskConfig(time_limit=32.0))
+    assert log.failure.startswith("time limit") and {"translation", "height"} <= set(log.mode)
+    height = np.array([mode == "height" for mode in log.mode])[:-1]
+    dz = np.diff(log.hand_pos[:, 2])
+    assert dz[height].sum() < -0.10  # down by more than 10 cm in height mode
+    assert np.abs(dz[~height]).sum() < 0.02  # translation moves the hand in xy only
