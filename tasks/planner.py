@@ -36,6 +36,7 @@ class OperatorParams:
     turn: float
     coast_share: float
     full_speed: float
+    full_turn_speed: float
     stop: float
     align: float
     placed: float
@@ -48,15 +49,15 @@ class OperatorParams:
     release_gap: float
     retreat: float
     open_closure: float
-    closed_closure: float
+    miss_time: float
 
 
 _SECTIONS = {
     "timing": ("reaction_time", "pause_between_moves", "anticipation", "squeeze_time", "button_patience"),
-    "deflection": ("coarse", "fine", "turn", "coast_share", "full_speed"),
+    "deflection": ("coarse", "fine", "turn", "coast_share", "full_speed", "full_turn_speed"),
     "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg", "tilt_deg"),
     "heights": ("hover", "carry_clearance", "grasp_offset", "release_gap", "retreat"),
-    "fingers": ("open_closure", "closed_closure"),
+    "fingers": ("open_closure", "miss_time"),
 }
 _MAY_BE_NEGATIVE = {"grasp_offset"}
 
@@ -89,8 +90,8 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
         raise ValueError(f"unknown table(s): {', '.join(sorted(unknown_sections))}")
     if not 0 < values["fine"] <= values["coarse"] <= 1 or not 0 < values["turn"] <= 1:
         raise ValueError("[deflection] needs 0 < fine <= coarse <= 1 and 0 < turn <= 1")
-    if not 0 < values["open_closure"] < values["closed_closure"] < 1:
-        raise ValueError("[fingers] needs 0 < open_closure < closed_closure < 1")
+    if not 0 < values["open_closure"] < 1:
+        raise ValueError("[fingers] open_closure must lie strictly between 0 and 1")
     if values["stop"] <= 0 or values["align"] <= 0 or values["placed"] <= 0:
         raise ValueError("[tolerance] stop, align and placed must be positive")
     return OperatorParams(**values)
@@ -157,6 +158,7 @@ class Memory:
     descending: bool = False  # a descent goes on while the hand stays roughly over the goal
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
     stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
+    closing_since: float | None = None  # when the fingers (in the finger mode) began closing on a cube they do not touch yet
     controls: Controls = Controls()  # the same all episode
 
 
@@ -193,9 +195,10 @@ def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
     return min(touching, key=lambda k: float(np.linalg.norm(view.cube_pos[k] - view.hand_pos)))
 
 
-def missed_grasp(view: View, p: OperatorParams) -> bool:
-    """The fingers have closed on nothing."""
-    return view.closure >= p.closed_closure and not any(view.touching)
+def missed_grasp(view: View, memory: Memory, p: OperatorParams) -> bool:
+    """The fingers have been closing for ``miss_time`` without touching a cube: they closed on
+    nothing, or beside the cube against something else."""
+    return memory.closing_since is not None and view.t - memory.closing_since > p.miss_time and not any(view.touching)
 
 
 def cube_to_take(view: View, bottom: int | None) -> int:
@@ -220,6 +223,11 @@ def deflection_for(distance: float, p: OperatorParams, anticipation: float) -> f
     goes on for a while after letting go does not go full speed into a short move, and makes small
     corrections slowly enough not to overshoot them."""
     return float(np.clip(p.coast_share * distance / (p.full_speed * max(anticipation, 1e-9)), p.fine, p.coarse))
+
+
+def turn_deflection_for(angle: float, p: OperatorParams, anticipation: float) -> float:
+    """The same rule for a wrist turn of ``angle`` rad, between fine and ``turn``."""
+    return float(np.clip(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine, p.turn))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -278,7 +286,7 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= 2 * p.align
                 and (abs(hand[2] - grasp[2]) <= 2 * p.stop or memory.stalled))
     if at_grasp and (view.touching[k] or not open_hand):
-        if missed_grasp(view, p):
+        if missed_grasp(view, memory, p):
             return Action("open", f"missed cube {k + 1}: open hand")
         return Action("close", f"grasp cube {k + 1}")
     if not open_hand:
@@ -287,6 +295,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     turn = yaw_error(view, k)
     yaw_tolerance = math.radians(p.yaw_deg) / (2 if memory.turning else 1)
     if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
+        if hand[2] < grasp[2] + p.hover / 2 and not memory.turning:  # the fingers would hit the cube
+            return Action("move", f"reach cube {k + 1}: rise to turn", np.r_[hand[:2], hover_z])
         return Action("turn", f"turn to cube {k + 1}", turn=np.array([0.0, 0.0, turn]))
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", Action("close", f"grasp cube {k + 1}"),
                      memory.descending, memory.stalled)
@@ -326,30 +336,34 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
     action = next_action(view, memory, p)
     descending = action.goal.endswith("descend")
+    finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
+    closing = action.kind == "close" and view.mode is finger_mode and not any(view.touching)
     memory = replace(memory, turning=action.kind == "turn", descending=descending,
                      stalled=memory.stalled and (descending or action.kind in ("open", "close"))
-                     and not missed_grasp(view, p))
+                     and not missed_grasp(view, memory, p),
+                     closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None)
+    lead = p.anticipation if anticipation is None else anticipation
     if action.kind == "move":
-        lead = p.anticipation if anticipation is None else anticipation
         need, deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,
                                               memory.axis, holding or {}, memory.controls.layout, view.mode)
     else:
-        (need, deflection), axis = _other_action(action, memory.controls.layout, p), None
+        (need, deflection), axis = _other_action(action, memory.controls.layout, p, lead), None
     if need is not None and need is not view.mode:
         button = mode_button(view.mode, need, memory.controls)
         return StickIntent(button=button, goal=f"{action.goal}: {need.value} mode"), memory
     return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
 
 
-def _other_action(action: Action, layout: Layout, p: OperatorParams) -> tuple[Mode | None, dict[str, float]]:
-    """The mode and the stick for a turn (one rotation axis at a time, the largest first), an open
-    or a close; no mode and no stick to rest."""
+def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipation: float
+                  ) -> tuple[Mode | None, dict[str, float]]:
+    """The mode and the stick for a turn (one rotation axis at a time, the largest first, as fast
+    as lets it coast part of the way), an open or a close; no mode and no stick to rest."""
     if action.kind == "turn":
         axis = int(np.argmax(np.abs(action.turn)))
         direction = [0.0, 0.0, 0.0]
         direction[axis] = math.copysign(1.0, action.turn[axis])
         mode, fn = layout.find(Kind.ANGULAR, tuple(direction))
-        return mode, {fn: p.turn}
+        return mode, {fn: turn_deflection_for(abs(float(action.turn[axis])), p, anticipation)}
     if action.kind in ("open", "close"):
         mode, fn = layout.find(Kind.FINGERS, 1.0 if action.kind == "close" else -1.0)
         return mode, {fn: p.coarse}

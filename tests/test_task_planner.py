@@ -8,7 +8,7 @@ import pytest
 from bomi.errors import BomiError
 from sim.joystick import THREE_AXIS, TWO_AXIS, Mode
 from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Memory, ScriptedUser, View, cube_to_take, deflection_for,
-                           held_cube, load_operator, mode_button, plan, placed_cubes)
+                           held_cube, load_operator, mode_button, placed_cubes, plan, turn_deflection_for)
 
 P = load_operator()
 TWO_AXIS_B1 = Memory(controls=Controls(TWO_AXIS, ("B1",)))  # P4, P5: four directions and one button
@@ -320,11 +320,41 @@ def test_a_descent_that_corrects_upward_is_never_taken_as_stalled():
 def test_fingers_closed_on_nothing_open_again_and_forget_the_stall():
     high = (-0.14, -0.39, HALF + 0.03)  # a stalled descent closed 3 cm too high
     stalled = Memory(descending=True, stalled=True)
-    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.5), stalled, P, combine_axes=False)
-    assert intent.goal == "grasp cube 1" and memory.stalled  # still closing: not yet a miss
-    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=P.closed_closure), stalled, P,
+    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.5, t=10.0), stalled, P, combine_axes=False)
+    assert intent.goal == "grasp cube 1" and memory.stalled and memory.closing_since == 10.0
+    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.7, t=10.0 + P.miss_time), memory, P,
+                          combine_axes=False)
+    assert intent.goal == "grasp cube 1" and memory.closing_since == 10.0  # not yet a miss
+    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.7, t=10.1 + P.miss_time), memory, P,
                           combine_axes=False)
     assert intent.goal == "missed cube 1: open hand" and set(intent.deflection) == {"B"}
-    assert not memory.stalled
+    assert not memory.stalled and memory.closing_since is None
     intent, _ = plan(view(hand=high, mode=Mode.FINGERS, closure=0.0), memory, P, combine_axes=False)
     assert intent.goal == "reach cube 1: descend: translation mode"  # open again: descend the rest of the way
+
+
+def test_closing_is_timed_only_in_the_finger_mode_and_while_nothing_is_touched():
+    at_grasp = (-0.14, -0.39, HALF)
+    _, memory = plan(view(hand=at_grasp, mode=Mode.TRANSLATION, closure=0.3, t=1.0), Memory(), P, combine_axes=False)
+    assert memory.closing_since is None  # still switching to the finger mode
+    _, memory = plan(view(hand=at_grasp, mode=Mode.FINGERS, closure=0.3, t=2.0), memory, P, combine_axes=False)
+    assert memory.closing_since == 2.0
+    _, memory = plan(view(hand=at_grasp, mode=Mode.FINGERS, closure=0.6, touching=(True, False), t=9.0), memory, P,
+                     combine_axes=False)
+    assert memory.closing_since is None
+
+
+def test_a_wrist_turn_slows_down_near_its_goal_by_the_same_coasting_rule():
+    # 0.1 rad to go, 1 s of coasting seen: 0.5 x 0.1 rad / (0.6 rad/s x 1 s) = 0.083
+    assert turn_deflection_for(0.1, P, anticipation=1.0) == pytest.approx(0.5 * 0.1 / 0.6)
+    assert turn_deflection_for(0.5, P, anticipation=1.0) == P.turn  # far: no faster than the turn deflection
+    assert turn_deflection_for(0.01, P, anticipation=1.0) == P.fine
+    assert turn_deflection_for(0.1, P, anticipation=0.08) == P.turn  # a joystick user turns at the usual rate
+
+
+def test_a_turn_near_the_cube_at_grasp_height_rises_first():
+    low = view(hand=(-0.14, -0.39, HALF + 0.01), yaw=(0.5, 0.0))  # cube 1 turned 29 deg, the hand at its side
+    intent, _ = plan(low, Memory(), P, combine_axes=False)
+    assert intent.goal == "reach cube 1: rise to turn" and set(intent.deflection) == {"Rr"}
+    intent, _ = plan(replace(low, hand_pos=np.array([-0.14, -0.39, HALF + P.hover])), Memory(), P, combine_axes=False)
+    assert intent.goal == "turn to cube 1: wrist mode"
