@@ -141,11 +141,12 @@ def run_many(jobs: list[EpisodeJob], workers: int) -> list[dict]:
 
 
 def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, time_limit: float,
-                   operator_file: str, vote_length: int = DEFAULT_VOTE) -> list[EpisodeJob]:
-    """Every (participant, operator, seed); the joystick operator needs no participant body, but is
-    run per participant so every table row has its own episodes."""
+                   operator_file: str, vote_length: int = DEFAULT_VOTE, first_seed: int = 0) -> list[EpisodeJob]:
+    """Every (participant, operator, seed) for ``seeds`` seeds from ``first_seed``; the joystick
+    operator needs no participant body, but is run per participant so every table row has its own
+    episodes."""
     return [EpisodeJob(op, p, s, time_limit, operator_file, vote_length) for p in participants for op in operators
-            for s in range(seeds)]
+            for s in range(first_seed, first_seed + seeds)]
 
 
 def write_json(path: Path, payload) -> None:
@@ -188,10 +189,10 @@ def cmd_run_task(args: argparse.Namespace) -> int:
 def cmd_benchmark(args: argparse.Namespace) -> int:
     _check_outputs(args.json)
     load_operator(args.operator_file)
-    if args.seeds < 1:
-        raise BomiError("--seeds must be at least 1")
+    if args.seeds < 1 or args.first_seed < 0:
+        raise BomiError("--seeds must be at least 1 and --first-seed not negative")
     jobs = benchmark_jobs(_names(args.participants, None, "participants"), _names(args.operators, OPERATORS, "operators"),
-                          args.seeds, args.time_limit, str(args.operator_file), args.vote)
+                          args.seeds, args.time_limit, str(args.operator_file), args.vote, args.first_seed)
     records = run_many(jobs, args.jobs)
     rows = aggregate(records)
     print(markdown_tables(rows))
@@ -237,7 +238,8 @@ def register(subparsers) -> None:
     bench = subparsers.add_parser("benchmark", help="many episodes in parallel; table beside the paper's figures")
     bench.add_argument("--participants", default="P1")
     bench.add_argument("--operators", default="joystick,bomi")
-    bench.add_argument("--seeds", type=int, default=20)
+    bench.add_argument("--seeds", type=int, default=20, help="how many seeds (default 20)")
+    bench.add_argument("--first-seed", type=int, default=0, help="the first seed (default 0)")
     bench.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     bench.add_argument("--time-limit", type=float, default=600.0)
     bench.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)

@@ -11,6 +11,7 @@ from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import edited_copy
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
+from tasks.commands import benchmark_jobs
 from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode, summarize
 from tasks.planner import Controls
 from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses
@@ -147,6 +148,14 @@ def test_benchmark_runs_episodes_in_worker_processes_and_compares_with_the_paper
 def test_benchmark_rejects_an_unknown_operator(capsys):
     assert main(["benchmark", "--operators", "joystick,telepathy", "--seeds", "1"]) == 2
     assert "unknown telepathy" in capsys.readouterr().err
+
+
+def test_benchmark_seeds_can_start_anywhere(capsys):
+    jobs = benchmark_jobs(["P1", "P4"], ["bomi"], 3, 60.0, "operator.toml", first_seed=20)
+    assert [(j.participant, j.seed) for j in jobs] == [("P1", 20), ("P1", 21), ("P1", 22), ("P4", 20), ("P4", 21),
+                                                       ("P4", 22)]
+    assert main(["benchmark", "--operators", "joystick", "--first-seed", "-1"]) == 2
+    assert "--first-seed not negative" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("old, new, missing", [
