@@ -447,6 +447,7 @@ class ScriptedUser:
     _waiting_since: float | None = None
     _stopped_at: float = -math.inf
     _started: float = 0.0  # when the current move began
+    _mode_at_start: Mode | None = None  # the arm's mode when it began
     _relax_until: float = -math.inf
     _coasting: tuple[float, np.ndarray, float] | None = None  # (t, hand, speed) when a move was let go
     settle: float = 0.0  # learnt: how long the hand keeps (or starts) moving after a move is let go
@@ -466,7 +467,9 @@ class ScriptedUser:
         self._watch_descent(view)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation)
-        if self.current.button is not None and view.t - self._started > self.params.button_patience:
+        if self.current.button is not None and view.mode is not self._mode_at_start:
+            wanted = replace(REST, goal=wanted.goal)  # the press worked: let go (press again if need be)
+        elif self.current.button is not None and view.t - self._started > self.params.button_patience:
             # the press did nothing: let go, relax as long again, then press anew
             wanted = replace(REST, goal=wanted.goal)
             self._relax_until = view.t + self.params.button_patience
@@ -486,7 +489,7 @@ class ScriptedUser:
         if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
             return replace(REST, goal=wanted.goal)
         self._learn_settling()
-        self.current, self._waiting_since, self._started = wanted, None, view.t
+        self.current, self._waiting_since, self._started, self._mode_at_start = wanted, None, view.t, view.mode
         return wanted
 
     def _let_go(self, view: View, velocity: np.ndarray) -> None:

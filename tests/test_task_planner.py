@@ -358,3 +358,19 @@ def test_a_turn_near_the_cube_at_grasp_height_rises_first():
     assert intent.goal == "reach cube 1: rise to turn" and set(intent.deflection) == {"Rr"}
     intent, _ = plan(replace(low, hand_pos=np.array([-0.14, -0.39, HALF + P.hover])), Memory(), P, combine_axes=False)
     assert intent.goal == "turn to cube 1: wrist mode"
+
+
+def test_with_one_button_each_press_is_let_go_once_the_mode_changes_then_made_again():
+    user = ScriptedUser(P, combine_axes=False, memory=TWO_AXIS_B1)
+    at_grasp = (-0.14, -0.39, HALF)  # wants the finger mode: three presses of B1 from translation
+    t, mode, presses, held = 0.0, Mode.TRANSLATION, [], None
+    while t < 6.0 and mode is not Mode.FINGERS:
+        intent = user.decide(view(hand=at_grasp, mode=mode, t=t))
+        if intent.button == "B1" and held is None:  # a press is the button going down
+            presses.append((t, mode))
+            mode = TWO_AXIS.after(mode, "B1")  # the arm answers the press at once
+        held = intent.button
+        t += 1 / 60
+    assert [m for _, m in presses] == [Mode.TRANSLATION, Mode.HEIGHT, Mode.WRIST] and mode is Mode.FINGERS
+    gaps = np.diff([t for t, _ in presses])  # let go, then press again after the reaction time
+    assert np.all(gaps >= P.reaction_time) and np.all(gaps < P.button_patience)
