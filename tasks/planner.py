@@ -159,6 +159,7 @@ class Memory:
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
     stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
     closing_since: float | None = None  # when the fingers (in the finger mode) began closing on a cube they do not touch yet
+    opening: bool = False  # the fingers are being opened: that goes on until the hand is open
     controls: Controls = Controls()  # the same all episode
 
 
@@ -250,6 +251,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
     held = held_cube(view, memory, p)
     open_hand = view.closure <= p.open_closure
+    if memory.opening and not open_hand:  # a release is not taken back half-way (the touch may flicker)
+        return Action("open", "open hand")
 
     tilt_tolerance = math.radians(p.tilt_deg) / (2 if memory.turning else 1)
     at_cube = any(view.touching) and not open_hand
@@ -341,7 +344,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     memory = replace(memory, turning=action.kind == "turn", descending=descending,
                      stalled=memory.stalled and (descending or action.kind in ("open", "close"))
                      and not missed_grasp(view, memory, p),
-                     closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None)
+                     closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
+                     opening=action.kind == "open")
     lead = p.anticipation if anticipation is None else anticipation
     if action.kind == "move":
         need, deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,

@@ -374,3 +374,14 @@ def test_with_one_button_each_press_is_let_go_once_the_mode_changes_then_made_ag
     assert [m for _, m in presses] == [Mode.TRANSLATION, Mode.HEIGHT, Mode.WRIST] and mode is Mode.FINGERS
     gaps = np.diff([t for t, _ in presses])  # let go, then press again after the reaction time
     assert np.all(gaps >= P.reaction_time) and np.all(gaps < P.button_patience)
+
+
+def test_a_release_is_not_taken_back_when_the_touch_flickers_half_way():
+    on_top = view(hand=(0.11, -0.45, 3 * HALF), cubes=((0.11, -0.45), (0.11, -0.45)), cube_z=(HALF, 3 * HALF),
+                  mode=Mode.FINGERS, closure=0.5, touching=(False, False), t=30.0)
+    intent, memory = plan(on_top, Memory(), P, combine_axes=False)
+    assert intent.goal == "grasp cube 2"  # half-closed at a cube it does not hold: it would close
+    intent, memory = plan(on_top, Memory(opening=True), P, combine_axes=False)
+    assert intent.goal == "open hand" and set(intent.deflection) == {"B"} and memory.opening
+    _, memory = plan(replace(on_top, closure=0.0), memory, P, combine_axes=False)
+    assert not memory.opening  # open: done
