@@ -159,7 +159,7 @@ class Memory:
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
     stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
     closing_since: float | None = None  # when the fingers (in the finger mode) began closing on a cube they do not touch yet
-    opening: bool = False  # the fingers are being opened: that goes on until the hand is open
+    opening: bool = False  # the person is opening the fingers: that goes on until the hand is open
     controls: Controls = Controls()  # the same all episode
 
 
@@ -340,12 +340,13 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     action = next_action(view, memory, p)
     descending = action.goal.endswith("descend")
     finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
+    _, opening_fn = memory.controls.layout.find(Kind.FINGERS, -1.0)
     closing = action.kind == "close" and view.mode is finger_mode and not any(view.touching)
     memory = replace(memory, turning=action.kind == "turn", descending=descending,
                      stalled=memory.stalled and (descending or action.kind in ("open", "close"))
                      and not missed_grasp(view, memory, p),
                      closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
-                     opening=action.kind == "open")
+                     opening=action.kind == "open" and view.mode is finger_mode and opening_fn in (holding or {}))
     lead = p.anticipation if anticipation is None else anticipation
     if action.kind == "move":
         need, deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,

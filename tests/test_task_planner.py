@@ -381,7 +381,10 @@ def test_a_release_is_not_taken_back_when_the_touch_flickers_half_way():
                   mode=Mode.FINGERS, closure=0.5, touching=(False, False), t=30.0)
     intent, memory = plan(on_top, Memory(), P, combine_axes=False)
     assert intent.goal == "grasp cube 2"  # half-closed at a cube it does not hold: it would close
-    intent, memory = plan(on_top, Memory(opening=True), P, combine_axes=False)
+    intent, memory = plan(on_top, Memory(opening=True), P, combine_axes=False, holding={"B": 1.0})
     assert intent.goal == "open hand" and set(intent.deflection) == {"B"} and memory.opening
-    _, memory = plan(replace(on_top, closure=0.0), memory, P, combine_axes=False)
+    _, memory = plan(replace(on_top, closure=0.0), memory, P, combine_axes=False, holding={"B": 1.0})
     assert not memory.opening  # open: done
+    held = replace(on_top, touching=(False, True), closure=0.6)
+    _, memory = plan(held, Memory(touch_since=0.0), P, combine_axes=False)
+    assert not memory.opening  # a release only wanted, not yet begun on the stick, commits to nothing
