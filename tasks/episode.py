@@ -189,7 +189,7 @@ class BomiChannel:
         self._label_of = {cls.function: cls.label for cls in profile.classes}
         self._function_of = {cls.label: cls.function for cls in profile.classes}
         self._since = 0.0  # when the posture held now was taken up (or last changed)
-        # the participant's feel for each proportional translation class (how far to lean for how fast)
+        # the participant's feel for each stick-direction class (how far to lean for how fast)
         self.feel = {cls.label: LeanFeel() for cls in profile.classes if cls.function in FUNCTIONS}
         self._wanted = 0.0  # deflection wanted from the posture held now
         self._speed = 0.0  # the arm's speed along the held posture's direction, as the person judges it
