@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bomi.chain_commands import reproduce, reproduction_markdown, reproduction_record
+from tasks.cli.chain import reproduce, reproduction_markdown, reproduction_record
 from bomi.dataset import data_dir
 from bomi.profiles import load_profile
 

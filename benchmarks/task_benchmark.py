@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from bomi.chain import OnlineChain  # noqa: E402
 from bomi.classifier import PostProcessing  # noqa: E402
 from bomi.frames import FrameParser, imu_index  # noqa: E402
-from tasks.commands import DEFAULT_VOTE, PAPER, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many  # noqa: E402
+from tasks.cli.task import DEFAULT_VOTE, PAPER, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many  # noqa: E402
 from tasks.episode import calibrated_channel, summarize  # noqa: E402
 from tasks.participant import VirtualParticipant, load_participant  # noqa: E402
 from tasks.planner import DEFAULT_OPERATOR_FILE  # noqa: E402

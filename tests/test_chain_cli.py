@@ -8,9 +8,9 @@ import pytest
 
 from bomi.chain import (OnlineChain, evaluate, neutral_references, node_states, prepare, recording_neutral,
                         segment_folds, select_settings, window_features)
-from bomi.chain_commands import PAPER_DAY1_MODEL, fused_recording
+from tasks.cli.chain import PAPER_DAY1_MODEL, fused_recording
 from bomi.classifier import PostProcessing, decide
-from bomi.cli import main
+from tasks.cli import main
 from bomi.dataset import data_dir
 from bomi.fusion import NodeCalibration
 from bomi.model_io import load_model

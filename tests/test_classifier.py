@@ -9,7 +9,7 @@ import pytest
 from bomi.chain import prepare
 from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, class_amplitude, decide,
                              fit_lda, gamma, majority_vote, posteriors, proportional, reject)
-from bomi.cli import main
+from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.model_io import FORMAT_VERSION, load_model, save_model
 

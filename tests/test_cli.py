@@ -6,7 +6,7 @@ import importlib
 
 import pytest
 
-from bomi.cli import COMMAND_MODULES, _modules_for, main
+from tasks.cli import COMMAND_MODULES, _modules_for, main
 
 
 @pytest.mark.parametrize("module", sorted(COMMAND_MODULES))
@@ -18,7 +18,7 @@ def test_module_registers_exactly_the_listed_commands(module):
 
 
 def test_only_the_owning_module_is_loaded_for_a_command():
-    assert _modules_for(["train", "x.csv", "--profile", "P1"]) == ["bomi.chain_commands"]
+    assert _modules_for(["train", "x.csv", "--profile", "P1"]) == ["tasks.cli.chain"]
     assert _modules_for(["--help"]) == list(COMMAND_MODULES)
     assert _modules_for(["no-such-command"]) == list(COMMAND_MODULES)
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bomi.chain import Decision, OnlineChain, train
-from bomi.cli import main
+from tasks.cli import main
 from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame
 from bomi.fusion import DT
@@ -284,7 +284,7 @@ def read_log(path) -> list[dict]:
 
 def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_path, p1_model_file, capsys):
     emulator = subprocess.Popen(
-        [sys.executable, "-m", "bomi", "emulate", "--participant", "P1", "--to", "pty", "--loss", "0",
+        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--loss", "0",
          "--hold", "2", "--neutral", "2", "--duration", "12", "--seed", str(SEED)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

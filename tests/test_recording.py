@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import scipy.io
 
-from bomi.cli import main
+from tasks.cli import main
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.recording import NodeData, NodeSample, Recording, RecordingWriter, read_recording, write_recording

@@ -14,7 +14,7 @@ import tty
 import numpy as np
 import pytest
 
-from bomi.cli import main
+from tasks.cli import main
 from bomi.dataset import data_dir
 from bomi.emulator import READER_SETTLE_S, EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
@@ -260,7 +260,7 @@ def test_emulator_to_socket_to_capture(tmp_path, capsys):
 def test_cli_emulate_prints_the_pty_path_and_capture_records_it(tmp_path, capsys):
     rec_path = tmp_path / "rec.csv"
     write_recording(rec_path, int_recording(60, nodes=(1,)))
-    emulator = subprocess.Popen([sys.executable, "-m", "bomi", "emulate", "--recording", str(rec_path),
+    emulator = subprocess.Popen([sys.executable, "-m", "tasks.cli", "emulate", "--recording", str(rec_path),
                                  "--to", "pty", "--rate", "100", "--linger", "3"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -391,7 +391,7 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     write_recording(rec_path, posture_recording([0, 1, 0, 2, 0] * 4, 30))
     path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
     out = tmp_path / "calibration.csv"
-    recorder = subprocess.Popen([sys.executable, "-m", "bomi", "record", "--profile", str(profile), "--port", path,
+    recorder = subprocess.Popen([sys.executable, "-m", "tasks.cli", "record", "--profile", str(profile), "--port", path,
                                  "--out", str(out), "--hold", "0.5", "--neutral", "0.5"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

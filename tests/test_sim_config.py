@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from bomi.cli import main
+from tasks.cli import main
 from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
 from sim.env import ArmSim
 from sim.errors import SimError

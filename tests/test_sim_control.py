@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from sim.check import enter_mode, hold, measure
-from sim.commands import DEMO_SCRIPT
+from tasks.cli.sim import DEMO_SCRIPT
 from sim.config import load_config
 from sim.env import ArmSim
 from sim.joystick import FUNCTIONS, JoystickState, Mode, script_states

@@ -5,7 +5,7 @@ import imageio.v2 as imageio
 import numpy as np
 import pytest
 
-from bomi.cli import main
+from tasks.cli import main
 from sim.env import ArmSim
 from sim.joystick import JoystickState, Mode
 from sim.render import CAPTION_HEIGHT, VideoWriter, caption_strip, describe, write_png

@@ -5,13 +5,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from bomi.cli import main
+from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import edited_copy
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
-from tasks.commands import benchmark_jobs
+from tasks.cli.task import benchmark_jobs
 from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode, summarize
 from tasks.planner import Controls
 from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses

@@ -1,5 +1,8 @@
 """The `bomi` command line: the one place that wires bomi/, sim/ and tasks/ together.
 
+It lives on the composing side (tasks/) so that bomi/, the signal chain, imports neither sim/ nor
+tasks/ and installs and runs without MuJoCo.
+
 Each command module exposes ``register(subparsers)`` which adds its sub-commands and sets
 ``func`` on them; ``func(args)`` returns the process exit code. Only the module that owns
 the command being run is imported, so `bomi train` does not pay for loading MuJoCo.
@@ -9,17 +12,18 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from importlib.metadata import version
 
 from bomi.errors import BomiError
 from sim.errors import SimError
 
 # module -> the sub-commands its register() adds (tests/test_cli.py checks they agree)
 COMMAND_MODULES: dict[str, tuple[str, ...]] = {
-    "bomi.chain_commands": ("train", "evaluate", "reproduce", "fuse"),
-    "bomi.stream_commands": ("emulate", "capture", "record"),
-    "sim.commands": ("sim-check", "render"),
-    "tasks.commands": ("run-task", "benchmark", "demo"),
-    "tasks.live_commands": ("live",),
+    "tasks.cli.chain": ("train", "evaluate", "reproduce", "fuse"),
+    "tasks.cli.stream": ("emulate", "capture", "record"),
+    "tasks.cli.sim": ("sim-check", "render"),
+    "tasks.cli.task": ("run-task", "benchmark", "demo"),
+    "tasks.cli.live": ("live",),
 }
 
 
@@ -32,6 +36,7 @@ def _modules_for(argv: list[str]) -> list[str]:
 
 def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bomi", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"%(prog)s {version('bomi-jaco')}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES if modules is None else modules:
         importlib.import_module(name).register(subparsers)

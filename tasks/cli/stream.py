@@ -147,7 +147,7 @@ def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
 
 def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     """The participant performs the calibration protocol; samples are made while they are played."""
-    from tasks.live import participant_blocks  # the CLI reaches across: tasks/ composes bomi/ and sim/
+    from tasks.live import participant_blocks  # here, not at load: capture and record need no simulator
     from tasks.participant import load_participant
     params = load_participant(args.participant)
     profile = load_profile(params.profile)

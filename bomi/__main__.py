@@ -1,5 +1,0 @@
-import sys
-
-from bomi.cli import main
-
-sys.exit(main())
