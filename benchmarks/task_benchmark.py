@@ -22,10 +22,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bomi import paper  # noqa: E402
 from bomi.chain import OnlineChain  # noqa: E402
 from bomi.classifier import PostProcessing  # noqa: E402
 from bomi.frames import FrameParser, imu_index  # noqa: E402
-from tasks.cli.task import DEFAULT_VOTE, PAPER, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many  # noqa: E402
+from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many  # noqa: E402
 from tasks.episode import calibrated_channel, summarize  # noqa: E402
 from tasks.participant import VirtualParticipant, load_participant  # noqa: E402
 from tasks.planner import DEFAULT_OPERATOR_FILE  # noqa: E402
@@ -42,12 +43,11 @@ def chain_cost_ms(participant: str, seed: int, seconds: float = 60.0) -> float:
         body.set_intent(label, 1.0, 5.0 * k)
     data = body.advance(seconds)
     chain = OnlineChain(channel.chain.model, channel.profile)
-    started, samples = time.perf_counter(), 0
-    for frame in FrameParser().feed(data):
-        node = imu_index(frame.node_id)
-        chain.push(node, frame.acc, frame.gyro, frame.mag)
-        samples += node == 1
-    return 1000.0 * (time.perf_counter() - started) / samples
+    started = time.perf_counter()
+    frames = FrameParser().feed(data)
+    chain.push_frames(frames)
+    elapsed = time.perf_counter() - started
+    return 1000.0 * elapsed / sum(imu_index(frame.node_id) == 1 for frame in frames)
 
 
 def figure(records: list[dict], time_limit: float, path: Path) -> None:
@@ -66,7 +66,7 @@ def figure(records: list[dict], time_limit: float, path: Path) -> None:
             ax.scatter([x] * failed, [time_limit] * failed, marker="x", color="red", s=40)
         if done:
             ax.hlines(np.mean(done), x - 0.3, x + 0.3, color="black")
-    for operator, seconds in (("BoMI", PAPER["bomi_time_s"]), ("joystick", PAPER["joystick_time_s"])):
+    for operator, seconds in (("BoMI", paper.TASK["bomi_time_s"]), ("joystick", paper.TASK["joystick_time_s"])):
         ax.axhline(seconds, color="gray", linestyle="--", linewidth=0.8)
         ax.text(len(groups) - 0.5, seconds, f"paper {operator} {seconds:.0f} s", ha="right", va="bottom", fontsize=8)
     ax.set_xticks(range(len(groups)), [f"{p}\n{o}" for p, o in groups])
@@ -105,7 +105,9 @@ def main() -> None:
         f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}; "
         f"episodes in {args.jobs} parallel processes; BoMI majority vote {DEFAULT_VOTE}.", "",
         markdown_tables(rows), "",
-        "Paper (Fall et al.): BoMI 138 s, joystick 58 s, real-time accuracy 99.2 %, longest error run 290 ms.", "",
+        f"Paper (Fall et al.): BoMI {paper.TASK['bomi_time_s']:.0f} s, joystick {paper.TASK['joystick_time_s']:.0f} s, "
+        f"real-time accuracy {100 * paper.TASK['realtime_accuracy']:.1f} %, "
+        f"longest error run {paper.TASK['longest_error_run_ms']:.0f} ms.", "",
         "| speed (one BoMI episode alone, one core) | value |", "|---|---|",
         f"| simulated time (s) | {speed['bomi_episode_sim_s']:.1f} |",
         f"| wall time (s) | {speed['bomi_episode_wall_s']:.1f} |",
@@ -114,7 +116,7 @@ def main() -> None:
         f"| chain cost per sample (ms, budget 1) | {speed['chain_ms_per_sample']:.3f} |", ""])
     (RESULTS / "task_benchmark.md").write_text(text, encoding="utf-8")
     (RESULTS / "task_benchmark.json").write_text(json.dumps(
-        {"paper": PAPER, "seeds": args.seeds, "rows": rows, "comparison": comparison(rows), "speed": speed,
+        {"paper": paper.TASK, "seeds": args.seeds, "rows": rows, "comparison": comparison(rows), "speed": speed,
          "episodes": records}, indent=2) + "\n", encoding="utf-8")
     figure(records, TIME_LIMIT, RESULTS / "task_benchmark.png")
     print(text)

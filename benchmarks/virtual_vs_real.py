@@ -27,6 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from bomi import paper  # noqa: E402
 from bomi.chain import evaluate, train  # noqa: E402
 from bomi.dataset import data_dir  # noqa: E402
 from bomi.errors import BomiError  # noqa: E402
@@ -37,7 +38,7 @@ from tasks.fit_participant import hold_blocks, split_sway_tremor  # noqa: E402
 from tasks.participant import calibration_session, load_participant, session_recording  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
-PAPER_DAY1_MODEL = {2: 99.93, 3: 98.14, 4: 97.50, 5: 98.31}   # paper, day-1 model, days 2..5 (day-1 *training* file)
+PAPER_DAY1_MODEL = {day: pct for day, pct in paper.DAY1_MODEL_PCT.items() if day > 1}  # days 2..5 (day-1 *training* file)
 BAR_POINTS = 1.0
 
 

@@ -6,7 +6,7 @@ Node state = neutral-subtracted (pitch, roll, yaw) + gyroscope as the recording 
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +16,7 @@ from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing,
                              decide, fit_lda, linear_parameters, posteriors, proportional, rejected)
 from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
+from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, neutral_offsets
 from bomi.profiles import Profile
 from bomi.recording import Recording
@@ -188,6 +189,14 @@ class OnlineChain:
         return self._calibration is not None
 
     # inputs
+    def push_frames(self, frames: Iterable[ImuFrame]) -> list[Decision]:
+        """Frames as the parser gives them, in arrival order, through the chain: the decisions they make."""
+        return [decision for frame in frames if (decision := self.push_frame(frame)) is not None]
+
+    def push_frame(self, frame: ImuFrame) -> Decision | None:
+        """One frame as the parser gives it (``push`` with its node index and raw values)."""
+        return self.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
+
     def push(self, node: int, acc, gyro, mag) -> Decision | None:
         """Raw int16 LSB in the sensor's axes -> fusion -> ``push_angles``. Unknown nodes are ignored."""
         fusion = self._fusion.get(node)

@@ -24,11 +24,10 @@ import numpy as np
 import serial
 
 from bomi.errors import BomiError
-from bomi.frames import ImuFrame, encode_imu_frame, imu_node_id
+from bomi.frames import COUNTER_MODULO, SAMPLE_RATE_HZ, ImuFrame, encode_imu_frame, imu_node_id
 from bomi.recording import Recording
 from bomi.serial_source import BASE_STATION_BAUD, open_port
 
-NOMINAL_RATE_HZ = 62.5
 # pyserial flushes the input (a tty's queue, a socket's ready bytes) right after opening a port:
 # give the reader time to get past that before streaming.
 READER_SETTLE_S = 0.3
@@ -37,7 +36,7 @@ _SIGNALS = ("mag", "gyro", "acc")  # frame order
 
 @dataclass(frozen=True)
 class EmulatorConfig:
-    rate_hz: float = NOMINAL_RATE_HZ
+    rate_hz: float = SAMPLE_RATE_HZ
     loss: float = 0.0     # probability that a frame is dropped
     corrupt: float = 0.0  # probability that a byte is altered
     seed: int = 0
@@ -101,7 +100,7 @@ def block_chunks(blocks: Iterable[dict[int, np.ndarray]], config: EmulatorConfig
                 if rng.random() < config.loss:
                     stats.frames_dropped += 1
                     continue
-                frames.append(encode_imu_frame(ImuFrame(imu_node_id(index), config.period_ms, k % 256,
+                frames.append(encode_imu_frame(ImuFrame(imu_node_id(index), config.period_ms, k % COUNTER_MODULO,
                                                         tuple(row[0:3]), tuple(row[3:6]), tuple(row[6:9]))))
             stats.frames_sent += len(frames)
             stats.samples += 1

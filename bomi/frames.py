@@ -18,7 +18,10 @@ END_BYTE = 0x34
 FIRST_IMU_NODE_ID = 10
 MAX_IMU_NODES = 6
 SAFETY_KEY_NODE_ID = 40
-DEFAULT_PERIOD_MS = 16
+SAMPLE_RATE_HZ = 62.5  # every IMU node samples at 62.5 Hz (hardware.md: the period byte says 16 ms)
+SAMPLE_PERIOD_S = 1.0 / SAMPLE_RATE_HZ
+DEFAULT_PERIOD_MS = round(1000 / SAMPLE_RATE_HZ)
+COUNTER_MODULO = 256  # the packet counter is one byte
 SAFETY_EVENT_BYTE = 14
 
 # start, node id, period, counter, unused, mag xyz, gyro xyz, acc xyz, 8 unused, end
@@ -69,6 +72,25 @@ class SafetyKeyEvent:
     event: int
     counter: int
     frame_number: int
+
+
+def counter_step(previous: int, counter: int) -> int:
+    """Samples from a frame with packet counter ``previous`` to the next one of the same node with
+    ``counter`` (1 when none was lost in between; the counter wraps at ``COUNTER_MODULO``)."""
+    return (counter - previous) % COUNTER_MODULO
+
+
+@dataclass
+class SampleIndex:
+    """Per-node sample index from the wrapping packet counters: a node's first frame counts as its
+    counter, each later frame as the previous index plus ``counter_step`` (lost frames included)."""
+
+    _last: dict[int, int] = field(default_factory=dict)
+
+    def __call__(self, frame: ImuFrame) -> int:
+        last = self._last.get(frame.node_id, frame.counter - 1)
+        index = self._last[frame.node_id] = last + counter_step(last, frame.counter)
+        return index
 
 
 def encode_imu_frame(frame: ImuFrame) -> bytes:
@@ -173,7 +195,7 @@ class FrameParser:
         if stats is None:
             stats = self.nodes[node_id] = NodeStats()
         else:
-            stats.lost += (counter - stats.last_counter - 1) % 256
+            stats.lost += (counter_step(stats.last_counter, counter) - 1) % COUNTER_MODULO  # a repeated counter: a full wrap lost
         stats.frames += 1
         stats.period_ms = period_ms
         stats.last_counter = counter

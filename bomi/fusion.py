@@ -12,11 +12,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bomi.frames import ImuFrame, imu_index, imu_node_id
+from bomi.frames import SAMPLE_PERIOD_S, ImuFrame, imu_index, imu_node_id
 from bomi.recording import NodeSample
 
 GYRO_DEG_PER_LSB = 2000.0 / 32768.0
-DT = 1.0 / 62.5
+DT = SAMPLE_PERIOD_S  # the filters integrate over one nominal sample period
+# A stream's first seconds, not used: from a zero state yaw settles within about 600 samples (hardware.md)
+WARMUP_S = 12.0
 GYRO_WEIGHT = 0.92
 ACC_WEIGHT = 0.08
 MAG_WEIGHT = 0.01

@@ -18,6 +18,7 @@ import numpy as np
 import scipy.io
 
 from bomi.errors import BomiError
+from bomi.frames import SAMPLE_RATE_HZ
 
 NODE_INDICES = range(1, 7)
 TIME_COLUMN = "Time"
@@ -193,7 +194,7 @@ def _format_row(time: float, samples: Sequence[NodeSample], label: int | None) -
     return ",".join(cells) + "\n"
 
 
-def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = 62.5) -> None:
+def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SAMPLE_RATE_HZ) -> None:
     """Write ``rec`` as CSV (Time from ``rec.time`` or sample index / rate); replaces ``path`` atomically."""
     path = Path(path)
     nodes = rec.node_indices

@@ -15,9 +15,9 @@ import numpy as np
 
 from bomi.chain import Decision, OnlineChain, train
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
-from bomi.frames import FrameParser, imu_index
+from bomi.frames import SAMPLE_PERIOD_S, FrameParser, SampleIndex
 from bomi.errors import BomiError
-from bomi.fusion import DT
+from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile, load_profile
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState, Kind, Layout, Mode, combine
@@ -67,7 +67,7 @@ class EpisodeLog:
     class_names: tuple[str, ...] = ()
     neutral: int = 0
     allowance: int = 0  # decisions after an intent change that belong to the transition
-    sample_period: float = 0.016
+    sample_period: float = SAMPLE_PERIOD_S
 
 
 def summarize(log: EpisodeLog) -> dict:
@@ -131,7 +131,6 @@ class JoystickChannel:
         return {}
 
 
-WARMUP_S = 12.0  # the fusion's yaw settles in about 600 samples (hardware.md)
 # Motion amplitudes the participant calibrates with and then uses: half to full range, so that
 # the calibrated gamma range (nu = 0 .. 1) spans the leans used in the task.
 BODY_RANGE = (0.5, 1.0)
@@ -196,7 +195,7 @@ class BomiChannel:
         # how long the person waits for a posture (or a change of lean) to take effect before
         # leaning further: reaction + the body's move + a second of watching
         self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
-        self._last_sample: dict[int, int] = {}
+        self._sample_index = SampleIndex()
         self.stick = DecisionStick()
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
         self._queue: list[Delivery] = []  # generated frames not yet arrived
@@ -215,12 +214,8 @@ class BomiChannel:
     def _feed(self, data: bytes, record: bool = True) -> list[Decision]:
         decisions = []
         for frame in self.parser.feed(data):
-            node = imu_index(frame.node_id)
-            if node is None:
-                continue
-            last = self._last_sample.get(node, frame.counter - 1)
-            sample = self._last_sample[node] = last + (frame.counter - last) % 256
-            decision = self.chain.push(node, frame.acc, frame.gyro, frame.mag)
+            sample = self._sample_index(frame)
+            decision = self.chain.push_frame(frame)
             if decision is not None:
                 decisions.append(decision)
                 if record:

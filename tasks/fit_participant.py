@@ -21,8 +21,9 @@ from tqdm import tqdm
 
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
+from bomi.frames import SAMPLE_RATE_HZ
 from bomi.recording import Recording, read_recording
-from tasks.participant import SAMPLE_RATE_HZ, SWAY_CUTOFF_HZ
+from tasks.participant import SWAY_CUTOFF_HZ
 
 EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
 MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise

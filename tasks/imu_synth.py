@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bomi.frames import DEFAULT_PERIOD_MS, ImuFrame, encode_imu_frame, imu_node_id
+from bomi.frames import COUNTER_MODULO, DEFAULT_PERIOD_MS, ImuFrame, encode_imu_frame, imu_node_id
 from bomi.fusion import DT, GYRO_DEG_PER_LSB, NodeCalibration
 
 ACC_LSB_PER_G = 1000.0 / 0.061          # LSM9DS0 at +-2 g: 0.061 mg/LSB
@@ -212,7 +212,7 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
         arrival[kept_index] = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
         arrival = np.maximum(arrival, (not_before_s or {}).get(node, -np.inf))
         for k in kept_index:
-            frame = ImuFrame(imu_node_id(node), period_ms, int(sample_index[k]) % 256,
+            frame = ImuFrame(imu_node_id(node), period_ms, int(sample_index[k]) % COUNTER_MODULO,
                              tuple(int(v) for v in raw.mag[k]), tuple(int(v) for v in raw.gyro[k]),
                              tuple(int(v) for v in raw.acc[k]))
             frames.append(encode_imu_frame(frame))

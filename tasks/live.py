@@ -41,14 +41,15 @@ import numpy as np
 
 from bomi.chain import Decision, OnlineChain
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
+from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent
 from bomi.profiles import Profile
 from bomi.serial_source import SerialSource
 from bomi.protocol import Segment
 from sim.joystick import ArmCommand, JoystickState
 from tasks.stick import DecisionStick
 from tasks.imu_synth import Delivery, LinkModel
-from tasks.participant import NEUTRAL_LABEL, ParticipantParams, VirtualParticipant
+from bomi.classifier import NEUTRAL_LABEL
+from tasks.participant import ParticipantParams, VirtualParticipant
 
 WATCHDOG_TIMEOUT_S = 0.1
 STATUS_PERIOD_S = 0.5
@@ -265,10 +266,7 @@ def decide(chain: OnlineChain, frames: Iterable[ImuFrame],
            functions: Mapping[int, str]) -> tuple[list[Decision], list[tuple[int, str]]]:
     """The frames through the chain: the decisions that may reach the arm, and (sample, reason) of the others."""
     decisions, dropped = [], []
-    for frame in frames:
-        decision = chain.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
-        if decision is None:
-            continue
+    for decision in chain.push_frames(frames):
         reason = refusal(decision, functions)
         if reason is None:
             decisions.append(decision)

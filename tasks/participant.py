@@ -28,18 +28,17 @@ import scipy.signal
 
 from bomi.config_files import load_toml
 from bomi.errors import BomiError
-from bomi.fusion import DT, FusedRows
-from bomi.frames import FrameParser, RowAssembler
+from bomi.classifier import NEUTRAL_LABEL
+from bomi.fusion import DT, WARMUP_S, FusedRows
+from bomi.frames import SAMPLE_RATE_HZ, FrameParser, RowAssembler, SampleIndex
 from bomi.profiles import Profile
 from bomi.protocol import protocol_order
 from bomi.recording import NodeData, NodeSample, Recording
 from tasks.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
 
 PARTICIPANT_DIR = Path(__file__).resolve().parent / "participants"
-SAMPLE_RATE_HZ = 1.0 / DT
 SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the P1 fit
 SPASM_DRAW_S = 10.0           # spasm onsets are drawn this far ahead at a time
-NEUTRAL_LABEL = 0
 
 _TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
              "classes", "spasm"}
@@ -479,7 +478,7 @@ class CalibrationSession:
 
 def calibration_session(params: ParticipantParams, profile: Profile, seed: int, repetitions: int = 3,
                         hold_s: float = 5.0, neutral_s: float = 5.0, amplitudes: Sequence[float] = (1.0,),
-                        order: Sequence[tuple[int, float]] | None = None, warmup_s: float = 12.0,
+                        order: Sequence[tuple[int, float]] | None = None, warmup_s: float = WARMUP_S,
                         noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()) -> CalibrationSession:
     """Run the protocol: neutral, then each cued motion held ``hold_s`` with ``neutral_s`` of neutral between.
 
@@ -526,17 +525,14 @@ def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recordi
     ids = tuple(node.node_id for node in profile.nodes)
     assembler = RowAssembler(ids)
     fused = FusedRows({node.index: node.calibration for node in profile.nodes})
-    latest: dict[int, tuple[int, int]] = {}          # node id -> (counter, sample index) of its last frame
+    sample_index = SampleIndex()
     index_of: dict[tuple[int, int], int] = {}        # (node id, counter) -> sample index of that frame
     rows: list[dict[int, NodeSample]] = []
     row_index: list[int] = []
     for frame in FrameParser().feed(stream):
         if frame.node_id not in ids:
             continue
-        last = latest.get(frame.node_id)
-        index = frame.counter if last is None else last[1] + (frame.counter - last[0]) % 256
-        latest[frame.node_id] = (frame.counter, index)
-        index_of[(frame.node_id, frame.counter)] = index
+        index_of[(frame.node_id, frame.counter)] = sample_index(frame)
         row = assembler.push(frame)
         if row is not None:
             rows.append(fused.samples(row))

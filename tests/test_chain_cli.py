@@ -8,7 +8,8 @@ import pytest
 
 from bomi.chain import (OnlineChain, evaluate, neutral_references, node_states, prepare, recording_neutral,
                         segment_folds, select_settings, window_features)
-from tasks.cli.chain import PAPER_DAY1_MODEL, fused_recording
+from bomi import paper
+from tasks.cli.chain import fused_recording
 from bomi.classifier import PostProcessing, decide
 from tasks.cli import main
 from bomi.dataset import data_dir
@@ -100,7 +101,7 @@ def test_fv3_day1_model_meets_the_paper_on_days_2_to_5(p1_days, p1_profile, day1
     """The P1 profile (settings chosen on day 1 only) against the paper's day-1-model table."""
     accuracy = {d: evaluate(day1_fv3_model, p1_days[d], p1_profile.neutral_samples).accuracy for d in range(2, 6)}
     for day, value in accuracy.items():
-        assert 100 * value >= PAPER_DAY1_MODEL[day], (day, value)
+        assert 100 * value >= paper.DAY1_MODEL_PCT[day], (day, value)
     assert np.mean(list(accuracy.values())) >= 0.99
 
 

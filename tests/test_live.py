@@ -176,8 +176,8 @@ class ScriptedChain:
     def set_neutral(self, offsets) -> None:
         pass
 
-    def push(self, node, acc, gyro, mag) -> Decision | None:
-        return next(self._decisions)
+    def push_frames(self, frames) -> list[Decision]:
+        return [d for d in (next(self._decisions) for _ in frames) if d is not None]
 
 
 class StickArm:

@@ -10,7 +10,7 @@ import scipy.signal
 from bomi.chain import OnlineChain, train
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, imu_index
+from bomi.frames import FrameParser
 from bomi.fusion import DT
 from bomi.profiles import load_profile
 from tasks import fit_participant
@@ -228,10 +228,7 @@ def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
     decisions = []
     for step in range(1, 60 * 44):
         t = step / 60.0
-        for frame in parser.feed(vp.advance(t)):
-            d = chain.push(imu_index(frame.node_id), frame.acc, frame.gyro, frame.mag)
-            if d is not None:
-                decisions.append((t, d.label))
+        decisions += [(t, d.label) for d in chain.push_frames(parser.feed(vp.advance(t)))]
         if step == 60 * 12:
             chain.begin_neutral_calibration()
         for when, label in schedule.items():

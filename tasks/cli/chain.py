@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from bomi import paper
 from bomi.chain import Evaluation, Selection, cross_validate, evaluate, select_settings, train
 from bomi.classifier import PostProcessing
 from bomi.dataset import data_dir
@@ -22,8 +23,6 @@ from bomi.model_io import SUFFIXES, load_model, save_model
 from bomi.profiles import Profile, load_profile
 from bomi.recording import NodeData, Recording, read_recording, write_recording
 
-# Table "reliability over days" of the paper: the day-1 model (FV3) tested on each day, percent.
-PAPER_DAY1_MODEL = {1: 99.58, 2: 99.93, 3: 98.14, 4: 97.50, 5: 98.31}
 DAYS = (1, 2, 3, 4, 5)
 
 
@@ -190,7 +189,7 @@ def reproduction_record(rows: list[FeatureReproduction]) -> dict:
                 "rejected_share": float(np.mean(rejected))}
 
     return {
-        "paper_day1_model_fv3": PAPER_DAY1_MODEL,
+        "paper_day1_model_fv3": paper.DAY1_MODEL_PCT,
         "method": "train on day 1 (the day-1 test recording stands in for the unpublished training recording), "
                   "test on days 2..5; shrinkage and rejection threshold chosen by drift-aware CV within day 1",
         "features": {r.kind: {
@@ -213,14 +212,14 @@ def reproduction_markdown(record: dict) -> str:
     header = ["Day", "Paper FV3"] + kinds + [f"{k} + rejection: accepted (rejected)" for k in kinds]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     day1 = [f"{100 * features[k]['within_day1_cv_accuracy']:.2f}" for k in kinds]
-    lines.append(f"| 1 (within day 1, 5-fold CV) | {PAPER_DAY1_MODEL[1]:.2f} | " + " | ".join(day1)
+    lines.append(f"| 1 (within day 1, 5-fold CV) | {paper.DAY1_MODEL_PCT[1]:.2f} | " + " | ".join(day1)
                  + " |" + " - |" * len(kinds))
     for day in DAYS[1:]:
         ours = [f"{100 * features[k]['days'][day]['accuracy']:.2f}" for k in kinds]
         rej = [f"{100 * features[k]['with_rejection'][day]['accepted_accuracy']:.2f} "
                f"({100 * features[k]['with_rejection'][day]['rejected_share']:.2f})" for k in kinds]
-        lines.append(f"| {day} | {PAPER_DAY1_MODEL[day]:.2f} | " + " | ".join(ours + rej) + " |")
-    paper_mean = np.mean([PAPER_DAY1_MODEL[d] for d in DAYS[1:]])
+        lines.append(f"| {day} | {paper.DAY1_MODEL_PCT[day]:.2f} | " + " | ".join(ours + rej) + " |")
+    paper_mean = np.mean([paper.DAY1_MODEL_PCT[d] for d in DAYS[1:]])
     means = [f"{100 * features[k]['mean_accuracy_days_2_5']:.2f}" for k in kinds]
     pooled = [f"{100 * features[k]['with_rejection_pooled_days_2_5']['accepted_accuracy']:.2f} "
               f"({100 * features[k]['with_rejection_pooled_days_2_5']['rejected_share']:.2f})" for k in kinds]

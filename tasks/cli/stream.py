@@ -13,7 +13,7 @@ from tqdm import tqdm
 from bomi.chain import train
 from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
+from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
 from bomi.fusion import DT, FusedRows, NodeCalibration
 from bomi.model_io import save_model
 from bomi.profiles import load_profile
@@ -43,7 +43,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     what.add_argument("--participant", help="virtual participant (P1, P4, P5 or a TOML file)")
     emulate.add_argument("--to", required=True, metavar="PORT_OR_URL",
                          help="'pty', socket://HOST:PORT (listens for one client), or a port / pyserial URL")
-    emulate.add_argument("--rate", type=float, default=62.5, help="samples per second per node (default 62.5)")
+    emulate.add_argument("--rate", type=float, default=SAMPLE_RATE_HZ,
+                         help=f"samples per second per node (default {SAMPLE_RATE_HZ:g})")
     emulate.add_argument("--loss", type=float, default=0.0, help="probability of dropping a frame (real: 0.09)")
     emulate.add_argument("--corrupt", type=float, default=0.0, help="probability of altering a byte")
     emulate.add_argument("--seed", type=int, default=0, help="seed of loss, corruption and the participant's session")

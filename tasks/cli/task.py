@@ -11,6 +11,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from bomi import paper
 from bomi.classifier import PostProcessing
 from bomi.errors import BomiError
 from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
@@ -18,17 +19,12 @@ from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking import TaskConfig
 from tasks.timeline import timeline_figure
 
-# What the paper reports for the assembly task (Fall et al.): mean completion times, the BoMI's
-# real-time accuracy and its longest run of misclassified outputs.
 # Majority vote over this many decisions on the simulated BoMI (the profiles ship with it off):
 # it removes the one- and two-decision blips that would otherwise press B1/B2 by mistake.
 DEFAULT_VOTE = 5
 # The demo's MP4 plays this many times faster than simulated time: a long BoMI episode stays a
 # short film (and quick to render).
 DEMO_VIDEO_SPEEDUP = 8.0
-
-PAPER = {"bomi_time_s": 138.0, "joystick_time_s": 58.0, "realtime_accuracy": 0.992, "longest_error_run_ms": 290.0}
-
 
 @dataclass(frozen=True)
 class EpisodeJob:
@@ -96,11 +92,11 @@ def comparison(rows: list[dict]) -> list[dict]:
         if bomi and joy and bomi["completion_time_mean"] and joy["completion_time_mean"]:
             ratio = bomi["completion_time_mean"] / joy["completion_time_mean"]
         out.append({"participant": participant, "time_ratio": ratio,
-                     "paper_time_ratio": PAPER["bomi_time_s"] / PAPER["joystick_time_s"],
+                     "paper_time_ratio": paper.TASK["bomi_time_s"] / paper.TASK["joystick_time_s"],
                      "realtime_accuracy": bomi["realtime_accuracy"] if bomi else None,
-                     "paper_realtime_accuracy": PAPER["realtime_accuracy"],
+                     "paper_realtime_accuracy": paper.TASK["realtime_accuracy"],
                      "longest_error_run_ms": bomi["longest_error_run_ms"] if bomi else None,
-                     "paper_longest_error_run_ms": PAPER["longest_error_run_ms"]})
+                     "paper_longest_error_run_ms": paper.TASK["longest_error_run_ms"]})
     return out
 
 
@@ -197,7 +193,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     rows = aggregate(records)
     print(markdown_tables(rows))
     if args.json:
-        write_json(args.json, {"paper": PAPER, "rows": rows, "comparison": comparison(rows), "episodes": records})
+        write_json(args.json, {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows), "episodes": records})
     return 0
 
 
@@ -210,7 +206,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     summaries = [summarize(joystick), summarize(bomi)]
     print(markdown_tables(aggregate(summaries)))
     timeline_figure([joystick, bomi], out / "timeline.png")
-    write_json(out / "demo.json", {"paper": PAPER, "episodes": summaries})
+    write_json(out / "demo.json", {"paper": paper.TASK, "episodes": summaries})
     print(f"wrote {out / 'timeline.png'}, {out / 'bomi_episode.mp4'}, {out / 'demo.json'}")
     return 0
 
