@@ -16,20 +16,16 @@ import platform
 import time
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from bomi import paper  # noqa: E402
-from bomi.chain import OnlineChain  # noqa: E402
-from bomi.classifier import PostProcessing  # noqa: E402
-from bomi.frames import FrameParser, imu_index  # noqa: E402
-from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many  # noqa: E402
-from tasks.episode import calibrated_channel, summarize  # noqa: E402
-from tasks.participant import VirtualParticipant, load_participant  # noqa: E402
-from tasks.planner import DEFAULT_OPERATOR_FILE  # noqa: E402
+from bomi import paper
+from bomi.chain import OnlineChain
+from bomi.classifier import PostProcessing
+from bomi.frames import FrameParser, imu_index
+from tasks.cli.engine import ProcessPool
+from tasks.cli.figures import completion_time_figure
+from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many
+from tasks.episode import calibrated_channel, summarize
+from tasks.participant import VirtualParticipant, load_participant
+from tasks.planner import DEFAULT_OPERATOR_FILE
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TIME_LIMIT = 600.0
@@ -50,32 +46,13 @@ def chain_cost_ms(participant: str, seed: int, seconds: float = 60.0) -> float:
     return 1000.0 * elapsed / sum(imu_index(frame.node_id) == 1 for frame in frames)
 
 
-def figure(records: list[dict], time_limit: float, path: Path) -> None:
-    """Completion time of every episode per participant and operator (timed-out ones at the limit,
-    in red), with the paper's mean times."""
+def figure(records: list[dict], path: Path) -> None:
+    """Completion time of every episode per participant and operator, with the paper's mean times."""
     groups = sorted({(r["participant"], r["operator"]) for r in records})
-    fig, ax = plt.subplots(figsize=(1.4 * len(groups) + 2, 4.5))
-    jitter = np.random.default_rng(0)
-    for x, (participant, operator) in enumerate(groups):
-        episodes = [r for r in records if (r["participant"], r["operator"]) == (participant, operator)]
-        done = [r["completion_time"] for r in episodes if r["success"]]
-        failed = sum(not r["success"] for r in episodes)
-        ax.scatter(x + jitter.uniform(-0.15, 0.15, len(done)), done, s=14, color="tab:blue" if operator == "bomi"
-                   else "tab:green", alpha=0.8)
-        if failed:
-            ax.scatter([x] * failed, [time_limit] * failed, marker="x", color="red", s=40)
-        if done:
-            ax.hlines(np.mean(done), x - 0.3, x + 0.3, color="black")
-    for operator, seconds in (("BoMI", paper.TASK["bomi_time_s"]), ("joystick", paper.TASK["joystick_time_s"])):
-        ax.axhline(seconds, color="gray", linestyle="--", linewidth=0.8)
-        ax.text(len(groups) - 0.5, seconds, f"paper {operator} {seconds:.0f} s", ha="right", va="bottom", fontsize=8)
-    ax.set_xticks(range(len(groups)), [f"{p}\n{o}" for p, o in groups])
-    ax.set_yscale("log")
-    ax.set_ylabel("completion time (s, log)")
-    ax.set_title("Stacking task: every episode (line: mean of successes; x: timed out)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    completion_time_figure([(f"{p}\n{o}", [r for r in records if (r["participant"], r["operator"]) == (p, o)])
+                            for p, o in groups], path,
+                           "Stacking task: every episode (line: mean of successes; x: failed, where it stopped)",
+                           {"paper BoMI": paper.TASK["bomi_time_s"], "paper joystick": paper.TASK["joystick_time_s"]})
 
 
 def main() -> None:
@@ -87,12 +64,12 @@ def main() -> None:
     args = parser.parse_args()
     if args.figure_only:
         saved = json.loads((RESULTS / "task_benchmark.json").read_text(encoding="utf-8"))
-        figure(saved["episodes"], TIME_LIMIT, RESULTS / "task_benchmark.png")
+        figure(saved["episodes"], RESULTS / "task_benchmark.png")
         return
     participants = [p.strip() for p in args.participants.split(",")]
 
     records = run_many(benchmark_jobs(participants, ["joystick", "bomi"], args.seeds, TIME_LIMIT,
-                                      str(DEFAULT_OPERATOR_FILE)), args.jobs)
+                                      str(DEFAULT_OPERATOR_FILE)), ProcessPool(args.jobs))
     rows = aggregate(records)
     alone = summarize(run_job(EpisodeJob("bomi", participants[0], 0)))
     cost = chain_cost_ms(participants[0], 0)
@@ -118,7 +95,7 @@ def main() -> None:
     (RESULTS / "task_benchmark.json").write_text(json.dumps(
         {"paper": paper.TASK, "seeds": args.seeds, "rows": rows, "comparison": comparison(rows), "speed": speed,
          "episodes": records}, indent=2) + "\n", encoding="utf-8")
-    figure(records, TIME_LIMIT, RESULTS / "task_benchmark.png")
+    figure(records, RESULTS / "task_benchmark.png")
     print(text)
 
 

@@ -25,7 +25,8 @@ from sim.render import FrameRenderer, VideoWriter, describe
 from tasks import metrics
 from tasks.imu_synth import Delivery
 from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
-from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, Memory, ScriptedUser, StickIntent, load_operator
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Memory, OperatorParams, ScriptedUser, StickIntent,
+                           load_operator)
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, rising_edge
 
@@ -317,13 +318,14 @@ def calibration_order(params: ParticipantParams, profile: Profile, repetitions: 
             for amplitude in (BODY_RANGE if functions[label] in FUNCTIONS else (1.0,))]
 
 
-def calibrated_channel(participant: str | ParticipantParams, seed: int, post: PostProcessing | None = None
-                       ) -> BomiChannel:
+def calibrated_channel(participant: str | ParticipantParams, seed: int, post: PostProcessing | None = None,
+                       profile: Profile | None = None) -> BomiChannel:
     """The paper's order: the participant performs the calibration protocol, the chain records
     it and trains the LDA with the ``bomi train`` code (``bomi.chain.train``), then the task.
-    ``post`` overrides the profile's post-processing (rejection, majority vote)."""
+    ``post`` overrides the profile's post-processing (rejection, majority vote); ``profile``
+    replaces the participant's own one (an edited copy of it)."""
     params = participant if isinstance(participant, ParticipantParams) else load_participant(participant)
-    profile = load_profile(params.profile)
+    profile = profile or load_profile(params.profile)
     session = calibration_session(params, profile, seed, order=calibration_order(params, profile))
     model = train([session_recording(session, profile)], profile, post=post)
     return BomiChannel(VirtualParticipant(params, profile, seed), OnlineChain(model, profile), profile)
@@ -337,17 +339,19 @@ def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.nd
 
 
 def run_episode(channel, *, operator: str, participant: str, seed: int,
-                operator_file: Path | str = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
+                operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
                 video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None) -> EpisodeLog:
     """Advance the task at the control rate until success or failure; optionally film it
-    (played ``video_speedup`` times faster than simulated time)."""
+    (played ``video_speedup`` times faster than simulated time).  ``operator_file``: the scripted
+    user's parameters, or the file they are read from."""
     sim = sim or ArmSim(layout=channel.controls.layout)
     if sim.layout is not channel.controls.layout:
         raise ValueError(f"the arm has the {sim.layout.name} joystick layout, the operator's controls the "
                          f"{channel.controls.layout.name} one")
     task = StackingTask(sim, task_config)
     task.reset(seed)
-    user = ScriptedUser(load_operator(operator_file), combine_axes=channel.combine_axes,
+    params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
+    user = ScriptedUser(params, combine_axes=channel.combine_axes,
                         memory=Memory(controls=channel.controls))
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
     film = _Film(sim, video, video_speedup) if video is not None else None

@@ -18,7 +18,7 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -94,9 +94,10 @@ class ParticipantParams:
 
 
 # ------------------------------------------------------------------------------------- loading
-def load_participant(path_or_name: str | Path) -> ParticipantParams:
-    """Load and validate a participant file, or a shipped one by name (P1, P4, P5)."""
-    return load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse)
+def load_participant(path_or_name: str | Path, overrides: Mapping[str, Any] | None = None) -> ParticipantParams:
+    """Load and validate a participant file, or a shipped one by name (P1, P4, P5); ``overrides``:
+    dotted keys set before validation (``{"spasm.rate_per_s": 0.2}``)."""
+    return load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse, overrides)
 
 
 def _check_keys(table: Any, allowed: set[str], required: set[str], where: str) -> dict:

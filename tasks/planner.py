@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -62,10 +62,11 @@ _SECTIONS = {
 _MAY_BE_NEGATIVE = {"grasp_offset"}
 
 
-def load_operator(path: Path | str = DEFAULT_OPERATOR_FILE) -> OperatorParams:
-    """Read and validate an operator TOML file (a path, or a shipped one by name); raise BomiError
-    naming the file and the fault."""
-    return load_toml(path, DEFAULT_OPERATOR_FILE.parent, "operator", _parse_operator)
+def load_operator(path: Path | str = DEFAULT_OPERATOR_FILE, overrides: Mapping[str, Any] | None = None) -> OperatorParams:
+    """Read and validate an operator TOML file (a path, or a shipped one by name), with ``overrides``
+    (dotted keys, ``{"timing.reaction_time": 0.4}``) set before validation; raise BomiError naming
+    the file and the fault."""
+    return load_toml(path, DEFAULT_OPERATOR_FILE.parent, "operator", _parse_operator, overrides)
 
 
 def _parse_operator(data: dict, source: str) -> OperatorParams:

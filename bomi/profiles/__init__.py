@@ -6,6 +6,7 @@ h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,9 +69,10 @@ class Profile:
         return {cls.label: cls.node for cls in self.classes if cls.node is not None}
 
 
-def load_profile(path_or_name: str | Path) -> Profile:
-    """Load and validate a profile file, or a shipped one by name (P1, P4, P5)."""
-    return load_toml(path_or_name, PROFILE_DIR, "profile", _parse)
+def load_profile(path_or_name: str | Path, overrides: Mapping[str, Any] | None = None) -> Profile:
+    """Load and validate a profile file, or a shipped one by name (P1, P4, P5); ``overrides``: dotted
+    keys set before validation (``{"post_processing.rejection_threshold": 0.99}``)."""
+    return load_toml(path_or_name, PROFILE_DIR, "profile", _parse, overrides)
 
 
 def _check_keys(table: dict, allowed: set[str], where: str) -> None:

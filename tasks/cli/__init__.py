@@ -23,6 +23,7 @@ COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "tasks.cli.stream": ("emulate", "capture", "record"),
     "tasks.cli.sim": ("sim-check", "render"),
     "tasks.cli.task": ("run-task", "benchmark", "demo"),
+    "tasks.cli.sweep": ("sweep",),
     "tasks.cli.live": ("live",),
 }
 

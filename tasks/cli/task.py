@@ -3,18 +3,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
 from bomi import paper
-from bomi.classifier import PostProcessing
 from bomi.errors import BomiError
+from bomi.profiles import load_profile
+from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
+from tasks.participant import load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking import TaskConfig
 from tasks.timeline import timeline_figure
@@ -26,14 +27,33 @@ DEFAULT_VOTE = 5
 # short film (and quick to render).
 DEMO_VIDEO_SPEEDUP = 8.0
 
+# The configuration files an episode reads, each of which a job may edit (``EpisodeJob.overrides``).
+EDITABLE_FILES = ("profile", "participant", "operator")
+
+
 @dataclass(frozen=True)
 class EpisodeJob:
+    """Everything an episode depends on.  ``overrides``: ``(file.dotted.key, value)`` pairs that
+    edit the profile, participant or operator file before it is read (``("profile.post_processing.
+    rejection_threshold", 0.99)``); the majority vote is ``vote_length``, never a profile override."""
+
     operator: str
     participant: str
     seed: int
     time_limit: float = 600.0
     operator_file: str = str(DEFAULT_OPERATOR_FILE)
     vote_length: int = DEFAULT_VOTE
+    overrides: tuple[tuple[str, Any], ...] = ()
+
+    def __str__(self) -> str:
+        edits = "".join(f", {key}={value!r}" for key, value in self.overrides)
+        vote = f", vote {self.vote_length}" if self.operator != "joystick" else ""
+        return f"episode {self.participant} {self.operator} seed {self.seed}{vote}{edits}"
+
+    def edits(self, file: str) -> dict[str, Any]:
+        """The overrides of one of EDITABLE_FILES, keyed relative to that file."""
+        prefix = file + "."
+        return {key[len(prefix):]: value for key, value in self.overrides if key.startswith(prefix)}
 
 
 def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4.0):
@@ -41,13 +61,16 @@ def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4
     if job.operator == "joystick":
         channel = JoystickChannel()
     else:
-        channel = calibrated_channel(job.participant, job.seed, PostProcessing(vote_length=job.vote_length))
+        params = load_participant(job.participant, job.edits("participant"))
+        profile = load_profile(params.profile, job.edits("profile"))
+        channel = calibrated_channel(params, job.seed, replace(profile.post, vote_length=job.vote_length), profile)
     return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
-                       operator_file=job.operator_file, task_config=TaskConfig(time_limit=job.time_limit),
-                       video=video, video_speedup=video_speedup)
+                       operator_file=load_operator(job.operator_file, job.edits("operator")),
+                       task_config=TaskConfig(time_limit=job.time_limit), video=video, video_speedup=video_speedup)
 
 
-def _summary_of(job: EpisodeJob) -> dict:
+def episode_record(job: EpisodeJob) -> dict:
+    """The per-episode metrics of one job (what the engines run)."""
     return summarize(run_job(job))
 
 
@@ -104,18 +127,29 @@ def _fmt(value, spec: str = ".1f") -> str:
     return "-" if value is None else format(value, spec)
 
 
+# The columns of a row of ``aggregate`` in the tables (``bomi benchmark``, ``bomi sweep``)
+ROW_COLUMNS = ("successes", "completion time (s)", "real-time accuracy", "longest error run (ms)", "mode switches",
+               "unintended displacement (mm)", "latency from onset (ms)", "drops", "x real time")
+
+
+def row_cells(r: dict) -> list[str]:
+    """A row of ``aggregate`` as the texts of ROW_COLUMNS."""
+    sd = f" ± {r['completion_time_sd']:.1f}" if r["completion_time_sd"] is not None else ""
+    acc = _fmt(None if r["realtime_accuracy"] is None else 100 * r["realtime_accuracy"], ".1f")
+    return [f"{r['successes']}/{r['episodes']}", f"{_fmt(r['completion_time_mean'])}{sd}",
+            f"{acc}{' %' if acc != '-' else ''}", _fmt(r["longest_error_run_ms"], ".0f"), _fmt(r["mode_switches"]),
+            _fmt(r["unintended_displacement_mm"], ".0f"), _fmt(r["latency_ms_mean"], ".0f"), str(r["cube_drops"]),
+            _fmt(r["realtime_factor"])]
+
+
+def markdown_table(header: list[str], rows: list[list[str]]) -> str:
+    return "\n".join(["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+                     + ["| " + " | ".join(row) + " |" for row in rows])
+
+
 def markdown_tables(rows: list[dict]) -> str:
-    lines = ["| participant | operator | successes | completion time (s) | real-time accuracy | longest error run (ms) "
-             "| mode switches | unintended displacement (mm) | latency from onset (ms) | drops | x real time |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        sd = f" ± {r['completion_time_sd']:.1f}" if r["completion_time_sd"] is not None else ""
-        acc = _fmt(None if r["realtime_accuracy"] is None else 100 * r["realtime_accuracy"], ".1f")
-        lines.append(f"| {r['participant']} | {r['operator']} | {r['successes']}/{r['episodes']} "
-                     f"| {_fmt(r['completion_time_mean'])}{sd} | {acc}{' %' if acc != '-' else ''} "
-                     f"| {_fmt(r['longest_error_run_ms'], '.0f')} | {_fmt(r['mode_switches'])} "
-                     f"| {_fmt(r['unintended_displacement_mm'], '.0f')} | {_fmt(r['latency_ms_mean'], '.0f')} "
-                     f"| {r['cube_drops']} | {_fmt(r['realtime_factor'])} |")
+    lines = [markdown_table(["participant", "operator", *ROW_COLUMNS],
+                            [[r["participant"], r["operator"], *row_cells(r)] for r in rows])]
     lines += ["", "| participant | BoMI / joystick time | paper | real-time accuracy | paper | longest error run (ms) "
               "| paper |", "|---|---|---|---|---|---|---|"]
     for c in comparison(rows):
@@ -126,13 +160,9 @@ def markdown_tables(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def run_many(jobs: list[EpisodeJob], workers: int) -> list[dict]:
-    """Episodes in parallel processes, with a progress bar; results in job order."""
-    results: dict[int, dict] = {}
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(_summary_of, job): i for i, job in enumerate(jobs)}
-        for future in tqdm(as_completed(futures), total=len(jobs), desc="episodes", unit="ep"):
-            results[futures[future]] = future.result()
+def run_many(jobs: list[EpisodeJob], engine: Engine) -> list[dict]:
+    """Episodes on ``engine``, with a progress bar; results in job order."""
+    results = dict(tqdm(engine.run(episode_record, jobs), total=len(jobs), desc="episodes", unit="ep"))
     return [results[i] for i in range(len(jobs))]
 
 
@@ -189,7 +219,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
         raise BomiError("--seeds must be at least 1 and --first-seed not negative")
     jobs = benchmark_jobs(_names(args.participants, None, "participants"), _names(args.operators, OPERATORS, "operators"),
                           args.seeds, args.time_limit, str(args.operator_file), args.vote, args.first_seed)
-    records = run_many(jobs, args.jobs)
+    records = run_many(jobs, engine_from_args(args))
     rows = aggregate(records)
     print(markdown_tables(rows))
     if args.json:
@@ -236,7 +266,7 @@ def register(subparsers) -> None:
     bench.add_argument("--operators", default="joystick,bomi")
     bench.add_argument("--seeds", type=int, default=20, help="how many seeds (default 20)")
     bench.add_argument("--first-seed", type=int, default=0, help="the first seed (default 0)")
-    bench.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    add_engine_arguments(bench)
     bench.add_argument("--time-limit", type=float, default=600.0)
     bench.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
     bench.add_argument("--vote", type=_vote, default=DEFAULT_VOTE, help=f"BoMI majority vote length (default {DEFAULT_VOTE})")

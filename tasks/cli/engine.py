@@ -1,0 +1,131 @@
+"""Where episodes run: a process pool on this machine, or a Ray cluster (the optional ``ray`` extra).
+
+Both engines take a picklable function and items and yield ``(index, result)`` as each item
+finishes, in whatever order they finish: the caller (``bomi benchmark``, ``bomi sweep``) puts
+them in order, shows progress and saves them.  A result depends only on its item (an episode
+depends only on its settings and seed), so the engine, the worker and the order change nothing.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from enum import Enum
+from typing import Any, Protocol
+
+from tqdm import tqdm
+
+from bomi.errors import BomiError
+
+RAY_INSTALL = 'pip install -e ".[ray]"'
+
+
+class EngineKind(str, Enum):
+    LOCAL = "local"
+    RAY = "ray"
+
+
+def report(message: str) -> None:
+    """A line on stderr that does not break a progress bar."""
+    tqdm.write(message, file=sys.stderr)
+
+
+class Engine(Protocol):
+    def run(self, work: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        """``(index, work(items[index]))`` for every item, as each finishes."""
+        ...
+
+
+class EpisodeFailed(RuntimeError):
+    """An item's work raised (or its worker died) and, on Ray, did so again when retried."""
+
+
+class ProcessPool:
+    """``workers`` processes on this machine (concurrent.futures)."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+
+    def run(self, work: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        with ProcessPoolExecutor(max_workers=self.workers) as pool:
+            futures = {pool.submit(work, item): i for i, item in enumerate(items)}
+            try:
+                for future in as_completed(futures):
+                    i = futures[future]
+                    try:
+                        result = future.result()
+                    except Exception as exc:
+                        raise EpisodeFailed(f"{items[i]}: {type(exc).__name__}: {exc}") from exc
+                    yield i, result
+            finally:  # interrupted or failed: do not start what is still queued
+                for future in futures:
+                    future.cancel()
+
+
+class RayCluster:
+    """Ray tasks of one CPU each, on the cluster at ``address`` or, without one, on a local Ray
+    started with ``cpus`` CPUs.  A task whose worker fails (an exception, a crashed or lost
+    worker) is reported with its item and run once more; a second failure stops the run."""
+
+    def __init__(self, address: str | None = None, cpus: int | None = None):
+        self.address, self.cpus = address, cpus
+
+    def run(self, work: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        ray = import_ray()
+        started_here = not ray.is_initialized()
+        if started_here:
+            ray.init(address=self.address, num_cpus=None if self.address else self.cpus,
+                     include_dashboard=False, log_to_driver=False, logging_level="warning")
+        remote = ray.remote(num_cpus=1, max_retries=0)(work)  # the one retry is ours, and reported
+        pending = {remote.remote(item): (i, 0) for i, item in enumerate(items)}
+        try:
+            while pending:
+                (ref,), _ = ray.wait(list(pending), num_returns=1)
+                i, failures = pending.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except ray.exceptions.RayError as exc:
+                    reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                    if failures:
+                        raise EpisodeFailed(f"{items[i]}: failed twice on Ray workers ({reason})") from exc
+                    report(f"bomi: {items[i]}: failed on a Ray worker ({type(exc).__name__}: {reason}); retrying once")
+                    pending[remote.remote(items[i])] = (i, 1)
+                    continue
+                yield i, result
+        finally:
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            if started_here:
+                ray.shutdown()
+
+
+def import_ray():
+    """The ray module, or a one-line error saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise BomiError(f"--engine ray: Ray is not installed; install the optional extra: {RAY_INSTALL}") from None
+    return ray
+
+
+def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--engine", choices=[k.value for k in EngineKind], default=EngineKind.LOCAL.value,
+                        help="where the episodes run: a local process pool (default) or a Ray cluster")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="parallel episodes on this machine (the pool's processes, or the CPUs of a local Ray)")
+    parser.add_argument("--address", help="--engine ray: the Ray cluster to join (e.g. HEAD:6379 or auto); "
+                                          "default: start a local Ray with --jobs CPUs")
+
+
+def engine_from_args(args: argparse.Namespace) -> Engine:
+    """The engine the options ask for; bad options (or Ray missing) fail before any work."""
+    if args.jobs < 1:
+        raise BomiError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.engine == EngineKind.RAY.value:
+        import_ray()
+        return RayCluster(args.address, args.jobs)
+    if args.address is not None:
+        raise BomiError("--address is for --engine ray")
+    return ProcessPool(args.jobs)

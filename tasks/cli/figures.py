@@ -1,0 +1,69 @@
+"""Figures over many episodes: completion time per group of episodes (``bomi benchmark``'s script,
+``bomi sweep``) and one per-cell metric against one swept setting (``bomi sweep``)."""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: Path, title: str,
+                           references: Mapping[str, float] | None = None) -> None:
+    """Completion time of every episode, one column per (label, episode records) group: successes
+    as dots with their mean as a line, failed episodes as red crosses where they stopped;
+    ``references`` (label -> seconds) as dashed lines."""
+    fig, ax = plt.subplots(figsize=(min(1.4 * len(groups) + 2, 24), 4.8))
+    jitter = np.random.default_rng(0)
+    for x, (_, records) in enumerate(groups):
+        done = [r["completion_time"] for r in records if r["success"]]
+        failed = [r["sim_time"] for r in records if not r["success"]]
+        colour = "tab:green" if all(r["operator"] == "joystick" for r in records) else "tab:blue"
+        ax.scatter(x + jitter.uniform(-0.15, 0.15, len(done)), done, s=14, color=colour, alpha=0.8)
+        if failed:
+            ax.scatter([x] * len(failed), failed, marker="x", color="red", s=40)
+        if done:
+            ax.hlines(np.mean(done), x - 0.3, x + 0.3, color="black")
+    for label, seconds in (references or {}).items():
+        ax.axhline(seconds, color="gray", linestyle="--", linewidth=0.8)
+        ax.text(len(groups) - 0.5, seconds, f"{label} {seconds:.0f} s", ha="right", va="bottom", fontsize=8)
+    ax.set_xticks(range(len(groups)), [label for label, _ in groups], fontsize=7 if len(groups) > 8 else 9)
+    ax.set_yscale("log")
+    ax.set_ylabel("completion time (s, log)")
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def metric_figure(series: Mapping[str, Sequence[tuple[object, float | None, tuple[float, float] | None]]],
+                  path: Path, metric: str, setting: str) -> None:
+    """``metric`` against ``setting``: one line per series (label -> (setting value, value, 95 %
+    interval or None) points); a numeric setting on a numeric axis, any other in the grid's order."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    values = [v for points in series.values() for v, _, _ in points]
+    numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+    order = {v: k for k, v in enumerate(dict.fromkeys(map(str, values)))}
+    for label, points in series.items():
+        points = [(v, y, ci) for v, y, ci in points if y is not None]
+        if not points:
+            continue
+        xs = [v if numeric else order[str(v)] for v, _, _ in points]
+        ys = [y for _, y, _ in points]
+        lows = [y - ci[0] if ci else 0.0 for _, y, ci in points]
+        highs = [ci[1] - y if ci else 0.0 for _, y, ci in points]
+        ax.errorbar(xs, ys, yerr=[lows, highs], marker="o", capsize=3, label=label)
+    if not numeric:
+        ax.set_xticks(range(len(order)), list(order))
+    ax.set_xlabel(setting)
+    ax.set_ylabel(metric)
+    ax.set_title(f"{metric} per cell against {setting} (bars: 95 % interval)", fontsize=10)
+    if len(series) > 1:
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
