@@ -19,23 +19,35 @@ from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, singl
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, neutral_offsets
 from bomi.profiles import Profile
-from bomi.recording import Recording
+from bomi.recording import Recording, Signal
 
 _WIDTH = len(NODE_STATE)
 
 
 # ----------------------------------------------------------------------------------------- batch
+def spec_signals(spec: FeatureSpec) -> tuple[Signal, ...]:
+    """The signals of every node a feature vector uses: FV1 the angles, FV2/FV3 the gyroscope too."""
+    return (Signal.ANGLES,) if spec.kind == "FV1" else (Signal.ANGLES, Signal.GYRO)
+
+
+def require_for(rec: Recording, spec: FeatureSpec) -> None:
+    """One-line BomiError unless ``rec`` holds what a ``spec`` model reads."""
+    rec.require(spec.nodes, spec_signals(spec), f"a {spec.kind} model")
+
+
 def recording_neutral(rec: Recording, nodes: Sequence[int], samples: int) -> np.ndarray:
     """(len(nodes), 3) neutral offsets: mean angles of each node over the first ``samples`` rows."""
+    rec.require(nodes, (Signal.ANGLES,), "the neutral-offset calibration")
     return np.stack([neutral_offsets(rec.nodes[i].angles, samples) for i in nodes])
 
 
 def node_states(rec: Recording, nodes: Sequence[int], neutral: np.ndarray) -> np.ndarray:
-    """(n, len(nodes) * 6): per node, angles minus its neutral offset, then the gyroscope."""
-    missing = [i for i in nodes if i not in rec.nodes]
-    if missing:
-        raise BomiError(f"{rec.source}: the model needs node(s) {missing}, the recording has {list(rec.node_indices)}")
-    return np.hstack([np.hstack([rec.nodes[i].angles - neutral[k], rec.nodes[i].gyro]) for k, i in enumerate(nodes)])
+    """(n, len(nodes) * 6): per node, angles minus its neutral offset, then the gyroscope (NaN when the
+    recording has none: only FV1, which does not read it, accepts such a recording)."""
+    rec.require(nodes, (Signal.ANGLES,), "the node states")
+    nan = np.full((len(rec), 3), np.nan)
+    return np.hstack([np.hstack([rec.nodes[i].angles - neutral[k], nan if rec.nodes[i].gyro is None else rec.nodes[i].gyro])
+                      for k, i in enumerate(nodes)])
 
 
 def window_features(states: np.ndarray, spec: FeatureSpec) -> np.ndarray:
@@ -55,6 +67,7 @@ class PreparedRecording:
 
 
 def prepare(rec: Recording, spec: FeatureSpec, neutral_samples: int) -> PreparedRecording:
+    require_for(rec, spec)
     states = node_states(rec, spec.nodes, recording_neutral(rec, spec.nodes, neutral_samples))
     ends = window_ends(len(rec), spec.window, spec.stride)
     labels = pure = None

@@ -25,7 +25,7 @@ import serial
 
 from bomi.errors import BomiError
 from bomi.frames import COUNTER_MODULO, SAMPLE_RATE_HZ, ImuFrame, encode_imu_frame, imu_node_id
-from bomi.recording import Recording
+from bomi.recording import RAW_SIGNALS, Recording
 from bomi.serial_source import BASE_STATION_BAUD, open_port
 
 # pyserial flushes the input (a tty's queue, a socket's ready bytes) right after opening a port:
@@ -67,6 +67,7 @@ def raw_samples(rec: Recording) -> dict[int, np.ndarray]:
     Refuses values that a frame cannot carry exactly (the published .mat files hold rotated,
     non-integer raw values).
     """
+    rec.require(rec.node_indices, RAW_SIGNALS, "a base-station stream")
     raw = {}
     for index, node in sorted(rec.nodes.items()):
         for signal in _SIGNALS:

@@ -1,8 +1,15 @@
-"""Recordings in the published dataset's column naming (.mat and .csv), and the project's CSV writer.
+"""Recordings as they come (.mat and .csv), and the project's CSV writer.
 
-Columns per IMU node i (1..6): ``Pitch{i}Raw Roll{i}Raw Yaw{i}Raw`` (fused angles, degrees),
-``ACC{i}X/Y/Z``, ``GYRO{i}X/Y/Z``, ``MAG{i}X/Y/Z`` (raw LSB); ``Etiquette`` is the class label and
-``Time`` (seconds) is optional. Any subset of nodes may be present, but a present node has all 12.
+Two published namings of a node's columns are read:
+- indexed, node i in 1..6 (the 5-day dataset, and what the project writes): ``Pitch{i}Raw Roll{i}Raw
+  Yaw{i}Raw`` (fused angles, degrees), ``ACC{i}X/Y/Z``, ``GYRO{i}X/Y/Z``, ``MAG{i}X/Y/Z`` (raw);
+- node-less, node 1 (the original host software's logger with one node): ``PitchRaw RollRaw YawRaw``,
+  ``ACCX/Y/Z``, ``GYROX/Y/Z``, ``MAGX/Y/Z``.
+``Etiquette`` is the class label; a CSV's numeric ``Time`` (seconds) is kept. Any subset of nodes may
+be present and, per node, any subset of its four signals (angles, acc, gyro, mag), each with all
+three columns. Every other variable, of any type, is ignored and listed in ``Recording.ignored``.
+What a recording must hold depends on what is done with it: ``Recording.require`` says, in one
+line, which columns are missing for that purpose.
 """
 from __future__ import annotations
 
@@ -10,8 +17,9 @@ import csv
 import io
 import os
 import tempfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from enum import Enum
 from pathlib import Path
 
 import numpy as np
@@ -23,53 +31,114 @@ from bomi.frames import SAMPLE_RATE_HZ
 NODE_INDICES = range(1, 7)
 TIME_COLUMN = "Time"
 LABEL_COLUMN = "Etiquette"
-_SIGNALS = ("angles", "acc", "gyro", "mag")  # column order of the published files
+LOGGER_NODE = 1  # the node the original logger's node-less column names belong to
 
 
-def node_columns(node: int) -> dict[str, tuple[str, str, str]]:
-    """The three column names of each signal of one node, keyed by signal."""
+class Signal(str, Enum):
+    """A node's signals, in the column order of the published files."""
+
+    ANGLES = "angles"
+    ACC = "acc"
+    GYRO = "gyro"
+    MAG = "mag"
+
+
+RAW_SIGNALS = (Signal.ACC, Signal.GYRO, Signal.MAG)
+_SIGNAL_TEXT = {Signal.ANGLES: "angles", Signal.ACC: "ACC", Signal.GYRO: "GYRO", Signal.MAG: "MAG"}
+
+
+def node_columns(node: int | None) -> dict[Signal, tuple[str, str, str]]:
+    """The three column names of each signal of one node, keyed by signal (``None``: the node-less names)."""
+    i = "" if node is None else node
     return {
-        "angles": (f"Pitch{node}Raw", f"Roll{node}Raw", f"Yaw{node}Raw"),
-        "acc": tuple(f"ACC{node}{axis}" for axis in "XYZ"),
-        "gyro": tuple(f"GYRO{node}{axis}" for axis in "XYZ"),
-        "mag": tuple(f"MAG{node}{axis}" for axis in "XYZ"),
+        Signal.ANGLES: (f"Pitch{i}Raw", f"Roll{i}Raw", f"Yaw{i}Raw"),
+        Signal.ACC: tuple(f"ACC{i}{axis}" for axis in "XYZ"),
+        Signal.GYRO: tuple(f"GYRO{i}{axis}" for axis in "XYZ"),
+        Signal.MAG: tuple(f"MAG{i}{axis}" for axis in "XYZ"),
     }
 
 
-def _flat_columns(node: int) -> list[str]:
-    return [name for names in node_columns(node).values() for name in names]
+def _flat_columns(node: int, signals: Iterable[Signal] = tuple(Signal)) -> list[str]:
+    columns = node_columns(node)
+    return [name for signal in signals for name in columns[signal]]
+
+
+# column name -> (node, signal, axis) for both namings
+_COLUMN_MEANING: dict[str, tuple[int, Signal, int]] = {
+    name: (LOGGER_NODE if node is None else node, signal, axis)
+    for node in (None, *NODE_INDICES) for signal, names in node_columns(node).items() for axis, name in enumerate(names)
+}
 
 
 @dataclass
 class NodeData:
-    """One node's signals, each (n, 3): raw acc/gyro/mag and fused (pitch, roll, yaw) in degrees."""
+    """One node's signals, each (n, 3) or None when the recording does not hold it: raw acc/gyro/mag
+    and fused (pitch, roll, yaw) in degrees."""
 
-    acc: np.ndarray
-    gyro: np.ndarray
-    mag: np.ndarray
-    angles: np.ndarray
+    acc: np.ndarray | None = None
+    gyro: np.ndarray | None = None
+    mag: np.ndarray | None = None
+    angles: np.ndarray | None = None
+
+    @property
+    def signals(self) -> tuple[Signal, ...]:
+        return tuple(s for s in Signal if getattr(self, s.value) is not None)
+
+    def __len__(self) -> int:
+        return len(getattr(self, self.signals[0].value))
 
 
 @dataclass
 class Recording:
-    """A multi-node recording; ``labels`` and ``time`` are None when the file has no such column."""
+    """A multi-node recording; ``labels`` and ``time`` are None when the file has no such column.
+
+    ``ignored``: the file's variables the chain does not use (``bomi train --verbose`` lists them).
+    """
 
     nodes: dict[int, NodeData]
     labels: np.ndarray | None
     time: np.ndarray | None = None
     source: str = "<memory>"
+    ignored: tuple[str, ...] = ()
 
     @property
     def node_indices(self) -> tuple[int, ...]:
         return tuple(sorted(self.nodes))
 
     def __len__(self) -> int:
-        return len(next(iter(self.nodes.values())).angles)
+        return len(next(iter(self.nodes.values())))
 
     def require_labels(self) -> np.ndarray:
         if self.labels is None:
             raise BomiError(f"{self.source}: no {LABEL_COLUMN} column (class labels are needed here)")
         return self.labels
+
+    def require(self, nodes: Iterable[int], signals: Iterable[Signal], purpose: str) -> None:
+        """One-line BomiError naming the missing columns unless every node in ``nodes`` has ``signals``."""
+        nodes, signals = list(nodes), list(signals)
+        missing = []
+        for i in nodes:
+            if i not in self.nodes:
+                missing.append(f"node {i} (none of its columns)")
+                continue
+            missing += [name for s in signals if getattr(self.nodes[i], s.value) is None
+                        for name in node_columns(i)[s]]
+        if not missing:
+            return
+        what = ", ".join(_SIGNAL_TEXT[s] for s in signals)
+        hint = ""
+        if Signal.ANGLES in signals and all(i in self.nodes and set(RAW_SIGNALS) <= set(self.nodes[i].signals)
+                                            for i in nodes):
+            hint = " (it has raw ACC/GYRO/MAG: `bomi fuse` computes the angles)"
+        raise BomiError(f"{self.source}: {purpose} needs {what} of node(s) {nodes}; missing "
+                        f"{', '.join(missing)}{hint}")
+
+    def describe(self) -> str:
+        """One line: samples, each node's signals, labels."""
+        nodes = "; ".join(f"node {i}: {', '.join(_SIGNAL_TEXT[s] for s in self.nodes[i].signals)}"
+                          for i in self.node_indices)
+        labels = "no labels" if self.labels is None else f"labels {sorted(set(self.labels.tolist()))}"
+        return f"{self.source}: {len(self)} samples; {nodes}; {labels}"
 
 
 @dataclass(frozen=True)
@@ -83,41 +152,29 @@ class NodeSample:
 
 
 def read_recording(path: str | os.PathLike) -> Recording:
-    """Read a .mat (published dataset) or .csv (published naming, project format) recording."""
+    """Read a .mat (MATLAB v5) or .csv recording in either naming; other variables are ignored."""
     path = Path(path)
     if not path.is_file():
         raise BomiError(f"{path}: no such recording file")
     suffix = path.suffix.lower()
     if suffix == ".mat":
-        columns = _read_mat_columns(path)
         # The published .mat files carry a uint8 'Time' counter that is not a clock (dataset README).
-        columns.pop(TIME_COLUMN, None)
-    elif suffix == ".csv":
-        columns = _read_csv_columns(path)
-    else:
-        raise BomiError(f"{path}: unknown recording format '{suffix}' (expected .mat or .csv)")
-    return _recording_from_columns(path, columns)
+        return _recording_from_variables(path, _read_mat_variables(path), from_csv=False)
+    if suffix == ".csv":
+        return _recording_from_variables(path, _read_csv_variables(path), from_csv=True)
+    raise BomiError(f"{path}: unknown recording format '{suffix}' (expected .mat or .csv)")
 
 
-def _read_mat_columns(path: Path) -> dict[str, np.ndarray]:
+def _read_mat_variables(path: Path) -> dict[str, object]:
     try:
         raw = scipy.io.loadmat(path)
-    except Exception as exc:  # scipy raises several types for corrupt files
-        raise BomiError(f"{path}: not a readable MATLAB file ({exc})") from None
-    columns = {}
-    for name, value in raw.items():
-        if name.startswith("__"):
-            continue
-        array = np.asarray(value)
-        if array.dtype.kind not in "biuf":
-            raise BomiError(f"{path}: column {name} is not numeric")
-        if array.ndim > 2 or (array.ndim == 2 and min(array.shape) > 1):
-            raise BomiError(f"{path}: column {name} is not a single column (shape {array.shape})")
-        columns[name] = array.reshape(-1).astype(float)
-    return columns
+    except Exception as exc:  # scipy raises several types for corrupt or v7.3 (HDF5) files
+        raise BomiError(f"{path}: not a readable MATLAB v5 file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    return {name: value for name, value in raw.items() if not name.startswith("__")}
 
 
-def _read_csv_columns(path: Path) -> dict[str, np.ndarray]:
+def _read_csv_variables(path: Path) -> dict[str, object]:
+    """Column name -> (n,) array of the cells as text (converted later, only for the columns used)."""
     try:
         with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: tolerate a byte-order mark
             rows = list(csv.reader(handle))
@@ -126,21 +183,35 @@ def _read_csv_columns(path: Path) -> dict[str, np.ndarray]:
     if not rows:
         raise BomiError(f"{path}: empty file")
     header = [name.strip() for name in rows[0]]
-    if len(set(header)) != len(header):
-        raise BomiError(f"{path}: duplicate column names in the header")
     body = rows[1:]
     for line, row in enumerate(body, start=2):
         if len(row) != len(header):
             raise BomiError(f"{path}: line {line} has {len(row)} cells, the header has {len(header)}")
     cells = np.array(body, dtype=str).reshape(len(body), len(header))
-    columns = {}
+    variables: dict[str, object] = {}
     for j, name in enumerate(header):
+        if name in variables:
+            if name in _COLUMN_MEANING or name in (LABEL_COLUMN, TIME_COLUMN):
+                raise BomiError(f"{path}: column {name} appears twice in the header")
+            continue
+        variables[name] = np.char.strip(cells[:, j])
+    return variables
+
+
+def _as_column(path: Path, name: str, value: object, text_cells: bool) -> np.ndarray:
+    """A used variable (CSV: its cells as text) as an (n,) float array, or a one-line BomiError."""
+    array = np.asarray(value)
+    if text_cells:
         try:
-            columns[name] = cells[:, j].astype(float)
+            return array.astype(float)
         except ValueError:
-            line = next(i for i, cell in enumerate(cells[:, j], start=2) if not _is_number(cell))
-            raise BomiError(f"{path}: column {name}, line {line}: not a number ({str(cells[line - 2, j])!r})") from None
-    return columns
+            line = next(k for k, cell in enumerate(array, start=2) if not _is_number(cell))
+            raise BomiError(f"{path}: column {name}, line {line}: not a number ({str(array[line - 2])!r})") from None
+    if array.dtype.kind not in "biuf":
+        raise BomiError(f"{path}: variable {name} is not numeric ({array.dtype.kind!r} data, shape {array.shape})")
+    if array.ndim > 2 or (array.ndim == 2 and min(array.shape) > 1):
+        raise BomiError(f"{path}: variable {name} is not a single column (shape {array.shape})")
+    return array.reshape(-1).astype(float)
 
 
 def _is_number(cell: str) -> bool:
@@ -151,16 +222,34 @@ def _is_number(cell: str) -> bool:
     return True
 
 
-def _recording_from_columns(path: Path, columns: dict[str, np.ndarray]) -> Recording:
-    present = [i for i in NODE_INDICES if any(name in columns for name in _flat_columns(i))]
-    if not present:
-        raise BomiError(f"{path}: no IMU node columns (expected e.g. Pitch1Raw, ACC1X, ... for nodes 1..6)")
-    for i in present:
-        for name in _flat_columns(i):
-            if name not in columns:
-                raise BomiError(f"{path}: node {i} is incomplete, column {name} is missing")
-    used = [name for i in present for name in _flat_columns(i)]
-    used += [name for name in (TIME_COLUMN, LABEL_COLUMN) if name in columns]
+def _recording_from_variables(path: Path, variables: dict[str, object], from_csv: bool) -> Recording:
+    """The node columns, labels and (CSV only) a numeric Time of ``variables``; the rest is ignored."""
+    meaning = {name: _COLUMN_MEANING[name] for name in variables if name in _COLUMN_MEANING}
+    if not meaning:
+        raise BomiError(f"{path}: no IMU node columns (expected e.g. Pitch1Raw, ACC1X, ... for nodes 1..6, "
+                        "or PitchRaw, ACCX, ... for a single node)")
+    found: dict[tuple[int, Signal], dict[int, str]] = {}
+    for name, (node, signal, axis) in meaning.items():
+        axes = found.setdefault((node, signal), {})
+        if axis in axes:
+            raise BomiError(f"{path}: both {axes[axis]} and {name} are present (node {node} given twice)")
+        axes[axis] = name
+    for (node, signal), axes in found.items():
+        if len(axes) < 3:
+            naming = None if next(iter(axes.values())) in node_columns(None)[signal] else node
+            absent = [n for k, n in enumerate(node_columns(naming)[signal]) if k not in axes]
+            raise BomiError(f"{path}: node {node} {_SIGNAL_TEXT[signal]} is incomplete, column "
+                            f"{', '.join(absent)} {'is' if len(absent) == 1 else 'are'} missing")
+    used = list(meaning) + [name for name in (LABEL_COLUMN,) if name in variables]
+    columns = {name: _as_column(path, name, variables[name], from_csv) for name in used}
+    ignored = [name for name in variables if name not in columns]
+    if from_csv and TIME_COLUMN in variables:
+        try:
+            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], True)
+            ignored.remove(TIME_COLUMN)
+            used.append(TIME_COLUMN)
+        except BomiError:
+            pass  # a clock the chain cannot read (e.g. text timestamps) is just another ignored variable
     length = len(columns[used[0]])
     if length == 0:
         raise BomiError(f"{path}: no samples (empty file)")
@@ -176,34 +265,35 @@ def _recording_from_columns(path: Path, columns: dict[str, np.ndarray]) -> Recor
         if np.any(values != np.round(values)) or np.any(values < 0):
             raise BomiError(f"{path}: column {LABEL_COLUMN} must hold non-negative whole class labels")
         labels = values.astype(np.int64)
-    nodes = {
-        i: NodeData(**{signal: np.column_stack([columns[n] for n in names])
-                       for signal, names in node_columns(i).items()})
-        for i in present
-    }
-    return Recording(nodes=nodes, labels=labels, time=columns.get(TIME_COLUMN), source=str(path))
+    nodes: dict[int, NodeData] = {}
+    for (node, signal), axes in sorted(found.items()):
+        data = nodes.setdefault(node, NodeData())
+        setattr(data, signal.value, np.column_stack([columns[axes[k]] for k in range(3)]))
+    return Recording(nodes=nodes, labels=labels, time=columns.get(TIME_COLUMN), source=str(path),
+                     ignored=tuple(ignored))
 
 
-def _header(nodes: Sequence[int], labelled: bool) -> list[str]:
-    return [TIME_COLUMN] + [name for i in nodes for name in _flat_columns(i)] + ([LABEL_COLUMN] if labelled else [])
+def _header(nodes: Mapping[int, Sequence[Signal]], labelled: bool) -> list[str]:
+    return ([TIME_COLUMN] + [name for i, signals in nodes.items() for name in _flat_columns(i, signals)]
+            + ([LABEL_COLUMN] if labelled else []))
 
 
-def _format_row(time: float, samples: Sequence[NodeSample], label: int | None) -> str:
-    values = [time] + [v for s in samples for signal in _SIGNALS for v in getattr(s, signal)]
+def _format_row(values: Sequence[float], label: int | None) -> str:
     cells = [repr(float(v)) for v in values] + ([str(int(label))] if label is not None else [])
     return ",".join(cells) + "\n"
 
 
 def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SAMPLE_RATE_HZ) -> None:
-    """Write ``rec`` as CSV (Time from ``rec.time`` or sample index / rate); replaces ``path`` atomically."""
+    """Write ``rec`` as CSV, indexed naming, the signals each node holds (Time from ``rec.time`` or
+    sample index / rate); replaces ``path`` atomically."""
     path = Path(path)
-    nodes = rec.node_indices
+    signals = {i: rec.nodes[i].signals for i in rec.node_indices}
     time = rec.time if rec.time is not None else np.arange(len(rec)) / rate_hz
+    table = np.column_stack([time] + [getattr(rec.nodes[i], s.value) for i, node in signals.items() for s in node])
     buffer = io.StringIO()
-    buffer.write(",".join(_header(nodes, rec.labels is not None)) + "\n")
-    for k in range(len(rec)):
-        samples = [NodeSample(**{s: getattr(rec.nodes[i], s)[k] for s in _SIGNALS}) for i in nodes]
-        buffer.write(_format_row(time[k], samples, None if rec.labels is None else rec.labels[k]))
+    buffer.write(",".join(_header(signals, rec.labels is not None)) + "\n")
+    for k, values in enumerate(table.tolist()):
+        buffer.write(_format_row(values, None if rec.labels is None else rec.labels[k]))
     _atomic_write_text(path, buffer.getvalue())
 
 
@@ -242,7 +332,7 @@ class RecordingWriter:
             raise BomiError(f"{self.path}: file exists, not overwriting it") from None
         except OSError as exc:
             raise BomiError(f"{self.path}: cannot create the recording ({exc.strerror})") from None
-        self._file.write(",".join(_header(self.nodes, labelled)) + "\n")
+        self._file.write(",".join(_header({i: tuple(Signal) for i in self.nodes}, labelled)) + "\n")
         self._file.flush()
 
     def append(self, time: float, samples: Mapping[int, NodeSample], label: int | None = None) -> None:
@@ -251,7 +341,8 @@ class RecordingWriter:
             raise ValueError(f"row has nodes {sorted(samples)}, the recording has {list(self.nodes)}")
         if self.labelled == (label is None):
             raise ValueError("a label is required exactly when the recording is labelled")
-        self._pending.append(_format_row(time, [samples[i] for i in self.nodes], label))
+        values = [time] + [v for i in self.nodes for s in Signal for v in getattr(samples[i], s.value)]
+        self._pending.append(_format_row(values, label))
         if len(self._pending) >= self.segment_rows:
             self.flush()
 

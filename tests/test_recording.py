@@ -106,10 +106,10 @@ def test_malformed_mat(tmp_path):
         read_recording(tmp_path / "short.mat")
     columns["GYRO2Y"] = np.array(["abcde"])
     scipy.io.savemat(tmp_path / "text.mat", columns)
-    with pytest.raises(BomiError, match=r"text\.mat: column GYRO2Y is not numeric"):
+    with pytest.raises(BomiError, match=r"text\.mat: variable GYRO2Y is not numeric"):
         read_recording(tmp_path / "text.mat")
     (tmp_path / "garbage.mat").write_bytes(b"\x00garbage" * 10)
-    with pytest.raises(BomiError, match=r"garbage\.mat: not a readable MATLAB file"):
+    with pytest.raises(BomiError, match=r"garbage\.mat: not a readable MATLAB v5 file"):
         read_recording(tmp_path / "garbage.mat")
     with pytest.raises(BomiError, match="unknown recording format"):
         read_recording(write_csv(tmp_path, "x").rename(tmp_path / "x.txt"))

@@ -13,7 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from bomi import paper
-from bomi.chain import Evaluation, Selection, cross_validate, evaluate, select_settings, train
+from bomi.chain import Evaluation, Selection, cross_validate, evaluate, require_for, select_settings, train
 from bomi.classifier import PostProcessing
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
@@ -21,7 +21,7 @@ from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration, fuse
 from bomi.model_io import SUFFIXES, load_model, save_model
 from bomi.profiles import Profile, load_profile
-from bomi.recording import NodeData, Recording, read_recording, write_recording
+from bomi.recording import RAW_SIGNALS, NodeData, Recording, read_recording, write_recording
 
 DAYS = (1, 2, 3, 4, 5)
 
@@ -32,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", default="P1", help="profile name (P1, P4, P5) or TOML file (default P1)")
     p.add_argument("--features", choices=FEATURE_KINDS, help="override the profile's feature vector")
     p.add_argument("--out", required=True, help="model file to write (.json or .npz)")
+    p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     p.set_defaults(func=train_command)
 
     p = subparsers.add_parser("evaluate", help="train on one recording, test on others")
@@ -43,6 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vote", type=int, metavar="N", help="majority vote over the last N decisions")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--png", metavar="OUT", default="confusion.png", help="confusion matrix figure (default confusion.png)")
+    p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     p.set_defaults(func=evaluate_command)
 
     p = subparsers.add_parser("reproduce", help="the paper's reliability-over-days table beside ours (P1 data)")
@@ -56,6 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="CSV recording to write")
     p.add_argument("--profile", help="take the node calibrations from this profile "
                                      "(default: headset constants for node 1, uncalibrated otherwise)")
+    p.add_argument("--verbose", action="store_true", help="describe the recording and list the variables ignored")
     p.set_defaults(func=fuse_command)
 
 
@@ -74,6 +77,16 @@ def _write_text(path: Path, text: str) -> None:
     with os.fdopen(handle, "w", encoding="utf-8") as out:
         out.write(text)
     os.replace(temp, path)
+
+
+def read(path: str | Path, verbose: bool) -> Recording:
+    """``read_recording``; with ``verbose``, what it holds and the variables the chain ignores."""
+    rec = read_recording(path)
+    if verbose:
+        print(rec.describe())
+        if rec.ignored:
+            print(f"{rec.source}: ignored {len(rec.ignored)} variable(s): {', '.join(rec.ignored)}")
+    return rec
 
 
 def _spec(profile: Profile, kind: str | None) -> FeatureSpec:
@@ -111,7 +124,7 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
 def train_command(args: argparse.Namespace) -> int:
     out = _check_output(args.out, SUFFIXES)
     profile = load_profile(args.profile)
-    recordings = [read_recording(path) for path in args.recordings]
+    recordings = [read(path, args.verbose) for path in args.recordings]
     model = train(recordings, profile, _spec(profile, args.features))
     save_model(out, model)
     print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), classes {model.classes.tolist()}, "
@@ -123,16 +136,21 @@ def evaluate_command(args: argparse.Namespace) -> int:
     json_out = _check_output(args.json, (".json",)) if args.json else None
     png_out = _check_output(args.png, (".png",))
     profile = load_profile(args.profile)
-    if Path(args.train).suffix.lower() in SUFFIXES:
-        if args.features:
-            raise BomiError(f"{args.train}: --features only applies when training from a recording")
-        model = load_model(args.train)
-    else:
-        model = train([read_recording(args.train)], profile, _spec(profile, args.features))
+    from_model = Path(args.train).suffix.lower() in SUFFIXES
+    if from_model and args.features:
+        raise BomiError(f"{args.train}: --features only applies when training from a recording")
+    model = load_model(args.train) if from_model else None
+    training = None if from_model else read(args.train, args.verbose)
+    tests = [read(path, args.verbose) for path in args.test]
+    for rec in tests:  # before any long work: every test recording holds what the model reads, and labels
+        require_for(rec, model.spec if model else _spec(profile, args.features))
+        rec.require_labels()
+    if model is None:
+        model = train([training], profile, _spec(profile, args.features))
     post = PostProcessing(rejection_threshold=args.reject if args.reject is not None else model.post.rejection_threshold,
                           vote_length=args.vote if args.vote is not None else model.post.vote_length)
-    evaluations = [evaluate(model, read_recording(path), profile.neutral_samples, post)
-                   for path in tqdm(args.test, desc="evaluating", unit="file", disable=len(args.test) < 2)]
+    evaluations = [evaluate(model, rec, profile.neutral_samples, post)
+                   for rec in tqdm(tests, desc="evaluating", unit="file", disable=len(tests) < 2)]
     results = []
     for path, ev in zip(args.test, evaluations):
         line = f"{path}: accuracy {100 * ev.accuracy:.2f} % over {len(ev.truth)} windows"
@@ -269,7 +287,8 @@ def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) ->
 
 def fuse_command(args: argparse.Namespace) -> int:
     out = _check_output(args.out, (".csv",))
-    rec = read_recording(args.input)
+    rec = read(args.input, args.verbose)
+    rec.require(rec.node_indices, RAW_SIGNALS, "fuse")
     calibrations = {i: NodeCalibration.default_for(i) for i in rec.node_indices}
     if args.profile:
         profile = load_profile(args.profile)
