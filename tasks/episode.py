@@ -8,6 +8,7 @@ presses its button on the rising edge) -> arm.  IMU samples and control ticks sh
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -340,10 +341,12 @@ def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.nd
 
 def run_episode(channel, *, operator: str, participant: str, seed: int,
                 operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
-                video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None) -> EpisodeLog:
+                video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None,
+                on_tick: Callable[[float], None] | None = None) -> EpisodeLog:
     """Advance the task at the control rate until success or failure; optionally film it
     (played ``video_speedup`` times faster than simulated time).  ``operator_file``: the scripted
-    user's parameters, or the file they are read from."""
+    user's parameters, or the file they are read from. ``on_tick`` is told the simulated time
+    after every tick (a progress bar)."""
     sim = sim or ArmSim(layout=channel.controls.layout)
     if sim.layout is not channel.controls.layout:
         raise ValueError(f"the arm has the {sim.layout.name} joystick layout, the operator's controls the "
@@ -371,6 +374,8 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
             rows["cubes"].append(np.array(view.cube_pos))
             rows["touching"].append(view.touching)
             sim.step(state)
+            if on_tick is not None:
+                on_tick(sim.time)
             if film is not None:
                 film.tick(f"{view.t:6.1f} s  " + describe(sim.mode, state, sim.layout) + f"  | {intent.goal}")
             outcome = task.outcome()

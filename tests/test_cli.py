@@ -1,26 +1,81 @@
-"""The dispatcher's table of commands matches what each command module registers."""
+"""The dispatcher's table of commands matches what each command module registers; every option
+explains itself; `bomi --help` loads no command module."""
 from __future__ import annotations
 
 import argparse
 import importlib
+import json
+import subprocess
+import sys
 
 import pytest
 
-from tasks.cli import COMMAND_MODULES, _modules_for, main
+from tasks.cli import COMMAND_MODULES, COMMANDS, _modules_for, build_parser, main
 
 
-@pytest.mark.parametrize("module", sorted(COMMAND_MODULES))
+@pytest.mark.parametrize("module", COMMAND_MODULES)
 def test_module_registers_exactly_the_listed_commands(module):
     parser = argparse.ArgumentParser()
     subparsers = parser.add_subparsers(dest="command")
     importlib.import_module(module).register(subparsers)
-    assert tuple(subparsers.choices) == COMMAND_MODULES[module]
+    assert tuple(subparsers.choices) == tuple(name for name, c in COMMANDS.items() if c.module == module)
 
 
 def test_only_the_owning_module_is_loaded_for_a_command():
     assert _modules_for(["train", "x.csv", "--profile", "P1"]) == ["tasks.cli.chain"]
-    assert _modules_for(["--help"]) == list(COMMAND_MODULES)
-    assert _modules_for(["no-such-command"]) == list(COMMAND_MODULES)
+    assert _modules_for(["--help"]) == []
+    assert _modules_for(["no-such-command"]) == []
+
+
+def _subcommand_options():
+    """(command, its parser, action) for every argument of every sub-command but -h."""
+    parser = build_parser()
+    subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, sub in subparsers.choices.items():
+        in_required_group = {id(a) for g in sub._mutually_exclusive_groups if g.required for a in g._group_actions}
+        for action in sub._actions:
+            if not isinstance(action, argparse._HelpAction):
+                yield name, sub, action, id(action) in in_required_group
+
+
+def test_every_option_of_every_command_has_help_that_states_its_default():
+    problems = []
+    for name, sub, action, in_required_group in _subcommand_options():
+        label = f"bomi {name} {'/'.join(action.option_strings) or action.dest}"
+        text = sub._get_formatter()._expand_help(action) if action.help else ""
+        if not text.strip():
+            problems.append(f"{label}: no help")
+            continue
+        has_default = action.nargs != 0 and action.default is not None and not action.required \
+            and not in_required_group  # an option left out means something: the help says what
+        if has_default and "default" not in text:
+            problems.append(f"{label}: help does not say the default")
+        if has_default and isinstance(action.default, (int, float, str)) and str(action.default) not in text:
+            problems.append(f"{label}: help does not show the default {action.default!r}")
+    assert problems == [], "\n".join(problems)
+
+
+def test_the_option_walk_sees_every_command_and_catches_an_option_without_help():
+    seen = {name for name, *_ in _subcommand_options()}
+    assert seen == set(COMMANDS)
+    parser = argparse.ArgumentParser()
+    action = parser.add_argument("--x", type=int, default=3, help="an x")
+    assert str(action.default) not in parser._get_formatter()._expand_help(action)
+
+
+def test_top_level_help_lists_every_command_without_loading_any():
+    code = ("import json, sys\n"
+            "from tasks.cli import main\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "heavy = ('sklearn', 'scipy', 'mujoco', 'pinocchio', 'matplotlib', 'dm_control')\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] in heavy "
+            "or m.startswith('tasks.cli.'))))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    *help_lines, loaded = done.stdout.strip().splitlines()
+    assert json.loads(loaded) == []
+    listing = "\n".join(help_lines)
+    for name, command in COMMANDS.items():
+        assert name in listing and command.summary.split()[0] in listing
 
 
 def test_unknown_command_is_a_usage_error(capsys):

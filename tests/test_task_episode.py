@@ -120,7 +120,12 @@ def test_run_task_writes_json_and_plot(tmp_path, capsys):
     record = json.loads(out.read_text())
     assert code == 0 and record["success"] is True and record["completion_time"] > 0
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "| P1 | joystick | 1/1 |" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "| P1 | joystick | 1/1 |" in captured.out
+    # it says what it wrote, and showed the episode's progress meanwhile
+    written = captured.out[captured.out.index("wrote:"):].splitlines()[1:]
+    assert [line.split()[0] for line in written] == [str(plot), str(out)]
+    assert "P1 joystick seed 1: episode:" in captured.err and "s simulated" in captured.err
 
 
 def test_run_task_with_a_bad_operator_file_is_one_line_and_writes_nothing(tmp_path, capsys):

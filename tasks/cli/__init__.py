@@ -3,44 +3,75 @@
 It lives on the composing side (tasks/) so that bomi/, the signal chain, imports neither sim/ nor
 tasks/ and installs and runs without MuJoCo.
 
-Each command module exposes ``register(subparsers)`` which adds its sub-commands and sets
-``func`` on them; ``func(args)`` returns the process exit code. Only the module that owns
-the command being run is imported, so `bomi train` does not pay for loading MuJoCo.
+Each command module exposes ``register(subparsers)`` which adds its sub-commands (through
+``add_command``, which gives each its one-line summary from ``COMMANDS``) and sets ``func`` on
+them; ``func(args)`` returns the process exit code. Only the module that owns the command being
+run is imported, so `bomi train` does not pay for loading MuJoCo, and `bomi --help` (which lists
+the summaries) imports none of them.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import sys
+from collections.abc import Collection
+from dataclasses import dataclass
 from importlib.metadata import version
 
 from bomi.errors import BomiError
 from sim.errors import SimError
 
-# module -> the sub-commands its register() adds (tests/test_cli.py checks they agree)
-COMMAND_MODULES: dict[str, tuple[str, ...]] = {
-    "tasks.cli.chain": ("train", "evaluate", "reproduce", "fuse"),
-    "tasks.cli.stream": ("emulate", "capture", "record"),
-    "tasks.cli.sim": ("sim-check", "render"),
-    "tasks.cli.task": ("run-task", "benchmark", "demo"),
-    "tasks.cli.sweep": ("sweep",),
-    "tasks.cli.live": ("live",),
+
+@dataclass(frozen=True)
+class Command:
+    module: str   # the module whose register() adds it
+    summary: str  # its line in `bomi --help`
+
+
+COMMANDS: dict[str, Command] = {
+    "train": Command("tasks.cli.chain", "train an LDA model on labelled recordings"),
+    "evaluate": Command("tasks.cli.chain", "train on one recording, test on others"),
+    "reproduce": Command("tasks.cli.chain", "the paper's reliability-over-days table beside ours (P1 data)"),
+    "fuse": Command("tasks.cli.chain", "recompute Pitch/Roll/Yaw columns from the raw ACC/GYRO/MAG columns"),
+    "emulate": Command("tasks.cli.stream", "play a recording or a virtual participant as base-station frames "
+                                           "onto a pty, socket or port"),
+    "capture": Command("tasks.cli.stream", "record what a base-station stream carries, without prompts"),
+    "record": Command("tasks.cli.stream", "guided calibration: prompt each motion, record it labelled, "
+                                          "optionally train"),
+    "sim-check": Command("tasks.cli.sim", "drive the simulated arm through every joystick function"),
+    "render": Command("tasks.cli.sim", "render a short scripted motion of the arm to MP4"),
+    "run-task": Command("tasks.cli.task", "one stacking episode with the joystick or the BoMI operator"),
+    "benchmark": Command("tasks.cli.task", "many episodes in parallel; table beside the paper's figures"),
+    "demo": Command("tasks.cli.task", "one joystick and one BoMI episode of P1: table, timeline figure, MP4"),
+    "sweep": Command("tasks.cli.sweep", "episodes over a grid of participants x settings x seeds, resumable"),
+    "live": Command("tasks.cli.live", "drive the simulated arm from a live base-station stream"),
 }
+COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(command.module for command in COMMANDS.values()))
+
+
+def add_command(subparsers: argparse._SubParsersAction, name: str, **kwargs) -> argparse.ArgumentParser:
+    """The parser of sub-command ``name``, listed with its summary from COMMANDS."""
+    return subparsers.add_parser(name, help=COMMANDS[name].summary, **kwargs)
 
 
 def _modules_for(argv: list[str]) -> list[str]:
-    """The command module of the first positional argument, or all of them (for help and errors)."""
-    command = next((arg for arg in argv if not arg.startswith("-")), None)
-    owners = [module for module, commands in COMMAND_MODULES.items() if command in commands]
-    return owners or list(COMMAND_MODULES)
+    """The module of the command named by the first positional argument; none without one (help,
+    --version and an unknown command need only the summaries)."""
+    name = next((arg for arg in argv if not arg.startswith("-")), None)
+    return [COMMANDS[name].module] if name in COMMANDS else []
 
 
-def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
+def build_parser(modules: Collection[str] = COMMAND_MODULES) -> argparse.ArgumentParser:
+    """The parser with every option of the commands of ``modules``; the other commands are listed only."""
     parser = argparse.ArgumentParser(prog="bomi", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"%(prog)s {version('bomi-jaco')}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMAND_MODULES if modules is None else modules:
-        importlib.import_module(name).register(subparsers)
+    for module in COMMAND_MODULES:
+        if module in modules:
+            importlib.import_module(module).register(subparsers)
+        else:
+            for name in (name for name, command in COMMANDS.items() if command.module == module):
+                add_command(subparsers, name)
     return parser
 
 

@@ -22,38 +22,44 @@ from bomi.fusion import NodeCalibration, fuse
 from bomi.model_io import SUFFIXES, load_model, save_model
 from bomi.profiles import Profile, load_profile
 from bomi.recording import RAW_SIGNALS, NodeData, Recording, read_recording, write_recording
+from tasks.cli import add_command
 
 DAYS = (1, 2, 3, 4, 5)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("train", help="train an LDA model on labelled recordings")
+    p = add_command(subparsers, "train")
     p.add_argument("recordings", nargs="+", metavar="RECORDING", help=".mat or .csv recordings")
-    p.add_argument("--profile", default="P1", help="profile name (P1, P4, P5) or TOML file (default P1)")
-    p.add_argument("--features", choices=FEATURE_KINDS, help="override the profile's feature vector")
+    p.add_argument("--profile", default="P1", help="profile name (P1, P4, P5) or TOML file (default %(default)s)")
+    p.add_argument("--features", choices=FEATURE_KINDS, help="override the profile's feature vector (default: "
+                                                              "the profile's)")
     p.add_argument("--out", required=True, help="model file to write (.json or .npz)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     p.set_defaults(func=train_command)
 
-    p = subparsers.add_parser("evaluate", help="train on one recording, test on others")
+    p = add_command(subparsers, "evaluate")
     p.add_argument("--train", required=True, metavar="A", help="training recording, or a trained model (.json/.npz)")
     p.add_argument("--test", required=True, action="append", metavar="B", help="test recording (repeatable)")
-    p.add_argument("--profile", default="P1", help="profile name or TOML file (default P1)")
-    p.add_argument("--features", choices=FEATURE_KINDS, help="override the feature vector (only when training)")
-    p.add_argument("--reject", type=float, metavar="P", help="confidence rejection threshold (posterior)")
-    p.add_argument("--vote", type=int, metavar="N", help="majority vote over the last N decisions")
+    p.add_argument("--profile", default="P1", help="profile name or TOML file (default %(default)s)")
+    p.add_argument("--features", choices=FEATURE_KINDS,
+                   help="override the feature vector, only when training (default: the profile's)")
+    p.add_argument("--reject", type=float, metavar="P",
+                   help="confidence rejection threshold (posterior; default: the model's)")
+    p.add_argument("--vote", type=int, metavar="N",
+                   help="majority vote over the last N decisions (default: the model's)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
-    p.add_argument("--png", metavar="OUT", default="confusion.png", help="confusion matrix figure (default confusion.png)")
+    p.add_argument("--png", metavar="OUT", default="confusion.png",
+                   help="confusion matrix figure (default %(default)s)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     p.set_defaults(func=evaluate_command)
 
-    p = subparsers.add_parser("reproduce", help="the paper's reliability-over-days table beside ours (P1 data)")
+    p = add_command(subparsers, "reproduce")
     p.add_argument("--data", type=Path, help="dataset directory (default: BOMI_DATA_DIR or ../shared/data/...)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--markdown", metavar="OUT", help="write the table as markdown")
     p.set_defaults(func=reproduce_command)
 
-    p = subparsers.add_parser("fuse", help="recompute Pitch/Roll/Yaw columns from the raw ACC/GYRO/MAG columns")
+    p = add_command(subparsers, "fuse")
     p.add_argument("input", metavar="IN", help=".mat or .csv recording")
     p.add_argument("--out", required=True, help="CSV recording to write")
     p.add_argument("--profile", help="take the node calibrations from this profile "
@@ -93,6 +99,13 @@ def _spec(profile: Profile, kind: str | None) -> FeatureSpec:
     return replace(profile.spec, kind=kind) if kind else profile.spec
 
 
+def class_listing(profile: Profile, labels: Sequence[int]) -> str:
+    """The classes a model knows, one per line, by label, joystick function and name."""
+    by_label = {cls.label: cls for cls in profile.classes}
+    return f"{len(labels)} classes:\n" + "\n".join(
+        f"  c{label} {by_label[label].function:<7} {by_label[label].name}" for label in labels)
+
+
 def confusion_text(evaluation: Evaluation, classes: Sequence[int]) -> str:
     from sklearn.metrics import confusion_matrix
 
@@ -127,8 +140,8 @@ def train_command(args: argparse.Namespace) -> int:
     recordings = [read(path, args.verbose) for path in args.recordings]
     model = train(recordings, profile, _spec(profile, args.features))
     save_model(out, model)
-    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), classes {model.classes.tolist()}, "
-          f"shrinkage {model.shrinkage}: wrote {out}")
+    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}: wrote {out}")
+    print(class_listing(profile, model.classes.tolist()))
     return 0
 
 

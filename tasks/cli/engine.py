@@ -112,9 +112,10 @@ def import_ray():
 
 def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--engine", choices=[k.value for k in EngineKind], default=EngineKind.LOCAL.value,
-                        help="where the episodes run: a local process pool (default) or a Ray cluster")
+                        help="where the episodes run: a local process pool or a Ray cluster (default %(default)s)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                        help="parallel episodes on this machine (the pool's processes, or the CPUs of a local Ray)")
+                        help="parallel episodes on this machine: the pool's processes, or the CPUs of a local Ray "
+                             "(default: the number of CPUs, %(default)s)")
     parser.add_argument("--address", help="--engine ray: the Ray cluster to join (e.g. HEAD:6379 or auto); "
                                           "default: start a local Ray with --jobs CPUs")
 

@@ -14,12 +14,13 @@ from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
 from sim.joystick import LAYOUTS
+from tasks.cli import add_command
 from tasks.live import Headless, PassiveViewer, StatusLine, display_opens, has_display, open_log, run_live
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    live = subparsers.add_parser(
-        "live", help="drive the simulated arm from a live base-station stream",
+    live = add_command(
+        subparsers, "live",
         description="Frames -> BoMI chain -> joystick -> simulated JACO at 60 Hz, in MuJoCo's viewer (or "
                     "headless). Neutral offsets come from the first samples (hold still) unless --neutral-from "
                     "gives a recording. The arm stops when no frame arrives for 100 ms.")
@@ -27,15 +28,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       help="serial port, pty path or pyserial URL (socket://, loop://)")
     live.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
     live.add_argument("--model", required=True, type=Path, help="model file (.json/.npz) trained for the profile")
-    live.add_argument("--headless", action="store_true", help="no viewer window")
+    live.add_argument("--headless", action="store_true",
+                      help="no viewer window (default: a window when a display is there)")
     live.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C or the "
                                                      "viewer closes)")
-    live.add_argument("--log", type=Path, help="JSON-lines log of every control tick (must not exist)")
+    live.add_argument("--log", type=Path, help="JSON-lines log of every control tick (must not exist; default: none)")
     live.add_argument("--neutral-from", type=Path, metavar="RECORDING",
-                      help="take the neutral offsets from the first samples of this recording")
-    live.add_argument("--baud", type=int, default=BASE_STATION_BAUD)
+                      help="take the neutral offsets from the first samples of this recording "
+                           "(default: from the stream's first samples, hold still)")
+    live.add_argument("--baud", type=int, default=BASE_STATION_BAUD,
+                      help="baud rate of a real port (default %(default)s)")
     live.add_argument("--retries", type=int, default=RetryPolicy.attempts,
-                      help="reconnection attempts after the stream is lost")
+                      help="reconnection attempts after the stream is lost (default %(default)s)")
     live.set_defaults(func=run)
 
 

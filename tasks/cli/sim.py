@@ -15,6 +15,7 @@ from sim.env import ArmSim
 from sim.errors import SimError
 from sim.joystick import JoystickState, script_states
 from sim.render import VideoWriter, describe, write_png
+from tasks.cli import add_command
 
 # The scripted motion of ``bomi render``: pick the first cube up at A and put it down at B, with
 # the stick alone. (seconds, stick state) segments; a segment's buttons are pressed once, at its
@@ -42,14 +43,15 @@ DEMO_SCRIPT: tuple[tuple[float, JoystickState], ...] = (
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    check = subparsers.add_parser("sim-check", help="drive the simulated arm through every joystick function")
+    check = add_command(subparsers, "sim-check")
     _common_options(check)
-    check.add_argument("--deflection", type=float, default=1.0, help="stick deflection in (0, 1] (default 1)")
-    check.add_argument("--seconds", type=float, default=1.0, help="how long each function is held (default 1)")
+    check.add_argument("--deflection", type=float, default=1.0, help="stick deflection in (0, 1] (default %(default)s)")
+    check.add_argument("--seconds", type=float, default=1.0,
+                       help="seconds each function is held, above 0.5 (default %(default)s)")
     check.add_argument("--json", type=Path, help="also write the results as JSON here")
     check.set_defaults(func=run_check)
 
-    render = subparsers.add_parser("render", help="render a short scripted motion of the arm to MP4")
+    render = add_command(subparsers, "render")
     _common_options(render)
     render.add_argument("--out", type=Path, required=True, help="MP4 file to write")
     render.add_argument("--png", type=Path, help="also write the last frame as PNG here")
@@ -57,8 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _common_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="simulation TOML (default models/sim.toml)")
-    parser.add_argument("--models", type=Path, default=MODELS_DIR, help="directory of the MJCF model files")
+    parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG,
+                        help="simulation TOML (default: the shipped models/sim.toml)")
+    parser.add_argument("--models", type=Path, default=MODELS_DIR,
+                        help="directory of the MJCF model files (default: the shipped models/)")
 
 
 def run_check(args: argparse.Namespace) -> int:

@@ -20,6 +20,8 @@ from bomi.profiles import load_profile
 from bomi.protocol import Segment, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
+from tasks.cli import add_command
+from tasks.cli.chain import class_listing
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
 NODE_DETECTION_S = 0.5
@@ -32,8 +34,8 @@ TimedFrame = tuple[float, ImuFrame]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    emulate = subparsers.add_parser(
-        "emulate", help="play a recording or a virtual participant as base-station frames onto a pty, socket or port",
+    emulate = add_command(
+        subparsers, "emulate",
         description="Play a recording's raw samples, or a virtual participant performing the calibration "
                     "protocol of `bomi record` (neutral, then each class held --hold s with --neutral s of "
                     "neutral between, 3 times), as base-station frames at the real rate. "
@@ -44,21 +46,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     emulate.add_argument("--to", required=True, metavar="PORT_OR_URL",
                          help="'pty', socket://HOST:PORT (listens for one client), or a port / pyserial URL")
     emulate.add_argument("--rate", type=float, default=SAMPLE_RATE_HZ,
-                         help=f"samples per second per node (default {SAMPLE_RATE_HZ:g})")
-    emulate.add_argument("--loss", type=float, default=0.0, help="probability of dropping a frame (real: 0.09)")
-    emulate.add_argument("--corrupt", type=float, default=0.0, help="probability of altering a byte")
-    emulate.add_argument("--seed", type=int, default=0, help="seed of loss, corruption and the participant's session")
-    emulate.add_argument("--duration", type=float, help="stop after this many seconds of recording")
-    emulate.add_argument("--hold", type=float, default=5.0, help="--participant: seconds each motion is held")
+                         help="samples per second per node (default %(default)s)")
+    emulate.add_argument("--loss", type=float, default=0.0,
+                         help="probability of dropping a frame (default %(default)s; the real link: 0.09)")
+    emulate.add_argument("--corrupt", type=float, default=0.0,
+                         help="probability of altering a byte (default %(default)s)")
+    emulate.add_argument("--seed", type=int, default=0,
+                         help="seed of loss, corruption and the participant's session (default %(default)s)")
+    emulate.add_argument("--duration", type=float,
+                         help="stop after this many seconds of recording (default: all of it)")
+    emulate.add_argument("--hold", type=float, default=5.0,
+                         help="--participant: seconds each motion is held (default %(default)s)")
     emulate.add_argument("--neutral", type=float, default=5.0,
-                         help="--participant: seconds of neutral posture between motions")
+                         help="--participant: seconds of neutral posture between motions (default %(default)s)")
     emulate.add_argument("--linger", type=float, default=5.0,
-                         help="pty: after the end, wait up to this many seconds for the reader to close")
-    emulate.add_argument("--baud", type=int, default=BASE_STATION_BAUD, help="baud rate of a real port")
+                         help="pty: after the end, wait up to this many seconds for the reader to close "
+                              "(default %(default)s)")
+    emulate.add_argument("--baud", type=int, default=BASE_STATION_BAUD,
+                         help="baud rate of a real port (default %(default)s)")
     emulate.set_defaults(func=run_emulate)
 
-    capture = subparsers.add_parser(
-        "capture", help="record what a base-station stream carries, without prompts",
+    capture = add_command(
+        subparsers, "capture",
         description="Record raw frames per node (and their fused angles) into a recording CSV.")
     _add_stream_arguments(capture)
     capture.add_argument("--duration", required=True, type=float, help="seconds to record")
@@ -67,18 +76,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                            "calibration for node 1, none for the others)")
     capture.set_defaults(func=run_capture)
 
-    record = subparsers.add_parser(
-        "record", help="guided calibration: prompt each motion, record it labelled, optionally train",
+    record = add_command(
+        subparsers, "record",
         description="The paper's calibration protocol: neutral, then each class held --hold s with --neutral s "
                     "of neutral between, the whole sequence --repetitions times; --session does 3 sequences.")
     _add_stream_arguments(record)
     record.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
     record.add_argument("--session", action="store_true", help="a Session of 3 sequences instead of one Sequence")
-    record.add_argument("--repetitions", type=int, default=3, help="repetitions of every class in a sequence")
+    record.add_argument("--repetitions", type=int, default=3,
+                        help="repetitions of every class in a sequence (default %(default)s)")
     record.add_argument("--amplitudes", type=_amplitude_list, default=(1.0,),
-                        help="fractions of the full motion to hold, e.g. 1,0.5 (multi-amplitude)")
-    record.add_argument("--hold", type=float, default=5.0, help="seconds each motion is held")
-    record.add_argument("--neutral", type=float, default=5.0, help="seconds of neutral posture between motions")
+                        help="fractions of the full motion to hold, e.g. 1,0.5 (multi-amplitude; default 1)")
+    record.add_argument("--hold", type=float, default=5.0, help="seconds each motion is held (default %(default)s)")
+    record.add_argument("--neutral", type=float, default=5.0,
+                        help="seconds of neutral posture between motions (default %(default)s)")
     record.add_argument("--train", type=Path, metavar="MODEL", help="then train the model and write it (.json/.npz)")
     record.set_defaults(func=run_record)
 
@@ -87,9 +98,10 @@ def _add_stream_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", required=True, metavar="PORT_OR_URL",
                         help="serial port, pty path or pyserial URL (socket://, loop://)")
     parser.add_argument("--out", required=True, type=Path, help="recording to write (.csv, must not exist)")
-    parser.add_argument("--baud", type=int, default=BASE_STATION_BAUD)
+    parser.add_argument("--baud", type=int, default=BASE_STATION_BAUD,
+                        help="baud rate of a real port (default %(default)s)")
     parser.add_argument("--retries", type=int, default=RetryPolicy.attempts,
-                        help="reconnection attempts after the stream is lost")
+                        help="reconnection attempts after the stream is lost (default %(default)s)")
 
 
 def _node_list(text: str) -> tuple[int, ...]:
@@ -289,5 +301,5 @@ def run_record(args: argparse.Namespace) -> int:
     if args.train is not None:
         model = train([read_recording(args.out)], profile)
         save_model(args.train, model)
-        print(f"{args.train}: model of profile {profile.name}, classes {model.classes.tolist()}")
+        print(f"{args.train}: model of profile {profile.name}; {class_listing(profile, model.classes.tolist())}")
     return 0

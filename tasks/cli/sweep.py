@@ -42,6 +42,7 @@ from tqdm import tqdm
 
 from bomi.errors import BomiError
 from bomi.profiles import load_profile
+from tasks.cli import add_command
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli.figures import completion_time_figure, metric_figure
 from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, ROW_COLUMNS, EpisodeJob, aggregate, episode_record,
@@ -362,7 +363,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def register(subparsers) -> None:
-    sweep = subparsers.add_parser("sweep", help="episodes over a grid of participants x settings x seeds, resumable")
+    sweep = add_command(subparsers, "sweep")
     sweep.add_argument("grid", type=Path, help="the grid file (TOML)")
     sweep.add_argument("--out", type=Path, required=True, help="directory for episodes.jsonl, the summary and figures")
     add_engine_arguments(sweep)

@@ -4,6 +4,9 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -14,6 +17,7 @@ from bomi import paper
 from bomi.errors import BomiError
 from bomi.profiles import load_profile
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
+from tasks.cli import add_command
 from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
 from tasks.participant import load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
@@ -56,17 +60,40 @@ class EpisodeJob:
         return {key[len(prefix):]: value for key, value in self.overrides if key.startswith(prefix)}
 
 
-def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4.0):
-    """One episode (calibration first for the BoMI); returns its log (and films it if ``video``)."""
+def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4.0, progress: bool = False):
+    """One episode (calibration first for the BoMI); returns its log (and films it if ``video``).
+    With ``progress``, a bar on stderr for each stage: the calibration, then the episode."""
+    what = f"{job.participant} {job.operator} seed {job.seed}"
     if job.operator == "joystick":
         channel = JoystickChannel()
     else:
         params = load_participant(job.participant, job.edits("participant"))
         profile = load_profile(params.profile, job.edits("profile"))
-        channel = calibrated_channel(params, job.seed, replace(profile.post, vote_length=job.vote_length), profile)
-    return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
-                       operator_file=load_operator(job.operator_file, job.edits("operator")),
-                       task_config=TaskConfig(time_limit=job.time_limit), video=video, video_speedup=video_speedup)
+        with _stage(f"{what}: calibration (the participant performs the protocol, the LDA is trained)", progress):
+            channel = calibrated_channel(params, job.seed, replace(profile.post, vote_length=job.vote_length),
+                                         profile)
+    filming = f", filming at {video_speedup:g}x" if video is not None else ""
+    with _simulated_time(f"{what}: episode{filming}", progress) as on_tick:
+        return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
+                           operator_file=load_operator(job.operator_file, job.edits("operator")),
+                           task_config=TaskConfig(time_limit=job.time_limit), video=video,
+                           video_speedup=video_speedup, on_tick=on_tick)
+
+
+@contextmanager
+def _stage(what: str, progress: bool) -> Iterator[None]:
+    """A one-step bar: shown when the stage starts, complete (with its duration) when it ends."""
+    with tqdm(total=1, desc=what, file=sys.stderr, disable=not progress, bar_format="{desc}: {elapsed}") as bar:
+        yield
+        bar.update(1)
+
+
+@contextmanager
+def _simulated_time(what: str, progress: bool) -> Iterator:
+    """A bar counting simulated seconds (an episode's length is not known in advance)."""
+    with tqdm(desc=what, file=sys.stderr, disable=not progress, unit="s", mininterval=0.5,
+              bar_format="{desc}: {n:.0f} s simulated in {elapsed} ({rate_fmt})") as bar:
+        yield lambda t: bar.update(t - bar.n)
 
 
 def episode_record(job: EpisodeJob) -> dict:
@@ -202,14 +229,24 @@ def cmd_run_task(args: argparse.Namespace) -> int:
     load_operator(args.operator_file)  # a bad file fails before any simulation
     job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file),
                      args.vote)
-    log = run_job(job, video=args.video)
+    log = run_job(job, video=args.video, progress=True)
     summary = summarize(log)
     print(markdown_tables(aggregate([summary])))
     if args.plot:
         timeline_figure([log], args.plot)
     if args.json:
         write_json(args.json, summary)
+    _print_written({args.video: "the episode filmed (4x speed)", args.plot: "timeline figure",
+                    args.json: "metrics of the episode"})
     return 0 if log.success else 1
+
+
+def _print_written(files: dict[Path | None, str]) -> None:
+    """The files a command wrote, each with what it holds (None: not asked for)."""
+    written = {path: what for path, what in files.items() if path is not None}
+    if written:
+        width = max(len(str(path)) for path in written)
+        print("wrote:\n" + "\n".join(f"  {str(path):<{width}}  {what}" for path, what in written.items()))
 
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
@@ -230,14 +267,20 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    joystick = run_job(EpisodeJob("joystick", "P1", args.seed))
-    bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=out / "bomi_episode.mp4",
-                   video_speedup=DEMO_VIDEO_SPEEDUP)
+    video, figure, record = out / "bomi_episode.mp4", out / "timeline.png", out / "demo.json"
+    joystick = run_job(EpisodeJob("joystick", "P1", args.seed), progress=True)
+    bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=video, video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
+    with _stage("timeline figure", progress=True):
+        timeline_figure([joystick, bomi], figure)
+    write_json(record, {"paper": paper.TASK, "episodes": summaries})
     print(markdown_tables(aggregate(summaries)))
-    timeline_figure([joystick, bomi], out / "timeline.png")
-    write_json(out / "demo.json", {"paper": paper.TASK, "episodes": summaries})
-    print(f"wrote {out / 'timeline.png'}, {out / 'bomi_episode.mp4'}, {out / 'demo.json'}")
+    print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
+          f"virtual participant's body and noise. The README's figures are means over 20 seeds "
+          f"(`bomi benchmark`).")
+    _print_written({figure: "timeline: the hand relative to B, the BoMI's decisions, amplitude and nu",
+                    video: f"the BoMI episode filmed at {DEMO_VIDEO_SPEEDUP:g}x speed",
+                    record: "metrics of both episodes (JSON)"})
     return 0
 
 
@@ -249,31 +292,44 @@ def _vote(text: str) -> int:
 
 
 def register(subparsers) -> None:
-    run = subparsers.add_parser("run-task", help="one stacking episode with the joystick or the BoMI operator")
-    run.add_argument("--operator", choices=OPERATORS, required=True)
-    run.add_argument("--participant", default="P1")
-    run.add_argument("--seed", type=int, default=0)
-    run.add_argument("--time-limit", type=float, default=600.0, help="seconds of simulated time (default 600)")
-    run.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
-    run.add_argument("--vote", type=_vote, default=DEFAULT_VOTE, help=f"BoMI majority vote length (default {DEFAULT_VOTE})")
-    run.add_argument("--video", type=Path, help="MP4 of the episode")
-    run.add_argument("--plot", type=Path, help="timeline figure (PNG)")
-    run.add_argument("--json", type=Path, help="metrics of the episode")
+    run = add_command(subparsers, "run-task")
+    run.add_argument("--operator", choices=OPERATORS, required=True,
+                     help="who drives the arm: the scripted user on a joystick, or a virtual participant "
+                          "through the BoMI (calibrated first)")
+    run.add_argument("--participant", default="P1",
+                     help="virtual participant: P1, P4, P5 or a TOML file (default %(default)s)")
+    run.add_argument("--seed", type=int, default=0,
+                     help="task seed: cube placement, the participant's body and noise (default %(default)s)")
+    _episode_options(run)
+    run.add_argument("--video", type=Path, help="also film the episode to this MP4 (4x speed)")
+    run.add_argument("--plot", type=Path, help="also write the timeline figure (PNG) here")
+    run.add_argument("--json", type=Path, help="also write the episode's metrics (JSON) here")
     run.set_defaults(func=cmd_run_task)
 
-    bench = subparsers.add_parser("benchmark", help="many episodes in parallel; table beside the paper's figures")
-    bench.add_argument("--participants", default="P1")
-    bench.add_argument("--operators", default="joystick,bomi")
-    bench.add_argument("--seeds", type=int, default=20, help="how many seeds (default 20)")
-    bench.add_argument("--first-seed", type=int, default=0, help="the first seed (default 0)")
+    bench = add_command(subparsers, "benchmark")
+    bench.add_argument("--participants", default="P1",
+                       help="comma-separated virtual participants, e.g. P1,P4,P5 (default %(default)s)")
+    bench.add_argument("--operators", default="joystick,bomi",
+                       help=f"comma-separated operators out of {','.join(OPERATORS)} (default %(default)s)")
+    bench.add_argument("--seeds", type=int, default=20, help="how many seeds per participant and operator "
+                                                             "(default %(default)s)")
+    bench.add_argument("--first-seed", type=int, default=0, help="the first seed (default %(default)s)")
     add_engine_arguments(bench)
-    bench.add_argument("--time-limit", type=float, default=600.0)
-    bench.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE)
-    bench.add_argument("--vote", type=_vote, default=DEFAULT_VOTE, help=f"BoMI majority vote length (default {DEFAULT_VOTE})")
-    bench.add_argument("--json", type=Path)
+    _episode_options(bench)
+    bench.add_argument("--json", type=Path, help="also write the table and every episode's metrics (JSON) here")
     bench.set_defaults(func=cmd_benchmark)
 
-    demo = subparsers.add_parser("demo", help="one joystick and one BoMI episode of P1: table, timeline figure, MP4")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--out", type=Path, default=Path("demo_out"))
+    demo = add_command(subparsers, "demo")
+    demo.add_argument("--seed", type=int, default=0, help="task seed of both episodes (default %(default)s)")
+    demo.add_argument("--out", type=Path, default=Path("demo_out"),
+                      help="directory for timeline.png, bomi_episode.mp4 and demo.json (default %(default)s)")
     demo.set_defaults(func=cmd_demo)
+
+
+def _episode_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--time-limit", type=float, default=600.0,
+                        help="seconds of simulated time before an episode fails (default %(default)s)")
+    parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
+                        help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
+    parser.add_argument("--vote", type=_vote, default=DEFAULT_VOTE,
+                        help="BoMI: majority vote over this many decisions (default %(default)s)")
