@@ -112,7 +112,7 @@ def test_train_and_evaluate_commands(tmp_path, capsys, p1_profile, day1_fv1_mode
     assert np.array_equal(load_model(model_path).coef, day1_fv1_model.coef)
     trained = capsys.readouterr().out
     # classes by label, function and the profile's name, as everything else shows them
-    assert "9 classes:" in trained and "c0 neutral" in trained and "c1 F       head pitch up (+29 deg)" in trained
+    assert "9 classes:" in trained and "c0 neutral" in trained and "c1 F: head pitch up (+29 deg)" in trained
     out, png = tmp_path / "eval.json", tmp_path / "confusion.png"
     assert main(["evaluate", "--train", str(model_path), "--test", day2, "--test", day4, "--reject", "0.99",
                  "--json", str(out), "--png", str(png)]) == 0

@@ -381,7 +381,8 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
     first = int(np.flatnonzero((streamed.nodes[1].acc == recorded.nodes[1].acc[0]).all(axis=1))[0])
     np.testing.assert_array_equal(recorded.nodes[1].acc, streamed.nodes[1].acc[first:first + len(labels)])
     assert load_model(model).classes.tolist() == [0, 1, 2]
-    assert f"{model}: model of profile T, classes [0, 1, 2]" in capsys.readouterr().out
+    assert (f"{model}: model of profile T; 3 classes:\n  c0 neutral: neutral posture\n  c1 F: tilt left\n"
+            "  c2 B: tilt right\n") in capsys.readouterr().out
 
 
 def test_interrupted_record_keeps_only_completed_segments(tmp_path):

@@ -103,7 +103,7 @@ def class_listing(profile: Profile, labels: Sequence[int]) -> str:
     """The classes a model knows, one per line, by label, joystick function and name."""
     by_label = {cls.label: cls for cls in profile.classes}
     return f"{len(labels)} classes:\n" + "\n".join(
-        f"  c{label} {by_label[label].function:<7} {by_label[label].name}" for label in labels)
+        f"  c{label} {by_label[label].function}: {by_label[label].name}" for label in labels)
 
 
 def confusion_text(evaluation: Evaluation, classes: Sequence[int]) -> str:
