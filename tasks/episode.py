@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -19,9 +20,9 @@ from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.frames import SAMPLE_PERIOD_S, FrameParser, SampleIndex
 from bomi.errors import BomiError
 from bomi.fusion import DT, WARMUP_S
-from bomi.profiles import Profile, load_profile
+from bomi.profiles import Profile
 from sim.env import ArmSim
-from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState, Kind, Layout, Mode, combine
+from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combine
 from sim.render import FrameRenderer, VideoWriter, describe
 from tasks import metrics
 from tasks.imu_synth import Delivery
@@ -29,7 +30,7 @@ from tasks.participant import ParticipantParams, VirtualParticipant, calibration
 from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Memory, OperatorParams, ScriptedUser, StickIntent,
                            load_operator)
 from tasks.stacking import StackingTask, TaskConfig
-from tasks.stick import DecisionStick, rising_edge
+from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
 OPERATORS = ("joystick", "bomi")
 
@@ -114,6 +115,22 @@ def summarize(log: EpisodeLog) -> dict:
     return out
 
 
+class OperatorChannel(Protocol):
+    """How the person's stick intent reaches the arm's stick: straight (``JoystickChannel``) or
+    through a body motion and the BoMI chain (``BomiChannel``)."""
+
+    combine_axes: bool  # the person may push several functions at once (a 3-axis stick can)
+    controls: Controls  # the layout and buttons the person has
+
+    def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
+                mode: Mode = Mode.TRANSLATION) -> JoystickState:
+        """The stick over the control tick [t, t_end) of task time. ``seen``: the hand's velocity as
+        a fraction of full speed (None on the first tick); ``mode``: the arm's mode."""
+
+    def log_fields(self) -> dict:
+        """Extra ``EpisodeLog`` fields the channel recorded (the BoMI's decisions)."""
+
+
 class JoystickChannel:
     """The person's decision goes straight to the stick (a 3-axis stick may combine axes)."""
 
@@ -162,7 +179,7 @@ class LeanFeel:
 def profile_controls(profile: Profile) -> Controls:
     """The controls a profile's classes give the scripted user: its joystick layout and the mode
     buttons it has a class for.  The user needs every direction of the layout and B1."""
-    layout = LAYOUTS[profile.joystick_layout]
+    layout = profile_layout(profile)
     functions = {cls.function for cls in profile.classes}
     needed = (*layout.functions, "B1")
     missing = [f for f in needed if f not in functions]
@@ -175,7 +192,7 @@ def profile_controls(profile: Profile) -> Controls:
 class BomiChannel:
     """The person's decision becomes a body motion; the stick is whatever the chain decides.
 
-    Participant time runs ``lead`` seconds ahead of the task: the warm-up and the neutral-offset
+    Participant time runs ``clock_offset`` seconds ahead of the task: the warm-up and the neutral-offset
     calibration happen before the task's clock starts.  One class at a time: the participant
     holds a posture for as long as the same function is wanted, starting from the lean their feel
     gives for the wanted deflection and correcting it while watching the arm (``_corrected_lean``).
@@ -204,14 +221,14 @@ class BomiChannel:
         # An intent set at t moves the body from t + reaction_s: samples may be made that far ahead.
         self._lookahead = 0.95 * participant.params.reaction_s
         self._asked_until = -np.inf
-        self.lead = 0.0
+        self.clock_offset = 0.0
         self._feed(participant.advance(WARMUP_S), record=False)
         chain.begin_neutral_calibration()
         t = WARMUP_S
         while chain.calibrating:
             t += 0.1
             self._feed(participant.advance(t), record=False)
-        self.lead = t
+        self.clock_offset = t
 
     def _feed(self, data: bytes, record: bool = True) -> list[Decision]:
         decisions = []
@@ -266,10 +283,10 @@ class BomiChannel:
                 self._take_up(label, lean, t)
                 if label in self.feel:
                     self.feel[label].learn(lean, self._wanted)
-        return self.stick.update(self._feed(self._arrived(self.lead + t, self.lead + t_end)))
+        return self.stick.update(self._feed(self._arrived(self.clock_offset + t, self.clock_offset + t_end)))
 
     def _take_up(self, label: int, amplitude: float, t: float) -> None:
-        self.participant.set_intent(label, amplitude, self.lead + t)
+        self.participant.set_intent(label, amplitude, self.clock_offset + t)
         self._since = t
 
     def _corrected_lean(self, label: int, lean: float, t: float, seen: np.ndarray | None, mode: Mode) -> float:
@@ -296,7 +313,7 @@ class BomiChannel:
         truth = self.participant.truth()
         rows = np.array(self._rows, dtype=float).reshape(-1, 4)
         samples = rows[:, 0].astype(int)
-        trace = DecisionTrace(t=samples * DT - self.lead, intended=truth.intent[samples].astype(int),
+        trace = DecisionTrace(t=samples * DT - self.clock_offset, intended=truth.intent[samples].astype(int),
                               decided=rows[:, 1].astype(int), gamma=rows[:, 2], nu=rows[:, 3])
         names = tuple(cls.function for cls in sorted(self.profile.classes, key=lambda c: c.label))
         return {"decisions": trace, "class_names": names, "neutral": NEUTRAL_LABEL,
@@ -326,7 +343,7 @@ def calibrated_channel(participant: str | ParticipantParams, seed: int, post: Po
     ``post`` overrides the profile's post-processing (rejection, majority vote); ``profile``
     replaces the participant's own one (an edited copy of it)."""
     params = participant if isinstance(participant, ParticipantParams) else load_participant(participant)
-    profile = profile or load_profile(params.profile)
+    profile = profile or arm_profile(params.profile)
     session = calibration_session(params, profile, seed, order=calibration_order(params, profile))
     model = train([session_recording(session, profile)], profile, post=post)
     return BomiChannel(VirtualParticipant(params, profile, seed), OnlineChain(model, profile), profile)
@@ -339,7 +356,7 @@ def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.nd
     return direction / norm if norm > 0 else direction
 
 
-def run_episode(channel, *, operator: str, participant: str, seed: int,
+def run_episode(channel: OperatorChannel, *, operator: str, participant: str, seed: int,
                 operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
                 video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None,
                 on_tick: Callable[[float], None] | None = None) -> EpisodeLog:
@@ -363,7 +380,7 @@ def run_episode(channel, *, operator: str, participant: str, seed: int,
     try:
         while True:
             view = task.view()
-            intent = user.decide(view)
+            intent = user.stick_intent(view)
             seen = None if previous is None else (view.hand_pos - previous) / (sim.dt * full_speed)
             previous = view.hand_pos
             state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)

@@ -20,9 +20,6 @@ calibration), ``dropped`` (decisions the sanitizer refused: sample_index, reason
 stick sent to the arm), ``mode`` (after the tick), ``linear`` (m/s), ``angular`` (rad/s) and
 ``finger`` (the arm's command); ``neutral`` (offsets per node index, degrees) on the tick they
 take effect.
-
-Also here: a virtual participant on the wire (``participant_blocks``), which ``bomi emulate
---participant`` plays: the participant follows the cues of ``bomi record``'s calibration protocol.
 """
 from __future__ import annotations
 
@@ -42,14 +39,9 @@ import numpy as np
 from bomi.chain import Decision, OnlineChain
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent
-from bomi.profiles import Profile
 from bomi.serial_source import SerialSource
-from bomi.protocol import Segment
 from sim.joystick import ArmCommand, JoystickState
 from tasks.stick import DecisionStick
-from tasks.imu_synth import Delivery, LinkModel
-from bomi.classifier import NEUTRAL_LABEL
-from tasks.participant import ParticipantParams, VirtualParticipant
 
 WATCHDOG_TIMEOUT_S = 0.1
 STATUS_PERIOD_S = 0.5
@@ -261,9 +253,17 @@ class LiveSummary:
     watchdog_trips: int = 0
     neutral: dict[int, tuple[float, float, float]] | None = None
 
+    def count(self, tick: Tick) -> None:
+        self.ticks += 1
+        self.frames += tick.frames
+        self.decisions += len(tick.decisions)
+        self.dropped += len(tick.dropped)
+        self.stale_ticks += tick.stale
+        self.standby_ticks += tick.standby
 
-def decide(chain: OnlineChain, frames: Iterable[ImuFrame],
-           functions: Mapping[int, str]) -> tuple[list[Decision], list[tuple[int, str]]]:
+
+def admitted_decisions(chain: OnlineChain, frames: Iterable[ImuFrame],
+                       functions: Mapping[int, str]) -> tuple[list[Decision], list[tuple[int, str]]]:
     """The frames through the chain: the decisions that may reach the arm, and (sample, reason) of the others."""
     decisions, dropped = [], []
     for decision in chain.push_frames(frames):
@@ -298,28 +298,16 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
     batches = source.batches()
     last_decision: Decision | None = None
     start = clock()
-    due = start
-    while display.running():
-        wait = due - clock()
-        if wait > 0:
-            sleep(wait)
-        now = clock()
-        if duration_s is not None and now - start >= duration_s:
-            break
-        due = max(due + arm.dt, now)  # a late tick does not make the next ones hurry
+    for now in paced_ticks(arm.dt, display, clock, sleep, start, duration_s):
         _, frames = next(batches)
-        decisions, dropped = decide(chain, frames, functions)
+        decisions, dropped = admitted_decisions(chain, frames, functions)
         if frames:
             watchdog.frames_arrived(now)
         if safety.update(source.parser.safety_events):
             chain.begin_neutral_calibration()
             summary.neutral = None
         stale = watchdog.expired(now)
-        if stale or safety.standby:
-            stick.release()
-            state = JoystickState()
-        else:
-            state = stick.update(decisions)
+        state = guarded_stick(stick, decisions, stale or safety.standby)
         command = arm.step(state)
         display.sync()
         new_neutral = None
@@ -333,14 +321,34 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
         last_decision = decisions[-1] if decisions else last_decision
         if status is not None:
             status.show(tick.t, lambda: status_text(tick, source.parser, last_decision))
-        summary.ticks += 1
-        summary.frames += len(frames)
-        summary.decisions += len(decisions)
-        summary.dropped += len(dropped)
-        summary.stale_ticks += stale
-        summary.standby_ticks += safety.standby
+        summary.count(tick)
     summary.watchdog_trips = watchdog.trips
     return summary
+
+
+def paced_ticks(dt: float, display: Display, clock: Callable[[], float], sleep: Callable[[float], None],
+                start: float, duration_s: float | None) -> Iterator[float]:
+    """The times of the control ticks, every ``dt`` on ``clock`` from ``start``, while the display
+    runs and until ``duration_s``; a late tick does not make the next ones hurry."""
+    due = start
+    while display.running():
+        wait = due - clock()
+        if wait > 0:
+            sleep(wait)
+        now = clock()
+        if duration_s is not None and now - start >= duration_s:
+            return
+        due = max(due + dt, now)
+        yield now
+
+
+def guarded_stick(stick: DecisionStick, decisions: Sequence[Decision], hold: bool) -> JoystickState:
+    """The tick's stick: centred, and the last decision forgotten, while the arm is held (no fresh
+    frames, or the safety key's standby); else the decisions on the stick."""
+    if hold:
+        stick.release()
+        return JoystickState()
+    return stick.update(decisions)
 
 
 def open_log(path: Path) -> IO[str]:
@@ -351,39 +359,3 @@ def open_log(path: Path) -> IO[str]:
         raise BomiError(f"{path}: file exists, not overwriting it") from None
     except OSError as exc:
         raise BomiError(f"{path}: cannot write the log ({exc.strerror})") from None
-
-
-# ------------------------------------------------------------------ a virtual participant on the wire
-LOSSLESS_LINK = LinkModel(loss_fraction=0.0)  # the emulator applies its own --loss
-
-
-def participant_blocks(params: ParticipantParams, profile: Profile, seed: int, cues: Sequence[Segment],
-                       end_s: float, block_s: float = 1.0) -> Iterator[dict[int, np.ndarray]]:
-    """Raw samples (per node index, (m, 9) mag, gyro, acc) of a virtual participant following ``cues``,
-    made ``block_s`` at a time up to ``end_s``. At each cue's start the participant takes up its class
-    (full amplitude; after its reaction time), as someone following ``bomi record``'s prompts."""
-    vp = VirtualParticipant(params, profile, seed, link=LOSSLESS_LINK)
-    pending = [cue for cue in cues if cue.start_s < end_s]
-    t = 0.0
-    while t < end_s:
-        t = min(t + block_s, end_s)
-        parts = []
-        while pending and pending[0].start_s <= t:
-            cue = pending.pop(0)
-            parts.append(vp.deliveries(cue.start_s))
-            vp.set_intent(cue.label, 0.0 if cue.label == NEUTRAL_LABEL else 1.0, cue.start_s)
-        parts += [vp.deliveries(t), vp.flush()]
-        yield raw_block(parts)
-
-
-def raw_block(deliveries: Sequence[Delivery]) -> dict[int, np.ndarray]:
-    """Decode lossless deliveries into per-node raw rows (mag, gyro, acc) in sample order."""
-    frames = FrameParser().feed(b"".join(d.stream() for d in deliveries))
-    values = np.array([frame.mag + frame.gyro + frame.acc for frame in frames], dtype=np.int64).reshape(-1, 9)
-    node_index = np.concatenate([d.node_index for d in deliveries])
-    sample_index = np.concatenate([d.sample_index for d in deliveries])
-    block = {}
-    for node in np.unique(node_index).tolist():
-        mine = np.flatnonzero(node_index == node)
-        block[node] = values[mine[np.argsort(sample_index[mine], kind="stable")]]
-    return block

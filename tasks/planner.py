@@ -10,6 +10,7 @@ BoMI gives one class at a time).
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -116,13 +117,43 @@ class View:
     cube_size: float
 
 
+class Phase(enum.Enum):
+    """The stage of a move toward a point (``_approach``), or the rise before a wrist turn."""
+
+    RISE = "rise"
+    TRAVEL = "travel"
+    DESCEND = "descend"
+    RISE_TO_TURN = "rise to turn"
+
+
+@dataclass(frozen=True)
+class Goal:
+    """What the person is after: a step of the task (plain words, e.g. "reach cube 1"), the stage of
+    its approach, and the mode a button press is meant to reach first.  ``str`` gives the words
+    logs, captions and figures show ("reach cube 1: descend: height mode")."""
+
+    step: str = "rest"
+    phase: Phase | None = None
+    mode: Mode | None = None  # the press of a mode button this goal waits for
+
+    def __str__(self) -> str:
+        parts = [self.step, *(() if self.phase is None else (self.phase.value,)),
+                 *(() if self.mode is None else (f"{self.mode.value} mode",))]
+        return ": ".join(parts)
+
+    @property
+    def descending(self) -> bool:
+        """The hand is being taken down onto its goal (not a press on the way there)."""
+        return self.phase is Phase.DESCEND and self.mode is None
+
+
 @dataclass(frozen=True)
 class StickIntent:
     """What the person wants from the stick now: functions with deflections, or one button."""
 
     deflection: Mapping[str, float] = field(default_factory=dict)
     button: str | None = None
-    goal: str = "rest"  # plain words for logs and figures
+    goal: Goal = Goal()
 
     @property
     def functions(self) -> frozenset[str]:
@@ -235,88 +266,124 @@ def turn_deflection_for(angle: float, p: OperatorParams, anticipation: float) ->
 # ---------------------------------------------------------------------------------------------
 # the decision
 
+class ActionKind(enum.Enum):
+    MOVE = "move"
+    TURN = "turn"
+    OPEN = "open"
+    CLOSE = "close"
+    REST = "rest"
+
+
 @dataclass(frozen=True)
 class Action:
     """A step of the task: move the hand to a point, turn the wrist, open or close the fingers."""
 
-    kind: str  # "move" | "turn" | "open" | "close" | "rest"
-    goal: str
-    point: np.ndarray | None = None  # for "move"
-    turn: np.ndarray | None = None  # for "turn": wanted rotation about world x, y, z (rad)
+    kind: ActionKind
+    goal: Goal
+    point: np.ndarray | None = None  # for MOVE
+    turn: np.ndarray | None = None  # for TURN: wanted rotation about world x, y, z (rad)
+
+
+def _open(step: str) -> Action:
+    return Action(ActionKind.OPEN, Goal(step))
+
+
+def _close(step: str) -> Action:
+    return Action(ActionKind.CLOSE, Goal(step))
+
+
+def _move(step: str, phase: Phase | None, point: np.ndarray) -> Action:
+    return Action(ActionKind.MOVE, Goal(step, phase), point)
+
+
+def _turn(step: str, turn: np.ndarray) -> Action:
+    return Action(ActionKind.TURN, Goal(step), turn=turn)
 
 
 def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
-    """The next step of the task from the current view (the person's plan, re-made every tick)."""
-    hand = view.hand_pos
+    """The next step of the task from the current view (the person's plan, re-made every tick):
+    finish a release under way, level a tilted hand, then by what is on the table: retreat from a
+    finished stack, carry the held cube, or take the next one."""
     bottom, top = placed_cubes(view, p)
     stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
-    held = held_cube(view, memory, p)
     open_hand = view.closure <= p.open_closure
     if memory.opening and not open_hand:  # a release is not taken back half-way (the touch may flicker)
-        return Action("open", "open hand")
-
+        return _open("open hand")
     tilt_tolerance = math.radians(p.tilt_deg) / (2 if memory.turning else 1)
     at_cube = any(view.touching) and not open_hand
     if not at_cube and np.max(np.abs(view.hand_tilt)) > tilt_tolerance:  # e.g. after a stray wrist command
-        return Action("turn", "level the hand", turn=np.r_[view.hand_tilt, 0.0])
-
-    if top is not None:  # both cubes stacked: let go, rise, rest
-        if not open_hand:
-            return Action("open", "release")
-        above = np.array([hand[0], hand[1], stack_top + p.retreat])
-        if hand[2] < above[2] - p.stop:
-            return Action("move", "retreat", above)
-        return Action("rest", "done")
-
+        return _turn("level the hand", np.r_[view.hand_tilt, 0.0])
+    if top is not None:
+        return _finish(view, stack_top, open_hand, p)
+    held = held_cube(view, memory, p)
     if held is not None:
-        cube = view.cube_pos[held]
-        grip = hand - cube  # where the hand holds the cube (it is not centred)
-        dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
-        support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
-        release = np.r_[dest_xy + grip[:2], support + view.cube_size / 2 + p.release_gap + grip[2]]
-        set_down = (np.linalg.norm(cube[:2] - dest_xy) <= p.placed
-                    and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop)
-        if set_down:
-            return Action("open", f"release cube {held + 1}")
-        carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
-        label = f"carry cube {held + 1}"
-        return _approach(hand, release, carry_z, p, label, Action("open", f"release cube {held + 1}"),
-                         memory.descending, memory.stalled)
+        return _carry(view, memory, held, bottom, stack_top, p)
+    return _take(view, memory, cube_to_take(view, bottom), stack_top, open_hand, p)
 
-    k = cube_to_take(view, bottom)
-    cube = view.cube_pos[k]
+
+def _finish(view: View, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
+    """Both cubes stacked: let go, rise, rest."""
+    if not open_hand:
+        return _open("release")
+    hand = view.hand_pos
+    above = np.array([hand[0], hand[1], stack_top + p.retreat])
+    if hand[2] < above[2] - p.stop:
+        return _move("retreat", None, above)
+    return Action(ActionKind.REST, Goal("done"))
+
+
+def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top: float, p: OperatorParams
+           ) -> Action:
+    """Take the held cube over B (or onto the cube at B) and set it down."""
+    hand, cube = view.hand_pos, view.cube_pos[held]
+    grip = hand - cube  # where the hand holds the cube (it is not centred)
+    dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
+    support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
+    release = np.r_[dest_xy + grip[:2], support + view.cube_size / 2 + p.release_gap + grip[2]]
+    set_down = (np.linalg.norm(cube[:2] - dest_xy) <= p.placed
+                and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop)
+    if set_down:
+        return _open(f"release cube {held + 1}")
+    carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
+    return _approach(hand, release, carry_z, p, f"carry cube {held + 1}", _open(f"release cube {held + 1}"),
+                     memory.descending, memory.stalled)
+
+
+def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
+    """Reach cube ``k`` with an open hand lined up with its faces, and close on it."""
+    hand, cube = view.hand_pos, view.cube_pos[k]
     grasp = np.r_[cube[:2], cube[2] + p.grasp_offset]
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
     at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= 2 * p.align
                 and (abs(hand[2] - grasp[2]) <= 2 * p.stop or memory.stalled))
     if at_grasp and (view.touching[k] or not open_hand):
         if missed_grasp(view, memory, p):
-            return Action("open", f"missed cube {k + 1}: open hand")
-        return Action("close", f"grasp cube {k + 1}")
+            return _open(f"missed cube {k + 1}: open hand")
+        return _close(f"grasp cube {k + 1}")
     if not open_hand:
-        return Action("open", "open hand")
+        return _open("open hand")
     hover_z = max(grasp[2] + p.hover, stack_top + p.carry_clearance + view.cube_size)
     turn = yaw_error(view, k)
     yaw_tolerance = math.radians(p.yaw_deg) / (2 if memory.turning else 1)
     if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
         if hand[2] < grasp[2] + p.hover / 2 and not memory.turning:  # the fingers would hit the cube
-            return Action("move", f"reach cube {k + 1}: rise to turn", np.r_[hand[:2], hover_z])
-        return Action("turn", f"turn to cube {k + 1}", turn=np.array([0.0, 0.0, turn]))
-    return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", Action("close", f"grasp cube {k + 1}"),
+            return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.r_[hand[:2], hover_z])
+        return _turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
+    return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", _close(f"grasp cube {k + 1}"),
                      memory.descending, memory.stalled)
 
 
-def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, label: str,
+def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, step: str,
               on_arrival: Action, descending: bool, stalled: bool = False) -> Action:
     """Rise to the travel height if low and far, travel over the goal, go down, then act.
     A descent already under way tolerates twice the alignment error; a stalled one has arrived."""
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
     if xy_off > p.align * (2 if descending else 1):
         if hand[2] < travel_z - 4 * p.stop and xy_off > 2 * p.align:
-            return Action("move", f"{label}: rise", np.r_[hand[:2], travel_z])
-        return Action("move", f"{label}: travel", np.r_[goal[:2], hand[2]])
+            return _move(step, Phase.RISE, np.r_[hand[:2], travel_z])
+        return _move(step, Phase.TRAVEL, np.r_[goal[:2], hand[2]])
     if abs(hand[2] - goal[2]) > p.stop and not stalled:
-        return Action("move", f"{label}: descend", np.r_[hand[:2] if xy_off <= p.stop else goal[:2], goal[2]])
+        return _move(step, Phase.DESCEND, np.r_[hand[:2] if xy_off <= p.stop else goal[:2], goal[2]])
     return on_arrival
 
 
@@ -339,24 +406,24 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     velocity = hand_velocity(view, memory)
     memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
     action = next_action(view, memory, p)
-    descending = action.goal.endswith("descend")
+    descending = action.goal.descending
     finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
     _, opening_fn = memory.controls.layout.find(Kind.FINGERS, -1.0)
-    closing = action.kind == "close" and view.mode is finger_mode and not any(view.touching)
-    memory = replace(memory, turning=action.kind == "turn", descending=descending,
-                     stalled=memory.stalled and (descending or action.kind in ("open", "close"))
+    closing = action.kind is ActionKind.CLOSE and view.mode is finger_mode and not any(view.touching)
+    memory = replace(memory, turning=action.kind is ActionKind.TURN, descending=descending,
+                     stalled=memory.stalled and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE))
                      and not missed_grasp(view, memory, p),
                      closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
-                     opening=action.kind == "open" and view.mode is finger_mode and opening_fn in (holding or {}))
-    lead = p.anticipation if anticipation is None else anticipation
-    if action.kind == "move":
-        need, deflection, axis = _translation(view.hand_pos, velocity, lead, action.point, p, combine_axes,
+                     opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
+    anticipation = p.anticipation if anticipation is None else anticipation
+    if action.kind is ActionKind.MOVE:
+        need, deflection, axis = _translation(view.hand_pos, velocity, anticipation, action.point, p, combine_axes,
                                               memory.axis, holding or {}, memory.controls.layout, view.mode)
     else:
-        (need, deflection), axis = _other_action(action, memory.controls.layout, p, lead), None
+        (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
         button = mode_button(view.mode, need, memory.controls)
-        return StickIntent(button=button, goal=f"{action.goal}: {need.value} mode"), memory
+        return StickIntent(button=button, goal=replace(action.goal, mode=need)), memory
     return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
 
 
@@ -364,14 +431,14 @@ def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipatio
                   ) -> tuple[Mode | None, dict[str, float]]:
     """The mode and the stick for a turn (one rotation axis at a time, the largest first, as fast
     as lets it coast part of the way), an open or a close; no mode and no stick to rest."""
-    if action.kind == "turn":
+    if action.kind is ActionKind.TURN:
         axis = int(np.argmax(np.abs(action.turn)))
         direction = [0.0, 0.0, 0.0]
         direction[axis] = math.copysign(1.0, action.turn[axis])
         mode, fn = layout.find(Kind.ANGULAR, tuple(direction))
         return mode, {fn: turn_deflection_for(abs(float(action.turn[axis])), p, anticipation)}
-    if action.kind in ("open", "close"):
-        mode, fn = layout.find(Kind.FINGERS, 1.0 if action.kind == "close" else -1.0)
+    if action.kind in (ActionKind.OPEN, ActionKind.CLOSE):
+        mode, fn = layout.find(Kind.FINGERS, 1.0 if action.kind is ActionKind.CLOSE else -1.0)
         return mode, {fn: p.coarse}
     return None, {}
 
@@ -382,12 +449,12 @@ def _remember_touch(view: View, memory: Memory) -> Memory:
     return memory if memory.touch_since is not None else replace(memory, touch_since=view.t)
 
 
-def _translation(hand: np.ndarray, velocity: np.ndarray, lead: float, point: np.ndarray, p: OperatorParams,
+def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, point: np.ndarray, p: OperatorParams,
                  combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode
                  ) -> tuple[Mode, dict[str, float], int | None]:
     """The mode, and the joystick functions (and their deflections) in it, that bring the hand to ``point``.
 
-    An axis being moved stops when the hand would coast (``lead`` seconds of its ``velocity``: the
+    An axis being moved stops when the hand would coast (``anticipation`` seconds of its ``velocity``: the
     travel expected after letting go) to within the stop tolerance of its goal; an idle axis
     starts again only when it is off by twice the stop tolerance (no dithering), unless nothing
     else would move the hand toward a goal the plan still wants.  Where the layout moves some axes
@@ -395,7 +462,7 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, lead: float, point: np.
     first: a switch costs presses.
     """
     error = point - hand
-    coast = velocity * lead
+    coast = velocity * anticipation
     movers = [_function_along(layout, i, error[i]) for i in range(3)]  # (mode, function) per axis
     held = {fn for fn in holding if fn in layout.axes(mode, Kind.LINEAR)}  # moving the hand now
     moving = []
@@ -419,7 +486,7 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, lead: float, point: np.
         if axis not in moving:
             axis = max(moving, key=lambda i: abs(error[i]))
         moving = [axis]
-    return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, lead) for i in moving}, axis
+    return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, anticipation) for i in moving}, axis
 
 
 def _function_along(layout: Layout, axis: int, signed: float) -> tuple[Mode, str]:
@@ -465,7 +532,8 @@ class ScriptedUser:
         if self.anticipation is None:
             self.anticipation = self.params.anticipation
 
-    def decide(self, view: View) -> StickIntent:
+    def stick_intent(self, view: View) -> StickIntent:
+        """What the person does with the stick at this glance."""
         velocity = hand_velocity(view, self.memory)
         if float(np.linalg.norm(velocity)) > STILL_SPEED:
             self._last_moving = view.t
@@ -512,7 +580,7 @@ class ScriptedUser:
         effects = self.memory.controls.layout.effects[view.mode]
         pushing_down = any(fn in effects and effects[fn].kind is Kind.LINEAR and effects[fn].axis[2] < 0
                            for fn in self.current.deflection)
-        if not (self.current.goal.endswith("descend") and pushing_down):
+        if not (self.current.goal.descending and pushing_down):
             self._height_seen = (view.t, float(view.hand_pos[2]))
             return
         since, height = self._height_seen

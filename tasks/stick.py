@@ -1,11 +1,39 @@
-"""Classifier decisions -> joystick state: the one mapping the simulated and the live BoMI share."""
+"""Classifier decisions -> joystick state: the one mapping the simulated and the live BoMI share.
+
+The joystick's vocabulary (function and button names, layouts) is the arm's, defined once in
+sim/joystick.py; a profile names those functions and bomi/ passes them through as opaque names,
+so a profile meant for the arm is checked against the arm's vocabulary here (``arm_profile``).
+"""
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
 
 from bomi.chain import Decision
-from bomi.profiles import NEUTRAL_FUNCTION
-from sim.joystick import BUTTONS, FUNCTIONS, JoystickState
+from bomi.errors import BomiError
+from bomi.profiles import NEUTRAL_FUNCTION, Profile, load_profile
+from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, THREE_AXIS, JoystickState, Layout
+
+
+def arm_profile(path_or_name: str | Path, overrides: Mapping[str, Any] | None = None) -> Profile:
+    """``bomi.profiles.load_profile``, then: every class drives a function of the JACO's stick and
+    the layout is one of the arm's. A failure is one line naming the file."""
+    profile = load_profile(path_or_name, overrides)
+    functions = (*FUNCTIONS, *BUTTONS)
+    for cls in profile.classes:
+        if cls.function not in (*functions, NEUTRAL_FUNCTION):
+            raise BomiError(f"{profile.source}: class c{cls.label} ({cls.name}): function must be one of "
+                            f"{', '.join(functions)} or \"{NEUTRAL_FUNCTION}\", got {cls.function!r}")
+    if profile.joystick_layout is not None and profile.joystick_layout not in LAYOUTS:
+        raise BomiError(f"{profile.source}: joystick: layout must be one of {', '.join(map(repr, LAYOUTS))}, "
+                        f"got {profile.joystick_layout!r}")
+    return profile
+
+
+def profile_layout(profile: Profile) -> Layout:
+    """The arm's joystick layout a profile's classes drive (the 3-axis stick unless it names another)."""
+    return THREE_AXIS if profile.joystick_layout is None else LAYOUTS[profile.joystick_layout]
 
 
 def rising_edge(button: str | None, previous: str | None) -> frozenset[str]:

@@ -21,8 +21,8 @@ from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.stick import DecisionStick
-from tasks.live import (StatusLine, Tick, Watchdog, display_opens, has_display, participant_blocks,
-                        refusal, run_live, status_text)
+from tasks.live import StatusLine, Tick, Watchdog, display_opens, has_display, refusal, run_live, status_text
+from tasks.participant_wire import participant_blocks
 from tasks.participant import calibration_session, load_participant, session_recording
 
 CONTROL_DT = 1 / 60

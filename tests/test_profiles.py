@@ -6,6 +6,8 @@ import pytest
 from bomi.errors import BomiError
 from bomi.fusion import NodeCalibration
 from bomi.profiles import PROFILE_DIR, load_profile
+from sim.joystick import THREE_AXIS, TWO_AXIS
+from tasks.stick import arm_profile, profile_layout
 from helpers import edited_copy
 
 
@@ -31,7 +33,6 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
 
 
 @pytest.mark.parametrize("old, new, message", [
-    ('function = "F"', 'function = "Up"', "classes[1]: function must be one of"),
     ("label = 2", "label = 1", "duplicate label"),
     ('function = "neutral"', 'function = "B2"\nnode = 1', "must have function \"neutral\""),
     ('function = "neutral"', 'function = "B2"', "classes[0]: a motion class needs 'node'"),
@@ -48,7 +49,6 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
     ('site = "left shoulder"', 'site = "left shoulder"\ncalibration = { mounting = [[1, 0, 0], [0, 1, 0], [0, 0, 2]] }',
      "nodes[2].calibration: mounting must be a rotation matrix"),
     ('name = "P1"', 'name = "P1', "not valid TOML"),
-    ('layout = "3-axis"', 'layout = "4-axis"', "joystick: layout must be one of '3-axis', '2-axis', got '4-axis'"),
     ('layout = "3-axis"', "layout = 2", "joystick: 'layout' has the wrong type"),
     ('layout = "3-axis"', 'layuot = "3-axis"', "joystick: unknown key(s) layuot"),
 ])
@@ -65,12 +65,20 @@ def test_unknown_profile_name():
 
 
 def test_joystick_layout_is_3_axis_unless_the_profile_says_2_axis(tmp_path):
-    assert [load_profile(name).joystick_layout for name in ("P1", "P4", "P5")] == ["3-axis", "2-axis", "2-axis"]
+    assert [profile_layout(arm_profile(name)) for name in ("P1", "P4", "P5")] == [THREE_AXIS, TWO_AXIS, TWO_AXIS]
     unset = edited_copy(PROFILE_DIR / "P4.toml", tmp_path / "p4.toml", 'layout = "2-axis"', "")
-    assert load_profile(unset).joystick_layout == "3-axis"
+    assert load_profile(unset).joystick_layout is None and profile_layout(arm_profile(unset)) is THREE_AXIS
 
 
-def test_profile_layout_names_are_the_arms_layouts():
-    from bomi.profiles import JOYSTICK_LAYOUTS
-    from sim.joystick import LAYOUTS
-    assert tuple(LAYOUTS) == JOYSTICK_LAYOUTS
+@pytest.mark.parametrize("old, new, message", [
+    ('function = "F"', 'function = "Up"', "class c1 (head pitch up (+29 deg)): function must be one of F, B, R, L, Rr, Lr, B1, B2 "
+                                          "or \"neutral\", got 'Up'"),
+    ('layout = "3-axis"', 'layout = "4-axis"', "joystick: layout must be one of '3-axis', '2-axis', got '4-axis'"),
+])
+def test_a_profile_for_the_arm_names_only_the_arms_functions_and_layouts(tmp_path, old, new, message):
+    """The chain passes function names through (bomi's loader accepts them); the arm's vocabulary checks them."""
+    path = edited_copy(PROFILE_DIR / "P1.toml", tmp_path / "bad.toml", old, new)
+    assert load_profile(path).name == "P1"
+    with pytest.raises(BomiError) as info:
+        arm_profile(path)
+    assert str(info.value) == f"{path}: {message}"

@@ -20,9 +20,10 @@ from bomi.errors import BomiError
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration, fuse
 from bomi.model_io import SUFFIXES, load_model, save_model
-from bomi.profiles import Profile, load_profile
+from bomi.profiles import Profile
 from bomi.recording import RAW_SIGNALS, NodeData, Recording, read_recording, write_recording
 from tasks.cli import add_command
+from tasks.stick import arm_profile
 
 DAYS = (1, 2, 3, 4, 5)
 
@@ -136,7 +137,7 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
 # -------------------------------------------------------------------------------------- commands
 def train_command(args: argparse.Namespace) -> int:
     out = _check_output(args.out, SUFFIXES)
-    profile = load_profile(args.profile)
+    profile = arm_profile(args.profile)
     recordings = [read(path, args.verbose) for path in args.recordings]
     model = train(recordings, profile, _spec(profile, args.features))
     save_model(out, model)
@@ -148,7 +149,7 @@ def train_command(args: argparse.Namespace) -> int:
 def evaluate_command(args: argparse.Namespace) -> int:
     json_out = _check_output(args.json, (".json",)) if args.json else None
     png_out = _check_output(args.png, (".png",))
-    profile = load_profile(args.profile)
+    profile = arm_profile(args.profile)
     from_model = Path(args.train).suffix.lower() in SUFFIXES
     if from_model and args.features:
         raise BomiError(f"{args.train}: --features only applies when training from a recording")
@@ -279,7 +280,7 @@ def reproduce_command(args: argparse.Namespace) -> int:
     directory = args.data or data_dir()
     if not directory.is_dir():
         raise BomiError(f"{directory}: dataset directory not found (set BOMI_DATA_DIR)")
-    record = reproduction_record(reproduce(directory, load_profile("P1")))
+    record = reproduction_record(reproduce(directory, arm_profile("P1")))
     table = reproduction_markdown(record)
     print(table)
     if json_out:
@@ -304,7 +305,7 @@ def fuse_command(args: argparse.Namespace) -> int:
     rec.require(rec.node_indices, RAW_SIGNALS, "fuse")
     calibrations = {i: NodeCalibration.default_for(i) for i in rec.node_indices}
     if args.profile:
-        profile = load_profile(args.profile)
+        profile = arm_profile(args.profile)
         calibrations.update({n.index: n.calibration for n in profile.nodes})
     write_recording(out, fused_recording(rec, calibrations))
     print(f"fused {len(rec)} samples of node(s) {list(rec.node_indices)}: wrote {out}")

@@ -9,13 +9,12 @@ from pathlib import Path
 from bomi.chain import OnlineChain, recording_neutral
 from bomi.errors import BomiError
 from bomi.model_io import load_model
-from bomi.profiles import load_profile
 from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
-from sim.joystick import LAYOUTS
 from tasks.cli import add_command
 from tasks.live import Headless, PassiveViewer, StatusLine, display_opens, has_display, open_log, run_live
+from tasks.stick import arm_profile, profile_layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -64,7 +63,7 @@ def _display(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
 def run(args: argparse.Namespace) -> int:
     if args.duration is not None and args.duration <= 0:
         raise BomiError(f"--duration {args.duration:g}: must be positive")
-    profile = load_profile(args.profile)
+    profile = arm_profile(args.profile)
     model = load_model(args.model)
     unknown = sorted(set(model.classes.tolist()) - {cls.label for cls in profile.classes})
     if unknown:
@@ -76,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
     if args.log is not None and args.log.exists():
         raise BomiError(f"{args.log}: file exists, not overwriting it")
-    sim = ArmSim(layout=LAYOUTS[profile.joystick_layout])  # the layout the profile's classes drive
+    sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
     # timeout 0: a tick reads what has arrived and never waits for more
     source = SerialSource(args.port, baudrate=args.baud, timeout_s=0.0, retry=RetryPolicy(attempts=args.retries))
     status, log, display = StatusLine(), None, Headless()

@@ -16,12 +16,12 @@ from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
 from bomi.fusion import DT, FusedRows, NodeCalibration
 from bomi.model_io import save_model
-from bomi.profiles import load_profile
 from bomi.protocol import Segment, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from tasks.cli import add_command
 from tasks.cli.chain import class_listing
+from tasks.stick import arm_profile
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
 NODE_DETECTION_S = 0.5
@@ -160,10 +160,10 @@ def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
 
 def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     """The participant performs the calibration protocol; samples are made while they are played."""
-    from tasks.live import participant_blocks  # here, not at load: capture and record need no simulator
+    from tasks.participant_wire import participant_blocks  # here, not at load: capture and record need no participant
     from tasks.participant import load_participant
     params = load_participant(args.participant)
-    profile = load_profile(params.profile)
+    profile = arm_profile(params.profile)
     cues = calibration_schedule(profile, hold_s=args.hold, neutral_s=args.neutral)
     end_s = cues[-1].end_s if args.duration is None else min(args.duration, cues[-1].end_s)
     what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol, {end_s:g} s"
@@ -209,7 +209,7 @@ def _detect_nodes(batches: Iterator[tuple[float, list[ImuFrame]]], url: str,
 def _capture_calibrations(profile_name: str | None, indices: tuple[int, ...]) -> dict[int, NodeCalibration]:
     if profile_name is None:
         return {i: NodeCalibration.default_for(i) for i in indices}
-    profile = load_profile(profile_name)
+    profile = arm_profile(profile_name)
     by_index = {node.index: node.calibration for node in profile.nodes}
     missing = [i for i in indices if i not in by_index]
     if missing:
@@ -267,7 +267,7 @@ def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowA
 
 def run_record(args: argparse.Namespace) -> int:
     _refuse_existing(args.out)
-    profile = load_profile(args.profile)
+    profile = arm_profile(args.profile)
     if any(imu_node_id(node.index) != node.node_id for node in profile.nodes):
         raise BomiError(f"{profile.source}: record expects node_id = 10 + index - 1 (base-station numbering)")
     segments = calibration_schedule(profile, repetitions=args.repetitions, sequences=3 if args.session else 1,

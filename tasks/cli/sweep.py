@@ -41,7 +41,6 @@ from typing import Any
 from tqdm import tqdm
 
 from bomi.errors import BomiError
-from bomi.profiles import load_profile
 from tasks.cli import add_command
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli.figures import completion_time_figure, metric_figure
@@ -50,6 +49,7 @@ from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, ROW_COLUMNS, EpisodeJo
 from tasks.episode import OPERATORS, profile_controls
 from tasks.participant import load_participant
 from tasks.planner import load_operator
+from tasks.stick import arm_profile
 
 RESULTS_FILE = "episodes.jsonl"
 # EpisodeJob fields a grid may vary, beside the EDITABLE_FILES' keys
@@ -205,7 +205,7 @@ def check_cells(grid: Grid, cell_list: list[Cell]) -> None:
             load_operator(job.operator_file, job.edits("operator"))
             if cell.operator != "joystick":
                 params = load_participant(cell.participant, job.edits("participant"))
-                profile_controls(load_profile(params.profile, job.edits("profile")))
+                profile_controls(arm_profile(params.profile, job.edits("profile")))
         except BomiError as exc:
             raise BomiError(f"{grid.source}: cell {cell.label}: {exc}") from None
 

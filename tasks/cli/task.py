@@ -15,13 +15,13 @@ from tqdm import tqdm
 
 from bomi import paper
 from bomi.errors import BomiError
-from bomi.profiles import load_profile
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
 from tasks.participant import load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking import TaskConfig
+from tasks.stick import arm_profile
 from tasks.timeline import timeline_figure
 
 # Majority vote over this many decisions on the simulated BoMI (the profiles ship with it off):
@@ -68,7 +68,7 @@ def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4
         channel = JoystickChannel()
     else:
         params = load_participant(job.participant, job.edits("participant"))
-        profile = load_profile(params.profile, job.edits("profile"))
+        profile = arm_profile(params.profile, job.edits("profile"))
         with _stage(f"{what}: calibration (the participant performs the protocol, the LDA is trained)", progress):
             channel = calibrated_channel(params, job.seed, replace(profile.post, vote_length=job.vote_length),
                                          profile)
