@@ -53,6 +53,7 @@ class EpisodeLog:
     operator: str
     participant: str
     seed: int
+    controls: str  # the layout and buttons the operator had (Controls.label)
     t: np.ndarray  # (N,) control ticks
     hand_pos: np.ndarray  # (N, 3)
     intended_dir: np.ndarray  # (N, 3) unit direction the person wanted, zero when resting
@@ -73,6 +74,10 @@ class EpisodeLog:
     sample_period: float = SAMPLE_PERIOD_S
 
 
+# allowances (s) at which the excused accuracy is also given: its curve shows what excusing buys
+ALLOWANCE_CURVE_S = tuple(round(0.1 * k, 1) for k in range(16))
+
+
 def summarize(log: EpisodeLog) -> dict:
     """The per-episode metrics as a JSON-ready dict."""
     sim_time = float(log.t[-1]) if len(log.t) else 0.0
@@ -80,6 +85,7 @@ def summarize(log: EpisodeLog) -> dict:
         "operator": log.operator,
         "participant": log.participant,
         "seed": log.seed,
+        "layout": log.controls,
         "success": bool(log.success),
         "completion_time": log.completion_time,
         "failure": log.failure,
@@ -97,20 +103,31 @@ def summarize(log: EpisodeLog) -> dict:
     if d is None:
         return out
     errors = metrics.misclassified(d.intended, d.decided, log.allowance)
-    latency = metrics.decision_latencies(d.intended, d.decided, log.neutral)
+    wild = metrics.irrelevant(d.intended, d.decided, log.neutral)
+    latency_ms = metrics.decision_latencies(d.intended, d.decided, log.neutral) * 1000.0 * log.sample_period
+    curve = np.round(np.array(ALLOWANCE_CURVE_S) / log.sample_period).astype(int)
     out.update({
         "decisions": int(len(d.t)),
         "decisions_intended_active": int(np.sum(d.intended != log.neutral)),
         "decisions_emitted_active": int(np.sum(d.decided != log.neutral)),
-        "realtime_accuracy": metrics.realtime_accuracy(d.intended, d.decided, log.allowance),
+        "accuracy_all_decisions": metrics.accuracy_all_decisions(d.intended, d.decided),
+        "accuracy_excused_transitions": metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance),
+        "scored_share": metrics.scored_share(d.intended, log.allowance),
+        "excused_allowance_samples": log.allowance,
+        "excused_allowance_ms": 1000.0 * log.allowance * log.sample_period,
+        "accuracy_vs_allowance": {"allowance_s": list(ALLOWANCE_CURVE_S),
+                                  "accuracy": metrics.accuracy_vs_allowance(d.intended, d.decided, curve).tolist()},
         "misclassified": int(errors.sum()),
         "longest_error_run_ms": metrics.longest_error_run_ms(errors, log.sample_period),
         **{f"errors_{k}": v for k, v in metrics.error_destinations(d.decided, errors, log.neutral).items()},
-        "latency_samples_mean": float(latency.mean()) if latency.size else None,
-        "latency_samples_max": int(latency.max()) if latency.size else None,
-        "latency_ms_mean": float(latency.mean() * 1000 * log.sample_period) if latency.size else None,
-        "latency_ms_max": float(latency.max() * 1000 * log.sample_period) if latency.size else None,
-        "latency_allowance_samples": log.allowance,
+        "irrelevant_decisions": int(wild.sum()),
+        "irrelevant_runs": len(metrics.runs(wild)),
+        "irrelevant_per_min": metrics.per_minute(len(metrics.runs(wild)), len(d.t), log.sample_period),
+        "irrelevant_longest_run_ms": metrics.longest_error_run_ms(wild, log.sample_period),
+        "latency_onsets_ms": latency_ms.tolist(),
+        "latency_ms_median": float(np.median(latency_ms)) if latency_ms.size else None,
+        "latency_ms_p90": float(np.percentile(latency_ms, 90)) if latency_ms.size else None,
+        "latency_ms_max": float(latency_ms.max()) if latency_ms.size else None,
     })
     return out
 
@@ -132,12 +149,14 @@ class OperatorChannel(Protocol):
 
 
 class JoystickChannel:
-    """The person's decision goes straight to the stick (a 3-axis stick may combine axes)."""
+    """The person's decision goes straight to the stick (a stick may combine axes).  ``controls``:
+    the able-bodied baseline's stick; by default a real 3-axis JACO stick with both buttons, for a
+    like-for-like comparison the layout and buttons a BoMI profile gives (``profile_controls``)."""
 
     combine_axes = True
-    controls = Controls()  # the able-bodied baseline: a real 3-axis JACO stick with both buttons
 
-    def __init__(self) -> None:
+    def __init__(self, controls: Controls = Controls()) -> None:
+        self.controls = controls
         self._button: str | None = None
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
@@ -187,6 +206,12 @@ def profile_controls(profile: Profile) -> Controls:
         raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
                         f"the scripted stacking user with the {layout.name} layout needs {', '.join(needed)}")
     return Controls(layout, tuple(b for b in BUTTONS if b in functions))
+
+
+def participant_controls(participant: str | ParticipantParams) -> Controls:
+    """The controls of a participant's BoMI profile (what a like-for-like joystick baseline gets)."""
+    params = participant if isinstance(participant, ParticipantParams) else load_participant(participant)
+    return profile_controls(arm_profile(params.profile))
 
 
 class BomiChannel:
@@ -402,7 +427,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         if film is not None:
             film.close()
     return EpisodeLog(
-        operator=operator, participant=participant, seed=seed,
+        operator=operator, participant=participant, seed=seed, controls=channel.controls.label,
         t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
         touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(),

@@ -2,13 +2,16 @@
 
 Decision-stream metrics take one entry per classifier decision (one per IMU sample once the
 window is full): the class the virtual participant intended and the class the chain output.
-A decision made within ``allowance`` samples after the intended class changed is part of the
-transition (the window still holds the previous posture): it counts towards the latency, not
-as a misclassification.  Arm metrics take one entry per 60 Hz control tick.
+Two accuracies: over every decision (``accuracy_all_decisions``), and over the decisions made
+more than ``allowance`` samples after the intended class last changed
+(``accuracy_excused_transitions``: the window still holds the previous posture, so those are
+excused; ``scored_share`` says how many decisions that figure keeps).  Arm metrics take one
+entry per 60 Hz control tick.  docs/task.md defines every metric.
 """
 from __future__ import annotations
 
 import numpy as np
+import scipy.stats
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -33,12 +36,49 @@ def misclassified(intended: np.ndarray, decided: np.ndarray, allowance: int) -> 
     return (intended != decided) & ~in_transition(intended, allowance)
 
 
-def realtime_accuracy(intended: np.ndarray, decided: np.ndarray, allowance: int) -> float:
-    """Fraction of settled decisions (outside transitions) equal to the intended class."""
+def accuracy_excused_transitions(intended: np.ndarray, decided: np.ndarray, allowance: int) -> float:
+    """Fraction of the decisions outside transitions (more than ``allowance`` samples after the
+    last change of the intended class) equal to the intended class; NaN when none is outside."""
     settled = ~in_transition(intended, allowance)
     if not settled.any():
         return float("nan")
     return float(np.mean(np.asarray(intended)[settled] == np.asarray(decided)[settled]))
+
+
+def accuracy_all_decisions(intended: np.ndarray, decided: np.ndarray) -> float:
+    """Fraction of every decision equal to the intended class (nothing excused); NaN when empty."""
+    intended, decided = np.asarray(intended), np.asarray(decided)
+    return float(np.mean(intended == decided)) if intended.size else float("nan")
+
+
+def scored_share(intended: np.ndarray, allowance: int) -> float:
+    """Share of the decisions that ``accuracy_excused_transitions`` scores (those outside transitions)."""
+    intended = np.asarray(intended)
+    return float(np.mean(~in_transition(intended, allowance))) if intended.size else float("nan")
+
+
+def accuracy_vs_allowance(intended: np.ndarray, decided: np.ndarray, allowances: np.ndarray) -> np.ndarray:
+    """``accuracy_excused_transitions`` for each allowance (in samples) of ``allowances``."""
+    return np.array([accuracy_excused_transitions(intended, decided, int(a)) for a in allowances])
+
+
+def previous_intended(intended: np.ndarray) -> np.ndarray:
+    """For each decision, the intended class before the last change (the class itself before any change)."""
+    intended = np.asarray(intended)
+    previous = intended.copy()
+    changes = np.flatnonzero(intended[1:] != intended[:-1]) + 1
+    for start, end in zip(changes, np.r_[changes[1:], len(intended)]):
+        previous[start:end] = intended[start - 1]
+    return previous
+
+
+def irrelevant(intended: np.ndarray, decided: np.ndarray, neutral: int) -> np.ndarray:
+    """Decisions of an active class that is neither the intended one nor the one intended before
+    the last change: outputs that fit nothing the person was doing (the paper's "irrelevancy").
+    Neutral outputs move nothing and are never irrelevant; a late output of the previous class is
+    a transition, not irrelevant."""
+    intended, decided = np.asarray(intended), np.asarray(decided)
+    return (decided != neutral) & (decided != intended) & (decided != previous_intended(intended))
 
 
 def longest_error_run_ms(errors: np.ndarray, sample_period_s: float) -> float:
@@ -51,6 +91,12 @@ def error_destinations(decided: np.ndarray, errors: np.ndarray, neutral: int) ->
     """How many misclassified decisions fell to neutral and how many to another active class."""
     wrong = np.asarray(decided)[np.asarray(errors, dtype=bool)]
     return {"to_neutral": int(np.sum(wrong == neutral)), "to_other_class": int(np.sum(wrong != neutral))}
+
+
+def per_minute(count: int, decisions: int, sample_period_s: float) -> float:
+    """``count`` events over ``decisions`` decisions made every ``sample_period_s``, per minute."""
+    minutes = decisions * sample_period_s / 60.0
+    return count / minutes if minutes > 0 else float("nan")
 
 
 def decision_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) -> np.ndarray:
@@ -104,3 +150,22 @@ def cube_drops(cube_z: np.ndarray, touching: np.ndarray, fall_m: float = 0.02, h
             after = cube_z[release:release + horizon, k]
             drops += int(cube_z[release, k] - after.min() > fall_m)
     return drops
+
+
+def success_ci95(successes: int, episodes: int) -> tuple[float, float]:
+    """Wilson score 95 % interval of a success proportion (scipy's binomtest)."""
+    ci = scipy.stats.binomtest(successes, episodes).proportion_ci(confidence_level=0.95, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
+def mean_ci95(values: list[float] | np.ndarray) -> tuple[float, float] | None:
+    """Student-t 95 % confidence interval of the mean (None below two values; a zero spread gives
+    the mean twice)."""
+    values = np.asarray(values, dtype=float)
+    if values.size < 2:
+        return None
+    mean, sem = float(values.mean()), float(scipy.stats.sem(values))
+    if sem == 0.0:
+        return mean, mean
+    low, high = scipy.stats.t.interval(0.95, values.size - 1, loc=mean, scale=sem)
+    return float(low), float(high)

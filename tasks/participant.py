@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import IntEnum
 from pathlib import Path
 from typing import Any
 
@@ -279,29 +280,42 @@ class Truth:
 
 
 # ------------------------------------------------------------------------ the virtual participant
+class Session(IntEnum):
+    """Which of a day's sessions a virtual participant performs: the same person (the day's
+    postures) with the session's own noise."""
+
+    CALIBRATION = 1
+    TASK = 2
+
+
 class VirtualParticipant:
     """A streaming source of base-station bytes driven by intents (see the module docstring).
 
-    ``seed`` fixes everything random: this session's ("day's") posture offsets, repetition
-    offsets, sway, tremor, spasms, sensor noise, frame loss and delivery times.
+    ``seed`` fixes the person on that day: the day's posture offsets (``day_postures``), the same
+    in every ``session``.  The seed and ``session`` together fix the rest: repetition offsets,
+    sway, tremor, spasms, sensor noise, frame loss and delivery times, independent between the
+    calibration and the task (separate ``numpy.random.SeedSequence`` children of the seed).
     """
 
     def __init__(self, params: ParticipantParams, profile: Profile, seed: int,
-                 noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()):
+                 noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel(), session: Session = Session.TASK):
         check_against_profile(params, profile)
         self.params, self.profile, self.noise, self.link = params, profile, noise, link
-        # one generator per purpose (and per node for sensors and link), each drawn in sample
-        # order: the output does not depend on how the caller slices time into advance() calls
+        # child 0 of the seed: the person; child ``session``: that session's noise, one generator
+        # per purpose (and per node for sensors and link), each drawn in sample order: the output
+        # does not depend on how the caller slices time into advance() calls
+        children = np.random.SeedSequence(seed).spawn(1 + max(Session))
+        person = np.random.default_rng(children[0])
         body, sway, tremor, spasm, *per_node = (np.random.default_rng(s) for s in
-                                                np.random.SeedSequence(seed).spawn(4 + 2 * len(profile.nodes)))
+                                                children[session].spawn(4 + 2 * len(profile.nodes)))
         self._rng, self._spasm_rng = body, spasm
         self._sensor_rngs = per_node[:len(profile.nodes)]
         self._link_rngs = {node.index: rng for node, rng in zip(profile.nodes, per_node[len(profile.nodes):])}
         channels = params.n_nodes * 3
         self._sway = ColouredNoise(*sway_filter(), channels, sway)
         self._tremor = ColouredNoise(*tremor_filter(params.tremor_spectrum), channels, tremor)
-        self._day_posture = {label: np.exp(self._rng.normal(0.0, m.day_gain_log_std)) * m.posture_deg
-                             + self._rng.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
+        self._day_posture = {label: np.exp(person.normal(0.0, m.day_gain_log_std)) * m.posture_deg
+                             + person.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
         rest = self._target(NEUTRAL_LABEL, 0.0)
         self._segments: list[Segment] = [Segment(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
         n_spasm_nodes = len(params.spasm.nodes) if params.spasm else 0
@@ -322,6 +336,11 @@ class VirtualParticipant:
             return neutral.posture_deg + self._rng.normal(0.0, neutral.rep_std_deg)
         excursion = self._day_posture[label] + self._rng.normal(0.0, self.params.classes[label].rep_std_deg)
         return neutral.posture_deg + amplitude * self.params.max_amplitude * excursion
+
+    @property
+    def day_postures(self) -> dict[int, np.ndarray]:
+        """The day's posture of each class, (nodes, 3) degrees: the person, shared by the sessions of a seed."""
+        return {label: posture.copy() for label, posture in self._day_posture.items()}
 
     @property
     def time_s(self) -> float:
@@ -487,7 +506,7 @@ def calibration_session(params: ParticipantParams, profile: Profile, seed: int, 
     hold (and the neutral) lasts ``hold_s`` (``neutral_s``) from then. ``order`` overrides the
     default (label, amplitude) sequence.
     """
-    vp = VirtualParticipant(params, profile, seed, noise, link)
+    vp = VirtualParticipant(params, profile, seed, noise, link, Session.CALIBRATION)
     motions = list(order) if order is not None else protocol_order(sorted(params.classes), repetitions, amplitudes)
     settle = params.reaction_s + params.onset_s
     holds: list[tuple[float, float, int]] = [(warmup_s, warmup_s + neutral_s, NEUTRAL_LABEL)]

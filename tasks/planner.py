@@ -179,6 +179,11 @@ class Controls:
         if not self.buttons or not set(self.buttons) <= set(BUTTONS):
             raise ValueError(f"controls need one or more of the buttons {BUTTONS}, got {self.buttons}")
 
+    @property
+    def label(self) -> str:
+        """What a results row says of the controls, e.g. "2-axis, B1"."""
+        return f"{self.layout.name}, {'+'.join(self.buttons)}"
+
 
 @dataclass(frozen=True)
 class Memory:

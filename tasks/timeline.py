@@ -58,5 +58,7 @@ def _decision_panels(axes, log: "EpisodeLog") -> None:
     ax_nu.set_ylim(-0.05, 1.05)
     for ax in axes:
         ax.grid(alpha=0.3)
-    ax_class.set_title(f"BoMI decisions: real-time accuracy {100 * metrics.realtime_accuracy(d.intended, d.decided, log.allowance):.1f} %",
-                       fontsize=9)
+    every = 100 * metrics.accuracy_all_decisions(d.intended, d.decided)
+    excused = 100 * metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance)
+    ax_class.set_title(f"BoMI decisions: accuracy {every:.1f} % over all decisions, {excused:.1f} % with "
+                       f"{1000 * log.allowance * log.sample_period:.0f} ms after each intent change excused", fontsize=9)

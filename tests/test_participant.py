@@ -14,7 +14,7 @@ from bomi.frames import FrameParser
 from bomi.fusion import DT
 from bomi.profiles import load_profile
 from tasks import fit_participant
-from tasks.participant import (PARTICIPANT_DIR, CalibrationSession, VirtualParticipant, calibration_session,
+from tasks.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
                                load_participant, minimum_jerk, session_recording)
 from helpers import edited_copy
 
@@ -157,6 +157,30 @@ def test_stream_does_not_depend_on_how_time_is_sliced(name):
     assert whole == pieces
     np.testing.assert_allclose(one.truth().angles, many.truth().angles, atol=1e-9)   # filter round-off only
 
+
+
+@pytest.mark.parametrize("name", ["P1", "P4"])
+def test_calibration_and_task_share_the_person_but_not_the_noise(name):
+    """Same seed: the task participant is the person who calibrated (same day's postures), but sway,
+    tremor, spasms, sensor noise and frame loss are drawn afresh, so the streams differ from the start."""
+    params, profile = load_participant(name), load_profile(name)
+    seed = 7
+    session = calibration_session(params, profile, seed, order=[(1, 1.0)], warmup_s=12.0)
+    calibration_bytes, _ = session.delivery.until(10.0)
+    task = VirtualParticipant(params, profile, seed)
+    task_frames = task.deliveries(10.0)
+    assert calibration_bytes.stream() == VirtualParticipant(params, profile, seed, session=Session.CALIBRATION).advance(10.0)
+    assert len(task_frames.frames) > 1000 and calibration_bytes.stream() != task_frames.stream()
+    # frames carry noisy raw counts: hardly one is repeated byte for byte
+    assert len(set(calibration_bytes.frames) & set(task_frames.frames)) < 0.01 * len(task_frames.frames)
+    truth_cal, truth_task = session.truth, task.truth()
+    n = min(len(truth_cal.time_s), len(truth_task.time_s))
+    assert not np.allclose(truth_cal.angles[:n], truth_task.angles[:n], atol=0.01)   # sway/tremor differ
+    calibrating = VirtualParticipant(params, profile, seed, session=Session.CALIBRATION).day_postures
+    for label, posture in task.day_postures.items():
+        np.testing.assert_array_equal(posture, calibrating[label])
+    other_day = VirtualParticipant(params, profile, seed + 1).day_postures
+    assert any(not np.array_equal(other_day[k], v) for k, v in task.day_postures.items())
 
 
 def test_stream_parses_with_about_nine_percent_loss_and_nothing_from_the_future(p1):

@@ -11,7 +11,7 @@ from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import edited_copy
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
-from tasks.cli.task import benchmark_jobs
+from tasks.cli.task import aggregate, benchmark_jobs, comparison
 from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode, summarize
 from tasks.planner import Controls
 from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses
@@ -110,7 +110,7 @@ def test_joystick_operator_stacks_the_cubes_on_a_fixed_seed(sim):
     assert summary["cube_drops"] == 0
     bottom, top = np.argsort(log.cube_pos[-1, :, 2])
     assert np.linalg.norm(log.cube_pos[-1, top, :2] - log.cube_pos[-1, bottom, :2]) <= 0.015
-    assert "realtime_accuracy" not in summary  # no classifier in this channel
+    assert "accuracy_all_decisions" not in summary  # no classifier in this channel
 
 
 def test_run_task_writes_json_and_plot(tmp_path, capsys):
@@ -121,7 +121,7 @@ def test_run_task_writes_json_and_plot(tmp_path, capsys):
     assert code == 0 and record["success"] is True and record["completion_time"] > 0
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     captured = capsys.readouterr()
-    assert "| P1 | joystick | 1/1 |" in captured.out
+    assert "| any | joystick | 3-axis, B1+B2 | 1/1 [21, 100] % |" in captured.out
     # it says what it wrote, and showed the episode's progress meanwhile
     written = captured.out[captured.out.index("wrote:"):].splitlines()[1:]
     assert [line.split()[0] for line in written] == [str(plot), str(out)]
@@ -147,12 +147,36 @@ def test_benchmark_runs_episodes_in_worker_processes_and_compares_with_the_paper
     assert row["successes"] == 2 and row["episodes"] == 2
     times = [e["completion_time"] for e in record["episodes"]]
     assert row["completion_time_mean"] == pytest.approx(sum(times) / 2)
-    assert record["paper"]["bomi_time_s"] == 138.0 and "| 2.38 |" in capsys.readouterr().out
+    # two values a and b: mean +- t(0.975, 1) x |a - b| / 2 with t = 12.7062
+    half = 12.7062 * abs(times[0] - times[1]) / 2
+    assert row["completion_time_ci95"] == pytest.approx([sum(times) / 2 - half, sum(times) / 2 + half], rel=1e-4)
+    assert row["success_ci95"] == pytest.approx([2 / (2 + 1.959964 ** 2), 1.0], abs=1e-6)
+    assert row["layout"] == "3-axis, B1+B2" and row["participant"] == "any"
 
 
 def test_benchmark_rejects_an_unknown_operator(capsys):
     assert main(["benchmark", "--operators", "joystick,telepathy", "--seeds", "1"]) == 2
     assert "unknown telepathy" in capsys.readouterr().err
+
+
+def test_benchmark_runs_the_joystick_once_per_set_of_controls():
+    """P4 and P5 have the same controls (2-axis, B1): one joystick row for both, on their layout."""
+    jobs = benchmark_jobs(["P1", "P4", "P5"], ["joystick", "bomi"], 1, 60.0, "operator.toml")
+    assert [(j.operator, j.participant) for j in jobs] == [("joystick", "P1"), ("bomi", "P1"), ("joystick", "P4"),
+                                                           ("bomi", "P4"), ("bomi", "P5")]
+
+
+def test_bomi_rows_are_compared_with_the_joystick_row_of_their_layout():
+    def record(participant, operator, layout, time):
+        return {"participant": participant, "operator": operator, "layout": layout, "seed": 0, "success": True,
+                "completion_time": time, "failure": None, "mode_switches": 1, "unintended_displacement_mm": 0.0,
+                "cube_drops": 0, "realtime_factor": 10.0}
+    rows = aggregate([record("P1", "joystick", "3-axis, B1+B2", 20.0), record("P4", "joystick", "2-axis, B1", 40.0),
+                      record("P1", "bomi", "3-axis, B1+B2", 80.0), record("P4", "bomi", "2-axis, B1", 200.0)])
+    assert [(r["participant"], r["operator"], r["layout"]) for r in rows] == [
+        ("P1", "bomi", "3-axis, B1+B2"), ("P4", "bomi", "2-axis, B1"),
+        ("any", "joystick", "2-axis, B1"), ("any", "joystick", "3-axis, B1+B2")]
+    assert {c["participant"]: c["time_ratio"] for c in comparison(rows)} == {"P1": 4.0, "P4": 5.0}
 
 
 def test_benchmark_seeds_can_start_anywhere(capsys):
@@ -178,7 +202,7 @@ def test_a_profile_lacking_a_class_of_its_layout_is_a_one_line_error(tmp_path, o
 def test_profiles_give_their_layout_and_the_buttons_they_have():
     assert profile_controls(load_profile("P1")) == Controls(THREE_AXIS, ("B1", "B2"))
     assert profile_controls(load_profile("P4")) == Controls(TWO_AXIS, ("B1",))
-    assert JoystickChannel.controls == Controls(THREE_AXIS, ("B1", "B2"))  # a real 3-axis stick
+    assert JoystickChannel().controls == Controls(THREE_AXIS, ("B1", "B2"))  # by default a real 3-axis stick
 
 
 def test_p4_bomi_episode_moves_the_hand_down_in_height_mode():

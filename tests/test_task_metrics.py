@@ -24,7 +24,8 @@ def test_accuracy_and_errors_outside_transitions():
     errors = metrics.misclassified(INTENDED, DECIDED, allowance=2)
     assert np.flatnonzero(errors).tolist() == [1, 6]
     # 8 settled decisions (12 minus 4 in transition), 2 wrong
-    assert metrics.realtime_accuracy(INTENDED, DECIDED, allowance=2) == pytest.approx(6 / 8)
+    assert metrics.accuracy_excused_transitions(INTENDED, DECIDED, allowance=2) == pytest.approx(6 / 8)
+    assert metrics.scored_share(INTENDED, allowance=2) == pytest.approx(8 / 12)
     assert metrics.error_destinations(DECIDED, errors, neutral=0) == {"to_neutral": 1, "to_other_class": 1}
 
 
@@ -65,3 +66,53 @@ def test_cube_drops_tell_a_fall_from_a_placement():
     z[61:, 1] = 0.075
     touching[40:60, 1] = True
     assert metrics.cube_drops(z, touching) == 1
+
+
+def test_accuracy_over_all_decisions_excuses_nothing():
+    # wrong at 1, 3, 4, 6, 9, 10: 6 of 12
+    assert metrics.accuracy_all_decisions(INTENDED, DECIDED) == pytest.approx(6 / 12)
+    assert np.isnan(metrics.accuracy_all_decisions(np.array([]), np.array([])))
+
+
+def test_accuracy_grows_with_the_allowance_up_to_the_settled_figure():
+    curve = metrics.accuracy_vs_allowance(INTENDED, DECIDED, np.array([0, 1, 2, 3]))
+    # allowance 0: all 12 scored (6 right); 1: 10 scored (indices 3, 9 out; 6 right);
+    # 2: 8 scored (6 right); 3: 6 scored (0,1,2,6,7,8 -> wrong at 1 and 6: 4 right)
+    assert curve == pytest.approx([6 / 12, 6 / 10, 6 / 8, 4 / 6])
+
+
+def test_previous_intended_is_the_class_before_the_last_change():
+    intended = np.array([1, 1, 0, 0, 3, 3, 3])
+    assert metrics.previous_intended(intended).tolist() == [1, 1, 1, 1, 0, 0, 0]
+
+
+def test_irrelevant_outputs_fit_neither_the_previous_nor_the_new_intent():
+    # F(1) -> neutral(0) -> R(3); outputs: a late F during neutral (transition, not irrelevant), a B(2)
+    # during neutral (irrelevant), an F during R (irrelevant: two intents ago), neutral during R (a miss,
+    # never irrelevant), B twice in a row during R (irrelevant, a run of 2)
+    intended = np.array([1, 1, 0, 0, 0, 3, 3, 3, 3, 3, 3])
+    decided = np.array([1, 1, 1, 2, 0, 1, 0, 3, 2, 2, 3])
+    wild = metrics.irrelevant(intended, decided, neutral=0)
+    assert np.flatnonzero(wild).tolist() == [3, 5, 8, 9]
+    assert metrics.runs(wild) == [(3, 1), (5, 1), (8, 2)]
+    assert metrics.longest_error_run_ms(wild, 0.016) == pytest.approx(32.0)
+    # 3 runs over 11 decisions of 16 ms = 0.176 s
+    assert metrics.per_minute(3, 11, 0.016) == pytest.approx(3 / (11 * 0.016 / 60))
+
+
+def test_success_interval_is_wilson():
+    # Wilson score interval for 20/20 at 95 %: [n / (n + z^2), 1] with z = 1.959964
+    low, high = metrics.success_ci95(20, 20)
+    assert low == pytest.approx(20 / (20 + 1.959964 ** 2), abs=1e-6) and high == pytest.approx(1.0)
+    # 5/10: centre 0.5, half width z sqrt(p(1-p)/n + z^2/4n^2) / (1 + z^2/n)
+    z, n = 1.959964, 10
+    half = z * np.sqrt(0.25 / n + z ** 2 / (4 * n ** 2)) / (1 + z ** 2 / n)
+    assert metrics.success_ci95(5, 10) == pytest.approx((0.5 - half, 0.5 + half), abs=1e-6)
+
+
+def test_completion_time_interval_is_student_t():
+    # mean 2, sample sd 1, n = 3: 2 +- t(0.975, 2) x 1 / sqrt(3) with t = 4.302653
+    assert metrics.mean_ci95([1.0, 2.0, 3.0]) == pytest.approx((2 - 4.302653 / np.sqrt(3), 2 + 4.302653 / np.sqrt(3)),
+                                                                abs=1e-5)
+    assert metrics.mean_ci95([4.0]) is None
+    assert metrics.mean_ci95([4.0, 4.0]) == (4.0, 4.0)

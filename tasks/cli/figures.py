@@ -67,3 +67,28 @@ def metric_figure(series: Mapping[str, Sequence[tuple[object, float | None, tupl
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def accuracy_allowance_figure(rows: Sequence[dict], path: Path, references: Mapping[str, float] | None = None) -> None:
+    """Each row's ``accuracy_vs_allowance`` curve (rows without decisions are left out): accuracy
+    against the allowance excused after every intent change (0 s: every decision scored), the
+    allowance the tables use dotted; ``references`` (label -> accuracy) dashed."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for row in rows:
+        curve = row.get("accuracy_vs_allowance")
+        if curve is None:
+            continue
+        line, = ax.plot(curve["allowance_s"], 100 * np.array(curve["accuracy"]), marker=".",
+                        label=f"{row['participant']} ({row['layout']})")
+        ax.axvline(row["excused_allowance_ms"] / 1000.0, color=line.get_color(), linestyle=":", linewidth=0.8)
+    for label, accuracy in (references or {}).items():
+        ax.axhline(100 * accuracy, color="gray", linestyle="--", linewidth=0.8)
+        ax.text(0.0, 100 * accuracy, label, fontsize=7, va="bottom")
+    ax.set_xlabel("allowance excused after each intent change (s)")
+    ax.set_ylabel("BoMI accuracy (%)")
+    ax.set_title("Accuracy against the excused allowance (dotted: the tables')", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

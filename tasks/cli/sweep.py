@@ -57,8 +57,10 @@ JOB_SETTINGS = {"time_limit": (int, float), "vote_length": int}
 # what the joystick channel never reads
 NOT_READ_BY_JOYSTICK = ("vote_length", "profile.", "participant.")
 # summary-row columns the figure may plot (tests/test_sweep.py checks they are aggregate's)
-FIGURE_METRICS = ("completion_time_mean", "successes", "realtime_accuracy", "longest_error_run_ms", "mode_switches",
-                  "unintended_displacement_mm", "latency_ms_mean", "cube_drops")
+FIGURE_METRICS = ("completion_time_mean", "successes", "success_rate", "accuracy_all_decisions",
+                  "accuracy_excused_transitions", "scored_share", "relevant_share", "irrelevant_per_min",
+                  "longest_error_run_ms", "mode_switches", "unintended_displacement_mm", "latency_ms_median",
+                  "cube_drops")
 _TOP_KEYS = {"participants", "operators", "seeds", "vary", "figure"}
 
 
@@ -342,7 +344,7 @@ def _series(grid: Grid, rows: list[dict]) -> dict[str, list]:
         if value == "-":
             continue
         others = [f"{k.rsplit('.', 1)[-1]}={v}" for k, v in r["settings"].items() if k != grid.setting]
-        interval = r.get(f"{grid.metric.removesuffix('_mean')}_ci95")
+        interval = r.get(f"{grid.metric.removesuffix('_mean').removesuffix('_rate')}_ci95")
         series.setdefault(" ".join([r["participant"], r["operator"], *others]), []).append(
             (value, r[grid.metric], tuple(interval) if interval else None))
     return series

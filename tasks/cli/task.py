@@ -11,13 +11,16 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 from bomi import paper
 from bomi.errors import BomiError
+from tasks import metrics
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
-from tasks.episode import OPERATORS, JoystickChannel, calibrated_channel, run_episode, summarize
+from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
+                           run_episode, summarize)
 from tasks.participant import load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking import TaskConfig
@@ -33,6 +36,7 @@ DEMO_VIDEO_SPEEDUP = 8.0
 
 # The configuration files an episode reads, each of which a job may edit (``EpisodeJob.overrides``).
 EDITABLE_FILES = ("profile", "participant", "operator")
+JOYSTICK_ANYONE = "any"  # the participant column of a joystick row: the stick needs no body
 
 
 @dataclass(frozen=True)
@@ -64,11 +68,11 @@ def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4
     """One episode (calibration first for the BoMI); returns its log (and films it if ``video``).
     With ``progress``, a bar on stderr for each stage: the calibration, then the episode."""
     what = f"{job.participant} {job.operator} seed {job.seed}"
-    if job.operator == "joystick":
-        channel = JoystickChannel()
+    params = load_participant(job.participant, job.edits("participant"))
+    profile = arm_profile(params.profile, job.edits("profile"))
+    if job.operator == "joystick":  # on the controls the participant's profile gives (like for like)
+        channel = JoystickChannel(profile_controls(profile))
     else:
-        params = load_participant(job.participant, job.edits("participant"))
-        profile = arm_profile(params.profile, job.edits("profile"))
         with _stage(f"{what}: calibration (the participant performs the protocol, the LDA is trained)", progress):
             channel = calibrated_channel(params, job.seed, replace(profile.post, vote_length=job.vote_length),
                                          profile)
@@ -107,46 +111,79 @@ def _mean(values: list) -> float | None:
     return statistics.fmean(values) if values else None
 
 
+def _pooled(rs: list[dict], key: str) -> list:
+    return [v for r in rs for v in r.get(key) or []]
+
+
 def aggregate(records: list[dict]) -> list[dict]:
-    """One row per (participant, operator): successes and mean metrics over its episodes."""
-    groups: dict[tuple[str, str], list[dict]] = {}
-    for r in records:
-        groups.setdefault((r["participant"], r["operator"]), []).append(r)
+    """One row per (participant, operator, layout): successes with their Wilson 95 % interval,
+    completion time of the successes with a Student-t 95 % interval, and the decision metrics
+    (accuracies: mean over episodes; latency and irrelevant outputs: pooled over episodes)."""
+    groups: dict[tuple[str, str, str], list[dict]] = {}
+    for r in records:  # the joystick needs no body: its rows are per layout, for anyone
+        who = JOYSTICK_ANYONE if r["operator"] == "joystick" else r["participant"]
+        groups.setdefault((who, r["operator"], r["layout"]), []).append(r)
     rows = []
-    for (participant, operator), rs in sorted(groups.items()):
+    for (participant, operator, layout), rs in sorted(groups.items()):
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
-        rows.append({
-            "participant": participant, "operator": operator, "episodes": len(rs), "successes": len(done),
+        ci = metrics.mean_ci95(times)
+        row = {
+            "participant": participant, "operator": operator, "layout": layout, "episodes": len(rs),
+            "seeds": [r["seed"] for r in rs], "successes": len(done),
+            "success_rate": len(done) / len(rs), "success_ci95": list(metrics.success_ci95(len(done), len(rs))),
             "completion_time_mean": _mean(times),
             "completion_time_sd": statistics.stdev(times) if len(times) > 1 else None,
-            "realtime_accuracy": _mean([r.get("realtime_accuracy") for r in rs]),
-            "longest_error_run_ms": max((r["longest_error_run_ms"] for r in rs
-                                         if r.get("longest_error_run_ms") is not None), default=None),
+            "completion_time_ci95": None if ci is None else list(ci),
+            "failures": [{"seed": r["seed"], "failure": r["failure"]} for r in rs if not r["success"]],
             "mode_switches": _mean([r["mode_switches"] for r in rs]),
             "unintended_displacement_mm": _mean([r["unintended_displacement_mm"] for r in rs]),
-            "latency_ms_mean": _mean([r.get("latency_ms_mean") for r in rs]),
             "cube_drops": sum(r["cube_drops"] for r in rs),
             "realtime_factor": _mean([r["realtime_factor"] for r in rs]),
-        })
+        }
+        decided = [r for r in rs if r.get("decisions")]
+        if decided:
+            latency = _pooled(decided, "latency_onsets_ms")
+            decisions = sum(r["decisions"] for r in decided)
+            period_s = decided[0]["excused_allowance_ms"] / 1000.0 / max(decided[0]["excused_allowance_samples"], 1)
+            curves = [r["accuracy_vs_allowance"]["accuracy"] for r in decided]
+            row.update({
+                "accuracy_all_decisions": _mean([r["accuracy_all_decisions"] for r in decided]),
+                "accuracy_excused_transitions": _mean([r["accuracy_excused_transitions"] for r in decided]),
+                "scored_share": _mean([r["scored_share"] for r in decided]),
+                "excused_allowance_ms": _mean([r["excused_allowance_ms"] for r in decided]),
+                "relevant_share": 1.0 - sum(r["irrelevant_decisions"] for r in decided) / decisions,
+                "irrelevant_per_min": metrics.per_minute(sum(r["irrelevant_runs"] for r in decided), decisions, period_s),
+                "irrelevant_longest_run_ms": max(r["irrelevant_longest_run_ms"] for r in decided),
+                "longest_error_run_ms": max(r["longest_error_run_ms"] for r in decided),
+                "latency_ms_median": float(np.median(latency)) if latency else None,
+                "latency_ms_p90": float(np.percentile(latency, 90)) if latency else None,
+                "accuracy_vs_allowance": {"allowance_s": decided[0]["accuracy_vs_allowance"]["allowance_s"],
+                                          "accuracy": np.nanmean(np.array(curves, dtype=float), axis=0).tolist()},
+            })
+        rows.append(row)
     return rows
 
 
 def comparison(rows: list[dict]) -> list[dict]:
-    """Per participant: our BoMI/joystick time ratio, accuracy and longest error run beside the paper's."""
-    by = {(r["participant"], r["operator"]): r for r in rows}
+    """Per participant: our BoMI/joystick time ratio and decision figures beside the paper's.  The
+    paper's real-time accuracy counts the outputs that were not irrelevant: ``relevant_share``
+    is ours in that sense; the two accuracies say how often the output was the intended class."""
+    bomis = {r["participant"]: r for r in rows if r["operator"] == "bomi"}
+    sticks = {r["layout"]: r for r in rows if r["operator"] == "joystick"}
     out = []
-    for participant in sorted({r["participant"] for r in rows}):
-        bomi, joy = by.get((participant, "bomi")), by.get((participant, "joystick"))
+    for participant, bomi in sorted(bomis.items()):
+        joy = sticks.get(bomi["layout"])
         ratio = None
         if bomi and joy and bomi["completion_time_mean"] and joy["completion_time_mean"]:
             ratio = bomi["completion_time_mean"] / joy["completion_time_mean"]
-        out.append({"participant": participant, "time_ratio": ratio,
-                     "paper_time_ratio": paper.TASK["bomi_time_s"] / paper.TASK["joystick_time_s"],
-                     "realtime_accuracy": bomi["realtime_accuracy"] if bomi else None,
-                     "paper_realtime_accuracy": paper.TASK["realtime_accuracy"],
-                     "longest_error_run_ms": bomi["longest_error_run_ms"] if bomi else None,
-                     "paper_longest_error_run_ms": paper.TASK["longest_error_run_ms"]})
+        out.append({"participant": participant, "layout": bomi["layout"], "time_ratio": ratio,
+                    "paper_time_ratio": paper.TASK["bomi_time_s"] / paper.TASK["joystick_time_s"],
+                    **{key: bomi.get(key) for key in
+                       ("relevant_share", "accuracy_all_decisions", "accuracy_excused_transitions",
+                        "irrelevant_longest_run_ms")},
+                    "paper_realtime_accuracy": paper.TASK["realtime_accuracy"],
+                    "paper_longest_error_run_ms": paper.TASK["longest_error_run_ms"]})
     return out
 
 
@@ -154,19 +191,33 @@ def _fmt(value, spec: str = ".1f") -> str:
     return "-" if value is None else format(value, spec)
 
 
-# The columns of a row of ``aggregate`` in the tables (``bomi benchmark``, ``bomi sweep``)
-ROW_COLUMNS = ("successes", "completion time (s)", "real-time accuracy", "longest error run (ms)", "mode switches",
-               "unintended displacement (mm)", "latency from onset (ms)", "drops", "x real time")
+def _pct(value) -> str:
+    return "-" if value is None else f"{100 * value:.1f} %"
+
+
+def _interval(ci, spec: str = ".1f", scale: float = 1.0) -> str:
+    return "" if ci is None else f" [{scale * ci[0]:{spec}}, {scale * ci[1]:{spec}}]"
+
+
+# The columns of a row of ``aggregate`` in the tables (``bomi benchmark``, ``bomi sweep``); 95 % intervals
+# in brackets: Wilson for successes, Student-t for the mean completion time
+ROW_COLUMNS = ("layout", "successes [95 % CI]", "completion time (s) [95 % CI]", "accuracy, all decisions",
+               "accuracy, transitions excused (scored share)", "relevant outputs", "irrelevant / min (longest, ms)",
+               "latency from onset median / p90 (ms)", "mode switches", "drops", "x real time")
 
 
 def row_cells(r: dict) -> list[str]:
     """A row of ``aggregate`` as the texts of ROW_COLUMNS."""
-    sd = f" ± {r['completion_time_sd']:.1f}" if r["completion_time_sd"] is not None else ""
-    acc = _fmt(None if r["realtime_accuracy"] is None else 100 * r["realtime_accuracy"], ".1f")
-    return [f"{r['successes']}/{r['episodes']}", f"{_fmt(r['completion_time_mean'])}{sd}",
-            f"{acc}{' %' if acc != '-' else ''}", _fmt(r["longest_error_run_ms"], ".0f"), _fmt(r["mode_switches"]),
-            _fmt(r["unintended_displacement_mm"], ".0f"), _fmt(r["latency_ms_mean"], ".0f"), str(r["cube_drops"]),
-            _fmt(r["realtime_factor"])]
+    excused = "-" if r.get("accuracy_excused_transitions") is None else (
+        f"{_pct(r['accuracy_excused_transitions'])} ({_pct(r['scored_share'])} scored, "
+        f"{r['excused_allowance_ms']:.0f} ms excused)")
+    wild = "-" if r.get("irrelevant_per_min") is None else (
+        f"{r['irrelevant_per_min']:.2f} ({r['irrelevant_longest_run_ms']:.0f})")
+    latency = "-" if r.get("latency_ms_median") is None else f"{r['latency_ms_median']:.0f} / {r['latency_ms_p90']:.0f}"
+    return [r["layout"], f"{r['successes']}/{r['episodes']}{_interval(r['success_ci95'], '.0f', 100)} %",
+            f"{_fmt(r['completion_time_mean'])}{_interval(r['completion_time_ci95'])}",
+            _pct(r.get("accuracy_all_decisions")), excused, _pct(r.get("relevant_share")), wild, latency,
+            _fmt(r["mode_switches"]), str(r["cube_drops"]), _fmt(r["realtime_factor"])]
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
@@ -175,15 +226,18 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def markdown_tables(rows: list[dict]) -> str:
+    """The benchmark table and the comparison with the paper."""
     lines = [markdown_table(["participant", "operator", *ROW_COLUMNS],
                             [[r["participant"], r["operator"], *row_cells(r)] for r in rows])]
-    lines += ["", "| participant | BoMI / joystick time | paper | real-time accuracy | paper | longest error run (ms) "
-              "| paper |", "|---|---|---|---|---|---|---|"]
+    lines += ["", "| participant | layout | BoMI / joystick time (same layout) | paper | relevant outputs "
+              "| accuracy, all decisions | accuracy, transitions excused | paper real-time accuracy "
+              "| longest irrelevant run (ms) | paper longest error run (ms) |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for c in comparison(rows):
-        acc = None if c["realtime_accuracy"] is None else 100 * c["realtime_accuracy"]
-        lines.append(f"| {c['participant']} | {_fmt(c['time_ratio'], '.2f')} | {c['paper_time_ratio']:.2f} "
-                     f"| {_fmt(acc)} % | {100 * c['paper_realtime_accuracy']:.1f} % "
-                     f"| {_fmt(c['longest_error_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} |")
+        lines.append(f"| {c['participant']} | {c['layout']} | {_fmt(c['time_ratio'], '.2f')} | {c['paper_time_ratio']:.2f} "
+                     f"| {_pct(c['relevant_share'])} | {_pct(c['accuracy_all_decisions'])} "
+                     f"| {_pct(c['accuracy_excused_transitions'])} | {_pct(c['paper_realtime_accuracy'])} "
+                     f"| {_fmt(c['irrelevant_longest_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} |")
     return "\n".join(lines)
 
 
@@ -195,11 +249,22 @@ def run_many(jobs: list[EpisodeJob], engine: Engine) -> list[dict]:
 
 def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, time_limit: float,
                    operator_file: str, vote_length: int = DEFAULT_VOTE, first_seed: int = 0) -> list[EpisodeJob]:
-    """Every (participant, operator, seed) for ``seeds`` seeds from ``first_seed``; the joystick
-    operator needs no participant body, but is run per participant so every table row has its own
-    episodes."""
-    return [EpisodeJob(op, p, s, time_limit, operator_file, vote_length) for p in participants for op in operators
-            for s in range(first_seed, first_seed + seeds)]
+    """Every (participant, operator, seed) for ``seeds`` seeds from ``first_seed``.  The joystick
+    needs no body: it is run once per distinct set of controls (layout and buttons) among the
+    participants' profiles, so each BoMI row has a joystick row with the same controls and no
+    joystick row is repeated under several names."""
+    seen: set[str] = set()
+    jobs = []
+    for p in participants:
+        for op in operators:
+            if op == "joystick":
+                label = participant_controls(p).label
+                if label in seen:
+                    continue
+                seen.add(label)
+            jobs += [EpisodeJob(op, p, s, time_limit, operator_file, vote_length)
+                     for s in range(first_seed, first_seed + seeds)]
+    return jobs
 
 
 def write_json(path: Path, payload) -> None:
