@@ -143,7 +143,8 @@ def test_summary_is_the_benchmark_aggregation_per_cell_with_figures(tmp_path):
         cell = [r for r in records if r["settings"]["time_limit"] == row["settings"]["time_limit"]]
         expected, = aggregate(cell)
         assert {k: row[k] for k in expected} == expected and row["episodes"] == 2
-    assert "| P1 | joystick | 2.5 | 0/2 |" in table and (out / "summary.md").read_text().count("| P1 |") == 2
+    # a joystick row is for anyone with the controls: its participant is "any", its layout P1's
+    assert "| any | joystick | 2.5 | 3-axis, B1+B2 | 0/2 " in table and (out / "summary.md").read_text().count("| any |") == 2
     for figure in ("completion_time.png", "unintended_displacement_mm_vs_time_limit.png"):
         assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert set(FIGURE_METRICS) <= set(rows[0])  # every metric the figure may plot is a summary column

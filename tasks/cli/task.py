@@ -115,6 +115,12 @@ def _pooled(rs: list[dict], key: str) -> list:
     return [v for r in rs for v in r.get(key) or []]
 
 
+# the decision metrics of a row (None for an operator without a classifier)
+DECISION_KEYS = ("accuracy_all_decisions", "accuracy_excused_transitions", "scored_share", "excused_allowance_ms",
+                 "relevant_share", "irrelevant_per_min", "irrelevant_longest_run_ms", "longest_error_run_ms",
+                 "latency_ms_median", "latency_ms_p90", "accuracy_vs_allowance")
+
+
 def aggregate(records: list[dict]) -> list[dict]:
     """One row per (participant, operator, layout): successes with their Wilson 95 % interval,
     completion time of the successes with a Student-t 95 % interval, and the decision metrics
@@ -142,6 +148,7 @@ def aggregate(records: list[dict]) -> list[dict]:
             "realtime_factor": _mean([r["realtime_factor"] for r in rs]),
         }
         decided = [r for r in rs if r.get("decisions")]
+        row.update(dict.fromkeys(DECISION_KEYS))  # None where no classifier decided (the joystick)
         if decided:
             latency = _pooled(decided, "latency_onsets_ms")
             decisions = sum(r["decisions"] for r in decided)
