@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tasks.cli.chain import reproduce, reproduction_markdown, reproduction_record
 from bomi.dataset import data_dir
 from bomi.profiles import load_profile
+from bomi.reproduce import reproduce, reproduction_markdown, reproduction_record
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -13,7 +13,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, class_amplitude,
-                             decide, fit_lda, linear_parameters, posteriors, proportional, rejected)
+                             classify_windows, fit_lda, linear_parameters, posteriors, proportional, rejected)
 from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
 from bomi.frames import ImuFrame, imu_index
@@ -135,7 +135,7 @@ def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProce
     """Decide every window in time order (as the stream does), then score the single-label ones."""
     rec.require_labels()
     prepared = prepare(rec, model.spec, neutral_samples)
-    decisions = decide(model, prepared.features, post)
+    decisions = classify_windows(model, prepared.features, post)
     pure = prepared.pure
     return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure])
 
@@ -295,10 +295,9 @@ def neutral_references(rec: Recording, nodes: Sequence[int], samples: int) -> li
 
 @dataclass
 class CrossValidation:
-    """Held-out windows of a cross-validation: fold, truth and posteriors of each."""
+    """Held-out windows of a cross-validation: truth and posteriors of each."""
 
     classes: np.ndarray
-    fold: np.ndarray
     truth: np.ndarray
     prob: np.ndarray
 
@@ -337,7 +336,7 @@ def _cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinka
         for k in range(n_folds):
             rows = keep & (window_fold == k)
             for part, fold_models in zip(parts, models):
-                part.append((np.full(rows.sum(), k), trained.labels[rows], posteriors(fold_models[k], test_features[rows])))
+                part.append((trained.labels[rows], posteriors(fold_models[k], test_features[rows])))
     return [CrossValidation(fold_models[0].classes, *(np.concatenate(column) for column in zip(*part)))
             for part, fold_models in zip(parts, models)]
 

@@ -140,7 +140,7 @@ class BatchDecisions:
     labels: np.ndarray       # after post-processing
 
 
-def decide(model: Model, features: np.ndarray, post: PostProcessing | None = None) -> BatchDecisions:
+def classify_windows(model: Model, features: np.ndarray, post: PostProcessing | None = None) -> BatchDecisions:
     """Decisions for a sequence of windows in time order (the vote depends on the order)."""
     post = post or model.post
     prob = posteriors(model, features)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bomi.frames import SAMPLE_PERIOD_S, ImuFrame, imu_index, imu_node_id
-from bomi.recording import NodeSample
+from bomi.recording import NodeData, NodeSample, Recording
 
 GYRO_DEG_PER_LSB = 2000.0 / 32768.0
 DT = SAMPLE_PERIOD_S  # the filters integrate over one nominal sample period
@@ -168,3 +168,12 @@ class FusedRows:
                 last = self._last[node_id] = (frame, NodeSample(frame.acc, frame.gyro, frame.mag, angles))
             out[imu_index(node_id)] = last[1]
         return out
+
+
+def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) -> Recording:
+    """The recording with every node's angles recomputed from its raw ACC/GYRO/MAG columns."""
+    nodes = {}
+    for index, node in rec.nodes.items():
+        pitch, roll, yaw = fuse(node.acc, node.gyro, node.mag, calibrations[index])
+        nodes[index] = NodeData(acc=node.acc, gyro=node.gyro, mag=node.mag, angles=np.column_stack([pitch, roll, yaw]))
+    return Recording(nodes=nodes, labels=rec.labels, time=rec.time, source=rec.source)

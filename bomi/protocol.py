@@ -14,7 +14,7 @@ def protocol_order(labels: Sequence[int], repetitions: int, amplitudes: Sequence
 
 
 @dataclass(frozen=True)
-class Segment:
+class Cue:
     """One cue of the calibration protocol: hold ``label`` (or neutral) from start_s to end_s."""
 
     label: int
@@ -25,19 +25,19 @@ class Segment:
 
 def calibration_schedule(profile: Profile, *, repetitions: int = 3, sequences: int = 1,
                          amplitudes: Sequence[float] = (1.0,), hold_s: float = 5.0,
-                         neutral_s: float = 5.0) -> list[Segment]:
+                         neutral_s: float = 5.0) -> list[Cue]:
     """Neutral, then every motion class (at every amplitude) in label order, each held ``hold_s``
     and followed by ``neutral_s`` of neutral; the class sequence ``repetitions`` times per sequence."""
     neutral = next(cls for cls in profile.classes if cls.function == NEUTRAL_FUNCTION)
     by_label = {cls.label: cls for cls in profile.classes if cls.function != NEUTRAL_FUNCTION}
-    cues = [(by_label[label], amp)
-            for label, amp in protocol_order(sorted(by_label), sequences * repetitions, amplitudes)]
-    segments, t = [Segment(neutral.label, _prompt(neutral, None), 0.0, neutral_s)], neutral_s
-    for cls, amp in cues:
-        segments.append(Segment(cls.label, _prompt(cls, amp if len(amplitudes) > 1 else None), t, t + hold_s))
-        segments.append(Segment(neutral.label, _prompt(neutral, None), t + hold_s, t + hold_s + neutral_s))
+    motions = [(by_label[label], amp)
+               for label, amp in protocol_order(sorted(by_label), sequences * repetitions, amplitudes)]
+    schedule, t = [Cue(neutral.label, _prompt(neutral, None), 0.0, neutral_s)], neutral_s
+    for cls, amp in motions:
+        schedule.append(Cue(cls.label, _prompt(cls, amp if len(amplitudes) > 1 else None), t, t + hold_s))
+        schedule.append(Cue(neutral.label, _prompt(neutral, None), t + hold_s, t + hold_s + neutral_s))
         t += hold_s + neutral_s
-    return segments
+    return schedule
 
 
 def _prompt(cls: ClassConfig, amplitude: float | None) -> str:

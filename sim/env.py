@@ -173,13 +173,6 @@ class ArmSim:
         return self.data.site_xmat[self.scene.tool_site].reshape(3, 3).copy()
 
     @property
-    def tool_quat(self) -> np.ndarray:
-        """Tool orientation as a unit quaternion (w, x, y, z)."""
-        quat = np.zeros(4)
-        mujoco.mju_mat2Quat(quat, self.data.site_xmat[self.scene.tool_site])
-        return quat
-
-    @property
     def finger_closure(self) -> float:
         """Mean finger closure: 0 fully open, 1 fully closed."""
         lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]

@@ -250,7 +250,7 @@ def tremor_filter(spectrum: tuple[np.ndarray, np.ndarray], taps: int = 255) -> t
 
 
 @dataclass(frozen=True)
-class Segment:
+class PostureMove:
     """A min-jerk move from ``start`` to ``target`` (absolute angles, (nodes, 3)) beginning at ``t0``."""
 
     t0: float
@@ -317,7 +317,7 @@ class VirtualParticipant:
         self._day_posture = {label: np.exp(person.normal(0.0, m.day_gain_log_std)) * m.posture_deg
                              + person.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
         rest = self._target(NEUTRAL_LABEL, 0.0)
-        self._segments: list[Segment] = [Segment(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
+        self._moves: list[PostureMove] = [PostureMove(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
         n_spasm_nodes = len(params.spasm.nodes) if params.spasm else 0
         self._spasm_onsets = np.empty(0)
         self._spasm_sizes = np.empty((0, n_spasm_nodes, 3))
@@ -354,7 +354,7 @@ class VirtualParticipant:
 
     @property
     def intent(self) -> tuple[int, float]:
-        return self._segments[-1].label, self._segments[-1].amplitude
+        return self._moves[-1].label, self._moves[-1].amplitude
 
     def set_intent(self, label: int, amplitude: float, t: float) -> None:
         """From sim time ``t``: move (after the reaction time) to ``label``'s posture at ``amplitude`` in [0, 1].
@@ -367,21 +367,21 @@ class VirtualParticipant:
             raise ValueError(f"amplitude must be in [0, 1], got {amplitude}")
         if (label, amplitude) == self.intent or (label == NEUTRAL_LABEL and self.intent[0] == NEUTRAL_LABEL):
             return
-        t0 = max(t + self.params.reaction_s, self.time_s, self._segments[-1].t0)
+        t0 = max(t + self.params.reaction_s, self.time_s, self._moves[-1].t0)
         start = self._posture_at(np.array([t0]))[0]
-        self._segments.append(Segment(t0, self.params.onset_s, start, self._target(label, amplitude), label,
+        self._moves.append(PostureMove(t0, self.params.onset_s, start, self._target(label, amplitude), label,
                                       amplitude))
 
     def _segment_index(self, t: np.ndarray) -> np.ndarray:
         """Index of the segment in force at each time of ``t``."""
-        return np.maximum(np.searchsorted([s.t0 for s in self._segments], t, side="right") - 1, 0)
+        return np.maximum(np.searchsorted([s.t0 for s in self._moves], t, side="right") - 1, 0)
 
     def _posture_at(self, t: np.ndarray) -> np.ndarray:
         """Deliberate posture (no sway/tremor/spasm) at times ``t``, (n, nodes, 3)."""
         which = self._segment_index(t)
         out = np.empty((len(t), self.params.n_nodes, 3))
         for k in np.unique(which):
-            out[which == k] = self._segments[k].at(t[which == k])
+            out[which == k] = self._moves[k].at(t[which == k])
         return out
 
     def _noise_scale(self, t: np.ndarray, attribute: str) -> np.ndarray:
@@ -389,8 +389,8 @@ class VirtualParticipant:
         which = self._segment_index(t)
         out = np.empty((len(t), self.params.n_nodes, 3))
         for k in np.unique(which):
-            seg = self._segments[k]
-            old = getattr(self.params.motion(self._segments[max(k - 1, 0)].label), attribute)
+            seg = self._moves[k]
+            old = getattr(self.params.motion(self._moves[max(k - 1, 0)].label), attribute)
             new = getattr(self.params.motion(seg.label), attribute)
             progress = seg.progress(t[which == k])[:, None, None]
             out[which == k] = (1 - progress) * old[None] + progress * new[None]
@@ -444,8 +444,8 @@ class VirtualParticipant:
             self._last_arrival[int(node)] = float(fresh.arrival_s[fresh.node_index == node].max())
         self._pending = _merge(self._pending, fresh)
         which = self._segment_index(t)
-        self._truth.append((t, np.array([self._segments[k].label for k in which]),
-                            np.array([self._segments[k].amplitude for k in which]), angles))
+        self._truth.append((t, np.array([self._moves[k].label for k in which]),
+                            np.array([self._moves[k].amplitude for k in which]), angles))
         self._generated = n_total
 
     def deliveries(self, t_end: float) -> Delivery:

@@ -9,14 +9,14 @@ import numpy as np
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.frames import FrameParser
 from bomi.profiles import Profile
-from bomi.protocol import Segment
+from bomi.protocol import Cue
 from tasks.imu_synth import Delivery, LinkModel
 from tasks.participant import ParticipantParams, VirtualParticipant
 
 LOSSLESS_LINK = LinkModel(loss_fraction=0.0)  # the emulator applies its own --loss
 
 
-def participant_blocks(params: ParticipantParams, profile: Profile, seed: int, cues: Sequence[Segment],
+def participant_blocks(params: ParticipantParams, profile: Profile, seed: int, cues: Sequence[Cue],
                        end_s: float, block_s: float = 1.0) -> Iterator[dict[int, np.ndarray]]:
     """Raw samples (per node index, (m, 9) mag, gyro, acc) of a virtual participant following ``cues``,
     made ``block_s`` at a time up to ``end_s``. At each cue's start the participant takes up its class

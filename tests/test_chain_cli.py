@@ -9,11 +9,10 @@ import pytest
 from bomi.chain import (OnlineChain, evaluate, neutral_references, node_states, prepare, recording_neutral,
                         segment_folds, select_settings, window_features)
 from bomi import paper
-from tasks.cli.chain import fused_recording
-from bomi.classifier import PostProcessing, decide
+from bomi.classifier import PostProcessing, classify_windows
 from tasks.cli import main
 from bomi.dataset import data_dir
-from bomi.fusion import NodeCalibration
+from bomi.fusion import NodeCalibration, fused_recording
 from bomi.model_io import load_model
 from bomi.recording import NodeData, Recording, read_recording, write_recording
 
@@ -42,7 +41,7 @@ def test_streaming_equals_batch_on_a_real_recording(p1_days, p1_profile, day1_fv
     streamed = streamed[7:]
 
     prepared = prepare(rec, model.spec, p1_profile.neutral_samples)
-    batch = decide(model, prepared.features, post)
+    batch = classify_windows(model, prepared.features, post)
     assert [d.sample_index for d in streamed] == prepared.ends.tolist()
     assert [d.label for d in streamed] == batch.labels.tolist()
     assert [d.rejected for d in streamed] == batch.rejected.tolist()
@@ -75,7 +74,7 @@ def test_raw_push_path_fuses_like_the_batch_fusion(p1_days, p1_profile, day1_fv1
             d = chain.push(node, n.acc[k], n.gyro[k], n.mag[k])
         decisions.append(d)
     states = node_states(refused, (1, 2, 3), np.zeros((3, 3)))     # the chain was given no neutral offsets
-    batch = decide(day1_fv1_model, window_features(states, day1_fv1_model.spec))
+    batch = classify_windows(day1_fv1_model, window_features(states, day1_fv1_model.spec))
     assert [d.label for d in decisions[7:]] == batch.labels.tolist()
 
 

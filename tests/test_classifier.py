@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from bomi.chain import prepare
-from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, class_amplitude, decide,
-                             fit_lda, gamma, majority_vote, posteriors, proportional, reject)
+from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, class_amplitude,
+                             classify_windows, fit_lda, gamma, majority_vote, posteriors, proportional, reject)
 from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.model_io import FORMAT_VERSION, load_model, save_model
@@ -21,7 +21,7 @@ def test_posteriors_are_sklearns(p1_days, p1_profile, day1_fv1_model):
     lda = fit_lda(x, y, day1_fv1_model.shrinkage)
     test = prepare(p1_days[2], day1_fv1_model.spec, p1_profile.neutral_samples).features
     assert np.allclose(posteriors(day1_fv1_model, test), lda.predict_proba(test), rtol=0, atol=1e-12)
-    assert np.array_equal(decide(day1_fv1_model, test).raw, lda.predict(test))
+    assert np.array_equal(classify_windows(day1_fv1_model, test).raw, lda.predict(test))
 
 
 def test_rejection_and_vote_by_hand():
@@ -42,10 +42,10 @@ def test_decide_applies_rejection_before_vote():
     model = Model(classes=np.array([0, 1, 2]), coef=np.array([[0.0], [1.0], [-1.0]]), intercept=np.zeros(3),
                   spec=FeatureSpec("FV1", (1,), window=1), amplitude={})
     x = np.array([[5.0], [0.1], [5.0], [-5.0]])
-    d = decide(model, x, PostProcessing(rejection_threshold=0.9, vote_length=1))
+    d = classify_windows(model, x, PostProcessing(rejection_threshold=0.9, vote_length=1))
     assert d.raw.tolist() == [1, 1, 1, 2] and d.rejected.tolist() == [False, True, False, False]
     assert d.labels.tolist() == [1, 0, 1, 2]
-    assert decide(model, x, PostProcessing(rejection_threshold=0.9, vote_length=3)).labels.tolist() == [1, 0, 1, 2]
+    assert classify_windows(model, x, PostProcessing(rejection_threshold=0.9, vote_length=3)).labels.tolist() == [1, 0, 1, 2]
 
 
 def test_proportional_output_by_hand():

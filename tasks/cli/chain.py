@@ -6,26 +6,23 @@ import json
 import os
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
-from bomi import paper
-from bomi.chain import Evaluation, Selection, cross_validate, evaluate, require_for, select_settings, train
+from bomi.chain import Evaluation, evaluate, require_for, train
 from bomi.classifier import PostProcessing
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.features import FEATURE_KINDS, FeatureSpec
-from bomi.fusion import NodeCalibration, fuse
+from bomi.fusion import NodeCalibration, fused_recording
 from bomi.model_io import SUFFIXES, load_model, save_model
 from bomi.profiles import Profile
-from bomi.recording import RAW_SIGNALS, NodeData, Recording, read_recording, write_recording
+from bomi.recording import RAW_SIGNALS, Recording, read_recording, write_recording
+from bomi.reproduce import reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
 from tasks.stick import arm_profile
-
-DAYS = (1, 2, 3, 4, 5)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -185,95 +182,6 @@ def evaluate_command(args: argparse.Namespace) -> int:
     return 0
 
 
-@dataclass
-class FeatureReproduction:
-    kind: str
-    selection: Selection          # shrinkage and rejection threshold chosen on day 1
-    within_day1: float            # segment-chunk CV accuracy within day 1
-    days: dict[int, Evaluation]   # day -> without rejection
-    rejecting: dict[int, Evaluation]  # day -> with the day-1 threshold
-
-
-def reproduce(directory: Path, profile: Profile) -> list[FeatureReproduction]:
-    """Day-1 model tested on days 2..5, for FV1, FV2, FV3; every setting chosen on day 1 alone."""
-    paths = {day: directory / f"day{day}_testp.mat" for day in DAYS}
-    recordings = {day: read_recording(path) for day, path in tqdm(paths.items(), desc="reading days", unit="day")}
-    out = []
-    for kind in tqdm(FEATURE_KINDS, desc="feature vectors", unit="FV"):
-        spec = replace(profile.spec, kind=kind)
-        chosen = select_settings(recordings[1], profile, spec)
-        within = cross_validate(recordings[1], profile, spec, [chosen.shrinkage])[0].accuracy
-        model = train([recordings[1]], profile, spec, chosen.shrinkage, PostProcessing())
-        rejecting = PostProcessing(rejection_threshold=chosen.rejection_threshold)
-        out.append(FeatureReproduction(
-            kind, chosen, within,
-            {d: evaluate(model, recordings[d], profile.neutral_samples) for d in DAYS[1:]},
-            {d: evaluate(model, recordings[d], profile.neutral_samples, rejecting) for d in DAYS[1:]}))
-    return out
-
-
-def reproduction_record(rows: list[FeatureReproduction]) -> dict:
-    def pooled(evaluations: dict[int, Evaluation]) -> dict:
-        truth = np.concatenate([e.truth for e in evaluations.values()])
-        predicted = np.concatenate([e.predicted for e in evaluations.values()])
-        rejected = np.concatenate([e.rejected for e in evaluations.values()])
-        return {"accepted_accuracy": float(np.mean(predicted[~rejected] == truth[~rejected])),
-                "rejected_share": float(np.mean(rejected))}
-
-    return {
-        "paper_day1_model_fv3": paper.DAY1_MODEL_PCT,
-        "method": "train on day 1 (the day-1 test recording stands in for the unpublished training recording), "
-                  "test on days 2..5; shrinkage and rejection threshold chosen by drift-aware CV within day 1",
-        "features": {r.kind: {
-            "shrinkage": r.selection.shrinkage, "rejection_threshold": r.selection.rejection_threshold,
-            "day1_drift_cv_accuracy": {str(k): v for k, v in r.selection.drift_accuracy.items()},
-            "day1_drift_cv_rejected_share": {str(k): v for k, v in r.selection.drift_rejected.items()},
-            "within_day1_cv_accuracy": r.within_day1,
-            "days": {d: {"accuracy": e.accuracy, "windows": int(len(e.truth))} for d, e in r.days.items()},
-            "mean_accuracy_days_2_5": float(np.mean([e.accuracy for e in r.days.values()])),
-            "with_rejection": {d: {"accuracy": e.accuracy, "accepted_accuracy": e.accepted_accuracy,
-                                   "rejected_share": e.rejected_share} for d, e in r.rejecting.items()},
-            "with_rejection_pooled_days_2_5": pooled(r.rejecting),
-        } for r in rows},
-    }
-
-
-def reproduction_markdown(record: dict) -> str:
-    features = record["features"]
-    kinds = list(features)
-    header = ["Day", "Paper FV3"] + kinds + [f"{k} + rejection: accepted (rejected)" for k in kinds]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    day1 = [f"{100 * features[k]['within_day1_cv_accuracy']:.2f}" for k in kinds]
-    lines.append(f"| 1 (within day 1, 5-fold CV) | {paper.DAY1_MODEL_PCT[1]:.2f} | " + " | ".join(day1)
-                 + " |" + " - |" * len(kinds))
-    for day in DAYS[1:]:
-        ours = [f"{100 * features[k]['days'][day]['accuracy']:.2f}" for k in kinds]
-        rej = [f"{100 * features[k]['with_rejection'][day]['accepted_accuracy']:.2f} "
-               f"({100 * features[k]['with_rejection'][day]['rejected_share']:.2f})" for k in kinds]
-        lines.append(f"| {day} | {paper.DAY1_MODEL_PCT[day]:.2f} | " + " | ".join(ours + rej) + " |")
-    paper_mean = np.mean([paper.DAY1_MODEL_PCT[d] for d in DAYS[1:]])
-    means = [f"{100 * features[k]['mean_accuracy_days_2_5']:.2f}" for k in kinds]
-    pooled = [f"{100 * features[k]['with_rejection_pooled_days_2_5']['accepted_accuracy']:.2f} "
-              f"({100 * features[k]['with_rejection_pooled_days_2_5']['rejected_share']:.2f})" for k in kinds]
-    lines.append(f"| mean 2..5 (rejection: pooled) | {paper_mean:.2f} | " + " | ".join(means + pooled) + " |")
-    shrinkages = list(features[kinds[0]]["day1_drift_cv_accuracy"])
-    thresholds = list(features[kinds[0]]["day1_drift_cv_rejected_share"])
-    selection = ["| Day-1 drift-aware CV | " + " | ".join(f"shrinkage {s}" for s in shrinkages)
-                 + " | chosen shrinkage | " + " | ".join(f"rejected at {t}" for t in thresholds) + " | chosen threshold |",
-                 "|" + "---|" * (len(shrinkages) + len(thresholds) + 3)]
-    for k in kinds:
-        f = features[k]
-        selection.append(f"| {k} | " + " | ".join(f"{100 * f['day1_drift_cv_accuracy'][s]:.2f}" for s in shrinkages)
-                         + f" | {f['shrinkage']} | "
-                         + " | ".join(f"{100 * f['day1_drift_cv_rejected_share'][t]:.3f}" for t in thresholds)
-                         + f" | {f['rejection_threshold']} |")
-    return ("Accuracy (%) of the day-1 model on each day; rejection columns: accuracy of accepted windows "
-            "(share of windows rejected, %).\n\n" + "\n".join(lines)
-            + "\n\nSettings chosen on day 1 alone: accuracy (%) of the drift-aware cross-validation per LDA "
-              "shrinkage, and share (%) of its windows each rejection threshold rejects with the chosen shrinkage.\n\n"
-            + "\n".join(selection) + "\n")
-
-
 def reproduce_command(args: argparse.Namespace) -> int:
     json_out = _check_output(args.json, (".json",)) if args.json else None
     md_out = _check_output(args.markdown, (".md",)) if args.markdown else None
@@ -288,15 +196,6 @@ def reproduce_command(args: argparse.Namespace) -> int:
     if md_out:
         _write_text(md_out, table)
     return 0
-
-
-def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) -> Recording:
-    """The recording with every node's angles recomputed from its raw ACC/GYRO/MAG columns."""
-    nodes = {}
-    for index, node in rec.nodes.items():
-        pitch, roll, yaw = fuse(node.acc, node.gyro, node.mag, calibrations[index])
-        nodes[index] = NodeData(acc=node.acc, gyro=node.gyro, mag=node.mag, angles=np.column_stack([pitch, roll, yaw]))
-    return Recording(nodes=nodes, labels=rec.labels, time=rec.time, source=rec.source)
 
 
 def fuse_command(args: argparse.Namespace) -> int:

@@ -16,7 +16,7 @@ from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
 from bomi.fusion import DT, FusedRows, NodeCalibration
 from bomi.model_io import save_model
-from bomi.protocol import Segment, calibration_schedule
+from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from tasks.cli import add_command
@@ -239,7 +239,7 @@ def run_capture(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------ record
-def _cue(segments: list[Segment], k: int, t: float) -> str:
+def _cue(segments: list[Cue], k: int, t: float) -> str:
     """What the terminal shows at time t of segment k: the cue, time left, a countdown to the next."""
     segment = segments[k]
     left = segment.end_s - t
