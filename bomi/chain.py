@@ -13,7 +13,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, class_amplitude,
-                             classify_windows, fit_lda, linear_parameters, posteriors, proportional, rejected)
+                             classify_windows, fit_lda, linear_parameters, model_defects, posteriors, proportional,
+                             rejected)
 from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
 from bomi.frames import ImuFrame, imu_index
@@ -68,6 +69,8 @@ class PreparedRecording:
 
 def prepare(rec: Recording, spec: FeatureSpec, neutral_samples: int) -> PreparedRecording:
     require_for(rec, spec)
+    if len(rec) < spec.window:
+        raise BomiError(f"{rec.source}: {len(rec)} samples, shorter than one {spec.window}-sample window")
     states = node_states(rec, spec.nodes, recording_neutral(rec, spec.nodes, neutral_samples))
     ends = window_ends(len(rec), spec.window, spec.stride)
     labels = pure = None
@@ -98,13 +101,24 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         for k, i in enumerate(spec.nodes):
             angles[i].append(prepared.states[ends, k * _WIDTH:k * _WIDTH + 3])
     x, y = np.concatenate(xs), np.concatenate(ys)
+    sources = ", ".join(rec.source for rec in recordings)
     if len(np.unique(y)) < 3:
-        raise BomiError(f"{recordings[0].source}: training needs at least three classes, found {np.unique(y).tolist()}")
-    classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))
-    amplitude = amplitude_ranges({i: np.concatenate(a) for i, a in angles.items()}, y, profile.class_nodes,
-                                 profile.amplitude)
-    return Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
-                 post=post or profile.post, shrinkage=shrinkage)
+        raise BomiError(f"{sources}: training needs windows of at least three classes held for {spec.window} "
+                        f"samples each, found {np.unique(y).tolist() or 'none'}")
+    with np.errstate(all="ignore"):  # degenerate signals are reported below, as defects of the model
+        try:
+            classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise BomiError(f"{sources}: cannot train on these signals ({' '.join(str(exc).split())})") from None
+        amplitude = amplitude_ranges({i: np.concatenate(a) for i, a in angles.items()}, y, profile.class_nodes,
+                                     profile.amplitude)
+    model = Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
+                  post=post or profile.post, shrinkage=shrinkage, profile=profile.identity)
+    defects = model_defects(model)
+    if defects:
+        more = f" (and {len(defects) - 1} more)" if len(defects) > 1 else ""
+        raise BomiError(f"{sources}: cannot train a usable model: {defects[0]}{more}")
+    return model
 
 
 @dataclass
@@ -133,10 +147,14 @@ class Evaluation:
 
 def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProcessing | None = None) -> Evaluation:
     """Decide every window in time order (as the stream does), then score the single-label ones."""
-    rec.require_labels()
+    unknown = sorted(set(rec.require_labels().tolist()) - set(model.classes.tolist()))
+    if unknown:
+        raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of the model {model.classes.tolist()}")
     prepared = prepare(rec, model.spec, neutral_samples)
-    decisions = classify_windows(model, prepared.features, post)
     pure = prepared.pure
+    if not pure.any():
+        raise BomiError(f"{rec.source}: no {model.spec.window}-sample window lies within one label; nothing to score")
+    decisions = classify_windows(model, prepared.features, post)
     return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure])
 
 

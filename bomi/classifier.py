@@ -65,6 +65,49 @@ class Model:
     amplitude: dict[int, AmplitudeRange]
     post: PostProcessing = field(default_factory=PostProcessing)
     shrinkage: float | str | None = None
+    profile: ProfileIdentity | None = None  # the profile it was trained for (None: made in memory, e.g. a CV fold)
+
+
+@dataclass(frozen=True)
+class ProfileIdentity:
+    """Which profile a model was trained for: its name and a hash of what decides how the model
+    moves the arm (nodes and their calibration, classes and their joystick functions, features,
+    amplitude kind, joystick layout); see bomi.profiles.Profile.identity."""
+
+    name: str
+    digest: str
+
+
+def model_defects(model: Model) -> list[str]:
+    """What makes ``model`` unusable or unsafe (empty when it is fine): shapes, non-finite
+    parameters, and amplitude ranges that would give a class a speed out of nothing (NaN or
+    infinite bounds, min >= max, a node the model does not read, the neutral class)."""
+    defects = []
+    classes = np.asarray(model.classes)
+    if classes.ndim != 1 or classes.dtype.kind not in "iu" or len(set(classes.tolist())) != len(classes):
+        return ["classes must be distinct integer labels"]
+    if len(classes) < 3:
+        defects.append(f"needs at least three classes, has {len(classes)}")
+    if model.coef.ndim != 2 or model.coef.shape[0] != len(classes) or model.intercept.shape != (len(classes),):
+        defects.append(f"coef/intercept shapes {model.coef.shape}/{model.intercept.shape} do not fit "
+                       f"{len(classes)} classes")
+    elif not (np.all(np.isfinite(model.coef)) and np.all(np.isfinite(model.intercept))):
+        defects.append("non-finite LDA parameters (constant or degenerate training signals?)")
+    for label, r in sorted(model.amplitude.items()):
+        where = f"amplitude range of class {label}"
+        if label == NEUTRAL_LABEL or label not in set(classes.tolist()):
+            defects.append(f"{where}: not a motion class of the model")
+        if r.node not in model.spec.nodes:
+            defects.append(f"{where}: node {r.node} is not one of the model's nodes {list(model.spec.nodes)}")
+        if not (np.isfinite(r.gamma_min) and np.isfinite(r.gamma_max)):
+            defects.append(f"{where}: [{r.gamma_min}, {r.gamma_max}] is not finite")
+        elif not r.gamma_min < r.gamma_max:
+            defects.append(f"{where}: min {r.gamma_min} is not below max {r.gamma_max} (no spread in the "
+                           "class's training samples)")
+        elif r.direction is not None and not (len(r.direction) == 3 and np.all(np.isfinite(r.direction))
+                                            and abs(np.linalg.norm(r.direction) - 1.0) < 1e-6):
+            defects.append(f"{where}: direction must be a finite unit 3-vector")
+    return defects
 
 
 def fit_lda(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None) -> LinearDiscriminantAnalysis:
@@ -200,6 +243,6 @@ def proportional(gamma_value: float, amplitude: AmplitudeRange | None) -> float:
     if amplitude is None:
         return 0.0
     span = amplitude.gamma_max - amplitude.gamma_min
-    if span <= 0.0:
-        return 1.0
+    if not span > 0.0:  # a degenerate or NaN range gives no speed (model files with one are refused)
+        return 0.0
     return min(1.0, max(0.0, gamma_value - amplitude.gamma_min) / span)

@@ -15,6 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 FEATURE_KINDS = ("FV1", "FV2", "FV3")
+# Longest window a spec may ask for: 1024 samples are 16 s at 62.5 Hz, longer than any motion held in
+# calibration (5 s), so no single-label window that long exists to train on; a bound keeps a bad file
+# from allocating without limit.
+MAX_WINDOW = 1024
 NODE_STATE = ("pitch", "roll", "yaw", "gyro_x", "gyro_y", "gyro_z")
 
 
@@ -87,8 +91,9 @@ class FeatureSpec:
 
     def __post_init__(self) -> None:
         component_index(len(self.nodes), self.kind)  # validates kind
-        if self.window < 1 or self.stride < 1:
-            raise ValueError("window length and stride must be >= 1")
+        if not (1 <= self.window <= MAX_WINDOW and 1 <= self.stride <= self.window):
+            raise ValueError(f"window length must be in 1..{MAX_WINDOW} and stride in 1..window, "
+                             f"got window {self.window}, stride {self.stride}")
         if self.kind == "FV3" and self.window % 2:
             raise ValueError(f"FV3 needs an even window length, got {self.window}")
 

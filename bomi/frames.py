@@ -4,11 +4,20 @@ The parser is incremental (feed it any chunk of bytes), resynchronises on the do
 (a candidate starting with 0x33 counts only if its byte 31 is 0x34; after a bad candidate the
 search restarts at the next 0x33 after the old start), and never raises on bad bytes. Pure:
 no I/O; arrival times are passed in by the caller.
+
+Phantom-frame guard: the format has no checksum, so noise (or the data bytes of a real frame
+after a lost byte) can pass the start/end check. An IMU frame is delivered only from a node that
+has been confirmed: ``CONFIRM_FRAMES`` candidate frames of that node in a row, each with the same
+period byte and a counter 1..``MAX_COUNTER_GAP`` ahead of the previous one. The frames that
+confirm a node are delivered then, and every frame in arrival order (a clean stream loses nothing
+and keeps its interleaving); a confirmed node's frame that breaks the rule starts a new probation,
+so a phantom cannot inject a node or, beyond one frame whose counter happens to fit, a sample.
+Measured in benchmarks/parser_fuzz.py.
 """
 from __future__ import annotations
 
 import struct
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -23,6 +32,15 @@ SAMPLE_PERIOD_S = 1.0 / SAMPLE_RATE_HZ
 DEFAULT_PERIOD_MS = round(1000 / SAMPLE_RATE_HZ)
 COUNTER_MODULO = 256  # the packet counter is one byte
 SAFETY_EVENT_BYTE = 14
+# Phantom-frame guard (module docstring). 3 frames: random bytes pass the start/end check about once
+# per 65,536 positions and would then need two more frames of the same node, period and nearby counters.
+# A gap of 16 counters is 256 ms of consecutive loss; a longer outage costs the next 2 frames' delay.
+CONFIRM_FRAMES = 3
+MAX_COUNTER_GAP = 16
+# Frames are delivered in arrival order, so a frame on probation holds back the ones after it, at most
+# this many (2 x 3 frames of each of 6 nodes: a real node confirms well within it, a phantom is dropped).
+HOLD_FRAMES = 2 * CONFIRM_FRAMES * MAX_IMU_NODES
+_OK, _PENDING, _DROPPED = 0, 1, 2
 
 # start, node id, period, counter, unused, mag xyz, gyro xyz, acc xyz, 8 unused, end
 _FRAME = struct.Struct(">BBBBx3h3h3h8xB")
@@ -146,7 +164,13 @@ class FrameParser:
     safety_events: list[SafetyKeyEvent] = field(default_factory=list)
     discarded_bytes: int = 0
     frames_accepted: int = 0
+    unconfirmed: int = 0          # IMU frames the phantom-frame guard dropped
+    confirm_frames: int = CONFIRM_FRAMES
+    max_counter_gap: int = MAX_COUNTER_GAP
     _buffer: bytearray = field(default_factory=bytearray, repr=False)
+    _queue: deque = field(default_factory=deque, repr=False)       # [frame, arrival, status] in arrival order
+    _probation: dict[int, list[list]] = field(default_factory=dict, repr=False)  # node id -> its queue entries
+    _last: dict[int, ImuFrame] = field(default_factory=dict, repr=False)         # last frame let through
 
     def feed(self, data: bytes, now: float | None = None) -> list[ImuFrame]:
         """Parse ``data`` (any chunk); return the IMU frames completed by it, in order.
@@ -174,14 +198,12 @@ class FrameParser:
                 pos = start + 1
                 continue
             self.discarded_bytes += start - pos
-            frame = self._accept(buf, start, now)
-            if frame is not None:
-                frames.append(frame)
+            frames += self._accept(buf, start, now)
             pos = start + FRAME_SIZE
         del buf[:pos]
         return frames
 
-    def _accept(self, buf: bytearray, start: int, now: float | None) -> ImuFrame | None:
+    def _accept(self, buf: bytearray, start: int, now: float | None) -> list[ImuFrame]:
         self.frames_accepted += 1
         _, node_id, period_ms, counter = _HEADER.unpack_from(buf, start)
         if imu_index(node_id) is None:
@@ -189,21 +211,67 @@ class FrameParser:
             if node_id == SAFETY_KEY_NODE_ID and buf[start + SAFETY_EVENT_BYTE] != SafetyKey.NONE:
                 self.safety_events.append(SafetyKeyEvent(
                     buf[start + SAFETY_EVENT_BYTE], counter, self.frames_accepted - 1))
-            return None
+            return []
         values = _FRAME.unpack_from(buf, start)
-        stats = self.nodes.get(node_id)
-        if stats is None:
-            stats = self.nodes[node_id] = NodeStats()
+        frame = ImuFrame(node_id, period_ms, counter, values[4:7], values[7:10], values[10:13])
+        entry = [frame, now, _OK]
+        self._queue.append(entry)
+        last = self._last.get(node_id)
+        chain = self._probation.setdefault(node_id, [])
+        if last is not None and self._follows(last, frame):
+            self._last[node_id] = frame
+            self._drop(chain)  # the node's own stream goes on: what was on probation was not it
         else:
-            stats.lost += (counter_step(stats.last_counter, counter) - 1) % COUNTER_MODULO  # a repeated counter: a full wrap lost
+            if chain and not self._follows(chain[-1][0], frame):
+                self._drop(chain)
+            entry[2] = _PENDING
+            chain.append(entry)
+            if len(chain) >= self.confirm_frames:
+                for held in chain:
+                    held[2] = _OK
+                self._last[node_id] = frame
+                chain.clear()
+        return self._release()
+
+    def _follows(self, last: ImuFrame, frame: ImuFrame) -> bool:
+        return frame.period_ms == last.period_ms and 1 <= counter_step(last.counter, frame.counter) <= self.max_counter_gap
+
+    def _drop(self, chain: list[list]) -> None:
+        for held in chain:
+            held[2] = _DROPPED
+        self.unconfirmed += len(chain)
+        chain.clear()
+
+    def _release(self) -> list[ImuFrame]:
+        """Frames in arrival order up to the first one still on probation; a probation that holds
+        more than HOLD_FRAMES frames behind it is given up (a phantom that never repeated)."""
+        queue, out = self._queue, []
+        while queue:
+            frame, now, status = queue[0]
+            if status == _PENDING:
+                if len(queue) <= HOLD_FRAMES:
+                    break
+                self._drop(self._probation[frame.node_id])
+                continue
+            queue.popleft()
+            if status == _OK:
+                out.append(self._deliver(frame, now))
+        return out
+
+    def _deliver(self, frame: ImuFrame, now: float | None) -> ImuFrame:
+        stats = self.nodes.get(frame.node_id)
+        if stats is None:
+            stats = self.nodes[frame.node_id] = NodeStats()
+        else:
+            stats.lost += (counter_step(stats.last_counter, frame.counter) - 1) % COUNTER_MODULO  # a repeated counter: a full wrap lost
         stats.frames += 1
-        stats.period_ms = period_ms
-        stats.last_counter = counter
+        stats.period_ms = frame.period_ms
+        stats.last_counter = frame.counter
         if now is not None:
             if stats.first_time is None:
                 stats.first_time = now
             stats.last_time = now
-        return ImuFrame(node_id, period_ms, counter, values[4:7], values[7:10], values[10:13])
+        return frame
 
     @property
     def total_lost(self) -> int:
@@ -218,6 +286,8 @@ class FrameParser:
         ]
         if self.skipped:
             parts.append("skipped " + ", ".join(f"id {k}: {v}" for k, v in sorted(self.skipped.items())))
+        if self.unconfirmed:
+            parts.append(f"{self.unconfirmed} frames dropped by the phantom-frame guard")
         parts.append(f"{self.discarded_bytes} garbage bytes")
         return "; ".join(parts)
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 import csv
 import io
 import os
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
@@ -26,11 +25,17 @@ import numpy as np
 import scipy.io
 
 from bomi.errors import BomiError
+from bomi.files import check_input, write_text
 from bomi.frames import SAMPLE_RATE_HZ
 
 NODE_INDICES = range(1, 7)
 TIME_COLUMN = "Time"
 LABEL_COLUMN = "Etiquette"
+RECORDING_SUFFIXES = (".mat", ".csv")
+# Raw values are 16-bit counts and angles degrees: anything beyond this is a garbled cell, and would
+# overflow the filters and features downstream.
+MAX_ABS_VALUE = 1e6
+MAX_LABEL = 2**31 - 1  # labels are ints; a larger value is a garbled cell, not a class
 LOGGER_NODE = 1  # the node the original logger's node-less column names belong to
 
 
@@ -153,16 +158,14 @@ class NodeSample:
 
 def read_recording(path: str | os.PathLike) -> Recording:
     """Read a .mat (MATLAB v5) or .csv recording in either naming; other variables are ignored."""
-    path = Path(path)
-    if not path.is_file():
-        raise BomiError(f"{path}: no such recording file")
+    path = check_input(path, "recording")
     suffix = path.suffix.lower()
     if suffix == ".mat":
         # The published .mat files carry a uint8 'Time' counter that is not a clock (dataset README).
         return _recording_from_variables(path, _read_mat_variables(path), from_csv=False)
     if suffix == ".csv":
         return _recording_from_variables(path, _read_csv_variables(path), from_csv=True)
-    raise BomiError(f"{path}: unknown recording format '{suffix}' (expected .mat or .csv)")
+    raise BomiError(f"{path}: unknown recording format '{suffix}' (expected {' or '.join(RECORDING_SUFFIXES)})")
 
 
 def _read_mat_variables(path: Path) -> dict[str, object]:
@@ -180,9 +183,13 @@ def _read_csv_variables(path: Path) -> dict[str, object]:
             rows = list(csv.reader(handle))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise BomiError(f"{path}: not a readable CSV file ({exc})") from None
+    while rows and not any(cell.strip() for cell in rows[-1]):  # trailing blank lines
+        rows.pop()
     if not rows:
         raise BomiError(f"{path}: empty file")
     header = [name.strip() for name in rows[0]]
+    if len(header) == 1 and any(sep in header[0] for sep in ";\t"):
+        raise BomiError(f"{path}: one column named {header[0][:40]!r}...: columns must be separated by commas")
     body = rows[1:]
     for line, row in enumerate(body, start=2):
         if len(row) != len(header):
@@ -259,11 +266,17 @@ def _recording_from_variables(path: Path, variables: dict[str, object], from_csv
         bad = np.flatnonzero(~np.isfinite(columns[name]))
         if bad.size:
             raise BomiError(f"{path}: column {name} has a missing/NaN/inf value at row {bad[0] + 1}")
+        bad = np.flatnonzero(np.abs(columns[name]) > MAX_ABS_VALUE) if name not in (TIME_COLUMN, LABEL_COLUMN) else []
+        if len(bad):
+            raise BomiError(f"{path}: column {name}, row {bad[0] + 1}: {columns[name][bad[0]]:g} is beyond "
+                            f"+-{MAX_ABS_VALUE:g}, not a sensor value")
     labels = None
     if LABEL_COLUMN in columns:
         values = columns[LABEL_COLUMN]
-        if np.any(values != np.round(values)) or np.any(values < 0):
-            raise BomiError(f"{path}: column {LABEL_COLUMN} must hold non-negative whole class labels")
+        bad = np.flatnonzero((values != np.round(values)) | (values < 0) | (values > MAX_LABEL))
+        if bad.size:
+            raise BomiError(f"{path}: column {LABEL_COLUMN}, row {bad[0] + 1}: {values[bad[0]]:g} is not a class "
+                            f"label (whole number in 0..{MAX_LABEL})")
         labels = values.astype(np.int64)
     nodes: dict[int, NodeData] = {}
     for (node, signal), axes in sorted(found.items()):
@@ -283,9 +296,10 @@ def _format_row(values: Sequence[float], label: int | None) -> str:
     return ",".join(cells) + "\n"
 
 
-def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SAMPLE_RATE_HZ) -> None:
+def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SAMPLE_RATE_HZ, *,
+                    overwrite: bool = False) -> None:
     """Write ``rec`` as CSV, indexed naming, the signals each node holds (Time from ``rec.time`` or
-    sample index / rate); replaces ``path`` atomically."""
+    sample index / rate), atomically; replaces an existing file only if ``overwrite``."""
     path = Path(path)
     signals = {i: rec.nodes[i].signals for i in rec.node_indices}
     time = rec.time if rec.time is not None else np.arange(len(rec)) / rate_hz
@@ -294,19 +308,7 @@ def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SA
     buffer.write(",".join(_header(signals, rec.labels is not None)) + "\n")
     for k, values in enumerate(table.tolist()):
         buffer.write(_format_row(values, None if rec.labels is None else rec.labels[k]))
-    _atomic_write_text(path, buffer.getvalue())
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    """Write to a temporary file beside ``path`` then rename, so ``path`` is never half-written."""
-    handle, temp = tempfile.mkstemp(dir=path.parent or ".", prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8", newline="") as out:
-            out.write(text)
-        os.replace(temp, path)
-    except BaseException:
-        os.unlink(temp)
-        raise
+    write_text(path, buffer.getvalue(), overwrite=overwrite)
 
 
 class RecordingWriter:

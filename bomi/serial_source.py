@@ -3,7 +3,14 @@
 Any URL pyserial knows works: a real port (``/dev/ttyUSB0``, 1,998,848 baud, raw mode, which is
 what pyserial sets up on POSIX), a pseudo-terminal path, ``socket://host:port``, ``loop://``.
 When the stream is lost (USB unplugged, pty or socket closed) the source says so on one line,
-reconnects with exponential backoff and goes on; after the last attempt it raises BomiError.
+reconnects with exponential backoff and goes on; after the last attempt, or when the time asked
+for runs out while waiting, it raises StreamLost.
+
+Reading: the port is opened non-blocking (timeout 0) and each read asks for up to READ_SIZE
+bytes, so a read returns everything that has arrived, on every kind of port. ``in_waiting`` is
+not trusted: pyserial's socket:// reports 1 whatever is queued, which made a 60 Hz reader take
+one frame per tick and fall ever further behind a 3-node stream. When nothing has arrived the
+source waits ``poll_s`` (0 for a caller that paces itself, like the live loop) and yields b"".
 """
 from __future__ import annotations
 
@@ -15,10 +22,15 @@ from dataclasses import dataclass, field
 import serial
 
 from bomi.errors import BomiError
-from bomi.frames import FRAME_SIZE, FrameParser, ImuFrame
+from bomi.frames import FrameParser, ImuFrame
 
 BASE_STATION_BAUD = 1_998_848
-READ_TIMEOUT_S = 0.05
+READ_SIZE = 1 << 16  # more than a second of a full 6-node network (12 kB/s)
+POLL_S = 0.005       # wait between empty reads: far below a frame period (16 ms)
+
+
+class StreamLost(BomiError):
+    """The stream went away and did not come back (within the attempts or the time asked for)."""
 
 
 def _stderr(message: str) -> None:
@@ -41,7 +53,7 @@ class RetryPolicy:
         return [min(self.first_delay_s * 2 ** k, self.max_delay_s) for k in range(self.attempts)]
 
 
-def open_port(url: str, baudrate: int = BASE_STATION_BAUD, timeout: float = READ_TIMEOUT_S) -> serial.SerialBase:
+def open_port(url: str, baudrate: int = BASE_STATION_BAUD, timeout: float | None = 0.0) -> serial.SerialBase:
     """Open ``url`` with pyserial; any failure becomes a one-line BomiError naming the port."""
     try:
         return serial.serial_for_url(url, baudrate=baudrate, timeout=timeout)
@@ -55,7 +67,7 @@ class SerialSource:
 
     url: str
     baudrate: int = BASE_STATION_BAUD
-    timeout_s: float = READ_TIMEOUT_S
+    poll_s: float = POLL_S
     retry: RetryPolicy = field(default_factory=RetryPolicy)
     parser: FrameParser = field(default_factory=FrameParser)
     log: Callable[[str], None] = _stderr
@@ -66,7 +78,7 @@ class SerialSource:
 
     def open(self) -> SerialSource:
         if self.port is None:
-            self.port = open_port(self.url, self.baudrate, self.timeout_s)
+            self.port = open_port(self.url, self.baudrate)
         return self
 
     def close(self) -> None:
@@ -80,31 +92,42 @@ class SerialSource:
     def __exit__(self, *exc_info) -> None:
         self.close()
 
-    def chunks(self) -> Iterator[bytes]:
-        """Raw bytes as they arrive; ``b""`` after each read timeout so callers can keep time."""
+    def chunks(self, deadline: float | None = None) -> Iterator[bytes]:
+        """Raw bytes as they arrive, all that is there at each read; ``b""`` when nothing has (after
+        waiting ``poll_s``), so callers can keep time. Reconnection gives up at ``deadline`` (clock time)."""
         self.open()
         while True:
             try:
-                # at least a frame: socket:// reports 1 byte waiting whatever is there
-                yield self.port.read(max(FRAME_SIZE, self.port.in_waiting))
+                data = self.port.read(READ_SIZE)
             except (serial.SerialException, OSError) as exc:
-                self._reconnect(exc)
+                self._reconnect(exc, deadline)
+                continue
+            if not data and self.poll_s:
+                time.sleep(self.poll_s)  # not self.sleep: that one is the reconnection backoff
+            yield data
 
     def batches(self, duration_s: float | None = None) -> Iterator[tuple[float, list[ImuFrame]]]:
-        """(seconds since start, IMU frames completed by one chunk) until ``duration_s`` has passed."""
+        """(seconds since start, IMU frames completed by one chunk) until ``duration_s`` has passed,
+        reconnections included."""
         start = self.clock()
-        for chunk in self.chunks():
+        deadline = None if duration_s is None else start + duration_s
+        for chunk in self.chunks(deadline):
             now = self.clock()
             elapsed = now - start
             if duration_s is not None and elapsed >= duration_s:
                 return
             yield elapsed, self.parser.feed(chunk, now)
 
-    def _reconnect(self, exc: BaseException) -> None:
+    def _reconnect(self, exc: BaseException, deadline: float | None = None) -> None:
         self.close()
         self.log(f"bomi: {self.url}: stream lost ({_one_line(exc)}); reconnecting")
         delays = self.retry.delays()
         for attempt, delay in enumerate(delays, start=1):
+            if deadline is not None:
+                delay = min(delay, deadline - self.clock())
+                if delay <= 0:
+                    raise StreamLost(f"{self.url}: stream lost and not back before the end of the time asked for "
+                                     f"(last error: {_one_line(exc)})")
             self.log(f"bomi: {self.url}: retry {attempt} of {len(delays)} in {delay:g} s")
             self.sleep(delay)
             try:
@@ -115,5 +138,5 @@ class SerialSource:
             self.reconnections += 1
             self.log(f"bomi: {self.url}: reconnected")
             return
-        raise BomiError(f"{self.url}: stream lost and not back after {len(delays)} attempts "
-                        f"over {sum(delays):g} s (last error: {_one_line(exc)})")
+        raise StreamLost(f"{self.url}: stream lost and not back after {len(delays)} attempts "
+                         f"over {sum(delays):g} s (last error: {_one_line(exc)})")

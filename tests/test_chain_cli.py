@@ -124,7 +124,7 @@ def test_train_and_evaluate_commands(tmp_path, capsys, p1_profile, day1_fv1_mode
     assert f"accuracy {100 * expected.accuracy:.2f} %" in printed and "true\\pred" in printed
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # training straight from a recording gives the same numbers
-    assert main(["evaluate", "--train", day1, "--test", day2, "--features", "FV1", "--png", str(png),
+    assert main(["evaluate", "--train", day1, "--test", day2, "--features", "FV1", "--png", str(png), "--force",
                  "--json", str(out)]) == 0
     assert json.loads(out.read_text())["results"][0]["accuracy"] == evaluate(day1_fv1_model, p1_days[2], 100).accuracy
 
@@ -149,13 +149,13 @@ def test_command_errors_are_one_line(tmp_path, capsys):
     missing = tmp_path / "nope.mat"
     assert main(["train", str(missing), "--out", str(tmp_path / "m.json")]) == 2
     assert main(["train", str(missing), "--out", str(tmp_path / "m.pkl")]) == 2
-    assert main(["evaluate", "--train", str(missing), "--test", str(missing), "--profile", "P9",
-                 "--png", str(tmp_path / "c.png")]) == 2
     day1 = str(data_dir() / "day1_testp.mat")
+    assert main(["evaluate", "--train", day1, "--test", str(missing), "--profile", "P9",
+                 "--png", str(tmp_path / "c.png")]) == 2
     assert main(["train", day1, "--profile", "P4", "--out", str(tmp_path / "m.json")]) == 2
     errors = capsys.readouterr().err.splitlines()
     assert errors[0] == f"bomi: error: {missing}: no such recording file"
-    assert "m.pkl: output must end in .json or .npz" in errors[1]
+    assert "m.pkl: --out must end in .json or .npz" in errors[1]
     assert "no such profile file" in errors[2]
     assert errors[3] == f"bomi: error: {day1}: label(s) [6, 7, 8] are not classes of profile P4"
     assert not list(tmp_path.iterdir())

@@ -107,14 +107,14 @@ def corrupt(tmp_path, day1_fv1_model, edit):
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=FORMAT_VERSION + 1), "format version 2"),
+    (lambda d: d.update(version=FORMAT_VERSION + 1), f"format version {FORMAT_VERSION + 1}"),
     (lambda d: d.update(format="other"), "format is 'other'"),
     (lambda d: d.pop("coef"), "coef"),
     (lambda d: d.update(coef=d["coef"][:-1]), "do not fit"),
     (lambda d: d["features"].update(kind="FV9"), "unknown feature vector"),
     (lambda d: d.pop("features"), "missing field 'features'"),
     (lambda d: d["coef"][0].__setitem__(0, "x"), "could not convert"),
-    (lambda d: d["amplitude"]["1"].update(direction=[1.0, 1.0, 0.0]), "class 1: direction must be a unit 3-vector"),
+    (lambda d: d["amplitude"]["1"].update(direction=[1.0, 1.0, 0.0]), "class 1: direction must be a finite unit 3-vector"),
 ])
 def test_bad_model_files_give_clear_errors(tmp_path, day1_fv1_model, edit, message):
     path = corrupt(tmp_path, day1_fv1_model, edit)

@@ -19,6 +19,11 @@ WORKED_FRAME = ImuFrame(node_id=10, period_ms=16, counter=42, mag=(-1631, -2177,
                         gyro=(-1, -11, 5), acc=(-733, -847, 15625))
 
 PROPERTY_SETTINGS = settings(max_examples=150, deadline=None)
+
+
+def framing() -> FrameParser:
+    """The framing rule of hardware.md alone: the phantom-frame guard off (tested on its own below)."""
+    return FrameParser(confirm_frames=1)
 int16 = st.integers(-32768, 32767)
 vector3 = st.tuples(int16, int16, int16)
 
@@ -53,7 +58,7 @@ def feed_in_chunks(parser: FrameParser, stream: bytes, cuts: list[int]) -> list[
 
 
 def test_worked_example_decodes_to_documented_values():
-    assert FrameParser().feed(WORKED_EXAMPLE) == [WORKED_FRAME]
+    assert framing().feed(WORKED_EXAMPLE) == [WORKED_FRAME]
 
 
 def test_worked_example_encodes_to_documented_bytes():
@@ -61,7 +66,7 @@ def test_worked_example_encodes_to_documented_bytes():
 
 
 def test_worked_example_byte_by_byte_with_garbage_and_false_start():
-    parser = FrameParser()
+    parser = framing()
     stream = b"\x00\x33\x12" + WORKED_EXAMPLE + b"\x33"
     frames = [f for byte in stream for f in parser.feed(bytes([byte]))]
     assert frames == [WORKED_FRAME]
@@ -76,7 +81,7 @@ def test_node_index_mapping():
 
 
 def test_lost_packets_with_counter_wrap():
-    parser = FrameParser()
+    parser = framing()
     for counter in (250, 253, 2, 3):
         parser.feed(encode_imu_frame(ImuFrame(11, 16, counter, (0, 0, 0), (0, 0, 0), (0, 0, 0))))
     # 250 -> 253 loses 251, 252; 253 -> 2 loses 254, 255, 0, 1
@@ -85,7 +90,7 @@ def test_lost_packets_with_counter_wrap():
 
 
 def test_rate_from_arrival_times_and_period():
-    parser = FrameParser()
+    parser = framing()
     for k in range(11):
         parser.feed(encode_imu_frame(ImuFrame(10, 16, k, (0, 0, 0), (0, 0, 0), (0, 0, 0))), now=5.0 + k * 0.016)
     assert parser.nodes[10].rate_hz == pytest.approx(62.5)
@@ -97,7 +102,7 @@ def test_non_imu_frames_skipped_and_safety_events_exposed():
     emg[1] = 31
     stream = (bytes(emg) + encode_safety_key_frame(SafetyKey.STANDBY, counter=7) + WORKED_EXAMPLE
               + encode_safety_key_frame(SafetyKey.NONE, counter=8) + bytes(emg))
-    parser = FrameParser()
+    parser = framing()
     assert parser.feed(stream) == [WORKED_FRAME]
     assert parser.skipped == {31: 2, 40: 2}
     assert [(e.event, e.counter, e.frame_number) for e in parser.safety_events] == [(SafetyKey.STANDBY, 7, 1)]
@@ -112,7 +117,7 @@ def test_false_start_whose_byte_31_is_end_byte_is_taken_as_a_frame():
     fake_start = b"\x33" + bytes(20)  # its byte 31 falls on byte 10 of the frame after it
     overlapped = bytearray(WORKED_EXAMPLE)
     overlapped[10] = 0x34
-    parser = FrameParser()
+    parser = framing()
     assert parser.feed(fake_start + bytes(overlapped) + WORKED_EXAMPLE) == [WORKED_FRAME]
     assert parser.skipped == {0: 1}
 
@@ -121,7 +126,7 @@ def test_false_start_whose_byte_31_is_end_byte_is_taken_as_a_frame():
                        vector3, vector3, vector3))
 @PROPERTY_SETTINGS
 def test_encode_then_parse_gives_back_the_frame(frame):
-    assert FrameParser().feed(encode_imu_frame(frame)) == [frame]
+    assert framing().feed(encode_imu_frame(frame)) == [frame]
 
 
 @given(stream=st.binary(max_size=600) | st.lists(
@@ -130,7 +135,7 @@ def test_encode_then_parse_gives_back_the_frame(frame):
        cuts=st.lists(st.integers(0, 10_000), max_size=8))
 @PROPERTY_SETTINGS
 def test_any_bytes_in_any_chunks_match_the_reference_and_never_raise(stream, cuts):
-    parser = FrameParser()
+    parser = framing()
     frames = feed_in_chunks(parser, stream, cuts)
     assert [as_tuple(f) for f in frames] == reference_parse(stream)
 
@@ -194,7 +199,7 @@ def is_ambiguous(pieces: list[Piece]) -> bool:
 @PROPERTY_SETTINGS
 def test_every_intact_frame_recovered_and_losses_counted(pieces, cuts):
     assume(not is_ambiguous(pieces))
-    parser = FrameParser()
+    parser = framing()
     frames = feed_in_chunks(parser, b"".join(p.data for p in pieces), cuts)
 
     imu = [p for p in pieces if p.node_id]
@@ -204,3 +209,63 @@ def test_every_intact_frame_recovered_and_losses_counted(pieces, cuts):
         assert parser.nodes[node_id].frames == len(seqs)
         assert parser.nodes[node_id].lost == (seqs[-1] - seqs[0]) - (len(seqs) - 1)
     assert parser.skipped.get(30, 0) == sum(p.intact and p.data[1] == 30 for p in pieces)
+
+
+# --------------------------------------------------------------------------------- phantom-frame guard
+def imu_frame(node_id: int, counter: int, value: int = 0, period_ms: int = 16) -> bytes:
+    return encode_imu_frame(ImuFrame(node_id, period_ms, counter % 256, (value, 1, 2), (3, value, 4), (5, 6, value)))
+
+
+@given(nodes=st.lists(st.integers(10, 15), min_size=1, max_size=6, unique=True), samples=st.integers(3, 30),
+       first=st.integers(0, 255), cuts=st.lists(st.integers(0, 10_000), max_size=8))
+@PROPERTY_SETTINGS
+def test_guard_delivers_a_clean_stream_whole_and_in_arrival_order(nodes, samples, first, cuts):
+    stream = [imu_frame(node, first + k, k) for k in range(samples) for node in nodes]
+    parser = FrameParser()
+    assert [encode_imu_frame(f) for f in feed_in_chunks(parser, b"".join(stream), cuts)] == stream
+    assert parser.unconfirmed == 0
+
+
+def test_guard_drops_a_node_seen_fewer_than_three_times_in_a_row():
+    real = [imu_frame(10, k, k) for k in range(100)]
+    phantom_twice = imu_frame(13, 7) + imu_frame(13, 8)
+    stream = b"".join(real[:50]) + phantom_twice + b"".join(real[50:])
+    parser = FrameParser()
+    frames = parser.feed(stream)
+    assert [encode_imu_frame(f) for f in frames] == real   # node 13 never delivered, node 10 all
+    assert set(parser.nodes) == {10} and parser.unconfirmed == 2
+
+
+def test_guard_refuses_a_confirmed_nodes_frame_with_a_wild_counter_and_loses_no_real_frame():
+    real = [imu_frame(10, k, k) for k in range(20)]
+    wild = imu_frame(10, 200, 999)  # counter 190 ahead of the stream: not this node's next sample
+    stream = b"".join(real[:10]) + wild + b"".join(real[10:])
+    parser = FrameParser()
+    assert [encode_imu_frame(f) for f in parser.feed(stream)] == real
+    assert parser.nodes[10].lost == 0 and parser.unconfirmed == 1
+
+
+def test_guard_needs_the_same_period_and_counters_that_follow():
+    parser = FrameParser()
+    # three frames of node 11 whose counters jump by more than MAX_COUNTER_GAP, or whose period changes
+    assert parser.feed(imu_frame(11, 0) + imu_frame(11, 100) + imu_frame(11, 200)) == []
+    assert parser.feed(imu_frame(12, 0) + imu_frame(12, 1, period_ms=20) + imu_frame(12, 2)) == []
+    # a node back after a long outage (counters jumped) is delivered again once it repeats
+    parser = FrameParser()
+    before = [imu_frame(10, k) for k in range(5)]
+    after = [imu_frame(10, 100 + k) for k in range(5)]
+    assert len(parser.feed(b"".join(before + after))) == 10
+
+
+def test_well_formed_random_frames_in_noise_are_all_refused():
+    """2000 frames that pass the start/end check (random IMU id, period, counter) amid random bytes:
+    the framing rule alone takes every one, the guard none (rates: benchmarks/parser_fuzz.py)."""
+    import numpy as np
+    rng = np.random.default_rng(3)
+    pieces = []
+    for _ in range(2000):
+        pieces.append(rng.bytes(int(rng.integers(0, 64))).replace(b"\x33", b"\x00"))
+        pieces.append(imu_frame(int(rng.integers(10, 16)), int(rng.integers(0, 256)), period_ms=int(rng.integers(0, 256))))
+    stream = b"".join(pieces)
+    assert len(framing().feed(stream)) == 2000
+    assert FrameParser().feed(stream) == []

@@ -88,7 +88,7 @@ def row(acc_x: str = "1", label: str = "0", cells: int = 14) -> str:
     (GOOD_HEADER + "\n" + row(acc_x="nan"), "column ACC2X has a missing/NaN/inf value at row 1"),
     (GOOD_HEADER + "\n" + row(acc_x=""), "column ACC2X, line 2: not a number"),
     (GOOD_HEADER + "\n" + row() + row(cells=13), "line 3 has 13 cells, the header has 14"),
-    (GOOD_HEADER + "\n" + row(label="1.5"), "Etiquette must hold"),
+    (GOOD_HEADER + "\n" + row(label="1.5"), "Etiquette, row 1: 1.5 is not a class label"),
     ("Time,Foo\n1,2\n", "no IMU node columns"),
 ])
 def test_malformed_csv_names_file_and_column(tmp_path, text, message):
@@ -151,7 +151,7 @@ def test_cli_error_is_one_line_and_nothing_is_written(tmp_path, capsys):
     bad = write_csv(tmp_path, GOOD_HEADER + "\n" + row() + row(acc_x="x"))
     out = tmp_path / "out.csv"
     out.write_text("keep me")
-    assert main(["fuse", str(bad), "--out", str(out)]) == 2
+    assert main(["fuse", str(bad), "--out", str(out), "--force"]) == 2  # even when allowed to replace it
     err = capsys.readouterr().err
     assert err.startswith("bomi: error: ") and err.count("\n") == 1 and "bad.csv" in err and "ACC2X" in err
     assert out.read_text() == "keep me"

@@ -94,7 +94,7 @@ def mat_with(tmp_path, variables: dict):
     (lambda v: v.update(MAGY=np.array(["abc"])), "variable MAGY is not numeric"),
     (lambda v: v.update(ACCX=np.ones((N, 2))), "variable ACCX is not a single column (shape (300, 2))"),
     (lambda v: v.update(RollRaw=np.ones((N - 1, 1))), "column RollRaw has 299 rows"),
-    (lambda v: v.update(Etiquette=np.full((N, 1), 0.5)), "Etiquette must hold non-negative whole class labels"),
+    (lambda v: v.update(Etiquette=np.full((N, 1), 0.5)), "Etiquette, row 1: 0.5 is not a class label"),
     (lambda v: [v.pop(k) for k in list(v) if k not in ("Time", "Commands")], "no IMU node columns"),
 ])
 def test_malformed_logger_mat_is_one_line(tmp_path, day1, edit, message):

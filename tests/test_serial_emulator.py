@@ -159,7 +159,7 @@ def test_frame_chunks_timing_and_exact_values_without_loss():
     raw = raw_samples(rec)
     timed = list(frame_chunks(raw, EmulatorConfig(rate_hz=62.5), EmulatorStats()))
     assert [t for t, _ in timed[:3]] == [0.0, 0.016, 0.032]
-    frames = FrameParser().feed(b"".join(chunk for _, chunk in timed))
+    frames = FrameParser(confirm_frames=1).feed(b"".join(chunk for _, chunk in timed))  # decoding only
     assert [f.node_id for f in frames[:4]] == [10, 11, 12, 10]
     assert [f.counter for f in frames[::3]] == [k % 256 for k in range(300)]
     node2 = [f for f in frames if f.node_id == 11]
@@ -304,7 +304,8 @@ def test_emulate_rejects_impossible_settings(tmp_path, capsys):
     rec_path = tmp_path / "rec.csv"
     write_recording(rec_path, int_recording(5))
     assert main(["emulate", "--recording", str(rec_path), "--to", "pty", "--loss", "1.5"]) == 2
-    assert capsys.readouterr().err == "bomi: error: --loss 1.5: must be a probability in [0, 1)\n"
+    assert capsys.readouterr().err == \
+        "bomi: error: argument --loss: must be in [0, 1), got '1.5' (see bomi emulate --help)\n"
 
 
 # --------------------------------------------------------------------------------- guided calibration

@@ -83,7 +83,7 @@ def test_cli_reports_one_line_and_overwrites_nothing(models, tmp_path, capsys):
     edit(models / "scene.xml", "</mujoco>", "")
     out = tmp_path / "run.mp4"
     out.write_bytes(b"previous video")
-    assert main(["render", "--models", str(models), "--out", str(out)]) == 2
+    assert main(["render", "--models", str(models), "--out", str(out), "--force"]) == 2  # even when allowed to
     err = capsys.readouterr().err
     assert err.startswith("bomi: error: ") and err.count("\n") == 1 and "scene.xml" in err
     assert out.read_bytes() == b"previous video"

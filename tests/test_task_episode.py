@@ -184,7 +184,7 @@ def test_benchmark_seeds_can_start_anywhere(capsys):
     assert [(j.participant, j.seed) for j in jobs] == [("P1", 20), ("P1", 21), ("P1", 22), ("P4", 20), ("P4", 21),
                                                        ("P4", 22)]
     assert main(["benchmark", "--operators", "joystick", "--first-seed", "-1"]) == 2
-    assert "--first-seed not negative" in capsys.readouterr().err
+    assert "argument --first-seed: must not be negative" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("old, new, missing", [

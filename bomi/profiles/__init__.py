@@ -7,11 +7,13 @@ h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`
 from __future__ import annotations
 
 from collections.abc import Mapping
+import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing
+from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
 from bomi.config_files import load_toml
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration
@@ -66,6 +68,23 @@ class Profile:
     @property
     def class_nodes(self) -> dict[int, int]:
         return {cls.label: cls.node for cls in self.classes if cls.node is not None}
+
+    @property
+    def identity(self) -> ProfileIdentity:
+        """Name + SHA-256 of what decides how a model trained for this profile moves the arm:
+        nodes (index, id, calibration), classes (label, joystick function, carrying node), features,
+        amplitude kind and joystick layout. Names, sites, descriptions and post-processing are left
+        out: changing them does not change what a decision does."""
+        content = {
+            "nodes": [[n.index, n.node_id, n.calibration.hard_iron, n.calibration.soft_iron, n.calibration.mounting]
+                      for n in self.nodes],
+            "classes": [[c.label, c.function, c.node] for c in self.classes],
+            "features": [self.spec.kind, list(self.spec.nodes), self.spec.window, self.spec.stride],
+            "amplitude": self.amplitude,
+            "joystick_layout": self.joystick_layout,
+        }
+        digest = hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+        return ProfileIdentity(self.name, digest)
 
 
 def load_profile(path_or_name: str | Path, overrides: Mapping[str, Any] | None = None) -> Profile:

@@ -16,6 +16,7 @@ import importlib
 import sys
 from collections.abc import Collection
 from dataclasses import dataclass
+import traceback
 from importlib.metadata import version
 
 from bomi.errors import BomiError
@@ -61,10 +62,21 @@ def _modules_for(argv: list[str]) -> list[str]:
     return [COMMANDS[name].module] if name in COMMANDS else []
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with its usage errors as the one line every bad input gets: ``bomi: error: ...``, exit 2."""
+
+    def error(self, message: str) -> None:
+        command = self.prog.removeprefix("bomi").strip()
+        hint = f" (see bomi {command} --help)" if command else " (see bomi --help)"
+        self.exit(2, f"bomi: error: {' '.join(message.split())}{hint}\n")
+
+
 def build_parser(modules: Collection[str] = COMMAND_MODULES) -> argparse.ArgumentParser:
     """The parser with every option of the commands of ``modules``; the other commands are listed only."""
-    parser = argparse.ArgumentParser(prog="bomi", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="bomi", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"%(prog)s {version('bomi-jaco')}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the Python traceback of an internal error (a bug, not bad input)")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in COMMAND_MODULES:
         if module in modules:
@@ -77,15 +89,24 @@ def build_parser(modules: Collection[str] = COMMAND_MODULES) -> argparse.Argumen
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    args = build_parser(_modules_for(argv)).parse_args(argv)
+    try:
+        args = build_parser(_modules_for(argv)).parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error already reported in one line
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         return int(args.func(args) or 0)
-    except (BomiError, SimError) as exc:
-        print(f"bomi: error: {exc}", file=sys.stderr)
+    except (BomiError, SimError) as exc:  # bad input: files, options, ports, streams
+        print(f"bomi: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("bomi: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if args.debug:
+            traceback.print_exc()
+        print(f"bomi: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
+              f"(a bug; rerun with --debug for the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

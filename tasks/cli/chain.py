@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -16,12 +14,14 @@ from bomi.classifier import PostProcessing
 from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.features import FEATURE_KINDS, FeatureSpec
+from bomi.files import atomic_output, check_input, write_text
 from bomi.fusion import NodeCalibration, fused_recording
-from bomi.model_io import SUFFIXES, load_model, save_model
+from bomi.model_io import SUFFIXES, check_model_for, load_model, save_model
 from bomi.profiles import Profile
-from bomi.recording import RAW_SIGNALS, Recording, read_recording, write_recording
+from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_recording, write_recording
 from bomi.reproduce import reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
+from tasks.cli.options import add_force, check_outputs, open_unit_interval, positive_int
 from tasks.stick import arm_profile
 
 
@@ -33,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                               "the profile's)")
     p.add_argument("--out", required=True, help="model file to write (.json or .npz)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
+    add_force(p)
     p.set_defaults(func=train_command)
 
     p = add_command(subparsers, "evaluate")
@@ -41,20 +42,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", default="P1", help="profile name or TOML file (default %(default)s)")
     p.add_argument("--features", choices=FEATURE_KINDS,
                    help="override the feature vector, only when training (default: the profile's)")
-    p.add_argument("--reject", type=float, metavar="P",
-                   help="confidence rejection threshold (posterior; default: the model's)")
-    p.add_argument("--vote", type=int, metavar="N",
+    p.add_argument("--reject", type=open_unit_interval, metavar="P",
+                   help="confidence rejection threshold (posterior, between 0 and 1; default: the model's)")
+    p.add_argument("--vote", type=positive_int, metavar="N",
                    help="majority vote over the last N decisions (default: the model's)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--png", metavar="OUT", default="confusion.png",
                    help="confusion matrix figure (default %(default)s)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
+    add_force(p)
     p.set_defaults(func=evaluate_command)
 
     p = add_command(subparsers, "reproduce")
     p.add_argument("--data", type=Path, help="dataset directory (default: BOMI_DATA_DIR or ../shared/data/...)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
     p.add_argument("--markdown", metavar="OUT", help="write the table as markdown")
+    add_force(p)
     p.set_defaults(func=reproduce_command)
 
     p = add_command(subparsers, "fuse")
@@ -63,26 +66,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="take the node calibrations from this profile "
                                      "(default: headset constants for node 1, uncalibrated otherwise)")
     p.add_argument("--verbose", action="store_true", help="describe the recording and list the variables ignored")
+    add_force(p)
     p.set_defaults(func=fuse_command)
 
 
 # --------------------------------------------------------------------------------------- helpers
-def _check_output(path: str | Path, suffixes: Sequence[str]) -> Path:
-    path = Path(path)
-    if path.suffix.lower() not in suffixes:
-        raise BomiError(f"{path}: output must end in {' or '.join(suffixes)}")
-    if not path.parent.is_dir():
-        raise BomiError(f"{path}: directory {path.parent} does not exist")
-    return path
-
-
-def _write_text(path: Path, text: str) -> None:
-    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(handle, "w", encoding="utf-8") as out:
-        out.write(text)
-    os.replace(temp, path)
-
-
 def read(path: str | Path, verbose: bool) -> Recording:
     """``read_recording``; with ``verbose``, what it holds and the variables the chain ignores."""
     rec = read_recording(path)
@@ -133,25 +121,43 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
 
 # -------------------------------------------------------------------------------------- commands
 def train_command(args: argparse.Namespace) -> int:
-    out = _check_output(args.out, SUFFIXES)
+    out = check_outputs({"--out": (args.out, SUFFIXES)}, inputs=args.recordings, force=args.force)["--out"]
+    for path in args.recordings:
+        check_input(path, "recording")
     profile = arm_profile(args.profile)
     recordings = [read(path, args.verbose) for path in args.recordings]
     model = train(recordings, profile, _spec(profile, args.features))
-    save_model(out, model)
+    save_model(out, model, overwrite=args.force)
     print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}: wrote {out}")
     print(class_listing(profile, model.classes.tolist()))
     return 0
 
 
+def _training_source(path: str) -> str:
+    """'model' or 'recording', by suffix; anything else (a pickle, say) is refused by name."""
+    suffix = Path(path).suffix.lower()
+    if suffix in SUFFIXES:
+        return "model"
+    if suffix in RECORDING_SUFFIXES:
+        return "recording"
+    raise BomiError(f"{path}: --train takes a recording ({', '.join(RECORDING_SUFFIXES)}) or a model "
+                    f"({', '.join(SUFFIXES)}), not '{suffix or 'no suffix'}' (pickles are never loaded)")
+
+
 def evaluate_command(args: argparse.Namespace) -> int:
-    json_out = _check_output(args.json, (".json",)) if args.json else None
-    png_out = _check_output(args.png, (".png",))
+    inputs = [args.train, *args.test]
+    outputs = check_outputs({"--png": (args.png, (".png",)), "--json": (args.json, (".json",))},
+                            inputs=inputs, force=args.force)
+    kind = _training_source(args.train)
+    check_input(args.train, kind)
     profile = arm_profile(args.profile)
-    from_model = Path(args.train).suffix.lower() in SUFFIXES
-    if from_model and args.features:
+    if kind == "model" and args.features:
         raise BomiError(f"{args.train}: --features only applies when training from a recording")
-    model = load_model(args.train) if from_model else None
-    training = None if from_model else read(args.train, args.verbose)
+    model = None
+    if kind == "model":
+        model = load_model(args.train)
+        check_model_for(model, profile, args.train)
+    training = None if model else read(args.train, args.verbose)
     tests = [read(path, args.verbose) for path in args.test]
     for rec in tests:  # before any long work: every test recording holds what the model reads, and labels
         require_for(rec, model.spec if model else _spec(profile, args.features))
@@ -172,40 +178,41 @@ def evaluate_command(args: argparse.Namespace) -> int:
         print(confusion_text(ev, model.classes.tolist()))
         results.append({"test": str(path), "accuracy": ev.accuracy, "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
-    save_confusion_figure(png_out, evaluations, model.classes.tolist())
-    print(f"confusion matrices: {png_out}")
-    if json_out:
+    with atomic_output(outputs["--png"], overwrite=args.force) as temp:
+        save_confusion_figure(temp, evaluations, model.classes.tolist())
+    print(f"confusion matrices: {outputs['--png']}")
+    if outputs["--json"]:
         record = {"train": str(args.train), "features": model.spec.kind, "shrinkage": model.shrinkage,
                   "post_processing": {"rejection_threshold": post.rejection_threshold, "vote_length": post.vote_length},
                   "results": results}
-        _write_text(json_out, json.dumps(record, indent=1) + "\n")
+        write_text(outputs["--json"], json.dumps(record, indent=1) + "\n", overwrite=args.force)
     return 0
 
 
 def reproduce_command(args: argparse.Namespace) -> int:
-    json_out = _check_output(args.json, (".json",)) if args.json else None
-    md_out = _check_output(args.markdown, (".md",)) if args.markdown else None
+    outputs = check_outputs({"--json": (args.json, (".json",)), "--markdown": (args.markdown, (".md",))},
+                            force=args.force)
     directory = args.data or data_dir()
     if not directory.is_dir():
         raise BomiError(f"{directory}: dataset directory not found (set BOMI_DATA_DIR)")
     record = reproduction_record(reproduce(directory, arm_profile("P1")))
     table = reproduction_markdown(record)
     print(table)
-    if json_out:
-        _write_text(json_out, json.dumps(record, indent=1) + "\n")
-    if md_out:
-        _write_text(md_out, table)
+    if outputs["--json"]:
+        write_text(outputs["--json"], json.dumps(record, indent=1) + "\n", overwrite=args.force)
+    if outputs["--markdown"]:
+        write_text(outputs["--markdown"], table, overwrite=args.force)
     return 0
 
 
 def fuse_command(args: argparse.Namespace) -> int:
-    out = _check_output(args.out, (".csv",))
+    out = check_outputs({"--out": (args.out, (".csv",))}, inputs=[args.input], force=args.force)["--out"]
+    profile = arm_profile(args.profile) if args.profile else None
     rec = read(args.input, args.verbose)
     rec.require(rec.node_indices, RAW_SIGNALS, "fuse")
     calibrations = {i: NodeCalibration.default_for(i) for i in rec.node_indices}
-    if args.profile:
-        profile = arm_profile(args.profile)
+    if profile is not None:
         calibrations.update({n.index: n.calibration for n in profile.nodes})
-    write_recording(out, fused_recording(rec, calibrations))
+    write_recording(out, fused_recording(rec, calibrations), overwrite=args.force)
     print(f"fused {len(rec)} samples of node(s) {list(rec.node_indices)}: wrote {out}")
     return 0

@@ -18,6 +18,7 @@ from typing import Any, Protocol
 from tqdm import tqdm
 
 from bomi.errors import BomiError
+from tasks.cli.options import positive_int
 
 RAY_INSTALL = 'pip install -e ".[ray]"'
 
@@ -113,7 +114,7 @@ def import_ray():
 def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--engine", choices=[k.value for k in EngineKind], default=EngineKind.LOCAL.value,
                         help="where the episodes run: a local process pool or a Ray cluster (default %(default)s)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+    parser.add_argument("--jobs", type=positive_int, default=os.cpu_count() or 1,
                         help="parallel episodes on this machine: the pool's processes, or the CPUs of a local Ray "
                              "(default: the number of CPUs, %(default)s)")
     parser.add_argument("--address", help="--engine ray: the Ray cluster to join (e.g. HEAD:6379 or auto); "

@@ -7,12 +7,13 @@ import sys
 from pathlib import Path
 
 from bomi.chain import OnlineChain, recording_neutral
-from bomi.errors import BomiError
-from bomi.model_io import load_model
+from bomi.files import check_input, check_output
+from bomi.model_io import check_model_for, load_model
 from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
 from tasks.cli import add_command
+from tasks.cli.options import non_negative_int, positive_float, positive_int
 from tasks.live import Headless, PassiveViewer, StatusLine, display_opens, has_display, open_log, run_live
 from tasks.stick import arm_profile, profile_layout
 
@@ -29,15 +30,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument("--model", required=True, type=Path, help="model file (.json/.npz) trained for the profile")
     live.add_argument("--headless", action="store_true",
                       help="no viewer window (default: a window when a display is there)")
-    live.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C or the "
+    live.add_argument("--duration", type=positive_float, help="stop after this many seconds (default: until Ctrl-C or the "
                                                      "viewer closes)")
     live.add_argument("--log", type=Path, help="JSON-lines log of every control tick (must not exist; default: none)")
     live.add_argument("--neutral-from", type=Path, metavar="RECORDING",
                       help="take the neutral offsets from the first samples of this recording "
                            "(default: from the stream's first samples, hold still)")
-    live.add_argument("--baud", type=int, default=BASE_STATION_BAUD,
+    live.add_argument("--baud", type=positive_int, default=BASE_STATION_BAUD,
                       help="baud rate of a real port (default %(default)s)")
-    live.add_argument("--retries", type=int, default=RetryPolicy.attempts,
+    live.add_argument("--retries", type=non_negative_int, default=RetryPolicy.attempts,
                       help="reconnection attempts after the stream is lost (default %(default)s)")
     live.set_defaults(func=run)
 
@@ -61,23 +62,24 @@ def _display(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.duration is not None and args.duration <= 0:
-        raise BomiError(f"--duration {args.duration:g}: must be positive")
+    if args.log is not None:
+        check_output(args.log, what="--log", forceable=False)
     profile = arm_profile(args.profile)
-    model = load_model(args.model)
-    unknown = sorted(set(model.classes.tolist()) - {cls.label for cls in profile.classes})
-    if unknown:
-        raise BomiError(f"{args.model}: class(es) {unknown} are not classes of profile {profile.name}")
+    model = load_model(check_input(args.model, "model"))
+    check_model_for(model, profile, args.model)
     chain = OnlineChain(model, profile)
     neutral = None
     if args.neutral_from is not None:
         offsets = recording_neutral(read_recording(args.neutral_from), model.spec.nodes, profile.neutral_samples)
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
-    if args.log is not None and args.log.exists():
-        raise BomiError(f"{args.log}: file exists, not overwriting it")
-    sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
-    # timeout 0: a tick reads what has arrived and never waits for more
-    source = SerialSource(args.port, baudrate=args.baud, timeout_s=0.0, retry=RetryPolicy(attempts=args.retries))
+    # poll 0: a tick reads all that has arrived and never waits for more
+    source = SerialSource(args.port, baudrate=args.baud, poll_s=0.0, retry=RetryPolicy(attempts=args.retries))
+    source.open()  # a bad port fails before the simulator is built (what arrives meanwhile is read at once)
+    try:
+        sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
+    except BaseException:
+        source.close()
+        raise
     status, log, display = StatusLine(), None, Headless()
     try:
         with source:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from bomi.files import atomic_output, check_input, write_text
 from sim.check import check_all
 from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
 from sim.env import ArmSim
@@ -16,6 +17,7 @@ from sim.errors import SimError
 from sim.joystick import JoystickState, script_states
 from sim.render import VideoWriter, describe, write_png
 from tasks.cli import add_command
+from tasks.cli.options import add_force, check_outputs, positive_float
 
 # The scripted motion of ``bomi render``: pick the first cube up at A and put it down at B, with
 # the stick alone. (seconds, stick state) segments; a segment's buttons are pressed once, at its
@@ -45,16 +47,18 @@ DEMO_SCRIPT: tuple[tuple[float, JoystickState], ...] = (
 def register(subparsers: argparse._SubParsersAction) -> None:
     check = add_command(subparsers, "sim-check")
     _common_options(check)
-    check.add_argument("--deflection", type=float, default=1.0, help="stick deflection in (0, 1] (default %(default)s)")
-    check.add_argument("--seconds", type=float, default=1.0,
+    check.add_argument("--deflection", type=positive_float, default=1.0, help="stick deflection in (0, 1] (default %(default)s)")
+    check.add_argument("--seconds", type=positive_float, default=1.0,
                        help="seconds each function is held, above 0.5 (default %(default)s)")
     check.add_argument("--json", type=Path, help="also write the results as JSON here")
+    add_force(check)
     check.set_defaults(func=run_check)
 
     render = add_command(subparsers, "render")
     _common_options(render)
     render.add_argument("--out", type=Path, required=True, help="MP4 file to write")
     render.add_argument("--png", type=Path, help="also write the last frame as PNG here")
+    add_force(render)
     render.set_defaults(func=run_render)
 
 
@@ -65,9 +69,17 @@ def _common_options(parser: argparse.ArgumentParser) -> None:
                         help="directory of the MJCF model files (default: the shipped models/)")
 
 
+def _check_sim_inputs(args: argparse.Namespace) -> None:
+    check_input(args.config, "simulation config")
+    if not args.models.is_dir():
+        raise SimError(f"{args.models}: --models must be a directory of MJCF files")
+
+
 def run_check(args: argparse.Namespace) -> int:
     if not 0 < args.deflection <= 1 or args.seconds <= 0.5:
         raise SimError("sim-check: --deflection must be in (0, 1] and --seconds above 0.5")
+    outputs = check_outputs({"--json": (args.json, (".json",))}, force=args.force)
+    _check_sim_inputs(args)
     sim = ArmSim(load_config(args.config), args.models)
     results = check_all(sim, args.deflection, args.seconds)
     print(f"{'mode':<12}{'function':<9}{'commanded':>10}{'achieved':>10}{'ratio':>7}{'tracking error':>16}")
@@ -77,19 +89,16 @@ def run_check(args: argparse.Namespace) -> int:
         error = "" if np.isnan(result.tracking_error) else f"{1000 * result.tracking_error:.1f} {error_unit}"
         print(f"{result.mode:<12}{result.function:<9}{result.commanded:>10.3f}{result.achieved:>10.3f}"
               f"{result.ratio:>7.2f}{error:>16}  {speed_unit}")
-    if args.json:
+    if outputs["--json"]:
         records = [{key: _json_number(value) for key, value in (asdict(r) | {"ratio": r.ratio}).items()}
                    for r in results]
-        _write_atomic(args.json, lambda tmp: tmp.write_text(json.dumps(records, indent=2)))
+        write_text(outputs["--json"], json.dumps(records, indent=2), overwrite=args.force)
     return 0
 
 
 def run_render(args: argparse.Namespace) -> int:
-    if args.out.suffix.lower() != ".mp4":
-        raise SimError(f"{args.out}: --out must name an .mp4 file")
-    for path in filter(None, (args.out, args.png)):
-        if not path.parent.is_dir():
-            raise SimError(f"{path}: directory {path.parent} does not exist")
+    outputs = check_outputs({"--out": (args.out, (".mp4",)), "--png": (args.png, (".png",))}, force=args.force)
+    _check_sim_inputs(args)
     sim = ArmSim(load_config(args.config), args.models)
     control_hz = sim.config.physics.control_hz
     ticks_per_frame = max(1, round(control_hz / sim.config.render.fps))
@@ -107,9 +116,11 @@ def run_render(args: argparse.Namespace) -> int:
                     video.append(frame)
 
     try:
-        _write_atomic(args.out, write_video)
-        if args.png:
-            _write_atomic(args.png, lambda tmp: write_png(tmp, frame))
+        with atomic_output(outputs["--out"], overwrite=args.force) as temp:
+            write_video(temp)
+        if outputs["--png"]:
+            with atomic_output(outputs["--png"], overwrite=args.force) as temp:
+                write_png(temp, frame)
     finally:
         sim.close()
     print(f"wrote {args.out}" + (f" and {args.png}" if args.png else "")
@@ -120,13 +131,3 @@ def run_render(args: argparse.Namespace) -> int:
 def _json_number(value):
     """NaN is not JSON: write null."""
     return None if isinstance(value, float) and np.isnan(value) else value
-
-
-def _write_atomic(path: Path, write) -> None:
-    """Write through a temporary sibling and rename, so a failure never leaves a half-written file."""
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    try:
-        write(tmp)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)

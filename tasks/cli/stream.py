@@ -15,12 +15,15 @@ from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks, open_sink
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
 from bomi.fusion import DT, FusedRows, NodeCalibration
-from bomi.model_io import save_model
+from bomi.files import check_output
+from bomi.model_io import SUFFIXES, save_model
 from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
-from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
+from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamLost
 from tasks.cli import add_command
 from tasks.cli.chain import class_listing
+from tasks.cli.options import (add_force, check_outputs, non_negative_float, non_negative_int, positive_float,
+                               positive_int, probability)
 from tasks.stick import arm_profile
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
@@ -45,24 +48,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     what.add_argument("--participant", help="virtual participant (P1, P4, P5 or a TOML file)")
     emulate.add_argument("--to", required=True, metavar="PORT_OR_URL",
                          help="'pty', socket://HOST:PORT (listens for one client), or a port / pyserial URL")
-    emulate.add_argument("--rate", type=float, default=SAMPLE_RATE_HZ,
+    emulate.add_argument("--rate", type=positive_float, default=SAMPLE_RATE_HZ,
                          help="samples per second per node (default %(default)s)")
-    emulate.add_argument("--loss", type=float, default=0.0,
+    emulate.add_argument("--loss", type=probability, default=0.0,
                          help="probability of dropping a frame (default %(default)s; the real link: 0.09)")
-    emulate.add_argument("--corrupt", type=float, default=0.0,
+    emulate.add_argument("--corrupt", type=probability, default=0.0,
                          help="probability of altering a byte (default %(default)s)")
-    emulate.add_argument("--seed", type=int, default=0,
+    emulate.add_argument("--seed", type=non_negative_int, default=0,
                          help="seed of loss, corruption and the participant's session (default %(default)s)")
-    emulate.add_argument("--duration", type=float,
+    emulate.add_argument("--duration", type=positive_float,
                          help="stop after this many seconds of recording (default: all of it)")
-    emulate.add_argument("--hold", type=float, default=5.0,
+    emulate.add_argument("--hold", type=positive_float, default=5.0,
                          help="--participant: seconds each motion is held (default %(default)s)")
-    emulate.add_argument("--neutral", type=float, default=5.0,
+    emulate.add_argument("--neutral", type=positive_float, default=5.0,
                          help="--participant: seconds of neutral posture between motions (default %(default)s)")
-    emulate.add_argument("--linger", type=float, default=5.0,
+    emulate.add_argument("--linger", type=non_negative_float, default=5.0,
                          help="pty: after the end, wait up to this many seconds for the reader to close "
                               "(default %(default)s)")
-    emulate.add_argument("--baud", type=int, default=BASE_STATION_BAUD,
+    emulate.add_argument("--baud", type=positive_int, default=BASE_STATION_BAUD,
                          help="baud rate of a real port (default %(default)s)")
     emulate.set_defaults(func=run_emulate)
 
@@ -70,7 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         subparsers, "capture",
         description="Record raw frames per node (and their fused angles) into a recording CSV.")
     _add_stream_arguments(capture)
-    capture.add_argument("--duration", required=True, type=float, help="seconds to record")
+    capture.add_argument("--duration", required=True, type=positive_float, help="seconds to record")
     capture.add_argument("--nodes", type=_node_list, help="IMU node indices, e.g. 1,2,3 (default: those on the stream)")
     capture.add_argument("--profile", help="profile whose node calibrations fuse the angles (default: headset "
                                            "calibration for node 1, none for the others)")
@@ -83,14 +86,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _add_stream_arguments(record)
     record.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
     record.add_argument("--session", action="store_true", help="a Session of 3 sequences instead of one Sequence")
-    record.add_argument("--repetitions", type=int, default=3,
+    record.add_argument("--repetitions", type=positive_int, default=3,
                         help="repetitions of every class in a sequence (default %(default)s)")
     record.add_argument("--amplitudes", type=_amplitude_list, default=(1.0,),
                         help="fractions of the full motion to hold, e.g. 1,0.5 (multi-amplitude; default 1)")
-    record.add_argument("--hold", type=float, default=5.0, help="seconds each motion is held (default %(default)s)")
-    record.add_argument("--neutral", type=float, default=5.0,
+    record.add_argument("--hold", type=positive_float, default=5.0, help="seconds each motion is held (default %(default)s)")
+    record.add_argument("--neutral", type=positive_float, default=5.0,
                         help="seconds of neutral posture between motions (default %(default)s)")
     record.add_argument("--train", type=Path, metavar="MODEL", help="then train the model and write it (.json/.npz)")
+    add_force(record)  # --force applies to the --train model; recordings are never replaced
     record.set_defaults(func=run_record)
 
 
@@ -98,9 +102,9 @@ def _add_stream_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", required=True, metavar="PORT_OR_URL",
                         help="serial port, pty path or pyserial URL (socket://, loop://)")
     parser.add_argument("--out", required=True, type=Path, help="recording to write (.csv, must not exist)")
-    parser.add_argument("--baud", type=int, default=BASE_STATION_BAUD,
+    parser.add_argument("--baud", type=positive_int, default=BASE_STATION_BAUD,
                         help="baud rate of a real port (default %(default)s)")
-    parser.add_argument("--retries", type=int, default=RetryPolicy.attempts,
+    parser.add_argument("--retries", type=non_negative_int, default=RetryPolicy.attempts,
                         help="reconnection attempts after the stream is lost (default %(default)s)")
 
 
@@ -185,9 +189,12 @@ def _quality(parser: FrameParser) -> str:
                     for n, s in sorted(parser.nodes.items()))
 
 
-def _refuse_existing(path: Path) -> None:
-    if path.exists():
-        raise BomiError(f"{path}: file exists, not overwriting it")
+def _unfinished(exc: StreamLost, writer: RecordingWriter) -> BomiError:
+    """The one-line error of a lost stream, saying what became of the recording."""
+    if writer.rows_written == 0:
+        writer.path.unlink(missing_ok=True)
+        return BomiError(f"{exc}; nothing recorded, {writer.path} not written")
+    return BomiError(f"{exc}; {writer.path} is partial: it keeps the {writer.rows_written} rows recorded before")
 
 
 # ------------------------------------------------------------------------------------ capture
@@ -218,21 +225,30 @@ def _capture_calibrations(profile_name: str | None, indices: tuple[int, ...]) ->
 
 
 def run_capture(args: argparse.Namespace) -> int:
-    _refuse_existing(args.out)
+    check_output(args.out, suffixes=(".csv",), what="--out", forceable=False)
+    calibrations = None if args.nodes is None else _capture_calibrations(args.profile, args.nodes)
     source = SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries))
     with source, tqdm(total=round(args.duration, 1), unit="s", disable=None, file=sys.stderr,
                       bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s {postfix}") as progress:
         batches = source.batches(args.duration)
         backlog: list[TimedFrame] = []
         indices = args.nodes or _detect_nodes(batches, args.port, backlog)
-        rows = FusedRows(_capture_calibrations(args.profile, indices))
+        rows = FusedRows(calibrations or _capture_calibrations(args.profile, indices))
         assembler = RowAssembler(rows.node_ids)
         with RecordingWriter(args.out, indices, labelled=False, segment_rows=ROWS_PER_FLUSH) as writer:
-            for elapsed, frame in _timed_frames(batches, backlog, progress, source.parser):
-                progress.update(round(elapsed - progress.n, 1))
-                row = assembler.push(frame)
-                if row is not None:
-                    writer.append(elapsed, rows.samples(row))
+            try:
+                for elapsed, frame in _timed_frames(batches, backlog, progress, source.parser):
+                    progress.update(round(elapsed - progress.n, 1))
+                    row = assembler.push(frame)
+                    if row is not None:
+                        writer.append(elapsed, rows.samples(row))
+            except StreamLost as exc:
+                writer.close()
+                raise _unfinished(exc, writer) from None
+    if writer.rows_written == 0:
+        args.out.unlink(missing_ok=True)
+        raise BomiError(f"{args.port}: no complete row of node(s) {list(indices)} in {args.duration:g} s, nothing "
+                        f"recorded, {args.out} not written; {source.parser.summary()}")
     print(f"{args.out}: {writer.rows_written} rows of node(s) {list(indices)} in {args.duration:g} s "
           f"({assembler.held} values held over lost frames); {source.parser.summary()}")
     return 0
@@ -265,8 +281,32 @@ def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowA
         progress.set_postfix_str(_quality(source.parser), refresh=False)
 
 
+def _record_segments(writer: RecordingWriter, timed_rows: Iterable[tuple[float, dict[int, ImuFrame]]],
+                     segments: list[Cue], rows: FusedRows, start: float, progress: tqdm) -> None:
+    """Label the rows by the segment they fall in; a segment is written once complete."""
+    k, pending = 0, []
+    tqdm.write(segments[0].prompt, file=sys.stderr)
+    for elapsed, row in timed_rows:
+        t = elapsed - start
+        while k < len(segments) and t >= segments[k].end_s:
+            for sample_time, samples in pending:
+                writer.append(sample_time, samples, segments[k].label)
+            writer.flush()
+            pending, k = [], k + 1
+            if k < len(segments):
+                tqdm.write(segments[k].prompt, file=sys.stderr)
+        if k == len(segments):
+            return
+        pending.append((t, rows.samples(row)))
+        progress.set_description_str(_cue(segments, k, t), refresh=False)
+        progress.update(int(t) - progress.n)
+
+
 def run_record(args: argparse.Namespace) -> int:
-    _refuse_existing(args.out)
+    check_output(args.out, suffixes=(".csv",), what="--out", forceable=False)
+    check_outputs({"--train": (args.train, SUFFIXES)}, inputs=[args.out], force=args.force)
+    if args.train is not None and args.train.resolve() == args.out.resolve():
+        raise BomiError(f"{args.train}: --train and --out name the same file")
     profile = arm_profile(args.profile)
     if any(imu_node_id(node.index) != node.node_id for node in profile.nodes):
         raise BomiError(f"{profile.source}: record expects node_id = 10 + index - 1 (base-station numbering)")
@@ -280,26 +320,16 @@ def run_record(args: argparse.Namespace) -> int:
                       bar_format="{desc} |{bar}| {postfix}") as progress:
         timed_rows = _timed_rows(source.batches(), RowAssembler(rows.node_ids), source, progress)
         start, first_row = next(timed_rows)
-        tqdm.write(segments[0].prompt, file=sys.stderr)
-        k, pending = 0, []
         with RecordingWriter(args.out, profile.node_indices) as writer:
-            for elapsed, row in itertools.chain([(start, first_row)], timed_rows):
-                t = elapsed - start
-                while k < len(segments) and t >= segments[k].end_s:  # a segment is written once complete
-                    for sample_time, samples in pending:
-                        writer.append(sample_time, samples, segments[k].label)
-                    writer.flush()
-                    pending, k = [], k + 1
-                    if k < len(segments):
-                        tqdm.write(segments[k].prompt, file=sys.stderr)
-                if k == len(segments):
-                    break
-                pending.append((t, rows.samples(row)))
-                progress.set_description_str(_cue(segments, k, t), refresh=False)
-                progress.update(int(t) - progress.n)
+            try:
+                _record_segments(writer, itertools.chain([(start, first_row)], timed_rows), segments, rows,
+                                 start, progress)
+            except StreamLost as exc:
+                writer.close()
+                raise _unfinished(exc, writer) from None
     print(f"{args.out}: {writer.rows_written} labelled rows, {len(segments)} segments; {source.parser.summary()}")
     if args.train is not None:
         model = train([read_recording(args.out)], profile)
-        save_model(args.train, model)
+        save_model(args.train, model, overwrite=args.force)
         print(f"{args.train}: model of profile {profile.name}; {class_listing(profile, model.classes.tolist())}")
     return 0

@@ -19,6 +19,8 @@ from bomi.errors import BomiError
 from tasks import metrics
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
+from bomi.files import atomic_output, write_text
+from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_float, positive_int
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participant import load_participant
@@ -274,8 +276,8 @@ def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, ti
     return jobs
 
 
-def write_json(path: Path, payload) -> None:
-    Path(path).write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
+def write_json(path: Path, payload, overwrite: bool = False) -> None:
+    write_text(path, json.dumps(payload, indent=2) + "\n", overwrite=overwrite)
 
 
 # ------------------------------------------------------------------------------------ commands
@@ -290,26 +292,27 @@ def _names(text: str, allowed: tuple[str, ...] | None, what: str) -> list[str]:
     return names
 
 
-def _check_outputs(*paths: Path | None) -> None:
-    for path in paths:
-        if path is not None and not Path(path).parent.is_dir():
-            raise BomiError(f"{path}: directory {Path(path).parent} does not exist")
-
-
 def cmd_run_task(args: argparse.Namespace) -> int:
-    _check_outputs(args.video, args.plot, args.json)
+    outputs = check_outputs({"--video": (args.video, (".mp4",)), "--plot": (args.plot, (".png",)),
+                             "--json": (args.json, (".json",))}, force=args.force)
     load_operator(args.operator_file)  # a bad file fails before any simulation
+    load_participant(args.participant)  # for the joystick too: a typo is not silently ignored
     job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file),
                      args.vote)
-    log = run_job(job, video=args.video, progress=True)
+    if outputs["--video"]:
+        with atomic_output(outputs["--video"], overwrite=args.force) as video:
+            log = run_job(job, video=video, progress=True)
+    else:
+        log = run_job(job, progress=True)
     summary = summarize(log)
     print(markdown_tables(aggregate([summary])))
-    if args.plot:
-        timeline_figure([log], args.plot)
-    if args.json:
-        write_json(args.json, summary)
-    _print_written({args.video: "the episode filmed (4x speed)", args.plot: "timeline figure",
-                    args.json: "metrics of the episode"})
+    if outputs["--plot"]:
+        with atomic_output(outputs["--plot"], overwrite=args.force) as plot:
+            timeline_figure([log], plot)
+    if outputs["--json"]:
+        write_json(outputs["--json"], summary, overwrite=args.force)
+    _print_written({outputs["--video"]: "the episode filmed (4x speed)", outputs["--plot"]: "timeline figure",
+                    outputs["--json"]: "metrics of the episode"})
     return 0 if log.success else 1
 
 
@@ -322,30 +325,41 @@ def _print_written(files: dict[Path | None, str]) -> None:
 
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
-    _check_outputs(args.json)
+    outputs = check_outputs({"--json": (args.json, (".json",))}, force=args.force)
     load_operator(args.operator_file)
-    if args.seeds < 1 or args.first_seed < 0:
-        raise BomiError("--seeds must be at least 1 and --first-seed not negative")
-    jobs = benchmark_jobs(_names(args.participants, None, "participants"), _names(args.operators, OPERATORS, "operators"),
+    participants = _names(args.participants, None, "participants")
+    for name in participants:  # every name checked here, not inside a worker after others finished
+        load_participant(name)
+    jobs = benchmark_jobs(participants, _names(args.operators, OPERATORS, "operators"),
                           args.seeds, args.time_limit, str(args.operator_file), args.vote, args.first_seed)
     records = run_many(jobs, engine_from_args(args))
     rows = aggregate(records)
     print(markdown_tables(rows))
-    if args.json:
-        write_json(args.json, {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows), "episodes": records})
+    if outputs["--json"]:
+        write_json(outputs["--json"], {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows),
+                                       "episodes": records}, overwrite=args.force)
     return 0
+
+
+DEMO_FILES = ("timeline.png", "bomi_episode.mp4", "demo.json")
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    video, figure, record = out / "bomi_episode.mp4", out / "timeline.png", out / "demo.json"
+    if out.exists() and not out.is_dir():
+        raise BomiError(f"{out}: --out must be a directory, this is a file")
+    if not out.parent.is_dir():
+        raise BomiError(f"{out}: directory {out.parent} does not exist")
+    out.mkdir(exist_ok=True)
+    figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force).values()
     joystick = run_job(EpisodeJob("joystick", "P1", args.seed), progress=True)
-    bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=video, video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
+    with atomic_output(video, overwrite=args.force) as temp:
+        bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=temp, video_speedup=DEMO_VIDEO_SPEEDUP,
+                       progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
-    with _stage("timeline figure", progress=True):
-        timeline_figure([joystick, bomi], figure)
-    write_json(record, {"paper": paper.TASK, "episodes": summaries})
+    with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=args.force) as temp:
+        timeline_figure([joystick, bomi], temp)
+    write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=args.force)
     print(markdown_tables(aggregate(summaries)))
     print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
           f"virtual participant's body and noise. The README's figures are means over 20 seeds "
@@ -356,13 +370,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _vote(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError("must be at least 1")
-    return value
-
-
 def register(subparsers) -> None:
     run = add_command(subparsers, "run-task")
     run.add_argument("--operator", choices=OPERATORS, required=True,
@@ -370,12 +377,13 @@ def register(subparsers) -> None:
                           "through the BoMI (calibrated first)")
     run.add_argument("--participant", default="P1",
                      help="virtual participant: P1, P4, P5 or a TOML file (default %(default)s)")
-    run.add_argument("--seed", type=int, default=0,
+    run.add_argument("--seed", type=non_negative_int, default=0,
                      help="task seed: cube placement, the participant's body and noise (default %(default)s)")
     _episode_options(run)
     run.add_argument("--video", type=Path, help="also film the episode to this MP4 (4x speed)")
     run.add_argument("--plot", type=Path, help="also write the timeline figure (PNG) here")
     run.add_argument("--json", type=Path, help="also write the episode's metrics (JSON) here")
+    add_force(run)
     run.set_defaults(func=cmd_run_task)
 
     bench = add_command(subparsers, "benchmark")
@@ -383,25 +391,27 @@ def register(subparsers) -> None:
                        help="comma-separated virtual participants, e.g. P1,P4,P5 (default %(default)s)")
     bench.add_argument("--operators", default="joystick,bomi",
                        help=f"comma-separated operators out of {','.join(OPERATORS)} (default %(default)s)")
-    bench.add_argument("--seeds", type=int, default=20, help="how many seeds per participant and operator "
+    bench.add_argument("--seeds", type=positive_int, default=20, help="how many seeds per participant and operator "
                                                              "(default %(default)s)")
-    bench.add_argument("--first-seed", type=int, default=0, help="the first seed (default %(default)s)")
+    bench.add_argument("--first-seed", type=non_negative_int, default=0, help="the first seed (default %(default)s)")
     add_engine_arguments(bench)
     _episode_options(bench)
     bench.add_argument("--json", type=Path, help="also write the table and every episode's metrics (JSON) here")
+    add_force(bench)
     bench.set_defaults(func=cmd_benchmark)
 
     demo = add_command(subparsers, "demo")
-    demo.add_argument("--seed", type=int, default=0, help="task seed of both episodes (default %(default)s)")
+    demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
     demo.add_argument("--out", type=Path, default=Path("demo_out"),
                       help="directory for timeline.png, bomi_episode.mp4 and demo.json (default %(default)s)")
+    add_force(demo)
     demo.set_defaults(func=cmd_demo)
 
 
 def _episode_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--time-limit", type=float, default=600.0,
+    parser.add_argument("--time-limit", type=positive_float, default=600.0,
                         help="seconds of simulated time before an episode fails (default %(default)s)")
     parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
                         help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
-    parser.add_argument("--vote", type=_vote, default=DEFAULT_VOTE,
+    parser.add_argument("--vote", type=positive_int, default=DEFAULT_VOTE,
                         help="BoMI: majority vote over this many decisions (default %(default)s)")
