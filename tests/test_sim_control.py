@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.check import enter_mode, hold, measure
+from sim.check import AT_LIMIT, DirectionResult, enter_mode, hold, measure, verdict
 from tasks.cli.sim import DEMO_SCRIPT
 from sim.config import load_config
 from sim.env import ArmSim
@@ -49,14 +49,30 @@ def test_each_wrist_direction_turns_about_the_tool_point(sim, function):
     assert result.tracking_error < 0.005, result  # the tool point stays put while the hand turns
 
 
+def test_full_speed_wrist_tip_about_x_is_capped_by_a_joint_speed_limit_and_the_verdict_says_so(sim):
+    capped = measure(sim, Mode.WRIST, "F", deflection=1.0, seconds=1.0, settle=0.25)
+    free = measure(sim, Mode.WRIST, "R", deflection=1.0, seconds=1.0, settle=0.25)
+    assert capped.ratio < 0.9 and capped.speed_use >= AT_LIMIT and capped.busiest_joint in (4, 5)
+    assert verdict(capped) == f"capped: joint {capped.busiest_joint} at its speed limit"
+    assert abs(free.ratio - 1) < 0.05 and verdict(free) == "ok"  # (joint 6 may just touch its limit)
+
+
+@pytest.mark.parametrize("ratio, use, expected", [
+    (1.04, 0.5, "ok"), (0.96, 1.0, "ok"), (0.70, 1.0, "capped: joint 3 at its speed limit"),
+    (0.70, 0.5, "too slow"), (1.2, 0.5, "too fast")])
+def test_verdict_by_hand(ratio, use, expected):
+    result = DirectionResult("wrist", "F", 0.6, 0.6 * ratio, 0.001, speed_use=use, busiest_joint=3)
+    assert verdict(result) == expected
+
+
 def test_zero_command_drifts_less_than_2_mm_in_10_s(sim):
     sim.reset()
     hold(sim, JoystickState({"F": 1.0, "L": 0.6}), 0.5)  # release after a motion, not only from rest
     hold(sim, JoystickState(), 0.5)
     start_position, start_rotation = sim.tool_position, sim.tool_rotation
     samples = hold(sim, JoystickState(), 10.0)
-    drift = max(np.linalg.norm(p - start_position) for _, p, _, _ in samples)
-    turn = max(np.linalg.norm(mujoco_rotation_vector(r @ start_rotation.T)) for _, _, r, _ in samples)
+    drift = max(np.linalg.norm(p - start_position) for _, p, _, _, _ in samples)
+    turn = max(np.linalg.norm(mujoco_rotation_vector(r @ start_rotation.T)) for _, _, r, _, _ in samples)
     assert drift < 0.002 and turn < 0.01
 
 
@@ -87,7 +103,7 @@ def test_pushing_into_the_table_stops_the_hand_above_it(sim):
 def test_a_virtual_wall_stops_the_hand_without_jitter(sim):
     sim.reset()
     samples = hold(sim, JoystickState({"L": 1.0}), 3.5)  # x+ at 0.2 m/s until the x = 0.45 wall
-    positions = np.array([p for _, p, _, _ in samples])
+    positions = np.array([p for _, p, _, _, _ in samples])
     wall = sim.config.workspace.x[1]
     assert positions[:, 0].max() <= wall + 0.002
     last_half_second = positions[-30:]

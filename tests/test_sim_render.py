@@ -79,8 +79,12 @@ def test_cli_render_refuses_non_mp4_and_missing_directory(tmp_path, capsys):
 def test_cli_sim_check_prints_every_direction(tmp_path, capsys):
     record = tmp_path / "check.json"
     assert main(["sim-check", "--deflection", "0.5", "--json", str(record)]) == 0
-    rows = capsys.readouterr().out.splitlines()[1:]
-    assert len(rows) == 6 + 6 + 2
+    header, rule, *rows = capsys.readouterr().out.splitlines()
+    assert len(rows) == 6 + 6 + 2 and set(rule) == {"-"}
+    # the unit comes before the numbers and the tracking error; every row has a verdict (0.1 m/s: all reached)
+    assert header.split()[:3] == ["mode", "function", "unit"] and header.index("unit") < header.index("tracking")
+    assert [row.split()[2] for row in rows] == ["m/s"] * 6 + ["rad/s"] * 6 + ["1/s"] * 2
+    assert all(row.endswith("  ok") for row in rows)
     results = json.loads(record.read_text())
     translation = [r for r in results if r["mode"] == "translation"]
     assert [r["function"] for r in translation] == ["F", "B", "R", "L", "Rr", "Lr"]

@@ -10,7 +10,7 @@ import numpy as np
 from tqdm import tqdm
 
 from bomi.files import atomic_output, check_input, write_text
-from sim.check import check_all
+from sim.check import DirectionResult, check_all, verdict
 from sim.config import DEFAULT_CONFIG, MODELS_DIR, load_config
 from sim.env import ArmSim
 from sim.errors import SimError
@@ -82,18 +82,38 @@ def run_check(args: argparse.Namespace) -> int:
     _check_sim_inputs(args)
     sim = ArmSim(load_config(args.config), args.models)
     results = check_all(sim, args.deflection, args.seconds)
-    print(f"{'mode':<12}{'function':<9}{'commanded':>10}{'achieved':>10}{'ratio':>7}{'tracking error':>16}")
-    units = {"translation": ("m/s", "mm off line"), "wrist": ("rad/s", "mm drift"), "fingers": ("1/s", "")}
-    for result in results:
-        speed_unit, error_unit = units[result.mode]
-        error = "" if np.isnan(result.tracking_error) else f"{1000 * result.tracking_error:.1f} {error_unit}"
-        print(f"{result.mode:<12}{result.function:<9}{result.commanded:>10.3f}{result.achieved:>10.3f}"
-              f"{result.ratio:>7.2f}{error:>16}  {speed_unit}")
+    print(sim_check_table(results))
     if outputs["--json"]:
-        records = [{key: _json_number(value) for key, value in (asdict(r) | {"ratio": r.ratio}).items()}
+        records = [{key: _json_number(value) for key, value in (asdict(r) | {"ratio": r.ratio, "verdict": verdict(r)}).items()}
                    for r in results]
         write_text(outputs["--json"], json.dumps(records, indent=2), overwrite=args.force)
     return 0
+
+
+SPEED_UNITS = {"translation": "m/s", "height": "m/s", "wrist": "rad/s", "fingers": "1/s"}
+
+
+def sim_check_table(results: list[DirectionResult]) -> str:
+    """One row per function (unit before the numbers, tracking error in mm, a verdict), then a note on
+    the rows that a joint speed limit caps."""
+    header = (f"{'mode':<12}{'function':<9}{'unit':<7}{'commanded':>10}{'achieved':>10}{'ratio':>7}"
+              f"{'tracking error (mm)':>26}  verdict")
+    lines = [header, "-" * len(header)]
+    for r in results:
+        error = "" if np.isnan(r.tracking_error) else (
+            f"{1000 * r.tracking_error:.1f} {'off the line' if SPEED_UNITS[r.mode] == 'm/s' else 'tool drift'}")
+        lines.append(f"{r.mode:<12}{r.function:<9}{SPEED_UNITS[r.mode]:<7}{r.commanded:>10.3f}{r.achieved:>10.3f}"
+                     f"{r.ratio:>7.2f}{error:>26}  {verdict(r)}")
+    capped = [r for r in results if verdict(r).startswith("capped")]
+    if capped:
+        lines += ["", "capped: " + ", ".join(f"{r.mode} {r.function}" for r in capped) + ". At this deflection "
+                  "from the home pose a joint would have to turn faster than its speed limit (the actuators' "
+                  "ranges, the real JACO's); the controller then scales all joint velocities by one factor, so the "
+                  "hand keeps its straight path, only slower (a ratio r: the busiest joint would have needed 1/r "
+                  "times its limit). Wrist F/B tip the hand about x: the JACO's wrist is bent (joints 4-6 do not "
+                  "meet at one point), so with the hand pointing down joint 5 must turn faster than the hand and "
+                  "joint 3 swing the wrist around the fingertips. See docs/sim.md."]
+    return "\n".join(lines)
 
 
 def run_render(args: argparse.Namespace) -> int:
