@@ -17,7 +17,7 @@ from sim.controller import CartesianVelocityController, JointLimits, Workspace
 from sim.errors import SimError
 from sim.joystick import THREE_AXIS, ArmCommand, JoystickInterpreter, JoystickState, Layout, Mode
 from sim.kinematics import arm_kinematics
-from sim.render import FrameRenderer
+from sim.render import FrameRenderer, Legend
 from sim.scene import Scene, build_scene
 
 # Tool frame with the hand pointing down (tool z = -world z) and the fingers closing along world x.
@@ -221,12 +221,13 @@ class ArmSim:
 
     # -- rendering -------------------------------------------------------------------------------
 
-    def render(self, caption: str | None = None) -> np.ndarray:
-        """An RGB frame from the fixed workspace camera, with an optional caption strip on top."""
+    def render(self, caption: str | Sequence[str] | None = None, legend: Legend = ()) -> np.ndarray:
+        """An RGB frame from the fixed workspace camera, with optional caption lines on top and a
+        legend of marker colours below."""
         if self._renderer is None:
             settings = self.config.render
             self._renderer = FrameRenderer(self.model, settings.camera, settings.width, settings.height)
-        return self._renderer.render(self.data, caption)
+        return self._renderer.render(self.data, caption, legend)
 
     def close(self) -> None:
         """Release the rendering context (if a frame was rendered)."""

@@ -23,7 +23,7 @@ from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combine
-from sim.render import FrameRenderer, VideoWriter, describe
+from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
 from tasks.imu_synth import Delivery
 from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
@@ -72,6 +72,8 @@ class EpisodeLog:
     neutral: int = 0
     allowance: int = 0  # decisions after an intent change that belong to the transition
     sample_period: float = SAMPLE_PERIOD_S
+    amplitude: str = "gamma"  # what the decisions' amplitude is: the profile's [proportional] amplitude
+    goals: tuple[str, ...] = ()  # per control tick: the scripted user's step (planner Goal.step, plain words)
 
 
 # allowances (s) at which the excused accuracy is also given: its curve shows what excusing buys
@@ -147,6 +149,9 @@ class OperatorChannel(Protocol):
     def log_fields(self) -> dict:
         """Extra ``EpisodeLog`` fields the channel recorded (the BoMI's decisions)."""
 
+    def caption(self) -> str | None:
+        """A line for the film about what happens between the person and the stick (None: nothing)."""
+
 
 class JoystickChannel:
     """The person's decision goes straight to the stick (a stick may combine axes).  ``controls``:
@@ -167,6 +172,10 @@ class JoystickChannel:
 
     def log_fields(self) -> dict:
         return {}
+
+    def caption(self) -> None:
+        """Nothing between the person and the stick to show."""
+        return None
 
 
 # Motion amplitudes the participant calibrates with and then uses: half to full range, so that
@@ -240,6 +249,7 @@ class BomiChannel:
         # leaning further: reaction + the body's move + a second of watching
         self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
         self._sample_index = SampleIndex()
+        self._decided: int | None = None  # the label of the chain's latest decision
         self.stick = DecisionStick()
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
         self._queue: list[Delivery] = []  # generated frames not yet arrived
@@ -308,7 +318,22 @@ class BomiChannel:
                 self._take_up(label, lean, t)
                 if label in self.feel:
                     self.feel[label].learn(lean, self._wanted)
-        return self.stick.update(self._feed(self._arrived(self.clock_offset + t, self.clock_offset + t_end)))
+        decisions = self._feed(self._arrived(self.clock_offset + t, self.clock_offset + t_end))
+        if decisions:
+            self._decided = decisions[-1].label
+        return self.stick.update(decisions)
+
+    def caption(self) -> str:
+        """The class the participant performs and the class the chain decided last (for the film)."""
+        intended, decided = self.participant.intent[0], self._decided
+        relation = "=" if decided == intended else "\u2260"  # not equal
+        return f"BoMI  intended {self._class_text(intended)} {relation} decided {self._class_text(decided)}"
+
+    def _class_text(self, label: int | None) -> str:
+        if label is None:
+            return "nothing yet"
+        cls = next(c for c in self.profile.classes if c.label == label)
+        return f"c{label} {cls.function} ({cls.name.split(' (')[0]})"
 
     def _take_up(self, label: int, amplitude: float, t: float) -> None:
         self.participant.set_intent(label, amplitude, self.clock_offset + t)
@@ -342,7 +367,7 @@ class BomiChannel:
                               decided=rows[:, 1].astype(int), gamma=rows[:, 2], nu=rows[:, 3])
         names = tuple(cls.function for cls in sorted(self.profile.classes, key=lambda c: c.label))
         return {"decisions": trace, "class_names": names, "neutral": NEUTRAL_LABEL,
-                "allowance": self.transition_samples, "sample_period": DT}
+                "allowance": self.transition_samples, "sample_period": DT, "amplitude": self.profile.amplitude}
 
     @property
     def transition_samples(self) -> int:
@@ -398,7 +423,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
     user = ScriptedUser(params, combine_axes=channel.combine_axes,
                         memory=Memory(controls=channel.controls))
-    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching")}
+    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal")}
     film = _Film(sim, video, video_speedup) if video is not None else None
     full_speed, previous = sim.config.control.full_speed, None
     started, started_cpu = time.perf_counter(), time.process_time()
@@ -415,11 +440,12 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             rows["mode"].append(view.mode.value)
             rows["cubes"].append(np.array(view.cube_pos))
             rows["touching"].append(view.touching)
+            rows["goal"].append(intent.goal.step)
             sim.step(state)
             if on_tick is not None:
                 on_tick(sim.time)
             if film is not None:
-                film.tick(f"{view.t:6.1f} s  " + describe(sim.mode, state, sim.layout) + f"  | {intent.goal}")
+                film.tick(view.t, describe(sim.mode, state, sim.layout), channel.caption(), str(intent.goal))
             outcome = task.outcome()
             if outcome.done:
                 break
@@ -430,26 +456,30 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         operator=operator, participant=participant, seed=seed, controls=channel.controls.label,
         t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
-        touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(),
+        touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(), goals=tuple(rows["goal"]),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
         wall_time=time.perf_counter() - started, cpu_time=time.process_time() - started_cpu,
         **channel.log_fields())
 
 
 class _Film:
-    """Every n-th control tick rendered with a caption into an MP4."""
+    """Every n-th control tick rendered into an MP4, with a caption (time and film speed, mode and
+    stick, what the BoMI was asked and decided, the user's goal) and a legend of the discs A and B."""
 
     def __init__(self, sim: ArmSim, path: Path, speedup: float):
         render = sim.config.render
-        self.sim = sim
+        self.sim, self.speedup = sim, speedup
         self.every = max(1, round(speedup * sim.config.physics.control_hz / render.fps))
         self.renderer = FrameRenderer(sim.model, render.camera, render.width, render.height)
         self.writer = VideoWriter(Path(path), render.fps)
+        self.legend = (("A: where the cubes start", site_colour(sim.model, "location_a", "table")),
+                       ("B: the target, stack them here", site_colour(sim.model, "location_b", "table")))
         self.ticks = 0
 
-    def tick(self, caption: str) -> None:
+    def tick(self, t: float, command: str, channel: str | None, goal: str) -> None:
         if self.ticks % self.every == 0:
-            self.writer.append(self.renderer.render(self.sim.data, caption))
+            lines = (f"{t:6.1f} s (film {self.speedup:g}x)  {command}", *filter(None, [channel]), f"goal: {goal}")
+            self.writer.append(self.renderer.render(self.sim.data, lines, self.legend))
         self.ticks += 1
 
     def close(self) -> None:

@@ -1,7 +1,12 @@
-"""The timeline figure, like the paper's: where the hand is relative to B for both operators,
-the classifier output per decision (misclassified ones in red), gamma(t) and nu(t)."""
+"""The timeline figure, like the paper's: for each episode where the hand is relative to the target
+B (with the task's phases shaded and the joystick mode as a coloured band), then for a BoMI
+episode the classifier output per decision (wrong outputs inside the excused transition apart
+from misclassified ones), the amplitude the profile uses and nu(t). Legends sit right of the
+panels, never over the data."""
 from __future__ import annotations
 
+import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -9,28 +14,102 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
 
 from tasks import metrics  # noqa: E402
 
 if TYPE_CHECKING:
     from tasks.episode import EpisodeLog
 
+# The world axes as the joystick moves the hand along them (docs/sim.md): what "hand - B" is per line.
+AXES = (("x", "x (L: +, R: -)", "tab:blue"), ("y", "y (B: +, F: -)", "tab:orange"),
+        ("z", "z, height (up: +)", "tab:green"))
+MODE_COLOURS = {"translation": "#4c72b0", "height": "#8172b2", "wrist": "#dd8452", "fingers": "#55a868"}
+AMPLITUDE_LABELS = {"gamma": "gamma: angle change\nfrom neutral (deg)",
+                    "along_class": "amplitude along\nthe class (deg)"}
+LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.005, 1.0), "fontsize": 7, "borderaxespad": 0.0}
+_CUBE = re.compile(r"cube (\d+)")
+
+
+def task_phase(goal: str) -> str | None:
+    """The phase of the task a step of the scripted user (``tasks.planner.Goal.step``) belongs to: "reach k" until cube k is
+    held, "carry k" while it is carried and set down, "finish" once both are stacked; None for a
+    goal that only interrupts a phase (opening the hand, levelling it, resting)."""
+    if goal.startswith(("release cube", "carry cube")):
+        return f"carry {_CUBE.search(goal).group(1)}"
+    found = _CUBE.search(goal)
+    if found:
+        return f"reach {found.group(1)}"
+    if goal.startswith(("release", "retreat", "done")):
+        return "finish"
+    return None
+
+
+def task_phases(goals: Sequence[str]) -> list[tuple[int, int, str]]:
+    """(first tick, tick after the last, phase) for each run of ticks in one phase; a goal that only
+    interrupts a phase stays in the phase it interrupts (at the start: the first phase)."""
+    phases = [task_phase(goal) for goal in goals]
+    known = [p for p in phases if p is not None]
+    current = known[0] if known else "task"
+    filled = []
+    for phase in phases:
+        current = phase or current
+        filled.append(current)
+    runs = []
+    for k, phase in enumerate(filled):
+        if runs and runs[-1][2] == phase:
+            runs[-1] = (runs[-1][0], k + 1, phase)
+        else:
+            runs.append((k, k + 1, phase))
+    return runs
+
+
+def _shade_phases(ax, log: "EpisodeLog", label: bool) -> None:
+    t = log.t
+    for k, (start, end, phase) in enumerate(task_phases(log.goals)):
+        t0, t1 = t[start], t[min(end, len(t) - 1)]
+        if k % 2:
+            ax.axvspan(t0, t1, color="0.92", lw=0, zorder=0)
+        if label:
+            ax.text((t0 + t1) / 2, 1.0, phase, transform=ax.get_xaxis_transform(), ha="center", va="bottom",
+                    fontsize=6, color="0.35", clip_on=False)
+
+
+def _mode_band(ax, log: "EpisodeLog") -> list[Patch]:
+    """The joystick mode as a coloured band along the bottom of ``ax``; a tick at each switch."""
+    modes, t = list(log.mode), log.t
+    starts = [0] + [k for k in range(1, len(modes)) if modes[k] != modes[k - 1]]
+    transform = ax.get_xaxis_transform()
+    for start, end in zip(starts, starts[1:] + [len(modes) - 1]):
+        ax.axvspan(t[start], t[end], ymin=0.0, ymax=0.05, color=MODE_COLOURS.get(modes[start], "0.5"), lw=0)
+    for start in starts[1:]:
+        ax.plot([t[start]] * 2, [0.0, 0.09], transform=transform, color="black", lw=0.6)
+    return [Patch(color=MODE_COLOURS[m], label=f"mode: {m}") for m in MODE_COLOURS if m in set(modes)]
+
 
 def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
     """Write the figure for one or more episodes (any BoMI episode adds the decision panels)."""
     bomi_log = next((log for log in logs if log.decisions is not None), None)
     rows = len(logs) + (3 if bomi_log is not None else 0)
-    fig, axes = plt.subplots(rows, 1, figsize=(11, 2.2 * rows), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(rows, 1, figsize=(12.5, 2.3 * rows), sharex=True, squeeze=False)
     axes = axes[:, 0]
     for ax, log in zip(axes, logs):
         rel = 100.0 * (log.hand_pos - log.target_pos)
-        for i, (axis, colour) in enumerate(zip("xyz", ("tab:blue", "tab:orange", "tab:green"))):
-            ax.plot(log.t, rel[:, i], color=colour, lw=1, label=axis)
-        verdict = f"done in {log.completion_time:.1f} s" if log.success else f"failed: {log.failure}"
-        ax.set_title(f"{log.operator} operator, {log.participant}, seed {log.seed}: {verdict}", fontsize=9)
-        ax.set_ylabel("hand - B (cm)")
+        _shade_phases(ax, log, label=True)
+        for i, (_, label, colour) in enumerate(AXES):
+            ax.plot(log.t, rel[:, i], color=colour, lw=1, label=label)
         ax.axhline(0, color="0.6", lw=0.5)
-        ax.legend(loc="upper right", fontsize=7, ncol=3)
+        ax.margins(y=0.14)  # room for the mode band below the lines
+        switches = metrics.count_changes(log.mode)
+        verdict = f"done in {log.completion_time:.1f} s" if log.success else f"failed: {log.failure}"
+        ax.set_title(f"{log.operator} operator, {log.participant}, seed {log.seed}: {verdict}, {switches} mode "
+                     f"switches. Lines: hand position minus the target B, per world axis", fontsize=9, pad=12)
+        ax.set_ylabel("hand - B (cm)")
+        modes = _mode_band(ax, log)
+        handles, _ = ax.get_legend_handles_labels()
+        ax.legend(handles=handles + modes + [Patch(color="0.92", label="task phase (shaded\nevery other)")],
+                  **LEGEND)
     if bomi_log is not None:
         _decision_panels(axes[len(logs):], bomi_log)
     axes[-1].set_xlabel("time (s)")
@@ -41,24 +120,47 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
     return path
 
 
+def decision_kinds(intended: np.ndarray, decided: np.ndarray, allowance: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Masks over the decisions: equal to the intended class; another class but inside the excused
+    transition (the ``allowance`` decisions after an intent change, ``metrics.in_transition``);
+    misclassified (another class outside it, ``metrics.misclassified``)."""
+    wrong = np.asarray(decided) != np.asarray(intended)
+    return ~wrong, wrong & metrics.in_transition(intended, allowance), metrics.misclassified(intended, decided,
+                                                                                              allowance)
+
+
 def _decision_panels(axes, log: "EpisodeLog") -> None:
     d = log.decisions
-    errors = metrics.misclassified(d.intended, d.decided, log.allowance)
-    ax_class, ax_gamma, ax_nu = axes
+    right, excused, errors = decision_kinds(d.intended, d.decided, log.allowance)
+    ax_class, ax_amplitude, ax_nu = axes
+    for ax in axes:
+        _shade_phases(ax, log, label=False)
     ax_class.step(d.t, d.intended, where="post", color="0.7", lw=2, label="intended")
-    ax_class.scatter(d.t[~errors], d.decided[~errors], s=2, color="tab:blue", label="output")
+    ax_class.scatter(d.t[right], d.decided[right], s=2, color="tab:blue", label="output = intended")
+    ax_class.scatter(d.t[excused], d.decided[excused], s=10, facecolors="none", edgecolors="tab:orange",
+                     linewidths=0.7, label=f"other class, excused:\nwithin {1000 * log.allowance * log.sample_period:.0f}"
+                                       " ms of an\nintent change")
     ax_class.scatter(d.t[errors], d.decided[errors], s=8, color="red", label="misclassified")
     ax_class.set_yticks(range(len(log.class_names)), log.class_names, fontsize=7)
+    ax_class.set_ylim(-0.6, len(log.class_names) - 0.4)
     ax_class.set_ylabel("class")
-    ax_class.legend(loc="upper right", fontsize=7, ncol=3)
-    ax_gamma.plot(d.t, d.gamma, color="tab:purple", lw=0.8)
-    ax_gamma.set_ylabel("gamma (deg)")
+    ax_class.legend(**LEGEND)
+    ax_amplitude.plot(d.t, d.gamma, color="tab:purple", lw=0.8)
+    ax_amplitude.axhline(0, color="0.6", lw=0.5)
+    ax_amplitude.set_ylabel(AMPLITUDE_LABELS.get(log.amplitude, f"{log.amplitude} (deg)"), fontsize=8)
     ax_nu.plot(d.t, d.nu, color="tab:brown", lw=0.8)
-    ax_nu.set_ylabel("nu")
+    ax_nu.set_ylabel("nu: stick\ndeflection (0-1)", fontsize=8)
     ax_nu.set_ylim(-0.05, 1.05)
     for ax in axes:
         ax.grid(alpha=0.3)
     every = 100 * metrics.accuracy_all_decisions(d.intended, d.decided)
-    excused = 100 * metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance)
-    ax_class.set_title(f"BoMI decisions: accuracy {every:.1f} % over all decisions, {excused:.1f} % with "
-                       f"{1000 * log.allowance * log.sample_period:.0f} ms after each intent change excused", fontsize=9)
+    scored = 100 * metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance)
+    amplitude = ("signed angle change along the class's own mean direction (profile [proportional] "
+                 "amplitude = along_class)" if log.amplitude == "along_class" else
+                 "the paper's gamma (profile [proportional] amplitude = gamma)")
+    ax_class.set_title(f"BoMI decisions: accuracy {every:.1f} % over all decisions, {scored:.1f} % with "
+                       f"{1000 * log.allowance * log.sample_period:.0f} ms after each intent change excused "
+                       f"({int(errors.sum())} misclassified, {int(excused.sum())} excused)", fontsize=9)
+    ax_amplitude.set_title(f"amplitude of the decided class: {amplitude}", fontsize=8)
+    ax_nu.set_title("nu: the amplitude scaled by the calibrated range, the stick's deflection", fontsize=8)

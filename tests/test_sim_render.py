@@ -8,7 +8,8 @@ import pytest
 from tasks.cli import main
 from sim.env import ArmSim
 from sim.joystick import JoystickState, Mode
-from sim.render import CAPTION_HEIGHT, VideoWriter, caption_strip, describe, write_png
+from sim.render import (ELLIPSIS, MARGIN, VideoWriter, _canvas, _text_width, caption_strip, describe, fit,
+                        legend_strip, site_colour, write_png)
 
 
 @pytest.fixture(scope="module")
@@ -39,10 +40,36 @@ def test_caption_strip_is_on_top_and_carries_the_text(sim):
     text = describe(Mode.WRIST, state)
     assert text.startswith("mode: wrist") and "F=0.50" in text and "B1" in text
     frame = sim.render(text)
-    assert frame.shape[0] == sim.config.render.height + CAPTION_HEIGHT
-    strip = frame[:CAPTION_HEIGHT]
+    height = caption_strip((text,), frame.shape[1]).shape[0]
+    assert frame.shape[0] == sim.config.render.height + height and height % 16 == 0
+    strip = frame[:height]
     assert (strip.max(axis=2) > 200).sum() > 50  # white text drawn
-    assert not np.array_equal(strip, caption_strip(describe(Mode.FINGERS, state), frame.shape[1]))
+    assert not np.array_equal(strip, caption_strip((describe(Mode.FINGERS, state),), frame.shape[1]))
+
+
+def test_a_long_caption_line_is_shortened_to_the_frame_width_never_cut():
+    width = 640
+    long = "  24.8 s  film 8x  mode: translation  command: F=0.50 (move y-) L=0.20 (move x+)  | carry cube 1: descend"
+    _, canvas = _canvas(width, 32)
+    shown = fit(long, width - 2 * MARGIN, canvas)
+    assert shown.endswith(ELLIPSIS) and long.startswith(shown[:-len(ELLIPSIS)])
+    assert _text_width(shown, canvas) <= width - 2 * MARGIN < _text_width(long, canvas)
+    assert fit("mode: wrist", width, canvas) == "mode: wrist"
+    strip = caption_strip((long, "second line"), width)
+    assert strip.shape == (48, width, 3)
+    assert (strip[:, -MARGIN + 1:].max(axis=2) > 120).sum() == 0  # nothing drawn in the right margin
+    assert (strip[:, width // 2:].max(axis=2) > 200).sum() > 50  # but the line does reach far right
+
+
+def test_the_legend_shows_each_marker_in_its_colour(sim):
+    colours = {site: site_colour(sim.model, site, "table") for site in ("location_a", "location_b")}
+    assert colours["location_a"] != colours["location_b"]
+    strip = legend_strip((("A: start", colours["location_a"]), ("B: target", colours["location_b"])), 640)
+    for colour in colours.values():
+        rgb = np.round(255 * np.array(colour))
+        assert (np.abs(strip.astype(int) - rgb).max(axis=2) <= 3).sum() > 40
+    frame = sim.render(("a caption",), legend=(("A: start", colours["location_a"]),))
+    assert frame.shape[0] == 32 + sim.config.render.height + 32
 
 
 def test_png_and_mp4_round_trip(sim, tmp_path):
