@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import copy
+import math
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -52,3 +53,45 @@ def with_overrides(data: dict, overrides: Mapping[str, Any]) -> dict:
                 raise ValueError(f"{dotted}: '{name}' is not a table")
         table[leaf] = value
     return data
+
+
+# The checks every configuration parser uses (profiles, participants, operators): each raises a
+# ValueError saying where (``where``: the table, e.g. "[timing]" or "classes[2]") and what is wrong.
+def check_table(table: Any, where: str, allowed: Iterable[str], required: Iterable[str] = ()) -> dict:
+    """``table`` itself, once it is a table with no key outside ``allowed`` and every key of ``required``."""
+    if table is None:
+        raise ValueError(f"{where}: missing table")
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}: must be a table")
+    allowed = set(allowed)
+    unknown, missing = sorted(set(table) - allowed), sorted(set(required) - set(table))
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
+    if missing:
+        raise ValueError(f"{where}: missing key(s) {', '.join(missing)}")
+    return table
+
+
+def typed(table: dict, key: str, kind: type | tuple[type, ...], where: str, default: Any = ...) -> Any:
+    """``table[key]`` if it is of ``kind`` (a boolean never counts as a number), else ``default``
+    when the key is absent and there is one."""
+    if key not in table:
+        if default is ...:
+            raise ValueError(f"{where}: missing '{key}'")
+        return default
+    value = table[key]
+    if isinstance(value, bool) is not (kind is bool) or not isinstance(value, kind):
+        raise ValueError(f"{where}: '{key}' has the wrong type ({type(value).__name__})")
+    return value
+
+
+def number(table: dict, key: str, where: str, low: float = -math.inf, high: float = math.inf,
+           default: Any = ...) -> float:
+    """``table[key]`` as a float, if it is a finite number in [low, high]."""
+    if key not in table and default is not ...:
+        return default
+    value = table.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not low <= value <= high:
+        raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
+    return float(value)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -115,85 +115,104 @@ def isotropic_yaw(stds: np.ndarray) -> np.ndarray:
     return out
 
 
-def fit_recordings(recordings: list[Recording]) -> Fit:
-    """Measure the participant from one recording per day (all with the same nodes and labels)."""
-    n_nodes = len(recordings[0].node_indices)
-    deltas: dict[tuple[int, int], list[np.ndarray]] = {}     # (label, day) -> per-repetition deltas
-    levels: dict[tuple[int, int], list[np.ndarray]] = {}     # (label, day) -> per-repetition block medians
-    neutral_levels: dict[int, list[np.ndarray]] = {}          # day -> c0 block medians
-    sway: dict[tuple[int, int], list[np.ndarray]] = {}        # (label, node) -> per-block std (3,)
-    tremor: dict[tuple[int, int], list[np.ndarray]] = {}
-    spectra: list[np.ndarray] = []
-    for day, rec in enumerate(tqdm(recordings, desc="fitting days", unit="day"), start=1):
-        angles = stacked_angles(rec)
-        blocks = hold_blocks(rec.require_labels(), day)
+@dataclass
+class _Holds:
+    """What the held postures of every day show, gathered block by block."""
+
+    n_nodes: int
+    deltas: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)  # (label, day) -> per-repetition deltas
+    levels: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)  # (label, day) -> per-repetition medians
+    neutral_levels: dict[int, list[np.ndarray]] = field(default_factory=dict)      # day -> c0 block medians
+    sway: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)    # (label, node) -> per-block std (3,)
+    tremor: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)
+    spectra: list[np.ndarray] = field(default_factory=list)
+
+    def add_levels(self, day: int, blocks: list[Block], angles: np.ndarray) -> None:
+        """Each block's median posture; a motion's as a delta from the neutral before and after it
+        (robust to the slow yaw drift)."""
         medians = [np.median(angles[b.start:b.stop], axis=0) for b in blocks]
         for k, (block, level) in enumerate(zip(blocks, medians)):
             if block.label == 0:
-                neutral_levels.setdefault(day, []).append(level)
+                self.neutral_levels.setdefault(day, []).append(level)
                 continue
             around = [medians[j] for j in (k - 1, k + 1) if 0 <= j < len(blocks) and blocks[j].label == 0]
-            if around:   # delta from the neutral before and after: robust to the slow yaw drift
-                deltas.setdefault((block.label, day), []).append(level - np.mean(around, axis=0))
-                levels.setdefault((block.label, day), []).append(level)
+            if around:
+                self.deltas.setdefault((block.label, day), []).append(level - np.mean(around, axis=0))
+                self.levels.setdefault((block.label, day), []).append(level)
+
+    def add_noise(self, blocks: list[Block], angles: np.ndarray) -> None:
+        """Sway and tremor of every usable block and node; node 1's tremor spectrum."""
         for block in blocks:
-            for node in range(n_nodes):
+            for node in range(self.n_nodes):
                 x = angles[block.start:block.stop, node]
                 if repeated_fraction(x) > MAX_REPEATED_ROWS or len(x) <= 4 * EDGE_SAMPLES:
                     continue
                 s, t = split_sway_tremor(x)
-                sway.setdefault((block.label, node), []).append(s.std(axis=0))
-                tremor.setdefault((block.label, node), []).append(t.std(axis=0))
+                self.sway.setdefault((block.label, node), []).append(s.std(axis=0))
+                self.tremor.setdefault((block.label, node), []).append(t.std(axis=0))
                 if node == 0:
-                    spectra.append(scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=WELCH_SEGMENT, axis=0)[1].sum(axis=1))
+                    self.spectra.append(
+                        scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=WELCH_SEGMENT, axis=0)[1].sum(axis=1))
+
+    def per_node(self, table: dict, label: int) -> np.ndarray:
+        return np.array([_typical(table.get((label, node), [])) for node in range(self.n_nodes)])
+
+    def per_day(self, table: dict, label: int, days: int) -> list[np.ndarray]:
+        return [np.array(table[(label, d)]) for d in range(1, days + 1) if (label, d) in table]
+
+
+def _day_variation(days: list[np.ndarray], day_levels: list[np.ndarray], pooled_rep_var: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """(posture, repetition std, day gain log-std, day offset std) of one class from its per-day
+    repetitions (deltas) and held levels: a day's mean posture = gain x nominal posture + an
+    offset, the gain log-normal, fitted on the angles the feature vectors use (not the yaw of nodes
+    2.., unreliable here); the repetition spread is that of the held level itself (not of the
+    delta, which adds the neutrals' spread)."""
+    posture = np.median(np.concatenate(days), axis=0)
+    own = [reps - reps.mean(axis=0) for reps in day_levels if len(reps) > 1]
+    rep_var = np.mean(np.concatenate(own) ** 2, axis=0) if own else pooled_rep_var
+    reps_per_day = np.mean([len(reps) for reps in days])
+    day_means = np.array([reps.mean(axis=0) for reps in days])
+    used = np.ones_like(posture)
+    used[1:, 2] = 0.0
+    gains = np.einsum("dij,ij->d", day_means, posture * used) / np.sum((posture * used) ** 2)
+    gains = np.clip(gains, MIN_DAY_GAIN, None)
+    offsets = day_means - gains[:, None, None] * posture
+    # var(day offsets) = day var + rep var / reps per day
+    day_var = np.var(offsets, axis=0, ddof=1) - rep_var / reps_per_day
+    return posture, np.sqrt(rep_var), float(np.std(np.log(gains), ddof=1)), np.sqrt(np.clip(day_var, 0.0, None))
+
+
+def fit_recordings(recordings: list[Recording]) -> Fit:
+    """Measure the participant from one recording per day (all with the same nodes and labels)."""
+    holds = _Holds(len(recordings[0].node_indices))
+    for day, rec in enumerate(tqdm(recordings, desc="fitting days", unit="day"), start=1):
+        angles = stacked_angles(rec)
+        blocks = hold_blocks(rec.require_labels(), day)
+        holds.add_levels(day, blocks, angles)
+        holds.add_noise(blocks, angles)
     freqs = np.fft.rfftfreq(WELCH_SEGMENT, 1.0 / SAMPLE_RATE_HZ)
-    mean_psd = np.mean(spectra, axis=0)
-    labels = sorted({label for label, _ in deltas})
-
-    def per_node(table: dict, label: int) -> np.ndarray:
-        return np.array([_typical(table.get((label, node), [])) for node in range(n_nodes)])
-
-    per_day = {label: [np.array(deltas[(label, d)]) for d in range(1, len(recordings) + 1) if (label, d) in deltas]
-               for label in labels}
-    # repetition spread: of the held level itself (not of the delta, which adds the neutrals' spread)
-    per_day_levels = {label: [np.array(levels[(label, d)]) for d in range(1, len(recordings) + 1)
-                              if (label, d) in levels] for label in labels}
+    labels = sorted({label for label, _ in holds.deltas})
+    per_day = {label: holds.per_day(holds.deltas, label, len(recordings)) for label in labels}
+    per_day_levels = {label: holds.per_day(holds.levels, label, len(recordings)) for label in labels}
     within = [reps - reps.mean(axis=0) for days in per_day_levels.values() for reps in days if len(reps) > 1]
     pooled_rep_var = np.mean(np.concatenate(within) ** 2, axis=0)
-    postures, rep_std, day_gain, day_std = {}, {}, {}, {}
-    for label, days in per_day.items():
-        posture = postures[label] = np.median(np.concatenate(days), axis=0)
-        own = [reps - reps.mean(axis=0) for reps in per_day_levels[label] if len(reps) > 1]
-        rep_var = np.mean(np.concatenate(own) ** 2, axis=0) if own else pooled_rep_var
-        reps_per_day = np.mean([len(reps) for reps in days])
-        # a day's mean posture = gain x nominal posture + an offset; the gain is log-normal. It is
-        # fitted on the angles the feature vectors use: not the yaw of nodes 2.. (unreliable here)
-        day_means = np.array([reps.mean(axis=0) for reps in days])
-        used = np.ones_like(posture)
-        used[1:, 2] = 0.0
-        gains = np.einsum("dij,ij->d", day_means, posture * used) / np.sum((posture * used) ** 2)
-        gains = np.clip(gains, MIN_DAY_GAIN, None)
-        offsets = day_means - gains[:, None, None] * posture
-        # var(day offsets) = day var + rep var / reps per day
-        day_var = np.var(offsets, axis=0, ddof=1) - rep_var / reps_per_day
-        rep_std[label] = np.sqrt(rep_var)
-        day_gain[label] = float(np.std(np.log(gains), ddof=1))
-        day_std[label] = np.sqrt(np.clip(day_var, 0.0, None))
-    day_neutrals = [np.array(levels) for levels in neutral_levels.values()]
+    variation = {label: _day_variation(per_day[label], per_day_levels[label], pooled_rep_var) for label in labels}
+    day_neutrals = [np.array(levels) for levels in holds.neutral_levels.values()]
     neutral_within = np.concatenate([lv - lv.mean(axis=0) for lv in day_neutrals])
     return Fit(
         days=len(recordings),
         neutral_deg=np.median(day_neutrals[0], axis=0),
         neutral_rep_std=np.sqrt(np.mean(neutral_within ** 2, axis=0)),
-        neutral_sway_std=isotropic_yaw(per_node(sway, 0)),
-        neutral_tremor_std=isotropic_yaw(per_node(tremor, 0)),
-        tremor_spectrum=motion_spectrum(freqs, mean_psd),
-        postures=postures,
-        rep_std=rep_std,
-        day_gain_log_std=day_gain,
-        day_std=day_std,
-        sway_std={label: isotropic_yaw(per_node(sway, label)) for label in labels},
-        tremor_std={label: isotropic_yaw(per_node(tremor, label)) for label in labels},
+        neutral_sway_std=isotropic_yaw(holds.per_node(holds.sway, 0)),
+        neutral_tremor_std=isotropic_yaw(holds.per_node(holds.tremor, 0)),
+        tremor_spectrum=motion_spectrum(freqs, np.mean(holds.spectra, axis=0)),
+        postures={label: v[0] for label, v in variation.items()},
+        rep_std={label: v[1] for label, v in variation.items()},
+        day_gain_log_std={label: v[2] for label, v in variation.items()},
+        day_std={label: v[3] for label, v in variation.items()},
+        sway_std={label: isotropic_yaw(holds.per_node(holds.sway, label)) for label in labels},
+        tremor_std={label: isotropic_yaw(holds.per_node(holds.tremor, label)) for label in labels},
     )
 
 

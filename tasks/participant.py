@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from bomi.config_files import load_toml
+from bomi.config_files import check_table, load_toml, number
 from bomi.errors import BomiError
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT, WARMUP_S, FusedRows
@@ -101,24 +101,6 @@ def load_participant(path_or_name: str | Path, overrides: Mapping[str, Any] | No
     return load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse, overrides)
 
 
-def _check_keys(table: Any, allowed: set[str], required: set[str], where: str) -> dict:
-    if not isinstance(table, dict):
-        raise ValueError(f"{where}: expected a table")
-    unknown, missing = sorted(set(table) - allowed), sorted(required - set(table))
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)}")
-    if missing:
-        raise ValueError(f"{where}: missing key(s) {', '.join(missing)}")
-    return table
-
-
-def _number(table: dict, key: str, where: str, low: float, high: float = np.inf) -> float:
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-        raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
-    return float(value)
-
-
 def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative: bool) -> np.ndarray:
     try:
         m = np.array(table[key], dtype=float)
@@ -138,7 +120,7 @@ def _motion(table: dict, label: int, where: str, n_nodes: int, posture_key: str 
         label=label,
         posture_deg=_matrix(table, posture_key, where, n_nodes, nonnegative=False),
         rep_std_deg=_matrix(table, "rep_std_deg", where, n_nodes, nonnegative=True),
-        day_gain_log_std=_number(table, "day_gain_log_std", where, 0.0, 2.0) if label else 0.0,
+        day_gain_log_std=number(table, "day_gain_log_std", where, 0.0, 2.0) if label else 0.0,
         day_std_deg=_matrix(table, "day_std_deg", where, n_nodes, nonnegative=True) if label else zeros,
         sway_std_deg=_matrix(table, "sway_std_deg", where, n_nodes, nonnegative=True),
         tremor_std_deg=_matrix(table, "tremor_std_deg", where, n_nodes, nonnegative=True),
@@ -146,15 +128,39 @@ def _motion(table: dict, label: int, where: str, n_nodes: int, posture_key: str 
 
 
 def _parse(data: dict, source: str) -> ParticipantParams:
-    _check_keys(data, _TOP_KEYS, _TOP_KEYS - {"description", "spasm"}, "participant")
+    check_table(data, "participant", _TOP_KEYS, _TOP_KEYS - {"description", "spasm"})
     for key in ("name", "profile"):
         if not isinstance(data[key], str) or not data[key]:
             raise ValueError(f"'{key}' must be a non-empty string")
-    neutral_table = _check_keys(data["neutral"], _NEUTRAL_KEYS, _NEUTRAL_KEYS, "[neutral]")
+    neutral_table = check_table(data["neutral"], "[neutral]", _NEUTRAL_KEYS, _NEUTRAL_KEYS)
     n_nodes = _matrix(neutral_table, "angles_deg", "[neutral]", None, nonnegative=False).shape[0]
     neutral = _motion(neutral_table, NEUTRAL_LABEL, "[neutral]", n_nodes, posture_key="angles_deg")
-    tremor = _check_keys(data["tremor"], {"frequencies_hz", "relative_power"}, {"frequencies_hz", "relative_power"},
-                         "[tremor]")
+    freqs, power = _parse_tremor(data["tremor"])
+    if not isinstance(data["classes"], list) or not data["classes"]:
+        raise ValueError("'classes' must be a non-empty list of [[classes]] tables")
+    classes: dict[int, ClassMotion] = {}
+    for k, table in enumerate(data["classes"]):
+        where = f"classes[{k}]"
+        check_table(table, where, _CLASS_KEYS, _CLASS_KEYS)
+        label = table["label"]
+        if isinstance(label, bool) or not isinstance(label, int) or label <= NEUTRAL_LABEL or label in classes:
+            raise ValueError(f"{where}: 'label' must be a positive integer not used before, got {label!r}")
+        classes[label] = _motion(table, label, where, n_nodes)
+    spasm = _parse_spasm(data["spasm"], n_nodes) if "spasm" in data else None
+    return ParticipantParams(
+        name=data["name"], profile=data["profile"], description=str(data.get("description", "")),
+        onset_s=number(data, "onset_s", "participant", DT, 10.0),
+        reaction_s=number(data, "reaction_s", "participant", 0.0, 10.0),
+        max_amplitude=number(data, "max_amplitude", "participant", 0.01, 1.0),
+        tremor_spectrum=(freqs, power), neutral=neutral, classes=classes, spasm=spasm,
+        source=source)
+
+
+
+def _parse_tremor(table: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies_hz, relative_power) of the tremor spectrum."""
+    keys = {"frequencies_hz", "relative_power"}
+    tremor = check_table(table, "[tremor]", keys, keys)
     try:
         freqs, power = (np.array(tremor[k], dtype=float) for k in ("frequencies_hz", "relative_power"))
     except (TypeError, ValueError):
@@ -164,31 +170,16 @@ def _parse(data: dict, source: str) -> ParticipantParams:
             or np.any(power < 0) or not np.any(power > 0)):
         raise ValueError("[tremor]: frequencies_hz must rise from 0 to at most "
                          f"{SAMPLE_RATE_HZ / 2} Hz, with as many non-negative relative_power values, not all 0")
-    if not isinstance(data["classes"], list) or not data["classes"]:
-        raise ValueError("'classes' must be a non-empty list of [[classes]] tables")
-    classes: dict[int, ClassMotion] = {}
-    for k, table in enumerate(data["classes"]):
-        where = f"classes[{k}]"
-        _check_keys(table, _CLASS_KEYS, _CLASS_KEYS, where)
-        label = table["label"]
-        if isinstance(label, bool) or not isinstance(label, int) or label <= NEUTRAL_LABEL or label in classes:
-            raise ValueError(f"{where}: 'label' must be a positive integer not used before, got {label!r}")
-        classes[label] = _motion(table, label, where, n_nodes)
-    spasm = None
-    if "spasm" in data:
-        table = _check_keys(data["spasm"], _SPASM_KEYS, _SPASM_KEYS, "[spasm]")
-        nodes = table["nodes"]
-        if not isinstance(nodes, list) or not nodes or not all(isinstance(n, int) and 1 <= n <= n_nodes for n in nodes):
-            raise ValueError(f"[spasm]: 'nodes' must list node positions 1..{n_nodes}")
-        spasm = Spasm(_number(table, "rate_per_s", "[spasm]", 0.0), _number(table, "max_deg", "[spasm]", 0.0, 90.0),
-                      _number(table, "duration_s", "[spasm]", DT, 10.0), tuple(nodes))
-    return ParticipantParams(
-        name=data["name"], profile=data["profile"], description=str(data.get("description", "")),
-        onset_s=_number(data, "onset_s", "participant", DT, 10.0),
-        reaction_s=_number(data, "reaction_s", "participant", 0.0, 10.0),
-        max_amplitude=_number(data, "max_amplitude", "participant", 0.01, 1.0),
-        tremor_spectrum=(freqs, power), neutral=neutral, classes=classes, spasm=spasm,
-        source=source)
+    return freqs, power
+
+
+def _parse_spasm(table: Any, n_nodes: int) -> Spasm:
+    table = check_table(table, "[spasm]", _SPASM_KEYS, _SPASM_KEYS)
+    nodes = table["nodes"]
+    if not isinstance(nodes, list) or not nodes or not all(isinstance(n, int) and 1 <= n <= n_nodes for n in nodes):
+        raise ValueError(f"[spasm]: 'nodes' must list node positions 1..{n_nodes}")
+    return Spasm(number(table, "rate_per_s", "[spasm]", 0.0), number(table, "max_deg", "[spasm]", 0.0, 90.0),
+                 number(table, "duration_s", "[spasm]", DT, 10.0), tuple(nodes))
 
 
 def check_against_profile(params: ParticipantParams, profile: Profile) -> None:

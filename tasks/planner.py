@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from bomi.config_files import load_toml
+from bomi.config_files import check_table, load_toml, number
 from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
@@ -74,22 +74,10 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
     """The operator tables as OperatorParams; ValueError names what is wrong (load_toml adds the file)."""
     values: dict[str, float] = {}
     for section, keys in _SECTIONS.items():
-        table = data.get(section)
-        if not isinstance(table, dict):
-            raise ValueError(f"missing table [{section}]")
-        unknown = set(table) - set(keys)
-        if unknown:
-            raise ValueError(f"unknown key(s) in [{section}]: {', '.join(sorted(unknown))}")
+        table = check_table(data.get(section), f"[{section}]", keys)
         for key in keys:
-            value = table.get(key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"[{section}] {key} must be a finite number, got {value!r}")
-            if value < 0 and key not in _MAY_BE_NEGATIVE:
-                raise ValueError(f"[{section}] {key} must not be negative, got {value}")
-            values[key] = float(value)
-    unknown_sections = set(data) - set(_SECTIONS)
-    if unknown_sections:
-        raise ValueError(f"unknown table(s): {', '.join(sorted(unknown_sections))}")
+            values[key] = number(table, key, f"[{section}]", -math.inf if key in _MAY_BE_NEGATIVE else 0.0)
+    check_table(data, "operator", _SECTIONS)
     if not 0 < values["fine"] <= values["coarse"] <= 1 or not 0 < values["turn"] <= 1:
         raise ValueError("[deflection] needs 0 < fine <= coarse <= 1 and 0 < turn <= 1")
     if not 0 < values["open_closure"] < 1:

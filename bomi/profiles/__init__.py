@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
-from bomi.config_files import load_toml
+from bomi.config_files import check_table, load_toml, typed
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration
 
@@ -93,32 +93,40 @@ def load_profile(path_or_name: str | Path, overrides: Mapping[str, Any] | None =
     return load_toml(path_or_name, PROFILE_DIR, "profile", _parse, overrides)
 
 
-def _check_keys(table: dict, allowed: set[str], where: str) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
-
-
-def _get(table: dict, key: str, kind: type | tuple, where: str, default: Any = ...) -> Any:
-    if key not in table:
-        if default is ...:
-            raise ValueError(f"{where}: missing '{key}'")
-        return default
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, kind):  # no profile field is a boolean
-        raise ValueError(f"{where}: '{key}' has the wrong type ({type(value).__name__})")
-    return value
+def _section(data: dict, name: str, allowed: set[str]) -> dict:
+    """An optional top-level table (empty when absent) with its keys checked."""
+    return check_table(typed(data, name, dict, "profile", {}), name, allowed)
 
 
 def _parse(data: dict, source: str) -> Profile:
-    _check_keys(data, _TOP_KEYS, "profile")
-    nodes = tuple(_parse_node(t, f"nodes[{k}]") for k, t in enumerate(_get(data, "nodes", list, "profile")))
+    check_table(data, "profile", _TOP_KEYS)
+    nodes = _parse_nodes(typed(data, "nodes", list, "profile"))
+    indices = [node.index for node in nodes]
+    classes = _parse_classes(typed(data, "classes", list, "profile"), set(indices))
+    joystick = _section(data, "joystick", {"layout"})
+    return Profile(name=typed(data, "name", str, "profile"), description=typed(data, "description", str, "profile", ""),
+                   nodes=nodes, classes=classes, spec=_parse_spec(_section(data, "features", {"vector", "window", "stride"}),
+                                                                  tuple(indices)),
+                   shrinkage=_parse_shrinkage(_section(data, "classifier", {"shrinkage"})),
+                   neutral_samples=_parse_neutral_samples(_section(data, "neutral", {"samples"})),
+                   post=_parse_post(_section(data, "post_processing", {"rejection_threshold", "vote_length"})),
+                   source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
+                   joystick_layout=typed(joystick, "layout", str, "joystick", None))
+
+
+def _parse_nodes(tables: list) -> tuple[NodeConfig, ...]:
+    nodes = tuple(_parse_node(t, f"nodes[{k}]") for k, t in enumerate(tables))
     indices = [node.index for node in nodes]
     if not nodes or len(set(indices)) != len(indices) or len({n.node_id for n in nodes}) != len(nodes):
         raise ValueError("nodes: need at least one node, with distinct index and node_id")
     if indices != sorted(indices):
         raise ValueError("nodes: list them in increasing index (the first one carries yaw in FV1)")
-    classes = tuple(_parse_class(t, f"classes[{k}]", set(indices)) for k, t in enumerate(_get(data, "classes", list, "profile")))
+    return nodes
+
+
+def _parse_classes(tables: list, node_indices: set[int]) -> tuple[ClassConfig, ...]:
+    """The classes in label order: distinct labels, at least three, exactly one neutral (label 0)."""
+    classes = tuple(_parse_class(t, f"classes[{k}]", node_indices) for k, t in enumerate(tables))
     labels = [cls.label for cls in classes]
     if len(set(labels)) != len(labels):
         raise ValueError("classes: duplicate label")
@@ -127,82 +135,73 @@ def _parse(data: dict, source: str) -> Profile:
     neutral = [cls for cls in classes if cls.function == NEUTRAL_FUNCTION]
     if len(neutral) != 1 or neutral[0].label != NEUTRAL_LABEL:
         raise ValueError(f"classes: exactly one class, label {NEUTRAL_LABEL}, must have function \"neutral\"")
+    return tuple(sorted(classes, key=lambda c: c.label))
 
-    features = _get(data, "features", dict, "profile", {})
-    _check_keys(features, {"vector", "window", "stride"}, "features")
-    kind = _get(features, "vector", str, "features", "FV3")
+
+def _parse_spec(features: dict, nodes: tuple[int, ...]) -> FeatureSpec:
+    kind = typed(features, "vector", str, "features", "FV3")
     if kind not in FEATURE_KINDS:
         raise ValueError(f"features: vector must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
-    spec = FeatureSpec(kind=kind, nodes=tuple(indices), window=_get(features, "window", int, "features", 8),
-                       stride=_get(features, "stride", int, "features", 1))
+    return FeatureSpec(kind=kind, nodes=nodes, window=typed(features, "window", int, "features", 8),
+                       stride=typed(features, "stride", int, "features", 1))
 
-    classifier = _get(data, "classifier", dict, "profile", {})
-    _check_keys(classifier, {"shrinkage"}, "classifier")
-    shrinkage = _get(classifier, "shrinkage", (str, float, int), "classifier", "none")
+
+def _parse_shrinkage(classifier: dict) -> float | str | None:
+    shrinkage = typed(classifier, "shrinkage", (str, float, int), "classifier", "none")
     if isinstance(shrinkage, str):
         if shrinkage not in ("auto", "none"):
             raise ValueError(f"classifier: shrinkage must be \"auto\", \"none\" or a number in [0, 1], got {shrinkage!r}")
-        shrinkage = None if shrinkage == "none" else shrinkage
-    elif not 0.0 <= shrinkage <= 1.0:
+        return None if shrinkage == "none" else shrinkage
+    if not 0.0 <= shrinkage <= 1.0:
         raise ValueError(f"classifier: shrinkage must be in [0, 1], got {shrinkage}")
+    return shrinkage
 
-    neutral_table = _get(data, "neutral", dict, "profile", {})
-    _check_keys(neutral_table, {"samples"}, "neutral")
-    neutral_samples = _get(neutral_table, "samples", int, "neutral", 100)
-    if neutral_samples < 1:
+
+def _parse_neutral_samples(neutral: dict) -> int:
+    samples = typed(neutral, "samples", int, "neutral", 100)
+    if samples < 1:
         raise ValueError("neutral: samples must be >= 1")
+    return samples
 
-    proportional = _get(data, "proportional", dict, "profile", {})
-    _check_keys(proportional, {"amplitude"}, "proportional")
-    amplitude = _get(proportional, "amplitude", str, "proportional", "gamma")
+
+def _parse_amplitude(proportional: dict) -> str:
+    amplitude = typed(proportional, "amplitude", str, "proportional", "gamma")
     if amplitude not in AMPLITUDE_KINDS:
         raise ValueError(f"proportional: amplitude must be one of {', '.join(AMPLITUDE_KINDS)}, got {amplitude!r}")
+    return amplitude
 
-    post_table = _get(data, "post_processing", dict, "profile", {})
-    _check_keys(post_table, {"rejection_threshold", "vote_length"}, "post_processing")
-    post = PostProcessing(rejection_threshold=_get(post_table, "rejection_threshold", (float, int), "post_processing", None),
-                          vote_length=_get(post_table, "vote_length", int, "post_processing", 1))
 
-    joystick = _get(data, "joystick", dict, "profile", {})
-    _check_keys(joystick, {"layout"}, "joystick")
-    layout = _get(joystick, "layout", str, "joystick", None)
-    return Profile(name=_get(data, "name", str, "profile"), description=_get(data, "description", str, "profile", ""),
-                   nodes=nodes, classes=tuple(sorted(classes, key=lambda c: c.label)), spec=spec,
-                   shrinkage=shrinkage, neutral_samples=neutral_samples, post=post, source=source,
-                   amplitude=amplitude, joystick_layout=layout)
+def _parse_post(post: dict) -> PostProcessing:
+    return PostProcessing(rejection_threshold=typed(post, "rejection_threshold", (float, int), "post_processing", None),
+                          vote_length=typed(post, "vote_length", int, "post_processing", 1))
 
 
 def _parse_node(table: Any, where: str) -> NodeConfig:
-    if not isinstance(table, dict):
-        raise ValueError(f"{where}: must be a table")
-    _check_keys(table, _NODE_KEYS, where)
-    index = _get(table, "index", int, where)
+    check_table(table, where, _NODE_KEYS)
+    index = typed(table, "index", int, where)
     if not 1 <= index <= 6:
         raise ValueError(f"{where}: index must be in 1..6, got {index}")
     default = NodeCalibration.default_for(index)
-    calibration = _get(table, "calibration", dict, where, {})
-    _check_keys(calibration, _CALIBRATION_KEYS, f"{where}.calibration")
+    calibration = check_table(typed(table, "calibration", dict, where, {}), f"{where}.calibration", _CALIBRATION_KEYS)
     try:
         cal = NodeCalibration(hard_iron=calibration.get("hard_iron", default.hard_iron),
                               soft_iron=calibration.get("soft_iron", default.soft_iron),
                               mounting=calibration.get("mounting", default.mounting))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}.calibration: {exc}") from None
-    return NodeConfig(index=index, node_id=_get(table, "node_id", int, where),
-                      site=_get(table, "site", str, where), calibration=cal)
+    return NodeConfig(index=index, node_id=typed(table, "node_id", int, where),
+                      site=typed(table, "site", str, where), calibration=cal)
 
 
 def _parse_class(table: Any, where: str, node_indices: set[int]) -> ClassConfig:
-    if not isinstance(table, dict):
-        raise ValueError(f"{where}: must be a table")
-    _check_keys(table, _CLASS_KEYS, where)
-    label = _get(table, "label", int, where)
+    check_table(table, where, _CLASS_KEYS)
+    label = typed(table, "label", int, where)
     if label < 0:
         raise ValueError(f"{where}: label must be >= 0")
-    function = _get(table, "function", str, where)
-    node = _get(table, "node", int, where, None)
+    function = typed(table, "function", str, where)
+    node = typed(table, "node", int, where, None)
     if function != NEUTRAL_FUNCTION and node is None:
         raise ValueError(f"{where}: a motion class needs 'node' (the node that carries it)")
     if node is not None and node not in node_indices:
         raise ValueError(f"{where}: node {node} is not one of the profile's nodes {sorted(node_indices)}")
-    return ClassConfig(label=label, name=_get(table, "name", str, where), function=function, node=node)
+    return ClassConfig(label=label, name=typed(table, "name", str, where), function=function, node=node)

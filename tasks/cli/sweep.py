@@ -40,6 +40,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from bomi.config_files import check_table
 from bomi.errors import BomiError
 from tasks.cli import add_command
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
@@ -161,9 +162,7 @@ def _check_setting(name: str, values: Any) -> tuple:
 
 
 def _parse_grid(data: dict, source: str) -> Grid:
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise ValueError(f"unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    check_table(data, "grid", _TOP_KEYS)
     operators = _names(data, "operators")
     bad = [o for o in operators if o not in OPERATORS]
     if bad:
@@ -174,9 +173,7 @@ def _parse_grid(data: dict, source: str) -> Grid:
     if not isinstance(vary, dict):
         raise ValueError("[vary] must be a table of settings, each a list of values")
     vary = {name: _check_setting(name, values) for name, values in _flatten(vary).items()}
-    figure = data.get("figure", {})
-    if not isinstance(figure, dict) or set(figure) - {"metric", "setting"}:
-        raise ValueError("[figure] takes 'metric' and 'setting' only")
+    figure = check_table(data.get("figure", {}), "[figure]", {"metric", "setting"})
     metric = figure.get("metric", FIGURE_METRICS[0])
     if metric not in FIGURE_METRICS:
         raise ValueError(f"[figure] metric: {metric!r} is not one of {', '.join(FIGURE_METRICS)}")
