@@ -7,7 +7,7 @@ Node state = neutral-subtracted (pitch, roll, yaw) + gyroscope as the recording 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -19,7 +19,7 @@ from bomi.errors import BomiError
 from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, neutral_offsets
-from bomi.profiles import Profile
+from bomi.profiles import SELECT, Profile
 from bomi.recording import Recording, Signal
 
 _WIDTH = len(NODE_STATE)
@@ -80,24 +80,67 @@ def prepare(rec: Recording, spec: FeatureSpec, neutral_samples: int) -> Prepared
     return PreparedRecording(window_features(states, spec), ends, states, labels, pure)
 
 
+@dataclass
+class TrainingWindows:
+    """The single-label windows of one recording (and the smaller copies of its motions) to fit on."""
+
+    features: np.ndarray     # (m, F)
+    labels: np.ndarray       # (m,)
+    ends: np.ndarray         # (m,) last sample of each window in the recording (a copy shares its original's)
+    recorded: np.ndarray     # (m,) True for the recorded windows, False for the synthesised smaller ones
+
+
+def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
+                     amplitude_scales: Sequence[float] = ()) -> tuple[TrainingWindows, PreparedRecording]:
+    """Single-label windows, plus every motion window again at each of ``amplitude_scales``.
+
+    A smaller copy of a motion scales every node's neutral-subtracted angles and gyroscope over the
+    motion's samples by the factor (the same motion made smaller: the paper's multiple-amplitude
+    training), then its features are computed as for a recorded window. Neutral windows are not copied.
+    """
+    prepared = prepare(rec, spec, neutral_samples)
+    pure = prepared.pure
+    parts = [(prepared.features[pure], prepared.labels[pure], prepared.ends[pure], True)]
+    motion_samples = rec.labels != NEUTRAL_LABEL
+    motion_windows = pure & (prepared.labels != NEUTRAL_LABEL)
+    for scale in amplitude_scales:
+        states = prepared.states.copy()
+        states[motion_samples] *= scale
+        parts.append((window_features(states, spec)[motion_windows], prepared.labels[motion_windows],
+                      prepared.ends[motion_windows], False))
+    windows = TrainingWindows(*(np.concatenate([part[k] for part in parts]) for k in range(3)),
+                              np.concatenate([np.full(len(part[1]), part[3]) for part in parts]))
+    return windows, prepared
+
+
 def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec | None = None,
-          shrinkage: float | str | None = ..., post: PostProcessing | None = None) -> Model:
+          shrinkage: float | str | None = ..., post: PostProcessing | None = None,
+          selection: Selection | None = None) -> Model:
     """Fit the LDA on the single-label windows of every recording (each with its own neutral offsets).
 
-    ``spec``, ``shrinkage`` and ``post`` default to the profile's.
+    ``spec``, ``shrinkage`` and ``post`` default to the profile's; what the profile leaves to
+    ``select_settings`` ("select") comes from ``selection``, or is chosen here on ``recordings``.
     """
     spec = spec or profile.spec
     shrinkage = profile.shrinkage if shrinkage is ... else shrinkage
-    xs, ys, angles = [], [], {i: [] for i in spec.nodes}
+    post = post or profile.post
+    if selection is None and (shrinkage == SELECT or profile.select_rejection):
+        selection = select_settings(recordings, profile, spec)
+    if shrinkage == SELECT:
+        shrinkage = selection.shrinkage
+    if profile.select_rejection:
+        post = replace(post, rejection_threshold=selection.rejection_threshold)
+    xs, ys, recorded_labels, angles = [], [], [], {i: [] for i in spec.nodes}
     known = {cls.label for cls in profile.classes}
     for rec in recordings:
         unknown = sorted(set(rec.require_labels().tolist()) - known)
         if unknown:
             raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of profile {profile.name}")
-        prepared = prepare(rec, spec, profile.neutral_samples)
-        xs.append(prepared.features[prepared.pure])
-        ys.append(prepared.labels[prepared.pure])
-        ends = prepared.ends[prepared.pure]
+        windows, prepared = training_windows(rec, spec, profile.neutral_samples, profile.amplitude_scales)
+        xs.append(windows.features)
+        ys.append(windows.labels)
+        ends = windows.ends[windows.recorded]   # amplitude ranges: the recorded motions only
+        recorded_labels.append(windows.labels[windows.recorded])
         for k, i in enumerate(spec.nodes):
             angles[i].append(prepared.states[ends, k * _WIDTH:k * _WIDTH + 3])
     x, y = np.concatenate(xs), np.concatenate(ys)
@@ -110,10 +153,10 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
             classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise BomiError(f"{sources}: cannot train on these signals ({' '.join(str(exc).split())})") from None
-        amplitude = amplitude_ranges({i: np.concatenate(a) for i, a in angles.items()}, y, profile.class_nodes,
-                                     profile.amplitude)
+        amplitude = amplitude_ranges({i: np.concatenate(a) for i, a in angles.items()}, np.concatenate(recorded_labels),
+                                     profile.class_nodes, profile.amplitude)
     model = Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
-                  post=post or profile.post, shrinkage=shrinkage, profile=profile.identity)
+                  post=post, shrinkage=shrinkage, profile=profile.identity)
     defects = model_defects(model)
     if defects:
         more = f" (and {len(defects) - 1} more)" if len(defects) > 1 else ""
@@ -327,36 +370,58 @@ class CrossValidation:
         return float(np.mean(rejected(self.prob.max(axis=1), threshold)))
 
 
-def cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinkages: Sequence[float | str | None],
-                   n_folds: int = 5, references: Sequence[np.ndarray] | None = None) -> list[CrossValidation]:
-    """Segment-chunk cross-validation within one recording, one result per shrinkage value.
+def cross_validate(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+                   shrinkages: Sequence[float | str | None], n_folds: int = 5,
+                   drift: bool = False) -> list[CrossValidation]:
+    """Segment-chunk cross-validation within each recording, pooled; one result per shrinkage value.
 
-    Training windows use the recording's own neutral calibration; held-out windows are scored once
-    per neutral ``references`` entry (default: that same calibration). Windows straddling a label
-    change or a chunk boundary are left out.
+    Training folds use the recording's own neutral calibration (and the profile's smaller copies of
+    the motions); held-out windows are scored with that calibration, or with ``drift`` once per
+    ``neutral_references`` entry. Windows straddling a label change or a chunk boundary are left out.
     """
     with threadpool_limits(limits=1, user_api="blas"):  # many small products: see classifier.fit_lda
-        return _cross_validate(rec, profile, spec, shrinkages, n_folds, references)
+        parts = [_cross_validate(rec, profile, spec, shrinkages, n_folds, drift) for rec in recordings]
+    classes = np.unique(np.concatenate([rec.require_labels() for rec in recordings]))
+    results = []
+    for k in range(len(shrinkages)):
+        pieces = [piece for part in parts for piece in part[k]]
+        if not pieces:
+            raise BomiError(f"{recordings[0].source}: too little data for a {n_folds}-fold cross-validation")
+        results.append(CrossValidation(classes, *(np.concatenate([_align(p, classes)[j] for p in pieces])
+                                                  for j in range(2))))
+    return results
+
+
+def _align(piece: tuple, classes: np.ndarray) -> tuple:
+    """(truth, the fold model's classes, posteriors over them) -> (truth, posteriors over ``classes``)."""
+    truth, fold_classes, prob = piece
+    full = np.zeros((len(prob), len(classes)))
+    full[:, np.searchsorted(classes, fold_classes)] = prob
+    return truth, full
 
 
 def _cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinkages: Sequence[float | str | None],
-                    n_folds: int, references: Sequence[np.ndarray] | None) -> list[CrossValidation]:
+                    n_folds: int, drift: bool) -> list[list[tuple]]:
     labels = rec.require_labels()
-    trained = prepare(rec, spec, profile.neutral_samples)
+    windows, prepared = training_windows(rec, spec, profile.neutral_samples, profile.amplitude_scales)
     folds = segment_folds(labels, n_folds)
-    keep = single_label_windows(labels * n_folds + folds, spec.window, spec.stride)
-    window_fold = folds[trained.ends]
-    models = [[_fit(trained.features[keep & (window_fold != k)], trained.labels[keep & (window_fold != k)], spec, s)
-               for k in range(n_folds)] for s in shrinkages]
+    inside = single_label_windows(labels * n_folds + folds, spec.window, spec.stride)  # not across a chunk boundary
+    train_fold = np.where(inside[(windows.ends - (spec.window - 1)) // spec.stride], folds[windows.ends], -1)
+    test_rows = [inside & prepared.pure & (folds[prepared.ends] == k) for k in range(n_folds)]
+    references = neutral_references(rec, spec.nodes, profile.neutral_samples) if drift else []
+    test_features = [prepared.features] + [window_features(node_states(rec, spec.nodes, neutral), spec)
+                                           for neutral in references]
     parts: list[list[tuple]] = [[] for _ in shrinkages]
-    for neutral in references if references is not None else [None]:
-        test_features = trained.features if neutral is None else window_features(node_states(rec, spec.nodes, neutral), spec)
-        for k in range(n_folds):
-            rows = keep & (window_fold == k)
-            for part, fold_models in zip(parts, models):
-                part.append((trained.labels[rows], posteriors(fold_models[k], test_features[rows])))
-    return [CrossValidation(fold_models[0].classes, *(np.concatenate(column) for column in zip(*part)))
-            for part, fold_models in zip(parts, models)]
+    for k in range(n_folds):
+        fit_rows = (train_fold >= 0) & (train_fold != k)
+        if len(np.unique(windows.labels[fit_rows])) < 3 or not test_rows[k].any():
+            continue   # a fold without enough classes to fit, or nothing to test: left out
+        for part, shrinkage in zip(parts, shrinkages):
+            model = _fit(windows.features[fit_rows], windows.labels[fit_rows], spec, shrinkage)
+            for feats in test_features[1:] if references else test_features:
+                rows = test_rows[k]
+                part.append((prepared.labels[rows], model.classes, posteriors(model, feats[rows])))
+    return parts
 
 
 def _fit(features: np.ndarray, labels: np.ndarray, spec: FeatureSpec, shrinkage: float | str | None) -> Model:
@@ -367,25 +432,42 @@ def _fit(features: np.ndarray, labels: np.ndarray, spec: FeatureSpec, shrinkage:
 SHRINKAGE_GRID: tuple[float | str | None, ...] = (None, 1e-3, 1e-2, 1e-1, "auto")
 THRESHOLD_GRID = (0.5, 0.9, 0.99, 0.999, 0.9999)
 MAX_CV_REJECTED = 0.01
+FALLBACK_SHRINKAGE = "auto"   # Ledoit-Wolf: needs no validation data
 
 
 @dataclass
 class Selection:
-    """Settings chosen on the training recording alone, with the cross-validation behind the choice."""
+    """Settings chosen on the training recording(s) alone, with the cross-validation behind the choice."""
 
     shrinkage: float | str | None
-    rejection_threshold: float
+    rejection_threshold: float | None   # None: no threshold rejected at most MAX_CV_REJECTED, rejection off
     drift_accuracy: dict          # shrinkage -> accuracy under re-referenced neutral calibrations
     drift_rejected: dict          # threshold -> rejected share with the chosen shrinkage
+    reason: str = ""              # why, in one line
+
+    def explain(self) -> str:
+        rejection = "off" if self.rejection_threshold is None else self.rejection_threshold
+        return f"settings chosen on the training recording: shrinkage {self.shrinkage}, rejection threshold {rejection} ({self.reason})"
 
 
-def select_settings(rec: Recording, profile: Profile, spec: FeatureSpec) -> Selection:
-    """Shrinkage: best drift-aware CV accuracy; rejection threshold: the highest of THRESHOLD_GRID
-    that rejects at most MAX_CV_REJECTED of the drift-aware CV windows."""
-    references = neutral_references(rec, spec.nodes, profile.neutral_samples)
-    results = cross_validate(rec, profile, spec, SHRINKAGE_GRID, references=references)
+def select_settings(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> Selection:
+    """Always a usable choice. Shrinkage: the best drift-aware CV accuracy (first of SHRINKAGE_GRID
+    on a tie); rejection threshold: the highest of THRESHOLD_GRID that rejects at most
+    MAX_CV_REJECTED of the drift-aware CV windows, rejection off when none does. Without enough data
+    for the cross-validation: Ledoit-Wolf shrinkage, rejection off."""
+    try:
+        results = cross_validate(recordings, profile, spec, SHRINKAGE_GRID, drift=True)
+    except BomiError as exc:
+        return Selection(FALLBACK_SHRINKAGE, None, {}, {}, f"{exc}; Ledoit-Wolf shrinkage needs no validation")
     accuracy = {s: r.accuracy for s, r in zip(SHRINKAGE_GRID, results)}
     best = max(range(len(results)), key=lambda k: results[k].accuracy)
     shares = {t: results[best].rejected_share(t) for t in THRESHOLD_GRID}
-    threshold = max(t for t in THRESHOLD_GRID if shares[t] <= MAX_CV_REJECTED)
-    return Selection(SHRINKAGE_GRID[best], threshold, accuracy, shares)
+    allowed = [t for t in THRESHOLD_GRID if shares[t] <= MAX_CV_REJECTED]
+    threshold = max(allowed) if allowed else None
+    windows = len(results[best].truth)
+    reason = (f"best of {len(SHRINKAGE_GRID)} shrinkages in a drift-aware cross-validation over {windows} windows: "
+              f"{100 * accuracy[SHRINKAGE_GRID[best]]:.2f} %; ")
+    reason += (f"the highest threshold rejecting <= {100 * MAX_CV_REJECTED:g} % of them ({100 * shares[threshold]:.2f} %)"
+               if threshold is not None else
+               f"every threshold rejects more than {100 * MAX_CV_REJECTED:g} % of them (0.5: {100 * shares[0.5]:.2f} %)")
+    return Selection(SHRINKAGE_GRID[best], threshold, accuracy, shares, reason)

@@ -35,8 +35,8 @@ def reproduce(directory: Path, profile: Profile) -> list[FeatureReproduction]:
     out = []
     for kind in tqdm(FEATURE_KINDS, desc="feature vectors", unit="FV"):
         spec = replace(profile.spec, kind=kind)
-        chosen = select_settings(recordings[1], profile, spec)
-        within = cross_validate(recordings[1], profile, spec, [chosen.shrinkage])[0].accuracy
+        chosen = select_settings([recordings[1]], profile, spec)
+        within = cross_validate([recordings[1]], profile, spec, [chosen.shrinkage])[0].accuracy
         model = train([recordings[1]], profile, spec, chosen.shrinkage, PostProcessing())
         rejecting = PostProcessing(rejection_threshold=chosen.rejection_threshold)
         out.append(FeatureReproduction(

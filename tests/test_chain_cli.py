@@ -124,7 +124,7 @@ def test_train_and_evaluate_commands(tmp_path, capsys, p1_profile, day1_fv1_mode
     assert f"accuracy {100 * expected.accuracy:.2f} %" in printed and "true\\pred" in printed
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # training straight from a recording gives the same numbers
-    assert main(["evaluate", "--train", day1, "--test", day2, "--features", "FV1", "--png", str(png), "--force",
+    assert main(["evaluate", "--train", day1, "--test", day2, "--profile", "P1", "--features", "FV1", "--png", str(png), "--force",
                  "--json", str(out)]) == 0
     assert json.loads(out.read_text())["results"][0]["accuracy"] == evaluate(day1_fv1_model, p1_days[2], 100).accuracy
 
@@ -163,7 +163,7 @@ def test_command_errors_are_one_line(tmp_path, capsys):
 
 def test_p1_profile_ships_the_day1_selection(p1_days, p1_profile):
     """P1.toml's LDA shrinkage is what the drift-aware cross-validation on day 1 alone chooses."""
-    chosen = select_settings(p1_days[1], p1_profile, p1_profile.spec)
+    chosen = select_settings([p1_days[1]], p1_profile, p1_profile.spec)
     assert chosen.shrinkage == p1_profile.shrinkage
     assert chosen.drift_accuracy[chosen.shrinkage] == max(chosen.drift_accuracy.values())
     assert chosen.drift_rejected[chosen.rejection_threshold] <= 0.01

@@ -23,6 +23,9 @@ PROFILE_DIR = Path(__file__).resolve().parent
 # (the JACO's stick: sim/joystick.py, checked where a profile meets the arm, tasks/stick.py); the
 # chain passes them through untouched. Only the neutral class's function means something here.
 NEUTRAL_FUNCTION = "neutral"
+# A classifier setting left to the person's own training recording (bomi.chain.select_settings).
+SELECT = "select"
+DEFAULT_NEUTRAL_SAMPLES = 100  # hardware.md step 6: about 100 samples of the neutral posture
 
 _TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
              "post_processing", "joystick"}
@@ -60,6 +63,8 @@ class Profile:
     source: str
     amplitude: str = "gamma"  # proportional output: one of bomi.classifier.AMPLITUDE_KINDS
     joystick_layout: str | None = None  # the device's layout the classes drive (None: the device's default)
+    select_rejection: bool = False  # rejection threshold chosen on the training recording (post.rejection_threshold unused)
+    amplitude_scales: tuple[float, ...] = ()  # training also sees every motion at these fractions of its size
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -104,12 +109,14 @@ def _parse(data: dict, source: str) -> Profile:
     indices = [node.index for node in nodes]
     classes = _parse_classes(typed(data, "classes", list, "profile"), set(indices))
     joystick = _section(data, "joystick", {"layout"})
+    classifier = _section(data, "classifier", {"shrinkage", "amplitude_scales"})
+    post, select_rejection = _parse_post(_section(data, "post_processing", {"rejection_threshold", "vote_length"}))
     return Profile(name=typed(data, "name", str, "profile"), description=typed(data, "description", str, "profile", ""),
                    nodes=nodes, classes=classes, spec=_parse_spec(_section(data, "features", {"vector", "window", "stride"}),
                                                                   tuple(indices)),
-                   shrinkage=_parse_shrinkage(_section(data, "classifier", {"shrinkage"})),
+                   shrinkage=_parse_shrinkage(classifier), amplitude_scales=_parse_amplitude_scales(classifier),
                    neutral_samples=_parse_neutral_samples(_section(data, "neutral", {"samples"})),
-                   post=_parse_post(_section(data, "post_processing", {"rejection_threshold", "vote_length"})),
+                   post=post, select_rejection=select_rejection,
                    source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
                    joystick_layout=typed(joystick, "layout", str, "joystick", None))
 
@@ -149,16 +156,24 @@ def _parse_spec(features: dict, nodes: tuple[int, ...]) -> FeatureSpec:
 def _parse_shrinkage(classifier: dict) -> float | str | None:
     shrinkage = typed(classifier, "shrinkage", (str, float, int), "classifier", "none")
     if isinstance(shrinkage, str):
-        if shrinkage not in ("auto", "none"):
-            raise ValueError(f"classifier: shrinkage must be \"auto\", \"none\" or a number in [0, 1], got {shrinkage!r}")
+        if shrinkage not in ("auto", "none", SELECT):
+            raise ValueError(f"classifier: shrinkage must be \"{SELECT}\", \"auto\", \"none\" or a number in [0, 1], "
+                             f"got {shrinkage!r}")
         return None if shrinkage == "none" else shrinkage
     if not 0.0 <= shrinkage <= 1.0:
         raise ValueError(f"classifier: shrinkage must be in [0, 1], got {shrinkage}")
     return shrinkage
 
 
+def _parse_amplitude_scales(classifier: dict) -> tuple[float, ...]:
+    scales = typed(classifier, "amplitude_scales", list, "classifier", [])
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0 for v in scales):
+        raise ValueError(f"classifier: amplitude_scales must be fractions in (0, 1), got {scales!r}")
+    return tuple(float(v) for v in scales)
+
+
 def _parse_neutral_samples(neutral: dict) -> int:
-    samples = typed(neutral, "samples", int, "neutral", 100)
+    samples = typed(neutral, "samples", int, "neutral", DEFAULT_NEUTRAL_SAMPLES)
     if samples < 1:
         raise ValueError("neutral: samples must be >= 1")
     return samples
@@ -171,9 +186,14 @@ def _parse_amplitude(proportional: dict) -> str:
     return amplitude
 
 
-def _parse_post(post: dict) -> PostProcessing:
-    return PostProcessing(rejection_threshold=typed(post, "rejection_threshold", (float, int), "post_processing", None),
-                          vote_length=typed(post, "vote_length", int, "post_processing", 1))
+def _parse_post(post: dict) -> tuple[PostProcessing, bool]:
+    """The post-processing, and whether its rejection threshold is left to the training recording."""
+    threshold = typed(post, "rejection_threshold", (float, int, str), "post_processing", None)
+    if isinstance(threshold, str) and threshold != SELECT:
+        raise ValueError(f"post_processing: rejection_threshold must be a number in (0, 1) or \"{SELECT}\", "
+                         f"got {threshold!r}")
+    return (PostProcessing(rejection_threshold=None if threshold == SELECT else threshold,
+                           vote_length=typed(post, "vote_length", int, "post_processing", 1)), threshold == SELECT)
 
 
 def _parse_node(table: Any, where: str) -> NodeConfig:

@@ -9,15 +9,16 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from bomi.chain import Evaluation, evaluate, require_for, train
-from bomi.classifier import PostProcessing
+from bomi.chain import Evaluation, evaluate, require_for, select_settings, train
+from bomi.classifier import Model, PostProcessing
 from bomi.dataset import data_dir
+from bomi.derived import derive_profile, describe
 from bomi.errors import BomiError
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.files import atomic_output, check_input, write_text
 from bomi.fusion import NodeCalibration, fused_recording
 from bomi.model_io import SUFFIXES, check_model_for, load_model, save_model
-from bomi.profiles import Profile
+from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, SELECT, Profile
 from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_recording, write_recording
 from bomi.reproduce import reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
@@ -28,7 +29,8 @@ from tasks.stick import arm_profile
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "train")
     p.add_argument("recordings", nargs="+", metavar="RECORDING", help=".mat or .csv recordings")
-    p.add_argument("--profile", default="P1", help="profile name (P1, P4, P5) or TOML file (default %(default)s)")
+    p.add_argument("--profile", help="profile name (P1, P4, P5) or TOML file (default: derived from the recordings, "
+                                     "printed)")
     p.add_argument("--features", choices=FEATURE_KINDS, help="override the profile's feature vector (default: "
                                                               "the profile's)")
     p.add_argument("--out", required=True, help="model file to write (.json or .npz)")
@@ -39,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "evaluate")
     p.add_argument("--train", required=True, metavar="A", help="training recording, or a trained model (.json/.npz)")
     p.add_argument("--test", required=True, action="append", metavar="B", help="test recording (repeatable)")
-    p.add_argument("--profile", default="P1", help="profile name or TOML file (default %(default)s)")
+    p.add_argument("--profile", help="profile name or TOML file (default: derived from the training recording, printed)")
     p.add_argument("--features", choices=FEATURE_KINDS,
                    help="override the feature vector, only when training (default: the profile's)")
     p.add_argument("--reject", type=open_unit_interval, metavar="P",
@@ -120,15 +122,38 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
 
 
 # -------------------------------------------------------------------------------------- commands
+def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> Model:
+    """Train ``profile``'s model, first checking every recording and choosing (and printing) what the
+    profile leaves to the person's own data."""
+    for rec in recordings:
+        require_for(rec, spec)
+    selection = None
+    if profile.shrinkage == SELECT or profile.select_rejection:
+        print("choosing the classifier settings on the training recording (cross-validation) ...", flush=True)
+        selection = select_settings(recordings, profile, spec)
+        print(selection.explain())
+    return train(recordings, profile, spec, selection=selection)
+
+
+def _derived(recordings: Sequence[Recording]) -> Profile:
+    """The profile the recordings imply, printed."""
+    profile = derive_profile(recordings)
+    print(describe(profile))
+    return profile
+
+
 def train_command(args: argparse.Namespace) -> int:
     out = check_outputs({"--out": (args.out, SUFFIXES)}, inputs=args.recordings, force=args.force)["--out"]
     for path in args.recordings:
         check_input(path, "recording")
-    profile = arm_profile(args.profile)
+    profile = arm_profile(args.profile) if args.profile else None
     recordings = [read(path, args.verbose) for path in args.recordings]
-    model = train(recordings, profile, _spec(profile, args.features))
+    profile = profile or _derived(recordings)
+    model = fit_model(recordings, profile, _spec(profile, args.features))
     save_model(out, model, overwrite=args.force)
-    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}: wrote {out}")
+    rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
+    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}, "
+          f"rejection threshold {rejection}: wrote {out}")
     print(class_listing(profile, model.classes.tolist()))
     return 0
 
@@ -150,23 +175,28 @@ def evaluate_command(args: argparse.Namespace) -> int:
                             inputs=inputs, force=args.force)
     kind = _training_source(args.train)
     check_input(args.train, kind)
-    profile = arm_profile(args.profile)
+    profile = arm_profile(args.profile) if args.profile else None
     if kind == "model" and args.features:
         raise BomiError(f"{args.train}: --features only applies when training from a recording")
     model = None
     if kind == "model":
         model = load_model(args.train)
-        check_model_for(model, profile, args.train)
+        if profile is not None:  # without a profile the model is taken as it is
+            check_model_for(model, profile, args.train)
     training = None if model else read(args.train, args.verbose)
     tests = [read(path, args.verbose) for path in args.test]
+    if training is not None:
+        profile = profile or _derived([training])
+    spec = model.spec if model else _spec(profile, args.features)
     for rec in tests:  # before any long work: every test recording holds what the model reads, and labels
-        require_for(rec, model.spec if model else _spec(profile, args.features))
+        require_for(rec, spec)
         rec.require_labels()
     if model is None:
-        model = train([training], profile, _spec(profile, args.features))
+        model = fit_model([training], profile, spec)
+    neutral_samples = profile.neutral_samples if profile else DEFAULT_NEUTRAL_SAMPLES
     post = PostProcessing(rejection_threshold=args.reject if args.reject is not None else model.post.rejection_threshold,
                           vote_length=args.vote if args.vote is not None else model.post.vote_length)
-    evaluations = [evaluate(model, rec, profile.neutral_samples, post)
+    evaluations = [evaluate(model, rec, neutral_samples, post)
                    for rec in tqdm(tests, desc="evaluating", unit="file", disable=len(tests) < 2)]
     results = []
     for path, ev in zip(args.test, evaluations):

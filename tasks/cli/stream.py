@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from bomi.chain import train
 from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
@@ -21,7 +20,7 @@ from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamLost
 from tasks.cli import add_command
-from tasks.cli.chain import class_listing
+from tasks.cli.chain import class_listing, fit_model
 from tasks.cli.options import (add_force, check_outputs, non_negative_float, non_negative_int, positive_float,
                                positive_int, probability)
 from tasks.stick import arm_profile
@@ -329,7 +328,7 @@ def run_record(args: argparse.Namespace) -> int:
                 raise _unfinished(exc, writer) from None
     print(f"{args.out}: {writer.rows_written} labelled rows, {len(segments)} segments; {source.parser.summary()}")
     if args.train is not None:
-        model = train([read_recording(args.out)], profile)
+        model = fit_model([read_recording(args.out)], profile, profile.spec)
         save_model(args.train, model, overwrite=args.force)
         print(f"{args.train}: model of profile {profile.name}; {class_listing(profile, model.classes.tolist())}")
     return 0

@@ -1,0 +1,86 @@
+"""A profile derived from a person's labelled recording(s), for `bomi train` / `evaluate` without --profile.
+
+What the recording holds decides: its nodes (those with angles in every recording), the feature
+vector (FV3 when every such node has its gyroscope, else FV1), its labels (c0 is the neutral
+posture, c1, c2, ... take the paper's joystick functions F, B, R, L, Rr, Lr, B1, B2 in label order),
+and the node that carries each motion (the one whose mean angle change from neutral is largest
+over the class's samples). Classifier settings are left to the person's own data
+(``shrinkage = "select"``, ``rejection_threshold = "select"``) and training also sees every motion
+at 3/4 and 1/2 of its recorded size (the paper's multiple-amplitude training: see
+docs/signal_chain.md).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from bomi.classifier import NEUTRAL_LABEL, PostProcessing
+from bomi.errors import BomiError
+from bomi.features import FeatureSpec
+from bomi.fusion import NodeCalibration, neutral_offsets
+from bomi.paper import CLASS_FUNCTIONS
+from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, NEUTRAL_FUNCTION, SELECT, ClassConfig, NodeConfig, Profile
+from bomi.recording import Recording, Signal
+
+DERIVED_AMPLITUDE_SCALES = (0.75, 0.5)
+_BASE_STATION_FIRST_IMU = 10   # node index i is base-station id 10 + i - 1 (hardware.md)
+
+
+def derive_profile(recordings: Sequence[Recording]) -> Profile:
+    """The profile the recordings imply; one-line BomiError when they cannot make one."""
+    first = recordings[0]
+    nodes = [i for i in first.node_indices if all(i in rec.nodes and rec.nodes[i].angles is not None
+                                                   for rec in recordings)]
+    if not nodes:
+        first.require(first.node_indices, (Signal.ANGLES,), "training")
+    labels = sorted(set().union(*(set(rec.require_labels().tolist()) for rec in recordings)))
+    motions = [label for label in labels if label != NEUTRAL_LABEL]
+    if NEUTRAL_LABEL not in labels or len(motions) < 2:
+        raise BomiError(f"{first.source}: a profile is derived from labels 0 (neutral posture) and at least two "
+                        f"motions, the recording has labels {labels}")
+    if len(motions) > len(CLASS_FUNCTIONS):
+        raise BomiError(f"{first.source}: {len(motions)} motion classes, more than the {len(CLASS_FUNCTIONS)} "
+                        "joystick functions (give a --profile)")
+    for rec in recordings:
+        if len(rec) < DEFAULT_NEUTRAL_SAMPLES:
+            raise BomiError(f"{rec.source}: {len(rec)} samples, fewer than the {DEFAULT_NEUTRAL_SAMPLES} of the "
+                            "neutral-offset calibration")
+    gyro = all(rec.nodes[i].gyro is not None for rec in recordings for i in nodes)
+    carriers = _carrying_nodes(recordings, nodes, motions)
+    classes = (ClassConfig(NEUTRAL_LABEL, "c0", NEUTRAL_FUNCTION, None),) + tuple(
+        ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, CLASS_FUNCTIONS))
+    return Profile(
+        name="derived", description="derived from the recording: its nodes, its labels, generic class names",
+        nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", NodeCalibration.default_for(i))
+                    for i in nodes),
+        classes=classes, spec=FeatureSpec("FV3" if gyro else "FV1", tuple(nodes)), shrinkage=SELECT,
+        neutral_samples=DEFAULT_NEUTRAL_SAMPLES, post=PostProcessing(), source=f"derived from {first.source}",
+        amplitude="along_class",
+        select_rejection=True, amplitude_scales=DERIVED_AMPLITUDE_SCALES)
+
+
+def _carrying_nodes(recordings: Sequence[Recording], nodes: Sequence[int], motions: Sequence[int]) -> dict[int, int]:
+    """Per motion label: the node whose mean neutral-subtracted angles over the class are largest."""
+    size = {}
+    for label in motions:
+        means = []
+        for i in nodes:
+            changes = [rec.nodes[i].angles[rec.labels == label] - neutral_offsets(rec.nodes[i].angles, DEFAULT_NEUTRAL_SAMPLES)
+                       for rec in recordings]
+            changes = np.concatenate(changes)
+            means.append(float(np.linalg.norm(changes.mean(axis=0))) if len(changes) else 0.0)
+        size[label] = nodes[int(np.argmax(means))]
+    return size
+
+
+def describe(profile: Profile) -> str:
+    """One line: what a derived profile holds."""
+    kind = profile.spec.kind
+    classes = ", ".join(f"c{c.label} {c.function}" + ("" if c.node is None else f" (node {c.node})")
+                        for c in profile.classes)
+    scales = ", ".join(f"{s:g}" for s in profile.amplitude_scales)
+    return (f"no --profile: {profile.source}: node(s) {list(profile.node_indices)}, {kind} "
+            f"({'angles + GYRO' if kind != 'FV1' else 'angles: the recording has no GYRO'}), classes {classes}; "
+            f"shrinkage and rejection threshold chosen on the training recording; motions also trained at "
+            f"{scales} of their size")

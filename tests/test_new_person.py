@@ -1,0 +1,150 @@
+"""A new person as they come: no profile, settings chosen on their own recording, smaller motions."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import scipy.io
+from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+from bomi.chain import MAX_CV_REJECTED, prepare, select_settings, train, training_windows
+from bomi.dataset import data_dir
+from bomi.derived import derive_profile
+from bomi.errors import BomiError
+from bomi.features import FeatureSpec
+from bomi.model_io import load_model
+from bomi.profiles import SELECT, load_profile
+from bomi.recording import NodeData, Recording, node_columns, write_recording
+from tasks.cli import main
+from tests.helpers import edited_copy
+
+
+def head_only(rec: Recording, signals=("angles", "gyro")) -> Recording:
+    """Node 1 alone; the shoulder motions (c7, c8) are neutral postures for the head."""
+    return Recording({1: NodeData(**{s: getattr(rec.nodes[1], s) for s in signals})},
+                     np.where(rec.labels >= 7, 0, rec.labels), source=rec.source)
+
+
+@pytest.fixture(scope="module")
+def head_files(tmp_path_factory, p1_days):
+    """Day 1 in the original logger's layout (.mat, node-less names, extra variables), day 2 as an
+    indexed CSV with angles and gyroscope only."""
+    directory = tmp_path_factory.mktemp("head")
+    day1 = head_only(p1_days[1], ("acc", "gyro", "mag", "angles"))
+    variables = {name: getattr(day1.nodes[1], s.value)[:, k][:, None]
+                 for s, names in node_columns(None).items() for k, name in enumerate(names)}
+    variables.update(Etiquette=day1.labels[:, None], Time=np.arange(len(day1))[:, None] / 60.0,
+                     Commands=np.zeros((len(day1), 3)), Gain=2.0, Who="participant")
+    scipy.io.savemat(directory / "day1.mat", variables)
+    write_recording(directory / "day2.csv", head_only(p1_days[2]))
+    return directory / "day1.mat", directory / "day2.csv"
+
+
+def plain_lda_accuracy(train_rec: Recording, test_rec: Recording) -> float:
+    """Independent baseline: scikit-learn's default LDA on the single-label FV3 windows."""
+    spec = FeatureSpec("FV3", (1,))
+    a, b = prepare(train_rec, spec, 100), prepare(test_rec, spec, 100)
+    lda = LinearDiscriminantAnalysis().fit(a.features[a.pure], a.labels[a.pure])
+    return float(np.mean(lda.predict(b.features[b.pure]) == b.labels[b.pure]))
+
+
+def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_days):
+    day1, day2 = head_files
+    model_path = tmp_path / "head.json"
+    assert main(["train", str(day1), "--out", str(model_path), "--verbose"]) == 0
+    printed = capsys.readouterr().out
+    assert f"{day1}: ignored 4 variable(s): Time, Commands, Gain, Who" in printed
+    assert (f"no --profile: derived from {day1}: node(s) [1], FV3 (angles + GYRO), classes c0 neutral, c1 F (node 1), "
+            "c2 B (node 1), c3 R (node 1), c4 L (node 1), c5 Rr (node 1), c6 Lr (node 1)") in printed
+    assert "settings chosen on the training recording: shrinkage " in printed
+    model = load_model(model_path)
+    assert model.spec == FeatureSpec("FV3", (1,)) and model.classes.tolist() == list(range(7))
+    out = tmp_path / "eval.json"
+    assert main(["evaluate", "--train", str(model_path), "--test", str(day2), "--json", str(out),
+                 "--png", str(tmp_path / "c.png")]) == 0
+    accuracy = json.loads(out.read_text())["results"][0]["accuracy"]
+    assert accuracy >= plain_lda_accuracy(head_only(p1_days[1]), head_only(p1_days[2])) - 0.002
+    assert main(["fuse", str(day1), "--out", str(tmp_path / "fused.csv")]) == 0
+    # --profile still rules, and a profile whose nodes the recording lacks is one line
+    assert main(["train", str(day1), "--profile", "P1", "--out", str(tmp_path / "p1.json")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"bomi: error: {day1}: a FV3 model needs angles, GYRO of node(s) [1, 2, 3]; missing "
+                   "node 2 (none of its columns), node 3 (none of its columns)"]
+    assert not (tmp_path / "p1.json").exists()
+
+
+def test_angles_only_recording_gets_fv1(p1_days):
+    rec = head_only(p1_days[1], ("angles",))
+    profile = derive_profile([rec])
+    assert profile.spec.kind == "FV1" and profile.shrinkage == SELECT and profile.select_rejection
+    # the node that carries each class is the one that moves: c7 (right shoulder) is node 2 on P1
+    three = derive_profile([p1_days[1]])
+    assert three.class_nodes == {1: 1, 2: 1, 3: 1, 4: 1, 5: 1, 6: 1, 7: 2, 8: 3}
+    assert [c.function for c in three.classes] == ["neutral", "F", "B", "R", "L", "Rr", "Lr", "B1", "B2"]
+
+
+@pytest.mark.parametrize("labels, message", [
+    ([1, 2, 3], "a profile is derived from labels 0 (neutral posture) and at least two motions"),
+    ([0, 1], "a profile is derived from labels 0 (neutral posture) and at least two motions"),
+    (list(range(10)), "9 motion classes, more than the 8 joystick functions"),
+])
+def test_derivation_refuses_in_one_line(labels, message):
+    n = 200 * len(labels)
+    rec = Recording({1: NodeData(angles=np.zeros((n, 3)))}, np.repeat(labels, 200), source="r.csv")
+    with pytest.raises(BomiError, match=rf"^r\.csv: .*{message[:30]}"):
+        derive_profile([rec])
+
+
+def noise_recording(seed: int, n_segments: int = 30, length: int = 120) -> Recording:
+    """Three classes whose signals are the same noise: nothing separates them."""
+    rng = np.random.default_rng(seed)
+    labels = np.repeat(np.resize([0, 1, 0, 2], n_segments), length)
+    n = len(labels)
+    return Recording({1: NodeData(angles=rng.normal(size=(n, 3)), gyro=rng.normal(size=(n, 3)))}, labels, source="noise")
+
+
+def test_settings_rule_always_returns_a_usable_choice():
+    rec = noise_recording(0)
+    profile = derive_profile([rec])
+    chosen = select_settings([rec], profile, profile.spec)
+    assert chosen.rejection_threshold is None       # every threshold rejects far more than 1 % of chance-level windows
+    assert min(chosen.drift_rejected.values()) > MAX_CV_REJECTED and "every threshold rejects more than" in chosen.reason
+    model = train([rec], profile, selection=chosen)
+    assert model.post.rejection_threshold is None and model.shrinkage == chosen.shrinkage
+    # too short to cross-validate (segments shorter than five windows): Ledoit-Wolf, rejection off
+    short = noise_recording(1, n_segments=8, length=30)
+    fallback = select_settings([short], profile, profile.spec)
+    assert (fallback.shrinkage, fallback.rejection_threshold) == ("auto", None) and "too little data" in fallback.reason
+    assert train([short], profile, selection=fallback).shrinkage == "auto"
+
+
+def test_smaller_copies_scale_every_node_and_keep_the_amplitude_ranges(p1_days, p1_profile):
+    rec = p1_days[1]
+    spec = FeatureSpec("FV1", p1_profile.node_indices)
+    windows, prepared = training_windows(rec, spec, 100, (0.5,))
+    recorded, copies = windows.recorded, ~windows.recorded
+    assert np.all(windows.labels[copies] != 0) and recorded.sum() == prepared.pure.sum()
+    # FV1 is a window mean: a copy of a motion window is exactly half the recorded one (by hand)
+    index = {end: k for k, end in enumerate(windows.ends[recorded])}
+    originals = windows.features[recorded][[index[e] for e in windows.ends[copies]]]
+    np.testing.assert_allclose(windows.features[copies], 0.5 * originals, rtol=0, atol=1e-12)
+    plain = train([rec], p1_profile)
+    scaled_profile = type(p1_profile)(**{**p1_profile.__dict__, "amplitude_scales": (0.75, 0.5)})
+    scaled = train([rec], scaled_profile)
+    assert scaled.amplitude == plain.amplitude and not np.allclose(scaled.coef, plain.coef)
+
+
+def test_profile_settings_select_and_scales(tmp_path):
+    shipped = load_profile("P1").source
+    path = edited_copy(type(tmp_path)(shipped), tmp_path / "p.toml", "shrinkage = 0.001",
+                       'shrinkage = "select"\namplitude_scales = [0.75, 0.5]')
+    path.write_text(path.read_text().replace("vote_length = 1", 'vote_length = 1\nrejection_threshold = "select"'))
+    profile = load_profile(path)
+    assert profile.shrinkage == SELECT and profile.select_rejection and profile.amplitude_scales == (0.75, 0.5)
+    for old, new, message in [("amplitude_scales = [0.75, 0.5]", "amplitude_scales = [1.5]", "amplitude_scales must be fractions"),
+                              ('rejection_threshold = "select"', 'rejection_threshold = "best"', "rejection_threshold must be"),
+                              ('shrinkage = "select"', 'shrinkage = "pick"', 'shrinkage must be "select"')]:
+        bad = edited_copy(path, tmp_path / "bad.toml", old, new)
+        with pytest.raises(BomiError, match=message):
+            load_profile(bad)
