@@ -9,7 +9,6 @@ import scipy.io
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
 from bomi.chain import MAX_CV_REJECTED, prepare, select_settings, train, training_windows
-from bomi.dataset import data_dir
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
