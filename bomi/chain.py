@@ -123,12 +123,13 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
     """
     spec = spec or profile.spec
     shrinkage = profile.shrinkage if shrinkage is ... else shrinkage
+    select_rejection = post is None and profile.select_rejection
     post = post or profile.post
-    if selection is None and (shrinkage == SELECT or profile.select_rejection):
+    if selection is None and (shrinkage == SELECT or select_rejection):
         selection = select_settings(recordings, profile, spec)
     if shrinkage == SELECT:
         shrinkage = selection.shrinkage
-    if profile.select_rejection:
+    if select_rejection:
         post = replace(post, rejection_threshold=selection.rejection_threshold)
     xs, ys, recorded_labels, angles = [], [], [], {i: [] for i in spec.nodes}
     known = {cls.label for cls in profile.classes}
