@@ -133,7 +133,7 @@ CASES = [
          {"flat.csv": lambda b: edited_csv(b, lambda rows: [r.__setitem__(slice(1, -1), ["1.0"] * (len(r) - 2))
                                                            for r in rows[1:]])}),
     # 4. what used to end in a traceback
-    Case("recording-lacks-a-profile-node", ["train", "{d}/two.csv", "--out", "{d}/new.json"], "two.csv",
+    Case("recording-lacks-a-profile-node", ["train", "{d}/two.csv", "--profile", "P1", "--out", "{d}/new.json"], "two.csv",
          {"two.csv": lambda b: edited_csv(b, drop_node(3))}),
     Case("neutral-from-lacks-a-node", ["live", "--port", P1_PORT, "--profile", "P1", "--model", "{d}/m.json",
                                        "--neutral-from", "{d}/two.csv"], "two.csv",
@@ -186,7 +186,8 @@ CASES = [
          {"m.npz": lambda b: b["m.json"]}),
     Case("recording-is-a-directory", ["train", "{d}/rec.csv", "--out", "{d}/new.json"], "is a directory",
          directories=("rec.csv",)),
-    Case("window-longer-than-the-recording", ["train", "{d}/short.csv", "--out", "{d}/new.json"], "shorter than one",
+    Case("window-longer-than-the-recording", ["train", "{d}/short.csv", "--profile", "P1", "--out", "{d}/new.json"],
+         "shorter than one",
          {"short.csv": lambda b: "\n".join(tiny_text(b).splitlines()[:5]) + "\n"}),
     # 9. options
     Case("emulate-zero-hold", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "0"], "--hold"),
