@@ -23,10 +23,12 @@ take effect.
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -34,6 +36,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Protocol
 
+import mujoco
 import numpy as np
 
 from bomi.chain import Decision, OnlineChain
@@ -45,6 +48,7 @@ from tasks.stick import DecisionStick
 
 WATCHDOG_TIMEOUT_S = 0.1
 STATUS_PERIOD_S = 0.5
+VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to end
 
 
 # ---------------------------------------------------------------------------------- safety
@@ -147,9 +151,12 @@ class Arm(Protocol):
 
 
 class Display(Protocol):
+    """Where a live run is shown: ``sync`` after every tick, with the tick's status line (made only
+    if the display draws it)."""
+
     def running(self) -> bool: ...
 
-    def sync(self) -> None: ...
+    def sync(self, status: Callable[[], str]) -> None: ...
 
     def close(self) -> None: ...
 
@@ -158,7 +165,7 @@ class Headless:
     def running(self) -> bool:
         return True
 
-    def sync(self) -> None:
+    def sync(self, status: Callable[[], str]) -> None:
         """Nothing to draw."""
 
     def close(self) -> None:
@@ -166,20 +173,81 @@ class Headless:
 
 
 class PassiveViewer:
-    """MuJoCo's interactive viewer, following the simulation (closing its window ends the run)."""
+    """MuJoCo's interactive viewer, following the simulation, with the status line in its top-left
+    corner (closing its window ends the run)."""
 
     def __init__(self, model, data):
         import mujoco.viewer  # needs a display; imported only when one is there
-        self._handle = mujoco.viewer.launch_passive(model, data)
+        before = set(threading.enumerate())
+        # the scene fills the window; Tab and Shift+Tab bring MuJoCo's side panels back
+        self._handle = mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False)
+        # the viewer draws from a thread of its own; close() waits for it, so that the process never
+        # exits while it is still drawing into a window being destroyed
+        self._threads = [thread for thread in threading.enumerate() if thread not in before]
 
     def running(self) -> bool:
         return self._handle.is_running()
 
-    def sync(self) -> None:
+    def sync(self, status: Callable[[], str]) -> None:
+        self._handle.set_texts((mujoco.mjtFontScale.mjFONTSCALE_150, mujoco.mjtGridPos.mjGRID_TOPLEFT,
+                                status().replace(" | ", "\n"), ""))
         self._handle.sync()
 
     def close(self) -> None:
         self._handle.close()
+        for thread in self._threads:
+            thread.join(timeout=VIEWER_EXIT_S)
+
+
+class VideoDisplay:
+    """The fixed camera's view filmed to an MP4 that plays in real time, the status line as its
+    caption. Frames are due on the wall clock at the render rate; when rendering falls behind (a
+    busy machine, software OpenGL) a frame is repeated for the slots it missed, and the control
+    loop never waits for more than one render per tick."""
+
+    def __init__(self, arm, path: Path, clock: Callable[[], float] = time.monotonic):
+        from sim.render import VideoWriter  # only a filmed run needs the encoder
+
+        self.arm, self.path, self.clock = arm, Path(path), clock
+        self.fps = arm.config.render.fps
+        self.writer = VideoWriter(self.path, self.fps)
+        self.start: float | None = None
+        self.frames = 0
+
+    def running(self) -> bool:
+        return True
+
+    def sync(self, status: Callable[[], str]) -> None:
+        now = self.clock()
+        self.start = now if self.start is None else self.start
+        due = int((now - self.start) * self.fps) + 1 - self.frames  # frame slots up to now not yet filled
+        if due > 0:
+            fields = status().split(" | ")
+            frame = self.arm.render((" | ".join(fields[:4]), " | ".join(fields[4:])))
+            for _ in range(due):
+                self.writer.append(frame)
+            self.frames += due
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+@dataclass
+class Displays:
+    """Several displays at once (the viewer and a film): running while all are."""
+
+    members: Sequence[Display]
+
+    def running(self) -> bool:
+        return all(display.running() for display in self.members)
+
+    def sync(self, status: Callable[[], str]) -> None:
+        for display in self.members:
+            display.sync(status)
+
+    def close(self) -> None:
+        for display in self.members:
+            display.close()
 
 
 def has_display(environ: Mapping[str, str] = os.environ) -> bool:
@@ -309,7 +377,6 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
         stale = watchdog.expired(now)
         state = guarded_stick(stick, decisions, stale or safety.standby)
         command = arm.step(state)
-        display.sync()
         new_neutral = None
         if summary.neutral is None and not chain.calibrating:
             new_neutral = summary.neutral = chain.neutral
@@ -319,8 +386,10 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
         if log is not None:
             log.write(json.dumps(tick.record()) + "\n")
         last_decision = decisions[-1] if decisions else last_decision
+        line = functools.partial(status_text, tick, source.parser, last_decision)
+        display.sync(line)
         if status is not None:
-            status.show(tick.t, lambda: status_text(tick, source.parser, last_decision))
+            status.show(tick.t, line)
         summary.count(tick)
     summary.watchdog_trips = watchdog.trips
     return summary

@@ -36,3 +36,16 @@ def day1_fv3_model(p1_days, p1_profile):
 @pytest.fixture(scope="session")
 def day1_fv1_model(p1_days, p1_profile):
     return train([p1_days[1]], p1_profile, FeatureSpec("FV1", p1_profile.node_indices))
+
+
+@pytest.fixture(scope="session")
+def p1_model_file(tmp_path_factory):
+    """A model file trained on the virtual P1's short calibration session (another day: seed 1)."""
+    from bomi.model_io import save_model
+    from tasks.participant import calibration_session, load_participant, session_recording
+
+    params, profile = load_participant("P1"), load_profile("P1")
+    session = calibration_session(params, profile, 1, repetitions=1, hold_s=2.0, neutral_s=2.0)
+    path = tmp_path_factory.mktemp("model") / "p1.json"
+    save_model(path, train([session_recording(session, profile)], profile))
+    return path

@@ -11,19 +11,18 @@ from dataclasses import asdict, replace
 import numpy as np
 import pytest
 
-from bomi.chain import Decision, OnlineChain, train
+from bomi.chain import Decision, OnlineChain
 from tasks.cli import main
 from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame
 from bomi.fusion import DT
-from bomi.model_io import save_model
 from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.stick import DecisionStick
 from tasks.live import StatusLine, Tick, Watchdog, display_opens, has_display, refusal, run_live, status_text
 from tasks.participant_wire import participant_blocks
-from tasks.participant import calibration_session, load_participant, session_recording
+from tasks.participant import load_participant
 
 CONTROL_DT = 1 / 60
 FULL_SPEED = 0.2
@@ -248,16 +247,6 @@ def test_safety_key_standby_holds_the_arm_until_control_and_calibration_restarts
 
 # -------------------------------------------------------------------- emulator -> pty -> bomi live
 SEED = 0
-
-
-@pytest.fixture(scope="module")
-def p1_model_file(tmp_path_factory):
-    """A model trained on the virtual P1's short calibration session (another day: seed 1)."""
-    params, profile = load_participant("P1"), load_profile("P1")
-    session = calibration_session(params, profile, 1, repetitions=1, hold_s=2.0, neutral_s=2.0)
-    path = tmp_path_factory.mktemp("model") / "p1.json"
-    save_model(path, train([session_recording(session, profile)], profile))
-    return path
 
 
 def offline_decisions(model_path, hold_s: float, neutral_s: float, end_s: float) -> list[dict]:

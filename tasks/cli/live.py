@@ -14,7 +14,8 @@ from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
 from tasks.cli import add_command
 from tasks.cli.options import non_negative_int, positive_float, positive_int
-from tasks.live import Headless, PassiveViewer, StatusLine, display_opens, has_display, open_log, run_live
+from tasks.live import (Displays, Headless, PassiveViewer, StatusLine, VideoDisplay, display_opens, has_display,
+                        open_log, run_live)
 from tasks.stick import arm_profile, profile_layout
 
 
@@ -32,6 +33,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       help="no viewer window (default: a window when a display is there)")
     live.add_argument("--duration", type=positive_float, help="stop after this many seconds (default: until Ctrl-C or the "
                                                      "viewer closes)")
+    live.add_argument("--video", type=Path, help="also film the arm (fixed camera, status line as caption) to "
+                                                 "this MP4 (must not exist; default: none)")
     live.add_argument("--log", type=Path, help="JSON-lines log of every control tick (must not exist; default: none)")
     live.add_argument("--neutral-from", type=Path, metavar="RECORDING",
                       help="take the neutral offsets from the first samples of this recording "
@@ -48,7 +51,7 @@ def _print_neutral(offsets: dict) -> None:
     print(f"live: neutral offsets (pitch, roll, yaw deg) {text}", file=sys.stderr, flush=True)
 
 
-def _display(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
+def _viewer(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
     if headless:
         return Headless()
     if not has_display():
@@ -64,6 +67,8 @@ def _display(headless: bool, sim: ArmSim) -> Headless | PassiveViewer:
 def run(args: argparse.Namespace) -> int:
     if args.log is not None:
         check_output(args.log, what="--log", forceable=False)
+    if args.video is not None:
+        check_output(args.video, what="--video", suffixes=(".mp4",), forceable=False)
     profile = arm_profile(args.profile)
     model = load_model(check_input(args.model, "model"))
     check_model_for(model, profile, args.model)
@@ -80,20 +85,24 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         source.close()
         raise
-    status, log, display = StatusLine(), None, Headless()
+    status, log, displays = StatusLine(), None, []
     try:
         with source:
             log = open_log(args.log) if args.log is not None else None
-            display = _display(args.headless, sim)
+            displays.append(_viewer(args.headless, sim))
+            if args.video is not None:
+                displays.append(VideoDisplay(sim, args.video))
             summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
-                               status=status, display=display, on_neutral=_print_neutral)
+                               status=status, display=Displays(displays), on_neutral=_print_neutral)
     finally:
         status.close()
         if log is not None:
             log.close()
-        display.close()
+        Displays(displays).close()
         sim.close()
     print(f"live: {summary.ticks} ticks, {summary.frames} frames, {summary.decisions} decisions, "
           f"{summary.dropped} dropped by the sanitizer, watchdog stopped the arm {summary.watchdog_trips} time(s) "
           f"({summary.stale_ticks} ticks), safety-key standby {summary.standby_ticks} ticks; {source.parser.summary()}")
+    if args.video is not None:
+        print(f"wrote {args.video}")
     return 0
