@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -112,6 +113,9 @@ def test_train_and_evaluate_commands(tmp_path, capsys, p1_profile, day1_fv1_mode
     trained = capsys.readouterr().out
     # classes by label, function and the profile's name, as everything else shows them
     assert "9 classes:" in trained and "c0 neutral" in trained and "c1 F: head pitch up (+29 deg)" in trained
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert model_path.stat().st_mode & 0o777 == 0o666 & ~umask  # an ordinary file, not a private temporary
     out, png = tmp_path / "eval.json", tmp_path / "confusion.png"
     assert main(["evaluate", "--train", str(model_path), "--test", day2, "--test", day4, "--reject", "0.99",
                  "--json", str(out), "--png", str(png)]) == 0
