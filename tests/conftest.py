@@ -1,4 +1,7 @@
-"""Shared fixtures: the published P1 recordings (read once per session) and day-1 models."""
+"""Shared fixtures: the published P1 recordings (read once per session) and day-1 models.
+
+Every test that needs the shared recordings asks for the ``shared_data`` fixture (directly or
+through ``p1_days``): without them it is skipped, always with the same reason naming the directory."""
 from __future__ import annotations
 
 import os
@@ -16,9 +19,19 @@ from bomi.recording import read_recording
 
 
 @pytest.fixture(scope="session")
-def p1_days():
-    """day -> Recording of the published dataset (days 1..5)."""
+def shared_data():
+    """The directory of the published P1 recordings (days 1..5); skips the test when they are absent."""
     directory = data_dir()
+    missing = [f"day{day}_testp.mat" for day in range(1, 6) if not (directory / f"day{day}_testp.mat").is_file()]
+    if missing:
+        pytest.skip(f"shared P1 recordings absent: {directory} lacks {', '.join(missing)} (set BOMI_DATA_DIR)")
+    return directory
+
+
+@pytest.fixture(scope="session")
+def p1_days(shared_data):
+    """day -> Recording of the published dataset (days 1..5)."""
+    directory = shared_data
     return {day: read_recording(directory / f"day{day}_testp.mat") for day in range(1, 6)}
 
 

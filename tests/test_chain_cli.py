@@ -12,7 +12,6 @@ from bomi.chain import (OnlineChain, evaluate, neutral_references, node_states, 
 from bomi import paper
 from bomi.classifier import PostProcessing, classify_windows
 from tasks.cli import main
-from bomi.dataset import data_dir
 from bomi.fusion import NodeCalibration, fused_recording
 from bomi.model_io import load_model
 from bomi.recording import NodeData, Recording, read_recording, write_recording
@@ -105,8 +104,8 @@ def test_fv3_day1_model_meets_the_paper_on_days_2_to_5(p1_days, p1_profile, day1
     assert np.mean(list(accuracy.values())) >= 0.99
 
 
-def test_train_and_evaluate_commands(tmp_path, capsys, p1_profile, day1_fv1_model, p1_days):
-    day1, day2, day4 = (str(data_dir() / f"day{d}_testp.mat") for d in (1, 2, 4))
+def test_train_and_evaluate_commands(tmp_path, capsys, p1_profile, day1_fv1_model, p1_days, shared_data):
+    day1, day2, day4 = (str(shared_data / f"day{d}_testp.mat") for d in (1, 2, 4))
     model_path = tmp_path / "fv1.json"
     assert main(["train", day1, "--profile", "P1", "--features", "FV1", "--out", str(model_path)]) == 0
     assert np.array_equal(load_model(model_path).coef, day1_fv1_model.coef)
@@ -149,11 +148,11 @@ def test_fuse_command_recomputes_angles(tmp_path, p1_days):
     assert np.array_equal(fused.labels, part.labels)
 
 
-def test_command_errors_are_one_line(tmp_path, capsys):
+def test_command_errors_are_one_line(tmp_path, capsys, shared_data):
     missing = tmp_path / "nope.mat"
     assert main(["train", str(missing), "--out", str(tmp_path / "m.json")]) == 2
     assert main(["train", str(missing), "--out", str(tmp_path / "m.pkl")]) == 2
-    day1 = str(data_dir() / "day1_testp.mat")
+    day1 = str(shared_data / "day1_testp.mat")
     assert main(["evaluate", "--train", day1, "--test", str(missing), "--profile", "P9",
                  "--png", str(tmp_path / "c.png")]) == 2
     assert main(["train", day1, "--profile", "P4", "--out", str(tmp_path / "m.json")]) == 2

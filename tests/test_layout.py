@@ -6,7 +6,7 @@ import pytest
 
 from sim.check import measure
 from sim.env import ArmSim
-from sim.joystick import (FINGER_DIRECTION, FUNCTIONS, LAYOUTS, THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, WRIST_AXES,
+from sim.joystick import (FUNCTIONS, LAYOUTS, THREE_AXIS, TWO_AXIS,
                           JoystickInterpreter, JoystickState, Kind, Layout, Mode)
 from sim.render import describe
 
@@ -18,13 +18,28 @@ def two_axis_stick() -> JoystickInterpreter:
     return JoystickInterpreter(full_speed=0.2, wrist_speed=0.6, layout=TWO_AXIS)
 
 
-def test_three_axis_is_the_default_and_its_tables_are_the_papers():
+def command_after(layout, presses: int, function: str, deflection: float = 0.5):
+    """What a stick of ``layout`` commands for ``function`` after ``presses`` presses of B1."""
+    stick = JoystickInterpreter(full_speed=0.2, wrist_speed=0.6, layout=layout)
+    for _ in range(presses):
+        stick.update(B1)
+    return stick.update(JoystickState({function: deflection}))
+
+
+def test_three_axis_is_the_default_and_each_mode_does_one_kind_of_thing():
     assert JoystickInterpreter(0.2, 0.6).layout is THREE_AXIS and LAYOUTS["3-axis"] is THREE_AXIS
-    assert THREE_AXIS.modes == (Mode.TRANSLATION, Mode.WRIST, Mode.FINGERS)
-    assert THREE_AXIS.axes(Mode.TRANSLATION, Kind.LINEAR) == TRANSLATION_AXES
-    assert THREE_AXIS.axes(Mode.WRIST, Kind.ANGULAR) == WRIST_AXES
-    assert THREE_AXIS.axes(Mode.FINGERS, Kind.FINGERS) == FINGER_DIRECTION
-    assert THREE_AXIS.functions == FUNCTIONS
+    pairs = (("F", "B"), ("R", "L"), ("Rr", "Lr"))
+    for presses, field in ((0, "linear"), (1, "angular")):  # translation, then wrist
+        vectors = {fn: np.asarray(getattr(command_after(THREE_AXIS, presses, fn), field)) for fn in FUNCTIONS}
+        for a, b in pairs:  # opposite functions do opposite things at the same speed
+            np.testing.assert_allclose(vectors[a], -vectors[b])
+        units = np.array([vectors[a] / np.linalg.norm(vectors[a]) for a, _ in pairs])
+        np.testing.assert_allclose(np.abs(units) @ np.abs(units).T, np.eye(3), atol=1e-12)  # three distinct axes
+        other = "angular" if field == "linear" else "linear"
+        assert all(not np.any(getattr(command_after(THREE_AXIS, presses, fn), other)) for fn in FUNCTIONS)
+    assert command_after(THREE_AXIS, 0, "Lr").linear[2] < 0  # Lr lowers the hand in translation
+    fingers = {fn: command_after(THREE_AXIS, 2, fn).finger for fn in FUNCTIONS}
+    assert fingers["F"] > 0 > fingers["B"] and not any(fingers[fn] for fn in ("R", "L", "Rr", "Lr"))
 
 
 def test_two_axis_needs_four_directions():
@@ -40,29 +55,25 @@ def test_two_axis_b1_steps_forward_through_four_modes_and_b2_back():
     assert (stick.button_presses, stick.mode_switches) == (8, 8)
 
 
-@pytest.mark.parametrize("presses, function, linear, angular, finger", [
-    (0, "F", (0, -0.1, 0), (0, 0, 0), 0), (0, "B", (0, 0.1, 0), (0, 0, 0), 0),
-    (0, "R", (-0.1, 0, 0), (0, 0, 0), 0), (0, "L", (0.1, 0, 0), (0, 0, 0), 0),
-    (1, "F", (0, 0, 0.1), (0, 0, 0), 0), (1, "B", (0, 0, -0.1), (0, 0, 0), 0),  # height: up, down
-    (1, "R", (0, 0, 0), (0, 0, 0.3), 0), (1, "L", (0, 0, 0), (0, 0, -0.3), 0),  # and turns as Rr/Lr do in wrist
-    (2, "F", (0, 0, 0), (-0.3, 0, 0), 0), (2, "B", (0, 0, 0), (0.3, 0, 0), 0),
-    (2, "R", (0, 0, 0), (0, 0.3, 0), 0), (2, "L", (0, 0, 0), (0, -0.3, 0), 0),
-    (3, "F", (0, 0, 0), (0, 0, 0), 0.5), (3, "B", (0, 0, 0), (0, 0, 0), -0.5),
-    (3, "R", (0, 0, 0), (0, 0, 0), 0), (0, "Rr", (0, 0, 0), (0, 0, 0), 0),  # nothing
-])
-def test_two_axis_function_effects_per_mode(presses, function, linear, angular, finger):
-    stick = two_axis_stick()
-    for _ in range(presses):
-        stick.update(B1)
-    command = stick.update(JoystickState({function: 0.5}))
-    np.testing.assert_allclose(command.linear, linear, atol=1e-15)
-    np.testing.assert_allclose(command.angular, angular, atol=1e-15)
-    assert command.finger == pytest.approx(finger)
-
-
-def test_height_mode_turns_like_the_three_axis_wrist_rr_lr():
-    height = TWO_AXIS.effects[Mode.HEIGHT]
-    assert (height["R"].axis, height["L"].axis) == (WRIST_AXES["Rr"], WRIST_AXES["Lr"])
+@pytest.mark.parametrize("function", ["F", "B", "R", "L"])
+def test_two_axis_modes_do_what_the_three_axis_stick_does_with_its_six_directions(function):
+    """Translation: the 3-axis xy moves; height: F/B up/down like Rr/Lr move, R/L turn like the 3-axis
+    wrist's Rr/Lr; wrist: the 3-axis wrist's F/B/R/L tilts; fingers: F closes, B opens."""
+    height_twin = {"F": "Rr", "B": "Lr", "R": "Rr", "L": "Lr"}[function]
+    translation = command_after(TWO_AXIS, 0, function)
+    np.testing.assert_allclose(translation.linear, command_after(THREE_AXIS, 0, function).linear)
+    assert translation.linear[2] == 0 and not np.any(translation.angular)
+    height = command_after(TWO_AXIS, 1, function)
+    if function in ("F", "B"):
+        np.testing.assert_allclose(height.linear, command_after(THREE_AXIS, 0, height_twin).linear)
+        assert not np.any(height.linear[:2]) and not np.any(height.angular)
+    else:
+        np.testing.assert_allclose(height.angular, command_after(THREE_AXIS, 1, height_twin).angular)
+        assert not np.any(height.linear)
+    np.testing.assert_allclose(command_after(TWO_AXIS, 2, function).angular,
+                               command_after(THREE_AXIS, 1, function).angular)
+    assert command_after(TWO_AXIS, 3, function).finger == command_after(THREE_AXIS, 2, function).finger
+    assert not np.any(command_after(TWO_AXIS, 0, "Rr").linear)  # no Rr/Lr on a four-direction stick
 
 
 def test_layout_finds_the_first_mode_that_does_something():

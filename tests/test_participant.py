@@ -8,7 +8,6 @@ import pytest
 import scipy.signal
 
 from bomi.chain import OnlineChain, train
-from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.frames import FrameParser
 from bomi.fusion import DT
@@ -290,13 +289,11 @@ def test_fit_helpers_on_synthetic_signals():
     assert fit_participant.repeated_fraction(np.array([[1, 2], [1, 2], [1, 3], [1, 3]])) == pytest.approx(2 / 3)
 
 
-needs_data = pytest.mark.skipif(not (data_dir() / "day1_testp.mat").is_file(), reason="shared P1 recordings absent")
 
 
-@needs_data
-def test_shipped_p1_is_what_the_fit_of_the_real_recordings_gives(tmp_path):
+def test_shipped_p1_is_what_the_fit_of_the_real_recordings_gives(tmp_path, shared_data):
     out = tmp_path / "P1.toml"
-    assert fit_participant.main(["--data", str(data_dir()), "--out", str(out)]) == 0
+    assert fit_participant.main(["--data", str(shared_data), "--out", str(out)]) == 0
     assert out.read_text() == P1_TOML.read_text()
     params = load_participant(out)
     # the dataset README's day-1 means: c1 head pitch +29, c3 -26, c8 left-shoulder roll +26 (over days: less)

@@ -6,7 +6,6 @@ import pytest
 import scipy.io
 
 from tasks.cli import main
-from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.recording import NodeData, NodeSample, Recording, RecordingWriter, read_recording, write_recording
 
@@ -20,8 +19,8 @@ def small_recording(n=20, nodes=(1, 3), labelled=True, seed=0) -> Recording:
     return Recording(nodes=data, labels=labels, time=np.arange(n) / 62.5)
 
 
-def test_published_mat_matches_scipy_columns():
-    path = data_dir() / "day1_testp.mat"
+def test_published_mat_matches_scipy_columns(shared_data):
+    path = shared_data / "day1_testp.mat"
     raw = scipy.io.loadmat(path)
     rec = read_recording(path)
     assert rec.node_indices == (1, 2, 3) and len(rec) == 16555 and rec.time is None

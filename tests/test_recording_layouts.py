@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 import scipy.io
 
-from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.recording import RAW_SIGNALS, NodeData, Recording, Signal, node_columns, read_recording, write_recording
 
@@ -13,8 +12,8 @@ N = 300
 
 
 @pytest.fixture(scope="module")
-def day1():
-    return read_recording(data_dir() / "day1_testp.mat")
+def day1(shared_data):
+    return read_recording(shared_data / "day1_testp.mat")
 
 
 def logger_variables(rec: Recording, node: int = 1, rows: slice = slice(0, N)) -> dict:

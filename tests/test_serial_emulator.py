@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from tasks.cli import main
-from bomi.dataset import data_dir
 from bomi.emulator import READER_SETTLE_S, EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, RowAssembler, encode_imu_frame
@@ -124,10 +123,8 @@ def test_rows_hold_the_previous_frame_of_a_lost_node():
 
 
 # --------------------------------------------------------------------------------- emulator
-def test_published_mat_values_are_refused():
-    path = data_dir() / "day1_testp.mat"
-    if not path.exists():
-        pytest.skip(f"{path} not available")
+def test_published_mat_values_are_refused(shared_data):
+    path = shared_data / "day1_testp.mat"
     with pytest.raises(BomiError, match=r"day1_testp.mat: node 1 mag at row 1 is .* whole int16"):
         raw_samples(read_recording(path))
 

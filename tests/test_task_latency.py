@@ -34,14 +34,19 @@ def channel(stepping_p1):
     return calibrated_channel(stepping_p1, SEED)
 
 
-def test_decision_latency_from_motion_onset_is_within_window_plus_vote(channel):
+def perform(channel, hold_s: float = 1.5):
+    """Every move of MOVES held ``hold_s``, then neutral as long; the decision trace."""
     t, tick = 0.0, 1 / 60
     for move in MOVES:
-        for intent, hold in ((move, 1.5), (StickIntent(), 1.5)):
+        for intent, hold in ((move, hold_s), (StickIntent(), hold_s)):
             for _ in range(int(hold / tick)):
                 channel.command(intent, t, t + tick)
                 t += tick
-    trace = channel.log_fields()["decisions"]
+    return channel.log_fields()["decisions"]
+
+
+def test_decision_latency_from_motion_onset_is_within_window_plus_vote(channel):
+    trace = perform(channel)
     latency = metrics.decision_latencies(trace.intended, trace.decided, neutral=0)
     model = channel.chain.model
     bound = model.spec.window + model.post.vote_length
@@ -63,3 +68,14 @@ def test_per_sample_cost_of_the_whole_chain_is_under_a_millisecond(channel, step
     per_sample = elapsed / samples
     # parser + fusion of three nodes + window + FV3 + LDA + vote, per node-1 sample
     assert samples > 1000 and per_sample < 1e-3, f"{1e3 * per_sample:.3f} ms per sample"
+
+
+def test_the_excused_transition_covers_the_fitted_participants_real_moves():
+    """With P1's fitted 0.8 s move, every motion is recognised within ``transition_samples`` of its
+    onset: the allowance the excused accuracy leaves out is not shorter than a real transition.
+    (It is longer: on this seed the latencies are 9..37 samples against an allowance of 63.)"""
+    channel = calibrated_channel("P1", SEED)
+    trace = perform(channel, hold_s=2.5)
+    latency = metrics.decision_latencies(trace.intended, trace.decided, neutral=0)
+    assert len(latency) == len(MOVES) and latency.min() > 0
+    assert latency.max() <= channel.transition_samples, (latency.tolist(), channel.transition_samples)

@@ -1,24 +1,104 @@
-"""The virtual participant's feel for proportional control: how far to lean for how fast."""
+"""The virtual participant's feel for proportional control: how far to lean for how fast, how the
+lean is corrected while watching the arm, and the calibration order that makes nu span the leans."""
+import numpy as np
 import pytest
 
-from tasks.episode import BODY_RANGE, MAX_ZERO, LeanFeel
+from bomi.chain import OnlineChain, train
+from bomi.classifier import PostProcessing
+from sim.joystick import THREE_AXIS, Kind, Mode
+from tasks.episode import BODY_RANGE, BomiChannel, LeanFeel, calibration_order
+from tasks.participant import VirtualParticipant, calibration_session, load_participant, session_recording
+from tasks.planner import StickIntent
+from tasks.stick import arm_profile
+
+SEED = 4
+TICK = 1 / 60
 
 
-def test_a_wanted_deflection_maps_linearly_from_the_zero_lean_never_below_the_calibrated_floor():
-    feel = LeanFeel(zero=0.4)
-    assert feel.lean_for(1.0) == pytest.approx(1.0)
-    assert feel.lean_for(0.5) == pytest.approx(0.4 + 0.6 * 0.5)
-    assert feel.lean_for(0.1) == pytest.approx(BODY_RANGE[0])  # 0.46 would be below the least lean calibrated
-    assert LeanFeel().lean_for(0.2) == pytest.approx(BODY_RANGE[0] + (1 - BODY_RANGE[0]) * 0.2)
+def test_the_feel_asks_more_lean_for_more_speed_within_the_calibrated_range():
+    feel = LeanFeel()
+    leans = [feel.lean_for(d) for d in np.linspace(0.0, 1.0, 11)]
+    assert all(b >= a for a, b in zip(leans, leans[1:]))  # faster never asks less lean
+    assert leans[-1] == pytest.approx(1.0)  # full speed: full range
+    assert min(leans) >= BODY_RANGE[0]  # never below the least lean the classifier was calibrated on
+    assert leans[5] > leans[0]  # the lean does depend on the speed wanted
 
 
 def test_a_lean_that_worked_is_where_the_next_move_of_that_class_starts():
     feel = LeanFeel()
-    feel.learn(lean=0.75, deflection=0.2)  # had to lean to 0.75 for 0.2: zero = (0.75 - 0.2) / 0.8
-    assert feel.zero == pytest.approx(0.6875)
-    assert feel.lean_for(0.2) == pytest.approx(0.75)
-    feel.learn(lean=1.0, deflection=0.0)
-    assert feel.zero == MAX_ZERO  # never so far that the least deflection needs more than full range
-    before = feel.zero
-    feel.learn(lean=0.6, deflection=1.0)  # a full-speed move says nothing about the zero lean
-    assert feel.zero == before
+    feel.learn(lean=0.8, deflection=0.3)
+    assert feel.lean_for(0.3) == pytest.approx(0.8)  # the next move for 0.3 starts from 0.8
+    assert feel.lean_for(0.6) > 0.8 and feel.lean_for(1.0) == pytest.approx(1.0)
+    feel.learn(lean=1.0, deflection=0.0)  # had to lean fully even for the least speed
+    assert feel.lean_for(0.05) < 1.0  # the least deflection never needs the whole range
+    before = feel.lean_for(0.3)
+    feel.learn(lean=0.6, deflection=1.0)  # a full-speed move says nothing about slower ones
+    assert feel.lean_for(0.3) == before
+
+
+@pytest.fixture(scope="module")
+def p1_model():
+    params = load_participant("P1")
+    profile = arm_profile(params.profile)
+    session = calibration_session(params, profile, SEED, order=calibration_order(params, profile))
+    return params, profile, session, train([session_recording(session, profile)], profile,
+                                           post=PostProcessing(vote_length=5))
+
+
+def test_calibration_holds_proportional_classes_at_half_and_full_range_and_buttons_at_full(p1_model):
+    params, profile, session, _ = p1_model
+    functions = {cls.label: cls.function for cls in profile.classes}
+    held = session.holding & session.recorded & (session.cue != 0)
+    for label in params.classes:
+        amplitudes = set(np.round(session.truth.amplitude[held & (session.cue == label)], 3))
+        if functions[label] in ("B1", "B2"):
+            assert amplitudes == {1.0}, functions[label]  # pressed at full range only
+        else:
+            assert amplitudes == {BODY_RANGE[0], 1.0}, functions[label]
+
+
+def test_nu_spans_the_leans_the_task_uses(p1_model):
+    """Trained on that order, the least lean (asked for the slowest moves) gives a small but non-zero
+    nu and a full lean a nu near 1: the leans the participant uses cover the proportional range."""
+    params, profile, _, model = p1_model
+    channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
+    t = 0.0
+    for deflection, hold in ((0.0, 2.5), (None, 3.0), (1.0, 2.5), (None, 3.0)):  # no lean correction within 2.5 s
+        for _ in range(int(hold / TICK)):
+            channel.command(StickIntent() if deflection is None else StickIntent({"F": deflection}), t, t + TICK)
+            t += TICK
+    trace = channel.log_fields()["decisions"]
+    forward = next(cls.label for cls in profile.classes if cls.function == "F")
+    held = (trace.intended == forward) & (trace.decided == forward)
+    half, full = held & (trace.t < 3.0), held & (trace.t > 5.5)
+    assert half.sum() > 30 and full.sum() > 30  # both leans are recognised as F
+    assert 0.05 < np.median(trace.nu[half]) < 0.6 and np.median(trace.nu[full]) > 0.8
+
+
+def _correction(model, params, profile, seen_ratio: float | None, seconds: float = 5.0) -> list[float]:
+    """The lean the participant holds while wanting F at 0.3 and seeing the hand go ``seen_ratio``
+    times that speed along F (None: the arm does not move at all), sampled every tick."""
+    channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
+    axis = np.array(THREE_AXIS.axes(Mode.TRANSLATION, Kind.LINEAR)["F"])
+    wanted = 0.3
+    seen = axis * (0.0 if seen_ratio is None else seen_ratio * wanted)
+    leans, t = [], 0.0
+    for _ in range(int(seconds / TICK)):
+        channel.command(StickIntent({"F": wanted}), t, t + TICK, seen, Mode.TRANSLATION)
+        leans.append(channel.participant.intent[1])
+        t += TICK
+    return leans
+
+
+def test_the_participant_leans_further_when_the_arm_is_too_slow_and_less_when_too_fast(p1_model):
+    params, profile, _, model = p1_model
+    start = LeanFeel().lean_for(0.3)
+    patience = params.reaction_s + params.onset_s + 1.0  # a correction is given time to work
+    still = _correction(model, params, profile, None)
+    assert still[0] == pytest.approx(start)
+    assert max(still[:int(patience / TICK)]) == pytest.approx(start)  # no correction before the patience
+    assert still[-1] > start  # the arm does not move: lean further
+    fast = _correction(model, params, profile, 3.0)
+    assert fast[-1] < start  # three times too fast: lean less
+    right = _correction(model, params, profile, 1.0)
+    assert np.allclose(right, start)  # the wanted speed: keep the lean

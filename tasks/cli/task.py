@@ -352,9 +352,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     out.mkdir(exist_ok=True)
     figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force).values()
-    joystick = run_job(EpisodeJob("joystick", "P1", args.seed), progress=True)
+    joystick = run_job(EpisodeJob("joystick", "P1", args.seed, args.time_limit), progress=True)
     with atomic_output(video, overwrite=args.force) as temp:
-        bomi = run_job(EpisodeJob("bomi", "P1", args.seed), video=temp, video_speedup=DEMO_VIDEO_SPEEDUP,
+        bomi = run_job(EpisodeJob("bomi", "P1", args.seed, args.time_limit), video=temp, video_speedup=DEMO_VIDEO_SPEEDUP,
                        progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
     with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=args.force) as temp:
@@ -402,6 +402,8 @@ def register(subparsers) -> None:
 
     demo = add_command(subparsers, "demo")
     demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
+    demo.add_argument("--time-limit", type=float, default=600.0,
+                      help="seconds of simulated time per episode (default %(default)s)")
     demo.add_argument("--out", type=Path, default=Path("demo_out"),
                       help="directory for timeline.png, bomi_episode.mp4 and demo.json (default %(default)s)")
     add_force(demo)
