@@ -26,7 +26,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from bomi.chain import train
-from bomi.dataset import data_dir
 from bomi.files import TEMP_MARK
 from bomi.frames import ImuFrame, encode_imu_frame
 from bomi.model_io import save_model
@@ -38,9 +37,9 @@ TINY_ROWS = 950  # day 1 rows 0..949: neutral, c2, neutral, the start of c4
 
 
 @pytest.fixture(scope="module")
-def base(tmp_path_factory) -> dict[str, bytes]:
+def base(tmp_path_factory, shared_data) -> dict[str, bytes]:
     """name -> bytes of the files every case starts from."""
-    day1 = read_recording(data_dir() / "day1_testp.mat")
+    day1 = read_recording(shared_data / "day1_testp.mat")
     tiny = Recording({i: NodeData(*(getattr(n, s)[:TINY_ROWS] for s in ("acc", "gyro", "mag", "angles")))
                       for i, n in day1.nodes.items()}, day1.labels[:TINY_ROWS], source="tiny.csv")
     where = tmp_path_factory.mktemp("base")
