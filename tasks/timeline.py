@@ -65,13 +65,24 @@ def task_phases(goals: Sequence[str]) -> list[tuple[int, int, str]]:
     return runs
 
 
-def _shade_phases(ax, log: "EpisodeLog", label: bool) -> None:
-    t = log.t
+def _shade_phases(ax, log: "EpisodeLog") -> list[tuple[float, float, str]]:
+    """Every other task phase shaded; returns (start s, end s, phase) for the labels."""
+    t, spans = log.t, []
     for k, (start, end, phase) in enumerate(task_phases(log.goals)):
         t0, t1 = t[start], t[min(end, len(t) - 1)]
         if k % 2:
             ax.axvspan(t0, t1, color="0.92", lw=0, zorder=0)
-        if label:
+        spans.append((float(t0), float(t1), phase))
+    return spans
+
+
+def _label_phases(ax, spans: list[tuple[float, float, str]]) -> None:
+    """Each phase's name above the panel, where it fits (a phase too short for its name keeps only
+    its shading)."""
+    (left, right), width_px = ax.get_xlim(), ax.get_window_extent().width
+    char_px = 0.62 * 6 * ax.figure.dpi / 72  # a character of the 6-pt label
+    for t0, t1, phase in spans:
+        if (t1 - t0) / (right - left) * width_px >= (len(phase) + 1) * char_px:
             ax.text((t0 + t1) / 2, 1.0, phase, transform=ax.get_xaxis_transform(), ha="center", va="bottom",
                     fontsize=6, color="0.35", clip_on=False)
 
@@ -94,9 +105,10 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
     rows = len(logs) + (3 if bomi_log is not None else 0)
     fig, axes = plt.subplots(rows, 1, figsize=(12.5, 2.3 * rows), sharex=True, squeeze=False)
     axes = axes[:, 0]
+    phases = []
     for ax, log in zip(axes, logs):
         rel = 100.0 * (log.hand_pos - log.target_pos)
-        _shade_phases(ax, log, label=True)
+        phases.append((ax, _shade_phases(ax, log)))
         for i, (_, label, colour) in enumerate(AXES):
             ax.plot(log.t, rel[:, i], color=colour, lw=1, label=label)
         ax.axhline(0, color="0.6", lw=0.5)
@@ -114,6 +126,8 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
         _decision_panels(axes[len(logs):], bomi_log)
     axes[-1].set_xlabel("time (s)")
     fig.tight_layout()
+    for ax, spans in phases:
+        _label_phases(ax, spans)
     path = Path(path)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -135,7 +149,7 @@ def _decision_panels(axes, log: "EpisodeLog") -> None:
     right, excused, errors = decision_kinds(d.intended, d.decided, log.allowance)
     ax_class, ax_amplitude, ax_nu = axes
     for ax in axes:
-        _shade_phases(ax, log, label=False)
+        _shade_phases(ax, log)
     ax_class.step(d.t, d.intended, where="post", color="0.7", lw=2, label="intended")
     ax_class.scatter(d.t[right], d.decided[right], s=2, color="tab:blue", label="output = intended")
     ax_class.scatter(d.t[excused], d.decided[excused], s=10, facecolors="none", edgecolors="tab:orange",
