@@ -31,6 +31,10 @@ NODE_DETECTION_S = 0.5
 NODE_WAIT_S = 5.0
 ROWS_PER_FLUSH = 62  # capture: about one second of samples
 COUNTDOWN_S = 3.0
+# emulate --participant: after the protocol's last cue the participant stays in that (neutral)
+# posture this long, so that `bomi record`, whose schedule starts when the first frames reach it,
+# still completes its last segment before the stream ends.
+PROTOCOL_TAIL_S = 5.0
 
 TimedFrame = tuple[float, ImuFrame]
 
@@ -40,7 +44,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         subparsers, "emulate",
         description="Play a recording's raw samples, or a virtual participant performing the calibration "
                     "protocol of `bomi record` (neutral, then each class held --hold s with --neutral s of "
-                    "neutral between, 3 times), as base-station frames at the real rate. "
+                    "neutral between, 3 times, then 5 s more of neutral), as base-station frames at the real "
+                    "rate. "
                     "With --to pty the pseudo-terminal's path is printed on stdout.")
     what = emulate.add_mutually_exclusive_group(required=True)
     what.add_argument("--recording", type=Path, help="recording (.csv) with whole raw values")
@@ -168,7 +173,8 @@ def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     params = load_participant(args.participant)
     profile = arm_profile(params.profile)
     cues = calibration_schedule(profile, hold_s=args.hold, neutral_s=args.neutral)
-    end_s = cues[-1].end_s if args.duration is None else min(args.duration, cues[-1].end_s)
+    protocol_s = cues[-1].end_s + PROTOCOL_TAIL_S
+    end_s = protocol_s if args.duration is None else min(args.duration, protocol_s)
     what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol, {end_s:g} s"
     return (what, len(profile.nodes), int(end_s / DT) + 1,
             participant_blocks(params, profile, args.seed, cues, end_s))
