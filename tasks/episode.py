@@ -25,10 +25,11 @@ from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combine
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
+from tasks.human import HumanOperator, load_human
 from tasks.imu_synth import Delivery
 from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Memory, OperatorParams, ScriptedUser, StickIntent,
-                           load_operator)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
+                           StickIntent, load_operator)
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
@@ -67,6 +68,7 @@ class EpisodeLog:
     failure: str | None
     wall_time: float
     cpu_time: float  # this process's CPU seconds: the speed on one core, whatever else runs
+    pushing: np.ndarray | None = None  # (N,) the person held a stick function (not a button, not at rest)
     decisions: DecisionTrace | None = None
     class_names: tuple[str, ...] = ()
     neutral: int = 0
@@ -140,6 +142,7 @@ class OperatorChannel(Protocol):
 
     combine_axes: bool  # the person may push several functions at once (a 3-axis stick can)
     controls: Controls  # the layout and buttons the person has
+    body_reaction: float  # s of the person's reaction the channel's body model adds after an intent
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
                 mode: Mode = Mode.TRANSLATION) -> JoystickState:
@@ -159,6 +162,7 @@ class JoystickChannel:
     like-for-like comparison the layout and buttons a BoMI profile gives (``profile_controls``)."""
 
     combine_axes = True
+    body_reaction = 0.0  # the hand on the stick adds no reaction of its own to the person's
 
     def __init__(self, controls: Controls = Controls()) -> None:
         self.controls = controls
@@ -248,6 +252,8 @@ class BomiChannel:
         # how long the person waits for a posture (or a change of lean) to take effect before
         # leaning further: reaction + the body's move + a second of watching
         self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
+        # the body starts moving reaction_s after an intent: that much of the person's reaction is here
+        self.body_reaction = participant.params.reaction_s
         self._sample_index = SampleIndex()
         self._decided: int | None = None  # the label of the chain's latest decision
         self.stick = DecisionStick()
@@ -406,6 +412,15 @@ def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.nd
     return direction / norm if norm > 0 else direction
 
 
+def operator_user(params: OperatorParams, channel: OperatorChannel, seed: int) -> ScriptedUser | HumanOperator:
+    """The person at the controls: the scripted user, inside the human operator model when the
+    operator file names one (``[human] model``)."""
+    if params.human_model == NO_HUMAN_MODEL:
+        return ScriptedUser(params, combine_axes=channel.combine_axes, memory=Memory(controls=channel.controls))
+    return HumanOperator(load_human(params.human_model), params, channel.combine_axes, channel.controls, seed,
+                         channel.body_reaction)
+
+
 def run_episode(channel: OperatorChannel, *, operator: str, participant: str, seed: int,
                 operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
                 video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None,
@@ -421,9 +436,8 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     task = StackingTask(sim, task_config)
     task.reset(seed)
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
-    user = ScriptedUser(params, combine_axes=channel.combine_axes,
-                        memory=Memory(controls=channel.controls))
-    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal")}
+    user = operator_user(params, channel, seed)
+    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal", "pushing")}
     film = _Film(sim, video, video_speedup) if video is not None else None
     full_speed, previous = sim.config.control.full_speed, None
     started, started_cpu = time.perf_counter(), time.process_time()
@@ -441,6 +455,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             rows["cubes"].append(np.array(view.cube_pos))
             rows["touching"].append(view.touching)
             rows["goal"].append(intent.goal.step)
+            rows["pushing"].append(bool(intent.deflection))
             sim.step(state)
             if on_tick is not None:
                 on_tick(sim.time)
@@ -457,6 +472,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
         touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(), goals=tuple(rows["goal"]),
+        pushing=np.array(rows["pushing"], dtype=bool),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
         wall_time=time.perf_counter() - started, cpu_time=time.process_time() - started_cpu,
         **channel.log_fields())

@@ -10,6 +10,9 @@ entry per 60 Hz control tick.  docs/task.md defines every metric.
 """
 from __future__ import annotations
 
+import enum
+from collections.abc import Sequence
+
 import numpy as np
 import scipy.stats
 
@@ -169,3 +172,45 @@ def mean_ci95(values: list[float] | np.ndarray) -> tuple[float, float] | None:
         return mean, mean
     low, high = scipy.stats.t.interval(0.95, values.size - 1, loc=mean, scale=sem)
     return float(low), float(high)
+
+
+class TaskPhase(str, enum.Enum):
+    """The phases of the stacking task, told apart by the scripted user's step (``Goal.step``)."""
+
+    REACH = "reach"  # to a cube and down to it
+    GRASP = "grasp"  # closing on it (and a missed grasp opened again)
+    CARRY = "carry"  # the held cube up, over its place and set down on it
+    RELEASE = "release"  # opening the hand, rising clear
+    OTHER = "other"  # levelling a tipped hand, opening the hand before a grasp
+
+
+def phase_of(step: str) -> TaskPhase:
+    """The phase a step of the scripted user ("reach cube 1", "carry cube 2", ...) belongs to."""
+    for phase, starts in ((TaskPhase.REACH, ("reach",)), (TaskPhase.GRASP, ("grasp", "missed")),
+                          (TaskPhase.CARRY, ("carry",)), (TaskPhase.RELEASE, ("release", "retreat", "done"))):
+        if step.startswith(starts):
+            return phase
+    return TaskPhase.OTHER
+
+
+def phase_times(steps: Sequence[str], dt: float, until: int | None = None) -> dict[str, float]:
+    """Seconds spent in each phase over the first ``until`` ticks (all by default)."""
+    out = {phase.value: 0.0 for phase in TaskPhase}
+    for step in steps[:until]:
+        out[phase_of(step).value] += dt
+    return out
+
+
+def mode_switch_time(mode: list[str], pushing: np.ndarray, dt: float, until: int | None = None) -> float:
+    """Seconds spent switching modes (Herlant et al. 2016): from the last tick the stick was held
+    before a mode change to the first tick it is held after it (overlapping spans counted once)."""
+    pushing = np.asarray(pushing, dtype=bool)[:until]
+    changes = [i for i in range(1, len(pushing)) if mode[i] != mode[i - 1]]
+    held = np.flatnonzero(pushing)
+    spent = np.zeros(len(pushing), dtype=bool)
+    for i in changes:
+        before, after = held[held < i], held[held >= i]
+        start = before[-1] + 1 if len(before) else 0
+        stop = after[0] if len(after) else len(pushing)
+        spent[start:stop] = True
+    return float(spent.sum() * dt)

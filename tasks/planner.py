@@ -14,15 +14,16 @@ import enum
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping, Protocol
 
 import numpy as np
 
-from bomi.config_files import check_table, load_toml, number
+from bomi.config_files import check_table, load_toml, number, typed
 from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
 CUBE_SYMMETRY = math.pi / 2  # a cube looks the same every quarter turn
+NO_HUMAN_MODEL = "none"  # [human] model: the fixed timing of [timing] alone
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,7 @@ class OperatorParams:
     retreat: float
     open_closure: float
     miss_time: float
+    human_model: str = NO_HUMAN_MODEL  # a human-model TOML (tasks.human) around this user, or none
 
 
 _SECTIONS = {
@@ -77,14 +79,18 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
         table = check_table(data.get(section), f"[{section}]", keys)
         for key in keys:
             values[key] = number(table, key, f"[{section}]", -math.inf if key in _MAY_BE_NEGATIVE else 0.0)
-    check_table(data, "operator", _SECTIONS)
+    check_table(data, "operator", (*_SECTIONS, "human"))
+    human = check_table(data.get("human", {"model": NO_HUMAN_MODEL}), "[human]", ("model",), ("model",))
+    model = typed(human, "model", str, "[human]")
+    if not model:
+        raise ValueError(f'[human]: model must name a human-model file, or be "{NO_HUMAN_MODEL}"')
     if not 0 < values["fine"] <= values["coarse"] <= 1 or not 0 < values["turn"] <= 1:
         raise ValueError("[deflection] needs 0 < fine <= coarse <= 1 and 0 < turn <= 1")
     if not 0 < values["open_closure"] < 1:
         raise ValueError("[fingers] open_closure must lie strictly between 0 and 1")
     if values["stop"] <= 0 or values["align"] <= 0 or values["placed"] <= 0:
         raise ValueError("[tolerance] stop, align and placed must be positive")
-    return OperatorParams(**values)
+    return OperatorParams(**values, human_model=model)
 
 
 @dataclass(frozen=True)
@@ -243,12 +249,20 @@ def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
     return (err + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
 
 
-def deflection_for(distance: float, p: OperatorParams, anticipation: float) -> float:
+Pace = Callable[[float, float], float]  # (distance, tolerance) -> the least time a person takes to cover it
+
+
+def deflection_for(distance: float, p: OperatorParams, anticipation: float, pace: Pace | None = None) -> float:
     """As fast as lets the hand coast (``anticipation`` seconds of the speed) no further than
     ``coast_share`` of the distance, between fine and coarse: a person who has learnt that the arm
     goes on for a while after letting go does not go full speed into a short move, and makes small
-    corrections slowly enough not to overshoot them."""
-    return float(np.clip(p.coast_share * distance / (p.full_speed * max(anticipation, 1e-9)), p.fine, p.coarse))
+    corrections slowly enough not to overshoot them.  ``pace`` (a human model's movement time, e.g.
+    Fitts' law) may slow a move further: no faster than covers the distance in that time."""
+    coast = p.coast_share * distance / (p.full_speed * max(anticipation, 1e-9))
+    least_time = 0.0 if pace is None else pace(distance, 2 * p.stop)
+    if least_time > 0:
+        coast = min(coast, distance / (p.full_speed * least_time))
+    return float(np.clip(coast, p.fine, p.coarse))
 
 
 def turn_deflection_for(angle: float, p: OperatorParams, anticipation: float) -> float:
@@ -388,13 +402,13 @@ def hand_velocity(view: View, memory: Memory) -> np.ndarray:
 
 
 def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
-         holding: Mapping[str, float] | None = None, anticipation: float | None = None
-         ) -> tuple[StickIntent, Memory]:
+         holding: Mapping[str, float] | None = None, anticipation: float | None = None,
+         pace: Pace | None = None) -> tuple[StickIntent, Memory]:
     """Decide the stick intent for this tick.
 
     ``holding`` is the deflection currently applied per function (what the person feels in the
     hand); the person lets go ``anticipation`` seconds (default: the parameter) of the hand's
-    current travel before the goal.
+    current travel before the goal; ``pace`` slows translations (``deflection_for``).
     """
     velocity = hand_velocity(view, memory)
     memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
@@ -411,7 +425,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     anticipation = p.anticipation if anticipation is None else anticipation
     if action.kind is ActionKind.MOVE:
         need, deflection, axis = _translation(view.hand_pos, velocity, anticipation, action.point, p, combine_axes,
-                                              memory.axis, holding or {}, memory.controls.layout, view.mode)
+                                              memory.axis, holding or {}, memory.controls.layout, view.mode, pace)
     else:
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
@@ -443,8 +457,8 @@ def _remember_touch(view: View, memory: Memory) -> Memory:
 
 
 def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, point: np.ndarray, p: OperatorParams,
-                 combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode
-                 ) -> tuple[Mode, dict[str, float], int | None]:
+                 combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode,
+                 pace: Pace | None = None) -> tuple[Mode, dict[str, float], int | None]:
     """The mode, and the joystick functions (and their deflections) in it, that bring the hand to ``point``.
 
     An axis being moved stops when the hand would coast (``anticipation`` seconds of its ``velocity``: the
@@ -479,7 +493,7 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
         if axis not in moving:
             axis = max(moving, key=lambda i: abs(error[i]))
         moving = [axis]
-    return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, anticipation) for i in moving}, axis
+    return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, anticipation, pace) for i in moving}, axis
 
 
 def _function_along(layout: Layout, axis: int, signed: float) -> tuple[Mode, str]:
@@ -498,6 +512,38 @@ def mode_button(current: Mode, wanted: Mode, controls: Controls = Controls()) ->
 
 # ---------------------------------------------------------------------------------------------
 # the person in time
+
+class Timing(Protocol):
+    """When a person starts a new move and how fast they make it (``tasks.human.HumanTiming``)."""
+
+    def reaction(self, view: View, wanted: StickIntent, after: frozenset[Kind], controls: Controls) -> float:
+        """Seconds from wanting ``wanted`` to starting it, drawn once per move; ``after``: what the
+        move or press let go before it did (e.g. ``Kind.FINGERS``: a grasp or a release)."""
+
+    @property
+    def pause(self) -> float:
+        """Least rest between letting go of a move and starting the next."""
+
+    def pace(self, distance: float, tolerance: float) -> float:
+        """Least time to cover ``distance`` to within ``tolerance`` (0: no such limit)."""
+
+
+@dataclass(frozen=True)
+class FixedTiming:
+    """The scripted user's constants: ``reaction_time`` before every move, ``pause_between_moves``."""
+
+    params: OperatorParams
+
+    def reaction(self, view: View, wanted: StickIntent, after: frozenset[Kind], controls: Controls) -> float:
+        return self.params.reaction_time
+
+    @property
+    def pause(self) -> float:
+        return self.params.pause_between_moves
+
+    def pace(self, distance: float, tolerance: float) -> float:
+        return 0.0
+
 
 @dataclass
 class ScriptedUser:
@@ -520,10 +566,20 @@ class ScriptedUser:
     _last_moving: float = -math.inf  # when the hand was last seen moving
     _released_move: bool = False  # the last thing let go was a stick move (not a button)
     _height_seen: tuple[float, float] = (-math.inf, 0.0)  # (since when, hand height) during a descent
+    timing: Timing | None = None  # default: FixedTiming(params)
+    _reaction: float = 0.0  # the reaction drawn for the move being waited for
+    _let_go_of: frozenset[Kind] = frozenset()  # what the last move let go did (nothing for a press)
 
     def __post_init__(self) -> None:
         if self.anticipation is None:
             self.anticipation = self.params.anticipation
+        if self.timing is None:
+            self.timing = FixedTiming(self.params)
+
+    @property
+    def started(self) -> float:
+        """When the move or press held now (or last) began."""
+        return self._started
 
     def stick_intent(self, view: View) -> StickIntent:
         """What the person does with the stick at this glance."""
@@ -533,7 +589,7 @@ class ScriptedUser:
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         self._watch_descent(view)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
-                                   self.anticipation)
+                                   self.anticipation, self.timing.pace)
         if self.current.button is not None and view.mode is not self._mode_at_start:
             wanted = replace(REST, goal=wanted.goal)  # the press worked: let go (press again if need be)
         elif self.current.button is not None and view.t - self._started > self.params.button_patience:
@@ -550,8 +606,9 @@ class ScriptedUser:
             self.current = REST
         if self._waiting_since is None:
             self._waiting_since = view.t
-        ready = max(self._waiting_since + self.params.reaction_time,
-                    self._stopped_at + max(self.params.pause_between_moves, self.settle), self._relax_until)
+            self._reaction = self.timing.reaction(view, wanted, self._let_go_of, self.memory.controls)
+        ready = max(self._waiting_since + self._reaction,
+                    self._stopped_at + max(self.timing.pause, self.settle), self._relax_until)
         coasting = float(np.linalg.norm(velocity)) > STILL_SPEED and view.t - self._stopped_at < MAX_WAIT
         if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
             return replace(REST, goal=wanted.goal)
@@ -561,6 +618,8 @@ class ScriptedUser:
 
     def _let_go(self, view: View, velocity: np.ndarray) -> None:
         self._stopped_at = view.t
+        effects = self.memory.controls.layout.effects[view.mode]
+        self._let_go_of = frozenset(effects[fn].kind for fn in self.current.deflection if fn in effects)
         self._released_move = bool(self.current.deflection)
         speed = float(np.linalg.norm(velocity))
         moving = self.memory.controls.layout.axes(view.mode, Kind.LINEAR)

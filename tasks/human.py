@@ -1,0 +1,259 @@
+"""The human operator model: one person, the same behind the joystick and behind the BoMI.
+
+The scripted user (``tasks.planner``) knows the task; this module gives it a human's eyes and
+timing, so that the only difference between the joystick and the BoMI conditions is the
+interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: docs/human_model.md.
+
+- **Perception** (``Eyes``), as dm_control's composer observables: the scene is seen every
+  ``glance_interval``, ``visual_delay`` late (hand, cubes, the mode on the arm's indicator,
+  contact).  Where the cubes and B are relative to the hand is *judged*: one error per judgement,
+  std ``lateral_floor + lateral_weber x distance`` across the line of sight from the eyes and
+  ``depth_ratio`` times that along it.  A judgement is made anew whenever the person starts or
+  stops a move, so a move ends where it was misjudged to end and the next look, from closer,
+  brings a corrective sub-movement.  The held cube moves with the hand and is seen where it is.
+- **Timing** (``HumanTiming``): every new move or press waits a choice reaction time, drawn once:
+  an ex-Gaussian simple reaction time plus ``hick_slope x log2(n + 1)`` for the n commands the
+  interface offers in the current mode (Hick-Hyman); after a grasp or a release, a look to check
+  it; a move of the hand slows as it nears its goal so that it takes ``fitts_slope x log2(2D / W)``
+  (Fitts), whatever the interface's top speed allows.  A channel whose
+  body adds its own reaction (the BoMI participant starts moving ``reaction_s`` after an intent)
+  has that part taken off: the reaction is counted once.
+- **Slips** (``HumanOperator``): a share of mode presses is forgotten; the person pushes the
+  stick as if the mode had changed until they see the arm do something else (or nothing), then
+  makes the press (the one right after noticing a slip is not forgotten).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.stats
+
+from bomi.config_files import check_table, load_toml, number, typed
+from sim.joystick import Kind, Mode
+from tasks.planner import REST, Controls, Memory, OperatorParams, ScriptedUser, StickIntent, View
+
+DEFAULT_HUMAN_FILE = Path(__file__).with_name("human.toml")
+HUMAN_STREAM = 0x4855  # the human's random streams: independent of the task's and the participant's
+
+
+@dataclass(frozen=True)
+class HumanParams:
+    glance_interval: float
+    visual_delay: float
+    eye: np.ndarray  # (3,) m, world
+    lateral_floor: float
+    lateral_weber: float
+    depth_ratio: float
+    rt_mu: float
+    rt_sigma: float
+    rt_tau: float
+    hick_slope: float
+    fitts_slope: float
+    check_pause: float
+    wrong_mode_rate: float
+    notice_move: float
+    notice_turn_deg: float
+    notice_timeout: float
+
+
+_SECTIONS = {
+    "perception": ("glance_interval", "visual_delay", "eye", "lateral_floor", "lateral_weber", "depth_ratio"),
+    "timing": ("rt_mu", "rt_sigma", "rt_tau", "hick_slope", "fitts_slope", "check_pause"),
+    "slips": ("wrong_mode_rate", "notice_move", "notice_turn_deg", "notice_timeout"),
+}
+
+
+def load_human(path: Path | str = DEFAULT_HUMAN_FILE, overrides: Mapping[str, Any] | None = None) -> HumanParams:
+    """Read and validate a human-model TOML file, with ``overrides`` (dotted keys,
+    ``{"timing.fitts_slope": 0.4}``); BomiError names the file and the fault."""
+    return load_toml(path, DEFAULT_HUMAN_FILE.parent, "human model", _parse_human, overrides)
+
+
+def _parse_human(data: dict, source: str) -> HumanParams:
+    check_table(data, "human model", _SECTIONS)
+    values: dict = {}
+    for section, keys in _SECTIONS.items():
+        table = check_table(data.get(section), f"[{section}]", keys, keys)
+        for key in keys:
+            if key == "eye":
+                eye = typed(table, key, list, f"[{section}]")
+                if len(eye) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                            and math.isfinite(v) for v in eye):
+                    raise ValueError("[perception]: eye must be three numbers (x, y, z in metres)")
+                values[key] = np.array(eye, dtype=float)
+            else:
+                values[key] = number(table, key, f"[{section}]", 0.0, 1.0 if key == "wrong_mode_rate" else math.inf)
+    if values["depth_ratio"] <= 0 or values["rt_sigma"] <= 0 or values["rt_tau"] <= 0:
+        raise ValueError("[perception] depth_ratio, [timing] rt_sigma and rt_tau must be positive")
+    return HumanParams(**values)
+
+
+# ------------------------------------------------------------------------------------ timing
+def simple_reaction_time(p: HumanParams, rng: np.random.Generator) -> float:
+    """One ex-Gaussian draw: normal (rt_mu, rt_sigma) plus an exponential tail of mean rt_tau."""
+    return float(scipy.stats.exponnorm.rvs(p.rt_tau / p.rt_sigma, loc=p.rt_mu, scale=p.rt_sigma, random_state=rng))
+
+
+def choice_time(p: HumanParams, alternatives: int, rng: np.random.Generator) -> float:
+    """Hick-Hyman: a simple reaction time plus ``hick_slope`` x log2(alternatives + 1)."""
+    return max(0.0, simple_reaction_time(p, rng)) + p.hick_slope * math.log2(alternatives + 1)
+
+
+def fitts_time(p: HumanParams, distance: float, width: float) -> float:
+    """Fitts (1954): ``fitts_slope`` x log2(2 distance / width) for a target ``width`` wide (to
+    within width / 2), at least 0.  No intercept: the time before a move starts is the choice
+    reaction time, counted once."""
+    return p.fitts_slope * max(0.0, math.log2(2.0 * distance / width))
+
+
+def alternatives(controls: Controls, mode: Mode) -> int:
+    """The commands the interface offers in ``mode``: the functions that do something there and
+    the mode buttons the person has."""
+    return len(controls.layout.effects[mode]) + len(controls.buttons)
+
+
+@dataclass
+class HumanTiming:
+    """``planner.Timing`` from the human model: choice reaction times drawn once per move, a check
+    after a grasp or a release, Fitts' movement time.  ``body_reaction``: the part of a reaction
+    the channel's body model already adds after the intent (BoMI participant: ``reaction_s``)."""
+
+    params: HumanParams
+    rng: np.random.Generator
+    body_reaction: float = 0.0
+    pause: float = 0.0  # no rest beyond the reaction: it is the rest
+
+    def reaction(self, view: View, wanted: StickIntent, after: frozenset[Kind], controls: Controls) -> float:
+        t = choice_time(self.params, alternatives(controls, view.mode), self.rng)
+        if Kind.FINGERS in after:  # the fingers have just closed or opened: look whether it worked
+            t += float(self.rng.exponential(self.params.check_pause)) if self.params.check_pause > 0 else 0.0
+        return max(0.0, t - self.body_reaction)
+
+    def pace(self, distance: float, tolerance: float) -> float:
+        """The time constant of a first-order approach (speed = remaining distance / it): its
+        movement time from D to within W / 2 is ``fitts_slope`` x log2(2D / W) (``fitts_time``):
+        Fitts' law from a first-order approach (Crossman and Goodeve 1963)."""
+        return self.params.fitts_slope / math.log(2.0)
+
+
+# ------------------------------------------------------------------------------------ perception
+def judgement_error(p: HumanParams, hand: np.ndarray, distance: float, rng: np.random.Generator) -> np.ndarray:
+    """Error (3,) of one judgement of where something ``distance`` away from the ``hand`` is,
+    relative to the hand: std lateral_floor + lateral_weber x distance across the line of sight
+    from the eyes, ``depth_ratio`` times that along it."""
+    sight = hand - p.eye
+    sight = sight / np.linalg.norm(sight)
+    z = rng.standard_normal(3)
+    along = float(np.dot(z, sight))
+    sigma = p.lateral_floor + p.lateral_weber * distance
+    return sigma * ((z - along * sight) + p.depth_ratio * along * sight)
+
+
+def landmark_distance(view: View) -> float:
+    """How far the hand is from the nearest thing it may be going to: a cube it does not hold, or B."""
+    points = [pos for pos, touch in zip(view.cube_pos, view.touching) if not touch]
+    points.append(np.r_[view.target_xy, view.table_z])
+    return float(min(np.linalg.norm(np.asarray(q) - view.hand_pos) for q in points))
+
+
+class Eyes:
+    """What the person sees: the view ``visual_delay`` old, once per ``glance_interval``, with the
+    cubes (but the held one) and B displaced by the current judgement error."""
+
+    def __init__(self, params: HumanParams, rng: np.random.Generator):
+        self.params, self.rng = params, rng
+        self._frames: deque[View] = deque()
+        self._next_glance = -math.inf
+        self._error: np.ndarray | None = None  # None: judge anew at the next glance
+
+    def rejudge(self) -> None:
+        self._error = None
+
+    def see(self, view: View) -> View | None:
+        """The judged view when a glance is due at ``view.t``, else None."""
+        self._frames.append(view)
+        while len(self._frames) > 1 and self._frames[1].t <= view.t - self.params.visual_delay + 1e-9:
+            self._frames.popleft()
+        if view.t + 1e-9 < self._next_glance:
+            return None
+        self._next_glance = view.t + self.params.glance_interval
+        seen = self._frames[0]
+        if self._error is None:
+            self._error = judgement_error(self.params, seen.hand_pos, landmark_distance(seen), self.rng)
+        e = self._error
+        cubes = tuple(pos if touch else pos + e for pos, touch in zip(seen.cube_pos, seen.touching))
+        return replace(seen, cube_pos=cubes, target_xy=seen.target_xy + e[:2])
+
+
+# ------------------------------------------------------------------------------------ the person
+@dataclass(frozen=True)
+class Slip:
+    """A forgotten mode press: the mode the person believes in, and the arm as it was then."""
+
+    believed: Mode
+    since: float
+    hand: np.ndarray
+    yaw: float
+    tilt: np.ndarray
+    closure: float
+
+
+class HumanOperator:
+    """The scripted user with the human model's eyes, timing and slips (``stick_intent`` like
+    ``ScriptedUser.stick_intent``, called every control tick with the true view)."""
+
+    def __init__(self, params: HumanParams, operator: OperatorParams, combine_axes: bool, controls: Controls,
+                 seed: int, body_reaction: float = 0.0):
+        eyes_rng, timing_rng, slip_rng = (np.random.default_rng(s)
+                                          for s in np.random.SeedSequence([seed, HUMAN_STREAM]).spawn(3))
+        self.params, self.controls, self._rng = params, controls, slip_rng
+        self.timing = HumanTiming(params, timing_rng, body_reaction)
+        self.user = ScriptedUser(operator, combine_axes=combine_axes, memory=Memory(controls=controls),
+                                 timing=self.timing)
+        self.eyes = Eyes(params, eyes_rng)
+        self.intent = REST
+        self.slip: Slip | None = None
+        self.slips: list[tuple[float, float]] = []  # (start, noticed) of every wrong-mode episode
+        self._just_noticed = False  # a slip was noticed and the press not made yet
+
+    def stick_intent(self, view: View) -> StickIntent:
+        seen = self.eyes.see(view)
+        if seen is None:
+            return self.intent
+        if self.slip is not None:
+            if self._noticed(seen):
+                self.slips.append((self.slip.since, seen.t))
+                self.slip, self._just_noticed = None, True
+            else:
+                seen = replace(seen, mode=self.slip.believed)
+        intent = self.user.stick_intent(seen)
+        new_press = intent.button is not None and intent.button != self.intent.button
+        if new_press and self.slip is None and not self._just_noticed \
+                and self._rng.random() < self.params.wrong_mode_rate:
+            # the press is forgotten: the person goes on as if the mode had changed
+            self.slip = Slip(self.controls.layout.after(seen.mode, intent.button), seen.t, seen.hand_pos,
+                             seen.hand_yaw, seen.hand_tilt, seen.closure)
+            intent = replace(REST, goal=intent.goal)
+        elif new_press:
+            self._just_noticed = False
+        if (intent.functions, intent.button) != (self.intent.functions, self.intent.button):
+            self.eyes.rejudge()  # a move starts or stops: the person looks again
+        self.intent = intent
+        return intent
+
+    def _noticed(self, seen: View) -> bool:
+        """The arm did something the person did not expect, or nothing for ``notice_timeout``."""
+        s, p = self.slip, self.params
+        yaw = (seen.hand_yaw - s.yaw + math.pi) % (2 * math.pi) - math.pi
+        turned = max(abs(yaw), float(np.max(np.abs(seen.hand_tilt - s.tilt))))
+        changed = (np.linalg.norm(seen.hand_pos - s.hand) > p.notice_move or math.degrees(turned) > p.notice_turn_deg
+                   or abs(seen.closure - s.closure) > 0.05)
+        pushed_since = None if self.user.current.is_rest else self.user.started
+        stuck = pushed_since is not None and seen.t - max(pushed_since, s.since) > p.notice_timeout
+        return changed or stuck

@@ -1,0 +1,164 @@
+"""The human operator model: perception noise, choice and movement times, wrong-mode slips."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from bomi.errors import BomiError
+from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
+from tasks.human import (DEFAULT_HUMAN_FILE, HumanOperator, HumanTiming, alternatives, choice_time, fitts_time,
+                         judgement_error, load_human)
+from tasks.planner import REST, Controls, View, deflection_for, load_operator
+
+H = load_human()
+P = load_operator()
+HALF = 0.025
+
+
+def view(hand=(-0.14, -0.39, 0.025), mode=Mode.TRANSLATION, t=0.0, closure=0.0) -> View:
+    return View(t=t, hand_pos=np.array(hand, float), hand_yaw=0.0, hand_tilt=np.zeros(2), closure=closure, mode=mode,
+                cube_pos=(np.array([-0.14, -0.39, HALF]), np.array([-0.14, -0.51, HALF])), cube_yaw=(0.0, 0.0),
+                touching=(False, False), target_xy=np.array([0.14, -0.45]), table_z=0.0, cube_size=2 * HALF)
+
+
+def test_judged_position_is_worse_in_depth_than_across_by_the_configured_ratio():
+    rng = np.random.default_rng(0)
+    hand, distance = np.array([0.1, -0.45, 0.1]), 0.2
+    errors = np.array([judgement_error(H, hand, distance, rng) for _ in range(20000)])
+    sight = (hand - H.eye) / np.linalg.norm(hand - H.eye)
+    depth = errors @ sight
+    across = errors - np.outer(depth, sight)
+    lateral_std = math.sqrt(np.mean(np.sum(across ** 2, axis=1)) / 2)  # two axes across the line of sight
+    expected = H.lateral_floor + H.lateral_weber * distance  # hand-computed: 2 mm + 3 % of 20 cm = 8 mm
+    assert lateral_std == pytest.approx(expected, rel=0.03)
+    assert np.std(depth) / lateral_std == pytest.approx(H.depth_ratio, rel=0.03)
+
+
+def test_choice_time_grows_with_alternatives_as_hick_hyman():
+    rng = np.random.default_rng(1)
+    mean = {n: np.mean([choice_time(H, n, rng) for _ in range(20000)]) for n in (1, 3, 7)}
+    # ex-Gaussian mean = mu + tau; Hick-Hyman adds slope x log2(n + 1): 1, 2 and 3 bits
+    for n, bits in ((1, 1), (3, 2), (7, 3)):
+        assert mean[n] == pytest.approx(H.rt_mu + H.rt_tau + H.hick_slope * bits, abs=0.004)
+    assert mean[1] < mean[3] < mean[7]
+
+
+def test_alternatives_are_the_commands_of_the_interface_in_the_mode():
+    assert alternatives(Controls(THREE_AXIS), Mode.TRANSLATION) == 8  # six directions, two buttons
+    assert alternatives(Controls(THREE_AXIS), Mode.FINGERS) == 4  # close, open, two buttons
+    assert alternatives(Controls(TWO_AXIS, ("B1",)), Mode.TRANSLATION) == 5
+
+
+def test_body_reaction_is_not_counted_twice():
+    """A channel whose body adds reaction_s after the intent gets the person's reaction minus that."""
+    draws = {}
+    for body in (0.0, 0.4):
+        timing = HumanTiming(replace(H, rt_sigma=1e-6, rt_tau=1e-6), np.random.default_rng(2), body_reaction=body)
+        draws[body] = timing.reaction(view(), REST, frozenset(), Controls())
+    assert draws[0.0] - draws[0.4] == pytest.approx(0.4, abs=1e-4)
+
+
+def test_an_approach_paced_by_the_human_takes_fitts_time():
+    """Speed = remaining distance / (fitts_slope / ln 2), stepped at 60 Hz, from D to within W/2."""
+    timing = HumanTiming(H, np.random.default_rng(3))
+    fine = replace(P, fine=1e-4)
+    for distance in (0.05, 0.2):
+        d, t, dt = distance, 0.0, 1 / 60
+        while d > P.stop:
+            d -= deflection_for(d, fine, anticipation=1e-3, pace=timing.pace) * P.full_speed * dt
+            t += dt
+        # hand-computed: (b / ln 2) ln(D / (W/2)) = b log2(2D / W), W = 2 stop
+        assert t == pytest.approx(H.fitts_slope * math.log2(distance / P.stop), rel=0.03)
+        assert t == pytest.approx(fitts_time(H, distance, 2 * P.stop), rel=0.03)
+
+
+def _slipping_operator(**changes) -> HumanOperator:
+    human = replace(H, wrong_mode_rate=1.0, visual_delay=0.0, lateral_floor=0.0, lateral_weber=0.0, **changes)
+    return HumanOperator(human, P, combine_axes=True, controls=Controls(), seed=0)
+
+
+def test_a_wrong_mode_command_is_noticed_and_corrected():
+    """At the grasp point in translation mode the person wants the finger mode; the press is
+    forgotten, so they push 'close' (F), which in translation mode moves the hand along y-.  Once
+    they see the hand move they stop, bring it back and make the press."""
+    person = _slipping_operator()
+    start = np.array([-0.14, -0.39, 0.025])
+    hand, pushed, pressed = start.copy(), [], []
+    for tick in range(900):
+        t = tick / 60
+        intent = person.stick_intent(view(hand=tuple(hand), t=t))
+        for fn, deflection in intent.deflection.items():  # the arm obeys its true mode: translation
+            hand = hand + np.array(TRANSLATION_AXES[fn]) * P.full_speed * deflection / 60
+        if "F" in intent.deflection and not pressed:
+            pushed.append((t, np.linalg.norm(hand - start)))
+        if intent.button is not None:
+            pressed.append(t)
+            break
+    assert pushed, "the forgotten press is followed by a push as if in the finger mode"
+    assert len(person.slips) == 1 and person.slips[0][1] > person.slips[0][0]
+    assert max(d for _, d in pushed) < 0.03  # noticed within a few centimetres ...
+    assert pressed and pressed[0] > person.slips[0][1]  # ... and the press made after noticing
+    assert np.linalg.norm(hand[:2] - start[:2]) <= 2 * P.align  # back over the cube
+
+
+def test_a_wrong_mode_command_the_arm_ignores_is_noticed_after_the_timeout():
+    person = _slipping_operator()
+    pushed, pressed = [], []
+    for tick in range(600):
+        t = tick / 60
+        intent = person.stick_intent(view(t=t))  # the arm never moves
+        if intent.deflection:
+            pushed.append(t)
+        if intent.button is not None:
+            pressed.append(t)
+            break
+    assert pushed and pressed and pressed[0] - pushed[0] >= H.notice_timeout
+
+
+@pytest.mark.parametrize("text, fault", [
+    ("", "[perception]: missing table"),
+    ("rate", "'wrong_mode_rate' must be a number in [0.0, 1.0]"),
+    ("eye", "eye must be three numbers"),
+    ("unknown", "[timing]: unknown key(s) wobble"),
+])
+def test_bad_human_file_is_one_clear_error(tmp_path, text, fault):
+    good = DEFAULT_HUMAN_FILE.read_text()
+    content = {"rate": good.replace("wrong_mode_rate = 0.10", "wrong_mode_rate = 1.5"),
+               "eye": good.replace("eye = [0.0, 0.30, 0.45]", "eye = [0.0, 0.30]"),
+               "unknown": good.replace("[timing]\n", "[timing]\nwobble = 1\n")}.get(text, text)
+    path = tmp_path / "human.toml"
+    path.write_text(content)
+    with pytest.raises(BomiError) as err:
+        load_human(path)
+    assert str(path) in str(err.value) and fault in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_operator_file_names_the_human_model(tmp_path):
+    from tasks.episode import JoystickChannel, operator_user
+    from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser
+    assert isinstance(operator_user(P, JoystickChannel(), seed=0), ScriptedUser)  # model = "none"
+    humane = load_operator(DEFAULT_OPERATOR_FILE, {"human.model": "human"})
+    person = operator_user(humane, JoystickChannel(), seed=0)
+    assert isinstance(person, HumanOperator) and person.params.fitts_slope == H.fitts_slope
+    path = tmp_path / "op.toml"
+    path.write_text(DEFAULT_OPERATOR_FILE.read_text().replace('model = "none"', "model = 3"))
+    with pytest.raises(BomiError, match=r"\[human\]: 'model' has the wrong type"):
+        load_operator(path)
+
+
+def test_phase_times_follow_the_steps():
+    from tasks.metrics import phase_times
+    steps = (["reach cube 1"] * 3 + ["grasp cube 1"] * 2 + ["carry cube 1"] * 5 + ["release cube 1"]
+             + ["level the hand"])
+    assert phase_times(steps, 0.5) == {"reach": 1.5, "grasp": 1.0, "carry": 2.5, "release": 0.5, "other": 0.5}
+    assert phase_times(steps, 0.5, until=4)["grasp"] == 0.5
+
+
+def test_mode_switch_time_spans_from_the_last_push_to_the_next():
+    from tasks.metrics import mode_switch_time
+    mode = ["translation"] * 5 + ["fingers"] * 5
+    pushing = [True, True, False, False, False, False, False, True, True, False]
+    # last push before the change at tick 5: tick 1; first after: tick 7 -> ticks 2..6 = 5 ticks
+    assert mode_switch_time(mode, pushing, 0.1) == pytest.approx(0.5)
+    assert mode_switch_time(["translation"] * 10, pushing, 0.1) == 0.0
