@@ -1,6 +1,8 @@
 """The paper's "reliability over days" table on the published P1 recordings (`bomi reproduce`,
 benchmarks/reproduce_table.py): the day-1 model tested on days 2..5 for FV1, FV2 and FV3, every
-setting (LDA shrinkage, rejection threshold) chosen on day 1 alone."""
+setting (LDA shrinkage, rejection threshold) chosen on day 1 alone; beside it the 5 x 5 day-pair
+matrix (a model trained on each day, tested on every other day) for P1's shipped settings and for
+the per-person rule, each with and without training on smaller copies of the motions."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -13,8 +15,9 @@ from bomi import paper
 from bomi.chain import Evaluation, Selection, cross_validate, evaluate, select_settings, train
 from bomi.classifier import PostProcessing
 from bomi.features import FEATURE_KINDS
-from bomi.profiles import Profile
-from bomi.recording import read_recording
+from bomi.derived import DERIVED_AMPLITUDE_SCALES
+from bomi.profiles import SELECT, Profile
+from bomi.recording import Recording, read_recording
 
 DAYS = (1, 2, 3, 4, 5)
 
@@ -28,10 +31,14 @@ class FeatureReproduction:
     rejecting: dict[int, Evaluation]  # day -> with the day-1 threshold
 
 
-def reproduce(directory: Path, profile: Profile) -> list[FeatureReproduction]:
-    """Day-1 model tested on days 2..5, for FV1, FV2, FV3; every setting chosen on day 1 alone."""
+def read_days(directory: Path) -> dict[int, Recording]:
+    """day -> the published recording of that day."""
     paths = {day: directory / f"day{day}_testp.mat" for day in DAYS}
-    recordings = {day: read_recording(path) for day, path in tqdm(paths.items(), desc="reading days", unit="day")}
+    return {day: read_recording(path) for day, path in tqdm(paths.items(), desc="reading days", unit="day")}
+
+
+def reproduce(recordings: dict[int, Recording], profile: Profile) -> list[FeatureReproduction]:
+    """Day-1 model tested on days 2..5, for FV1, FV2, FV3; every setting chosen on day 1 alone."""
     out = []
     for kind in tqdm(FEATURE_KINDS, desc="feature vectors", unit="FV"):
         spec = replace(profile.spec, kind=kind)
@@ -46,7 +53,55 @@ def reproduce(directory: Path, profile: Profile) -> list[FeatureReproduction]:
     return out
 
 
-def reproduction_record(rows: list[FeatureReproduction]) -> dict:
+@dataclass
+class DayPairs:
+    """A model trained on each day with one way of setting the classifier, tested on every other day."""
+
+    name: str
+    accuracy: dict[tuple[int, int], float]   # (training day, test day) -> accuracy
+    chosen: dict[int, str]                   # training day -> the settings used, and why
+
+    @property
+    def off_diagonal(self) -> list[float]:
+        return [self.accuracy[pair] for pair in sorted(self.accuracy)]
+
+
+def day_pair_variants(profile: Profile) -> dict[str, Profile]:
+    """P1's shipped settings, the per-person rule (shrinkage and rejection threshold chosen on the
+    training day), and each also trained on the motions at DERIVED_AMPLITUDE_SCALES of their size."""
+    rule = replace(profile, shrinkage=SELECT, select_rejection=True)
+    return {f"{profile.name} as shipped": profile,
+            f"{profile.name} + smaller motions": replace(profile, amplitude_scales=DERIVED_AMPLITUDE_SCALES),
+            "per-person rule": rule,
+            "per-person rule + smaller motions": replace(rule, amplitude_scales=DERIVED_AMPLITUDE_SCALES)}
+
+
+def day_pairs(recordings: dict[int, Recording], profile: Profile) -> list[DayPairs]:
+    """Every ordered pair of days (20) for every variant; settings only ever chosen on the training day."""
+    out = []
+    variants = day_pair_variants(profile)
+    progress = tqdm(total=len(variants) * len(DAYS), desc="day-pair models", unit="model")
+    for name, variant in variants.items():
+        accuracy, chosen = {}, {}
+        for train_day in DAYS:
+            selection = None
+            if variant.shrinkage == SELECT or variant.select_rejection:
+                selection = select_settings([recordings[train_day]], variant, variant.spec)
+            model = train([recordings[train_day]], variant, selection=selection)
+            rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
+            chosen[train_day] = f"shrinkage {model.shrinkage}, rejection {rejection}" + (
+                f" ({selection.reason})" if selection else "")
+            for test_day in DAYS:
+                if test_day != train_day:
+                    accuracy[(train_day, test_day)] = evaluate(model, recordings[test_day],
+                                                               variant.neutral_samples).accuracy
+            progress.update()
+        out.append(DayPairs(name, accuracy, chosen))
+    progress.close()
+    return out
+
+
+def reproduction_record(rows: list[FeatureReproduction], pairs: list[DayPairs]) -> dict:
     def pooled(evaluations: dict[int, Evaluation]) -> dict:
         truth = np.concatenate([e.truth for e in evaluations.values()])
         predicted = np.concatenate([e.predicted for e in evaluations.values()])
@@ -69,6 +124,12 @@ def reproduction_record(rows: list[FeatureReproduction]) -> dict:
                                    "rejected_share": e.rejected_share} for d, e in r.rejecting.items()},
             "with_rejection_pooled_days_2_5": pooled(r.rejecting),
         } for r in rows},
+        "day_pairs": {p.name: {
+            "accuracy": {f"{a}->{b}": v for (a, b), v in sorted(p.accuracy.items())},
+            "mean": float(np.mean(p.off_diagonal)), "worst": float(np.min(p.off_diagonal)),
+            "worst_pair": "{}->{}".format(*min(p.accuracy, key=p.accuracy.get)),
+            "settings": {str(day): text for day, text in p.chosen.items()},
+        } for p in pairs},
     }
 
 
@@ -102,7 +163,22 @@ def reproduction_markdown(record: dict) -> str:
                          + " | ".join(f"{100 * f['day1_drift_cv_rejected_share'][t]:.3f}" for t in thresholds)
                          + f" | {f['rejection_threshold']} |")
     return ("Accuracy (%) of the day-1 model on each day; rejection columns: accuracy of accepted windows "
-            "(share of windows rejected, %).\n\n" + "\n".join(lines)
+            "(share of windows rejected, %).\n\n" + "\n".join(lines) + "\n\n" + day_pairs_markdown(record["day_pairs"])
             + "\n\nSettings chosen on day 1 alone: accuracy (%) of the drift-aware cross-validation per LDA "
               "shrinkage, and share (%) of its windows each rejection threshold rejects with the chosen shrinkage.\n\n"
             + "\n".join(selection) + "\n")
+
+
+def day_pairs_markdown(pairs: dict) -> str:
+    """Each variant's 5 x 5 matrix (rows: training day, columns: test day) with its mean and worst pair."""
+    out = ["Day pairs: accuracy (%) of a model trained on the row's day, tested on the column's day "
+           "(all 20 ordered pairs; a rejected window counts as the neutral class).\n"]
+    for name, p in pairs.items():
+        out.append(f"{name}: mean {100 * p['mean']:.2f}, worst {100 * p['worst']:.2f} (day {p['worst_pair']})\n")
+        out.append("| train \\ test | " + " | ".join(f"day {d}" for d in DAYS) + " |")
+        out.append("|" + "---|" * (len(DAYS) + 1))
+        for a in DAYS:
+            cells = ["-" if a == b else f"{100 * p['accuracy'][f'{a}->{b}']:.2f}" for b in DAYS]
+            out.append(f"| day {a} | " + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)

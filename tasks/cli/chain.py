@@ -20,7 +20,7 @@ from bomi.fusion import NodeCalibration, fused_recording
 from bomi.model_io import SUFFIXES, check_model_for, load_model, save_model
 from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, SELECT, Profile
 from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_recording, write_recording
-from bomi.reproduce import reproduce, reproduction_markdown, reproduction_record
+from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
 from tasks.cli.options import add_force, check_outputs, open_unit_interval, positive_int
 from tasks.stick import arm_profile
@@ -225,7 +225,8 @@ def reproduce_command(args: argparse.Namespace) -> int:
     directory = args.data or data_dir()
     if not directory.is_dir():
         raise BomiError(f"{directory}: dataset directory not found (set BOMI_DATA_DIR)")
-    record = reproduction_record(reproduce(directory, arm_profile("P1")))
+    profile, recordings = arm_profile("P1"), read_days(directory)
+    record = reproduction_record(reproduce(recordings, profile), day_pairs(recordings, profile))
     table = reproduction_markdown(record)
     print(table)
     if outputs["--json"]:
