@@ -2,13 +2,14 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import scipy.io
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
-from bomi.chain import MAX_CV_REJECTED, prepare, select_settings, train, training_windows
+from bomi.chain import MAX_CV_REJECTED, evaluate, prepare, select_settings, train, training_windows
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
@@ -129,7 +130,7 @@ def test_smaller_copies_scale_every_node_and_keep_the_amplitude_ranges(p1_days, 
     originals = windows.features[recorded][[index[e] for e in windows.ends[copies]]]
     np.testing.assert_allclose(windows.features[copies], 0.5 * originals, rtol=0, atol=1e-12)
     plain = train([rec], p1_profile)
-    scaled_profile = type(p1_profile)(**{**p1_profile.__dict__, "amplitude_scales": (0.75, 0.5)})
+    scaled_profile = replace(p1_profile, amplitude_scales=(0.75, 0.5))
     scaled = train([rec], scaled_profile)
     assert scaled.amplitude == plain.amplitude and not np.allclose(scaled.coef, plain.coef)
 
@@ -147,3 +148,33 @@ def test_profile_settings_select_and_scales(tmp_path):
         bad = edited_copy(path, tmp_path / "bad.toml", old, new)
         with pytest.raises(BomiError, match=message):
             load_profile(bad)
+
+
+def held_motions(seed: int, size: dict[int, float]) -> Recording:
+    """One node, neutral then motions 1..3 held 150 samples each (3 times), angle noise 0.5 deg;
+    motion k moves axis k-1 by ``size[k]`` degrees."""
+    rng = np.random.default_rng(seed)
+    labels = np.concatenate([np.zeros(150, int)] + [np.repeat([k, 0], 150) for _ in range(3) for k in (1, 2, 3)])
+    angles = rng.normal(scale=0.5, size=(len(labels), 3))
+    for k, degrees in size.items():
+        angles[labels == k, k - 1] += degrees
+    return Recording({1: NodeData(angles=angles)}, labels, source=f"synthetic{seed}")
+
+
+def test_smaller_copies_recognise_a_motion_made_at_half_its_size():
+    full, half = {1: 20.0, 2: 20.0, 3: 20.0}, {1: 9.0, 2: 20.0, 3: 20.0}
+    training, smaller = held_motions(0, full), held_motions(1, half)
+    profile = replace(derive_profile([training]), shrinkage=None, select_rejection=False)
+    single = train([training], replace(profile, amplitude_scales=()))
+    multiple = train([training], profile)     # derived default: also 0.75 and 0.5 of every motion
+    assert profile.amplitude_scales == (0.75, 0.5)
+    # c1 at 9 of its 20 degrees lies nearer neutral than the trained c1: the single-amplitude model
+    # reads it as neutral; trained down to 10 degrees, the model reads it as c1
+    c1 = lambda model: np.mean(evaluate_labels(model, smaller, 1) == 1)
+    assert c1(single) < 0.05 and c1(multiple) > 0.95
+    assert evaluate(multiple, held_motions(2, full), 100).accuracy > 0.99
+
+
+def evaluate_labels(model, rec: Recording, label: int) -> np.ndarray:
+    ev = evaluate(model, rec, 100)
+    return ev.predicted[ev.truth == label]
