@@ -210,15 +210,17 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
         kept_index = np.flatnonzero(kept)          # lost frames hold nothing up
         arrival = np.empty(len(raw))
         arrival[kept_index] = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
-        arrival = np.maximum(arrival, (not_before_s or {}).get(node, -np.inf))
-        for k in kept_index:
-            frame = ImuFrame(imu_node_id(node), period_ms, int(sample_index[k]) % COUNTER_MODULO,
-                             tuple(int(v) for v in raw.mag[k]), tuple(int(v) for v in raw.gyro[k]),
-                             tuple(int(v) for v in raw.acc[k]))
+        arrival = np.maximum(arrival, (not_before_s or {}).get(node, -np.inf)).tolist()
+        # Python numbers, converted once (per element from numpy scalars it cost more than the encoding)
+        mag, gyro, acc, index, node_id = raw.mag.tolist(), raw.gyro.tolist(), raw.acc.tolist(), \
+            np.asarray(sample_index).tolist(), imu_node_id(node)
+        for k in kept_index.tolist():
+            frame = ImuFrame(node_id, period_ms, index[k] % COUNTER_MODULO, tuple(mag[k]), tuple(gyro[k]),
+                             tuple(acc[k]))
             frames.append(encode_imu_frame(frame))
             times.append(arrival[k])
             nodes.append(node)
-            indices.append(int(sample_index[k]))
+            indices.append(index[k])
     order = np.lexsort((np.array(nodes), np.array(indices), np.array(times)))
     return Delivery(np.asarray(times, float)[order], np.asarray(nodes, int)[order],
                     np.asarray(indices, int)[order], [frames[i] for i in order])

