@@ -75,7 +75,7 @@ def main() -> None:
                 runs[name].append(fresh.submit(timed, name, args.seed).result())
     medians = {name: {key: statistics.median(r[key] for r in rs) for key in rs[0]} for name, rs in runs.items()}
     reference = medians[next(iter(KINDS))]
-    lines = [f"# Episode speed side by side ({args.rounds} rounds, seed {args.seed}, one process)", "",
+    lines = [f"# Episode speed side by side ({args.rounds} rounds, seed {args.seed}, each episode alone in a fresh process)", "",
              f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}; "
              "`python benchmarks/side_by_side.py`. x real time = simulated s / s, set-up included; medians.", "",
              "| episode | simulated (s) | wall (s) | x real time (wall) | x real time (CPU) | ratio to dm_control "
