@@ -8,7 +8,7 @@ import pytest
 from hypothesis import assume, given, settings, strategies as st
 
 from bomi.frames import (
-    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame,
+    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, SampleIndex, counter_step, encode_imu_frame, encode_safety_key_frame,
     imu_index, imu_node_id,
 )
 
@@ -269,3 +269,12 @@ def test_well_formed_random_frames_in_noise_are_all_refused():
     stream = b"".join(pieces)
     assert len(framing().feed(stream)) == 2000
     assert FrameParser().feed(stream) == []
+
+
+def test_sample_index_unwraps_each_nodes_counter_and_counts_lost_samples():
+    """Hand-computed: node 10 starts at 254, wraps after 255 and loses counter 1; node 11 keeps its own count."""
+    frames = [ImuFrame(node, 16, counter, (0, 0, 0), (0, 0, 0), (0, 0, 0))
+              for node, counter in ((10, 254), (11, 7), (10, 255), (10, 0), (11, 8), (10, 2))]
+    index = SampleIndex()
+    assert [index(f) for f in frames] == [254, 7, 255, 256, 8, 258]
+    assert [counter_step(a, b) for a, b in ((254, 255), (255, 0), (0, 2), (3, 3))] == [1, 1, 2, 0]

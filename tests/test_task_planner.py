@@ -7,7 +7,7 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import THREE_AXIS, TWO_AXIS, Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Memory, ScriptedUser, View, cube_to_take, deflection_for,
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
                            held_cube, load_operator, mode_button, placed_cubes, plan, turn_deflection_for)
 
 P = load_operator()
@@ -388,3 +388,12 @@ def test_a_release_is_not_taken_back_when_the_touch_flickers_half_way():
     held = replace(on_top, touching=(False, True), closure=0.6)
     _, memory = plan(held, Memory(touch_since=0.0), P, combine_axes=False)
     assert not memory.opening  # a release only wanted, not yet begun on the stick, commits to nothing
+
+
+def test_a_goal_reads_as_words_and_only_a_descent_under_way_counts_as_descending():
+    descend = Goal("reach cube 1", Phase.DESCEND)
+    assert str(descend) == "reach cube 1: descend" and descend.descending
+    pressing = Goal("reach cube 1", Phase.DESCEND, Mode.HEIGHT)  # a press on the way down is not the descent
+    assert str(pressing) == "reach cube 1: descend: height mode" and not pressing.descending
+    assert str(Goal("grasp cube 2")) == "grasp cube 2" and not Goal("grasp cube 2").descending
+    assert str(Goal()) == "rest"
