@@ -27,7 +27,8 @@ from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
 from tasks.human import HumanOperator, load_human
 from tasks.imu_synth import Delivery
-from tasks.participant import ParticipantParams, VirtualParticipant, calibration_session, load_participant, session_recording
+from tasks.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
+                               session_recording)
 from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
                            StickIntent, load_operator)
 from tasks.stacking import StackingTask, TaskConfig
@@ -182,30 +183,27 @@ class JoystickChannel:
         return None
 
 
-# Motion amplitudes the participant calibrates with and then uses: half to full range, so that
-# the calibrated gamma range (nu = 0 .. 1) spans the leans used in the task.
-BODY_RANGE = (0.5, 1.0)
-LEAN_STEP = 0.15  # how much further (or less far) the participant leans to correct a move
-SPEED_SMOOTHING_S = 0.3  # the person judges the arm's speed over about this long
-TOO_SLOW, TOO_FAST = 0.5, 2.0  # seen / wanted speed ratios that make the participant change their lean
-MAX_ZERO = 0.9
-
-
 @dataclass
 class LeanFeel:
     """The participant's feel for one proportional class: a wanted deflection d asks for a lean of
-    zero + (1 - zero) x d, never below the least lean calibrated.  ``zero`` (the lean at which the
-    arm would just not move) is learnt from the leans that worked: after correcting a move to
-    ``lean`` for a wanted ``d``, the next move of that class starts from there."""
+    zero + (1 - zero) x d, never below the least lean calibrated (``Feel.least_lean``).  ``zero``
+    (the lean at which the arm would just not move; at first the least lean) is learnt from the
+    leans that worked: after correcting a move to ``lean`` for a wanted ``d``, the next move of that
+    class starts from there."""
 
-    zero: float = BODY_RANGE[0]
+    feel: Feel
+    zero: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.zero is None:
+            self.zero = self.feel.least_lean
 
     def lean_for(self, deflection: float) -> float:
-        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, BODY_RANGE[0], 1.0))
+        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean, 1.0))
 
     def learn(self, lean: float, deflection: float) -> None:
         if deflection < 1.0:
-            self.zero = float(np.clip((lean - deflection) / (1.0 - deflection), 0.0, MAX_ZERO))
+            self.zero = float(np.clip((lean - deflection) / (1.0 - deflection), 0.0, self.feel.max_zero))
 
 
 def profile_controls(profile: Profile) -> Controls:
@@ -246,12 +244,13 @@ class BomiChannel:
         self._function_of = {cls.label: cls.function for cls in profile.classes}
         self._since = 0.0  # when the posture held now was taken up (or last changed)
         # the participant's feel for each stick-direction class (how far to lean for how fast)
-        self.feel = {cls.label: LeanFeel() for cls in profile.classes if cls.function in FUNCTIONS}
+        self.feel = {cls.label: LeanFeel(participant.params.feel) for cls in profile.classes
+                     if cls.function in FUNCTIONS}
         self._wanted = 0.0  # deflection wanted from the posture held now
         self._speed = 0.0  # the arm's speed along the held posture's direction, as the person judges it
         # how long the person waits for a posture (or a change of lean) to take effect before
         # leaning further: reaction + the body's move + a second of watching
-        self._patience = participant.params.reaction_s + participant.params.onset_s + 1.0
+        self._patience = participant.params.reaction_s + participant.params.onset_s + participant.params.feel.watch_s
         # the body starts moving reaction_s after an intent: that much of the person's reaction is here
         self.body_reaction = participant.params.reaction_s
         self._sample_index = SampleIndex()
@@ -305,7 +304,7 @@ class BomiChannel:
             return NEUTRAL_LABEL, 0.0
         (function, deflection), = intent.deflection.items()
         label = self._label_of[function]
-        feel = self.feel.get(label, LeanFeel())
+        feel = self.feel.get(label, LeanFeel(self.participant.params.feel))
         return label, feel.lean_for(float(deflection))
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
@@ -354,15 +353,16 @@ class BomiChannel:
         answered = self.stick.function == function
         axis = self.controls.layout.axes(mode, Kind.LINEAR).get(function)
         judged = axis is not None and seen is not None and label in self.feel
+        feel = self.participant.params.feel
         if answered and judged:
             along = float(np.dot(seen, axis))
-            self._speed += (along - self._speed) * min(1.0, DT / SPEED_SMOOTHING_S)
+            self._speed += (along - self._speed) * min(1.0, DT / feel.speed_smoothing_s)
         if t - self._since <= self._patience:
             return lean
-        if not answered or (judged and self._speed < TOO_SLOW * self._wanted):
-            return min(1.0, lean + LEAN_STEP)
-        if judged and self._speed > TOO_FAST * self._wanted:
-            return max(BODY_RANGE[0], lean - LEAN_STEP)
+        if not answered or (judged and self._speed < feel.too_slow * self._wanted):
+            return min(1.0, lean + feel.lean_step)
+        if judged and self._speed > feel.too_fast * self._wanted:
+            return max(feel.least_lean, lean - feel.lean_step)
         return lean
 
     def log_fields(self) -> dict:
@@ -389,7 +389,7 @@ def calibration_order(params: ParticipantParams, profile: Profile, repetitions: 
     (they are always pressed that way; half-range examples would bring them near neutral)."""
     functions = {cls.label: cls.function for cls in profile.classes}
     return [(label, amplitude) for _ in range(repetitions) for label in sorted(params.classes)
-            for amplitude in (BODY_RANGE if functions[label] in FUNCTIONS else (1.0,))]
+            for amplitude in ((params.feel.least_lean, 1.0) if functions[label] in FUNCTIONS else (1.0,))]
 
 
 def calibrated_channel(participant: str | ParticipantParams, seed: int, post: PostProcessing | None = None,

@@ -32,6 +32,18 @@ SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where 
 MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
 ASSUMED_ONSET_S = 0.8          # min-jerk onset of a posture (not measurable here, see docs)
 ASSUMED_REACTION_S = 0.4       # cue-to-movement delay (likewise)
+# How the participant leans through the BoMI (tasks.participant.Feel): not in recordings of holds
+# either; the fit writes it as assumed, the same as P4's and P5's files.
+ASSUMED_FEEL = """
+[feel]   # how the participant drives a proportional class through the BoMI (tasks/episode.py); assumed, the same for P1, P4, P5
+least_lean = 0.5           # the least lean used, and calibrated with (half the body's range): the calibrated nu range spans the leans used
+lean_step = 0.15           # a correction leans this much further (arm too slow or not answering) or less far (too fast)
+watch_s = 1.0              # s: after reaction + move, how long a posture is watched before it is corrected
+speed_smoothing_s = 0.3    # s: the arm's speed is judged over about this long
+too_slow = 0.5             # seen / wanted speed below which the participant leans further
+too_fast = 2.0             # seen / wanted speed above which the participant leans less far
+max_zero = 0.9             # the learnt zero lean never exceeds this: the least deflection needs less than full range
+"""
 
 
 @dataclass(frozen=True)
@@ -260,7 +272,7 @@ def fit_toml(fit: Fit, source: str) -> str:
             f"sway_std_deg = {_toml_matrix(_fill_missing(fit.sway_std[label], fit.neutral_sway_std))}",
             f"tremor_std_deg = {_toml_matrix(_fill_missing(fit.tremor_std[label], fit.neutral_tremor_std))}",
         ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + ASSUMED_FEEL
 
 
 def main(argv: list[str] | None = None) -> int:

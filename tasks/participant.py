@@ -14,7 +14,7 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 ``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg``; one
 ``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_gain_log_std``, ``day_std_deg``,
 ``sway_std_deg``, ``tremor_std_deg``; optional ``[spasm]`` with ``rate_per_s``, ``max_deg``,
-``duration_s``, ``nodes``. Every ``*_deg`` value is a (nodes x 3) matrix of (pitch, roll, yaw).
+``duration_s``, ``nodes``; ``[feel]`` (``Feel``: how they lean and correct a lean through the BoMI). Every ``*_deg`` value is a (nodes x 3) matrix of (pitch, roll, yaw).
 """
 from __future__ import annotations
 
@@ -42,11 +42,12 @@ SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the 
 SPASM_DRAW_S = 10.0           # spasm onsets are drawn this far ahead at a time
 
 _TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
-             "classes", "spasm"}
+             "classes", "spasm", "feel"}
 _NEUTRAL_KEYS = {"angles_deg", "rep_std_deg", "sway_std_deg", "tremor_std_deg"}
 _CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_gain_log_std", "day_std_deg", "sway_std_deg",
                "tremor_std_deg"}
 _SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
+_FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero"}
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,20 @@ class ClassMotion:
     day_std_deg: np.ndarray      # ... plus an offset of this std
     sway_std_deg: np.ndarray     # slow wander while holding (below SWAY_CUTOFF_HZ)
     tremor_std_deg: np.ndarray   # tremor while holding (in the tremor band)
+
+
+@dataclass(frozen=True)
+class Feel:
+    """How the participant drives a proportional class through the BoMI (``tasks.episode``): the
+    leans they use and calibrate with, and how they correct a lean while watching the arm."""
+
+    least_lean: float        # the least lean (share of the body's range) used and calibrated; full range is 1
+    lean_step: float         # how much further (or less far) a correction leans
+    watch_s: float           # after reaction + move, how long a posture is watched before correcting it
+    speed_smoothing_s: float  # the arm's speed is judged over about this long
+    too_slow: float          # seen / wanted speed below which the participant leans further
+    too_fast: float          # seen / wanted speed above which they lean less far
+    max_zero: float          # the learnt zero lean never exceeds this (the least deflection needs less than full range)
 
 
 @dataclass(frozen=True)
@@ -84,6 +99,7 @@ class ParticipantParams:
     neutral: ClassMotion         # label 0: angles_deg absolute, rep_std = neutral-to-neutral std
     classes: dict[int, ClassMotion]
     spasm: Spasm | None
+    feel: Feel
     source: str
 
     @property
@@ -153,7 +169,7 @@ def _parse(data: dict, source: str) -> ParticipantParams:
         reaction_s=number(data, "reaction_s", "participant", 0.0, 10.0),
         max_amplitude=number(data, "max_amplitude", "participant", 0.01, 1.0),
         tremor_spectrum=(freqs, power), neutral=neutral, classes=classes, spasm=spasm,
-        source=source)
+        feel=_parse_feel(data["feel"]), source=source)
 
 
 
@@ -171,6 +187,17 @@ def _parse_tremor(table: Any) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError("[tremor]: frequencies_hz must rise from 0 to at most "
                          f"{SAMPLE_RATE_HZ / 2} Hz, with as many non-negative relative_power values, not all 0")
     return freqs, power
+
+
+def _parse_feel(table: Any) -> Feel:
+    table = check_table(table, "[feel]", _FEEL_KEYS, _FEEL_KEYS)
+    return Feel(least_lean=number(table, "least_lean", "[feel]", 0.05, 1.0),
+                lean_step=number(table, "lean_step", "[feel]", 0.0, 1.0),
+                watch_s=number(table, "watch_s", "[feel]", 0.0, 60.0),
+                speed_smoothing_s=number(table, "speed_smoothing_s", "[feel]", DT, 60.0),
+                too_slow=number(table, "too_slow", "[feel]", 0.0, 1.0),
+                too_fast=number(table, "too_fast", "[feel]", 1.0),
+                max_zero=number(table, "max_zero", "[feel]", 0.0, 0.99))
 
 
 def _parse_spasm(table: Any, n_nodes: int) -> Spasm:

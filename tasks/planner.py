@@ -52,6 +52,18 @@ class OperatorParams:
     retreat: float
     open_closure: float
     miss_time: float
+    reach: float
+    turn_reach: float
+    turn_clearance: float
+    settled_share: float
+    rise_margin: float
+    restart: float
+    learning_rate: float
+    max_anticipation: float
+    max_wait: float
+    still_speed: float
+    coasting_min_speed: float
+    stall_time: float
     human_model: str = NO_HUMAN_MODEL  # a human-model TOML (tasks.human) around this user, or none
 
 
@@ -61,6 +73,8 @@ _SECTIONS = {
     "tolerance": ("stop", "align", "placed", "target_zone", "yaw_deg", "tilt_deg"),
     "heights": ("hover", "carry_clearance", "grasp_offset", "release_gap", "retreat"),
     "fingers": ("open_closure", "miss_time"),
+    "planner": ("reach", "turn_reach", "turn_clearance", "settled_share", "rise_margin", "restart"),
+    "learning": ("learning_rate", "max_anticipation", "max_wait", "still_speed", "coasting_min_speed", "stall_time"),
 }
 _MAY_BE_NEGATIVE = {"grasp_offset"}
 
@@ -90,6 +104,10 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
         raise ValueError("[fingers] open_closure must lie strictly between 0 and 1")
     if values["stop"] <= 0 or values["align"] <= 0 or values["placed"] <= 0:
         raise ValueError("[tolerance] stop, align and placed must be positive")
+    if not 0 < values["learning_rate"] <= 1:
+        raise ValueError("[learning] learning_rate must lie in (0, 1]")
+    if values["settled_share"] <= 0:
+        raise ValueError("[planner] settled_share must be positive")
     return OperatorParams(**values, human_model=model)
 
 
@@ -316,7 +334,7 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     open_hand = view.closure <= p.open_closure
     if memory.opening and not open_hand:  # a release is not taken back half-way (the touch may flicker)
         return _open("open hand")
-    tilt_tolerance = math.radians(p.tilt_deg) / (2 if memory.turning else 1)
+    tilt_tolerance = math.radians(p.tilt_deg) * (p.settled_share if memory.turning else 1.0)
     at_cube = any(view.touching) and not open_hand
     if not at_cube and np.max(np.abs(view.hand_tilt)) > tilt_tolerance:  # e.g. after a stray wrist command
         return _turn("level the hand", np.r_[view.hand_tilt, 0.0])
@@ -361,8 +379,8 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
     hand, cube = view.hand_pos, view.cube_pos[k]
     grasp = np.r_[cube[:2], cube[2] + p.grasp_offset]
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
-    at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= 2 * p.align
-                and (abs(hand[2] - grasp[2]) <= 2 * p.stop or memory.stalled))
+    at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= p.reach * p.align
+                and (abs(hand[2] - grasp[2]) <= p.reach * p.stop or memory.stalled))
     if at_grasp and (view.touching[k] or not open_hand):
         if missed_grasp(view, memory, p):
             return _open(f"missed cube {k + 1}: open hand")
@@ -371,9 +389,9 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
         return _open("open hand")
     hover_z = max(grasp[2] + p.hover, stack_top + p.carry_clearance + view.cube_size)
     turn = yaw_error(view, k)
-    yaw_tolerance = math.radians(p.yaw_deg) / (2 if memory.turning else 1)
-    if np.linalg.norm(hand[:2] - grasp[:2]) <= 6 * p.align and abs(turn) > yaw_tolerance:
-        if hand[2] < grasp[2] + p.hover / 2 and not memory.turning:  # the fingers would hit the cube
+    yaw_tolerance = math.radians(p.yaw_deg) * (p.settled_share if memory.turning else 1.0)
+    if np.linalg.norm(hand[:2] - grasp[:2]) <= p.turn_reach * p.align and abs(turn) > yaw_tolerance:
+        if hand[2] < grasp[2] + p.turn_clearance * p.hover and not memory.turning:  # the fingers would hit the cube
             return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.r_[hand[:2], hover_z])
         return _turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", _close(f"grasp cube {k + 1}"),
@@ -386,7 +404,7 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     A descent already under way tolerates twice the alignment error; a stalled one has arrived."""
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
     if xy_off > p.align * (2 if descending else 1):
-        if hand[2] < travel_z - 4 * p.stop and xy_off > 2 * p.align:
+        if hand[2] < travel_z - p.rise_margin * p.stop and xy_off > p.reach * p.align:
             return _move(step, Phase.RISE, np.r_[hand[:2], travel_z])
         return _move(step, Phase.TRAVEL, np.r_[goal[:2], hand[2]])
     if abs(hand[2] - goal[2]) > p.stop and not stalled:
@@ -478,7 +496,7 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
             closing_in = max(0.0, coast[i] * math.copysign(1.0, error[i]))
             keep = abs(error[i]) > p.stop + closing_in
         else:
-            keep = abs(error[i]) > 2 * p.stop
+            keep = abs(error[i]) > p.restart * p.stop
         if keep:
             moving.append(i)
     if not moving and not held:
@@ -584,7 +602,7 @@ class ScriptedUser:
     def stick_intent(self, view: View) -> StickIntent:
         """What the person does with the stick at this glance."""
         velocity = hand_velocity(view, self.memory)
-        if float(np.linalg.norm(velocity)) > STILL_SPEED:
+        if float(np.linalg.norm(velocity)) > self.params.still_speed:
             self._last_moving = view.t
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         self._watch_descent(view)
@@ -609,7 +627,8 @@ class ScriptedUser:
             self._reaction = self.timing.reaction(view, wanted, self._let_go_of, self.memory.controls)
         ready = max(self._waiting_since + self._reaction,
                     self._stopped_at + max(self.timing.pause, self.settle), self._relax_until)
-        coasting = float(np.linalg.norm(velocity)) > STILL_SPEED and view.t - self._stopped_at < MAX_WAIT
+        coasting = (float(np.linalg.norm(velocity)) > self.params.still_speed
+                    and view.t - self._stopped_at < self.params.max_wait)
         if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
             return replace(REST, goal=wanted.goal)
         self._learn_settling()
@@ -623,11 +642,11 @@ class ScriptedUser:
         self._released_move = bool(self.current.deflection)
         speed = float(np.linalg.norm(velocity))
         moving = self.memory.controls.layout.axes(view.mode, Kind.LINEAR)
-        if any(fn in moving for fn in self.current.deflection) and speed > COASTING_MIN_SPEED:
+        if any(fn in moving for fn in self.current.deflection) and speed > self.params.coasting_min_speed:
             self._coasting = (view.t, view.hand_pos, speed)
 
     def _watch_descent(self, view: View) -> None:
-        """A descent pushed down for ``STALL_TIME`` without the hand going lower is stalled (the cube
+        """A descent pushed down for ``stall_time`` without the hand going lower is stalled (the cube
         or the fingers rest on something): the person takes it as arrived."""
         effects = self.memory.controls.layout.effects[view.mode]
         pushing_down = any(fn in effects and effects[fn].kind is Kind.LINEAR and effects[fn].axis[2] < 0
@@ -638,32 +657,29 @@ class ScriptedUser:
         since, height = self._height_seen
         if height - view.hand_pos[2] > self.params.stop:
             self._height_seen = (view.t, float(view.hand_pos[2]))
-        elif view.t - since > STALL_TIME:
+        elif view.t - since > self.params.stall_time:
             self.memory = replace(self.memory, stalled=True)
 
     def _learn_settling(self) -> None:
         """Before a new move: update how long the hand went on moving after the last stick move was
         let go (through a BoMI the arm answers late; the person learns to watch it settle first)."""
         if self._released_move and math.isfinite(self._stopped_at):
-            seen = min(max(0.0, self._last_moving - self._stopped_at), MAX_WAIT)
-            self.settle = 0.5 * self.settle + 0.5 * seen
+            seen = min(max(0.0, self._last_moving - self._stopped_at), self.params.max_wait)
+            rate = self.params.learning_rate
+            self.settle = (1.0 - rate) * self.settle + rate * seen
         self._released_move = False
 
     def _learn_coasting(self, view: View, speed: float) -> None:
         """Once the hand has come to rest (or a new move began), update the anticipation."""
-        if self._coasting is None or (speed > STILL_SPEED and self.current.is_rest):
+        if self._coasting is None or (speed > self.params.still_speed and self.current.is_rest):
             return
         t0, start, speed0 = self._coasting
         seconds = float(np.linalg.norm(view.hand_pos - start)) / speed0
-        self.anticipation = 0.5 * self.anticipation + 0.5 * min(seconds, MAX_ANTICIPATION)
+        rate = self.params.learning_rate
+        self.anticipation = (1.0 - rate) * self.anticipation + rate * min(seconds, self.params.max_anticipation)
         self._coasting = None
 
 
-COASTING_MIN_SPEED = 0.02  # m/s: slower moves teach nothing about stopping
-STILL_SPEED = 0.005  # m/s: the person sees the hand at rest
-MAX_WAIT = 3.0  # s: gives up waiting for the hand to come to rest
-MAX_ANTICIPATION = 2.0  # s
-STALL_TIME = 5.0  # s: longer than a BoMI participant takes to lean further when a posture goes unrecognised
 
 
 def _continues(current: StickIntent, wanted: StickIntent) -> bool:

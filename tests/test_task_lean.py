@@ -6,26 +6,27 @@ import pytest
 from bomi.chain import OnlineChain, train
 from bomi.classifier import PostProcessing
 from sim.joystick import THREE_AXIS, Kind, Mode
-from tasks.episode import BODY_RANGE, BomiChannel, LeanFeel, calibration_order
+from tasks.episode import BomiChannel, LeanFeel, calibration_order
 from tasks.participant import VirtualParticipant, calibration_session, load_participant, session_recording
 from tasks.planner import StickIntent
 from tasks.stick import arm_profile
 
 SEED = 4
 TICK = 1 / 60
+FEEL = load_participant("P1").feel
 
 
 def test_the_feel_asks_more_lean_for_more_speed_within_the_calibrated_range():
-    feel = LeanFeel()
+    feel = LeanFeel(FEEL)
     leans = [feel.lean_for(d) for d in np.linspace(0.0, 1.0, 11)]
     assert all(b >= a for a, b in zip(leans, leans[1:]))  # faster never asks less lean
     assert leans[-1] == pytest.approx(1.0)  # full speed: full range
-    assert min(leans) >= BODY_RANGE[0]  # never below the least lean the classifier was calibrated on
+    assert min(leans) >= FEEL.least_lean  # never below the least lean the classifier was calibrated on
     assert leans[5] > leans[0]  # the lean does depend on the speed wanted
 
 
 def test_a_lean_that_worked_is_where_the_next_move_of_that_class_starts():
-    feel = LeanFeel()
+    feel = LeanFeel(FEEL)
     feel.learn(lean=0.8, deflection=0.3)
     assert feel.lean_for(0.3) == pytest.approx(0.8)  # the next move for 0.3 starts from 0.8
     assert feel.lean_for(0.6) > 0.8 and feel.lean_for(1.0) == pytest.approx(1.0)
@@ -54,7 +55,7 @@ def test_calibration_holds_proportional_classes_at_half_and_full_range_and_butto
         if functions[label] in ("B1", "B2"):
             assert amplitudes == {1.0}, functions[label]  # pressed at full range only
         else:
-            assert amplitudes == {BODY_RANGE[0], 1.0}, functions[label]
+            assert amplitudes == {FEEL.least_lean, 1.0}, functions[label]
 
 
 def test_nu_spans_the_leans_the_task_uses(p1_model):
@@ -92,7 +93,7 @@ def _correction(model, params, profile, seen_ratio: float | None, seconds: float
 
 def test_the_participant_leans_further_when_the_arm_is_too_slow_and_less_when_too_fast(p1_model):
     params, profile, _, model = p1_model
-    start = LeanFeel().lean_for(0.3)
+    start = LeanFeel(FEEL).lean_for(0.3)
     patience = params.reaction_s + params.onset_s + 1.0  # a correction is given time to work
     still = _correction(model, params, profile, None)
     assert still[0] == pytest.approx(start)
