@@ -1,6 +1,6 @@
-"""Frame parser throughput, and a fuzz run over a corrupted base-station stream.
+"""Frame parser throughput, a fuzz run over a corrupted base-station stream, and the phantom-frame guard.
 
-    python benchmarks/parser_fuzz.py [--fuzz-bytes 1000000] [--seed 0]
+    python benchmarks/parser_fuzz.py [--fuzz-bytes 1000000] [--noise-bytes 16000000] [--seed 0]
 
 Throughput: frames/s of ``FrameParser.feed`` on clean 3-node streams, fed in 4096-byte chunks
 (what a serial read returns under load) and one frame at a time (the live per-sample path).
@@ -9,6 +9,11 @@ frame loss, truncated frames, garbage bursts, stray start bytes and random byte 
 random chunks of 1..4096 bytes. Counts exceptions (must be 0) and the intact frames recovered
 (must be all, except any a false start shadows: a stray 0x33 whose byte 31 happens to be 0x34
 passes hardware.md's check, the format having no checksum; they are counted separately).
+Phantom-frame guard (bomi.frames): the same fuzz stream parsed with the guard and with the framing
+rule alone (``confirm_frames=1``); a delivered IMU frame is a phantom when no transmitted frame of
+the same node and counter lies within 4 bytes of it (a real frame with a flipped data byte is not
+a phantom: no parser can tell it without a checksum). And uniform random bytes (``--noise-bytes``):
+every frame delivered from them is a phantom; false accepts per MB, with and without the guard.
 Writes benchmarks/results/parser_fuzz.{md,json}.
 """
 from __future__ import annotations
@@ -60,6 +65,7 @@ class FuzzStream:
     data: bytes
     intact: dict[int, bytes]  # offset -> IMU frame that reaches the parser unaltered
     frames_generated: int     # IMU frames generated (sent or lost)
+    sent: list[bytes]         # every whole IMU frame put on the wire (before byte flips)
 
 
 def fuzz_stream(size: int, rng: np.random.Generator) -> FuzzStream:
@@ -98,7 +104,8 @@ def fuzz_stream(size: int, rng: np.random.Generator) -> FuzzStream:
         if is_imu and flipped[offset + FRAME_SIZE] == flipped[offset]:
             intact[offset] = piece
         offset += len(piece)
-    return FuzzStream(bytes(data), intact, generated)
+    sent = [piece for piece, is_imu in pieces if is_imu]
+    return FuzzStream(bytes(data), intact, generated, sent)
 
 
 def accepted_offsets(stream: bytes) -> list[int]:
@@ -113,8 +120,35 @@ def accepted_offsets(stream: bytes) -> list[int]:
     return offsets
 
 
-def run_fuzz(stream: FuzzStream, rng: np.random.Generator) -> dict:
-    parser = FrameParser()
+def phantoms(delivered: list[bytes], sent: list[bytes], max_differing: int = 4) -> int:
+    """Delivered frames that are no transmitted frame of the same node and counter (up to a few flipped bytes)."""
+    by_key: dict[tuple[int, int], list[bytes]] = {}
+    for frame in sent:
+        by_key.setdefault((frame[1], frame[3]), []).append(frame)
+    exact = set(sent)
+    count = 0
+    for frame in delivered:
+        if frame in exact:
+            continue
+        near = by_key.get((frame[1], frame[3]), [])
+        if not near or min(np.count_nonzero(np.frombuffer(frame, np.uint8) != np.frombuffer(f, np.uint8))
+                           for f in near) > max_differing:
+            count += 1
+    return count
+
+
+def noise_false_accepts(size: int, rng: np.random.Generator) -> dict:
+    """Frames delivered from ``size`` uniform random bytes (all phantoms), framing rule alone vs guard."""
+    data = rng.bytes(size)
+    counts = {}
+    for name, parser in (("framing rule alone", FrameParser(confirm_frames=1)), ("with the guard", FrameParser())):
+        counts[name] = sum(len(parser.feed(data[i:i + CHUNK])) for i in range(0, size, CHUNK))
+    return {"bytes": size, "phantom_frames": counts,
+            "phantom_frames_per_mb": {k: v / (size / 1e6) for k, v in counts.items()}}
+
+
+def run_fuzz(stream: FuzzStream, rng: np.random.Generator, parser: FrameParser | None = None) -> dict:
+    parser = parser or FrameParser()
     recovered: list[bytes] = []
     exceptions = 0
     position = 0
@@ -151,6 +185,9 @@ def run_fuzz(stream: FuzzStream, rng: np.random.Generator) -> dict:
         "skipped_frames_by_node": ", ".join(f"{k}: {v}" for k, v in sorted(parser.skipped.items())),
         "safety_key_events": len(parser.safety_events),
         "garbage_bytes": parser.discarded_bytes,
+        "imu_frames_delivered": len(recovered),
+        "phantom_frames_delivered": phantoms(recovered, stream.sent),
+        "frames_dropped_by_the_guard": parser.unconfirmed,
         "imu_frames_per_s": len(recovered) / seconds,
     }
 
@@ -158,6 +195,7 @@ def run_fuzz(stream: FuzzStream, rng: np.random.Generator) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fuzz-bytes", type=int, default=1_000_000)
+    parser.add_argument("--noise-bytes", type=int, default=16_000_000)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
@@ -167,12 +205,22 @@ def main() -> None:
         f"clean stream, {CHUNK}-byte chunks": best_rate(clean, CHUNK),
         "clean stream, one frame per feed": best_rate(clean[:100_000], FRAME_SIZE),
     }
-    fuzz = run_fuzz(fuzz_stream(args.fuzz_bytes, rng), rng)
+    stream = fuzz_stream(args.fuzz_bytes, rng)
+    chunk_seed = int(rng.integers(2**32))
+    fuzz = run_fuzz(stream, np.random.default_rng(chunk_seed))
+    unguarded = run_fuzz(stream, np.random.default_rng(chunk_seed), FrameParser(confirm_frames=1))
     throughput["fuzz stream, random 1..4096-byte chunks"] = fuzz.pop("imu_frames_per_s")
+    unguarded.pop("imu_frames_per_s")
+    guard = {
+        "fuzz stream": {name: {k: run[k] for k in ("intact_frames_recovered", "imu_frames_delivered",
+                                                    "phantom_frames_delivered", "frames_dropped_by_the_guard")}
+                        for name, run in (("framing rule alone", unguarded), ("with the guard", fuzz))},
+        "random bytes": noise_false_accepts(args.noise_bytes, rng),
+    }
 
     record = {
         "benchmark": "parser_fuzz", "seed": args.seed, "python": platform.python_version(),
-        "machine": platform.machine(), "throughput_frames_per_s": throughput, "fuzz": fuzz,
+        "machine": platform.machine(), "throughput_frames_per_s": throughput, "fuzz": fuzz, "phantom_guard": guard,
         "needed_frames_per_s": 6 * 62.5,
     }
     RESULTS.mkdir(exist_ok=True)
@@ -187,6 +235,21 @@ def main() -> None:
     lines += ["", "Lost packets are counted from the counters (hardware.md): a flipped counter byte or a false "
               "frame with an IMU node id makes a jump of up to 255, so under byte corruption the count "
               "exceeds the frames actually not delivered."]
+    noise = guard["random bytes"]
+    lines += ["", "## Phantom-frame guard", "",
+              "A phantom: a delivered IMU frame that is no transmitted frame of its node and counter (a real frame "
+              "with up to 4 flipped bytes is not one).", "",
+              "| input | parser | intact frames recovered | IMU frames delivered | phantoms delivered | "
+              "false-accept rate | dropped by the guard |", "|---|---|---:|---:|---:|---:|---:|"]
+    for name, run in guard["fuzz stream"].items():
+        rate = run["phantom_frames_delivered"] / run["imu_frames_delivered"]
+        lines.append(f"| fuzz stream ({fuzz['bytes']:,} B, {fuzz['intact_imu_frames']} intact frames) | {name} "
+                     f"| {run['intact_frames_recovered']} | {run['imu_frames_delivered']} "
+                     f"| {run['phantom_frames_delivered']} | {100 * rate:.3f} % of delivered "
+                     f"| {run['frames_dropped_by_the_guard']} |")
+    for name, count in noise["phantom_frames"].items():
+        lines.append(f"| uniform random bytes ({noise['bytes']:,} B) | {name} | - | {count} | {count} "
+                     f"| {noise['phantom_frames_per_mb'][name]:.3f} per MB | - |")
     (RESULTS / "parser_fuzz.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
