@@ -31,13 +31,34 @@ def load_toml(path_or_name: str | Path, shipped_dir: Path, kind: str, parse: Cal
         raise BomiError(f"{path}: no such {kind} file (shipped: {names})")
     source = str(path) if not overrides else f"{path} with {', '.join(f'{k} = {v!r}' for k, v in overrides.items())}"
     try:
-        return parse(with_overrides(tomllib.loads(path.read_text(encoding="utf-8")), overrides or {}), source)
+        data = with_overrides(tomllib.loads(path.read_text(encoding="utf-8")), overrides or {})
+        check_numbers(data)
+        return parse(data, source)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise BomiError(f"{path}: not valid TOML ({exc})") from None
     except OSError as exc:
         raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
     except ValueError as exc:
         raise BomiError(f"{source}: {exc}") from None
+
+
+# No setting of this project is near a million in size (the largest shipped one is the video width,
+# 640): a number beyond this is a garbled value, and would overflow the arithmetic it feeds.
+MAX_ABS_SETTING = 1e6
+
+
+def check_numbers(data: Any, where: str = "") -> None:
+    """ValueError naming the key of the first number that is not finite (TOML allows nan and inf) or
+    beyond +-MAX_ABS_SETTING."""
+    if isinstance(data, dict):
+        for key, value in data.items():
+            check_numbers(value, f"{where}.{key}" if where else str(key))
+    elif isinstance(data, list):
+        for k, value in enumerate(data):
+            check_numbers(value, f"{where}[{k}]")
+    elif isinstance(data, (int, float)) and not isinstance(data, bool):
+        if not math.isfinite(data) or abs(data) > MAX_ABS_SETTING:
+            raise ValueError(f"{where} = {data!r}: not a finite number within +-{MAX_ABS_SETTING:g}")
 
 
 def with_overrides(data: dict, overrides: Mapping[str, Any]) -> dict:

@@ -1,7 +1,7 @@
 """Bad input, class by class (issue 10): every case is exit 2 with exactly one stderr line
 ``bomi: error: ...`` naming the file or option, no traceback, every file in the directory unchanged
-byte for byte and no temporary file left behind. A larger corpus, outside the repository:
-benchmarks/bad_input_corpus.py.
+byte for byte and no temporary file left behind. How long each takes, and a larger corpus made
+outside the repository: benchmarks/bad_input_corpus.py.
 
 Each case runs in a directory holding a tiny P1 recording (950 rows of day 1: classes 0, 2, 4),
 a model trained on it, and whatever bad file the case writes.
@@ -79,6 +79,10 @@ def model_json(base, edit: Callable[[dict], None]) -> str:
 
 def nested_json(depth: int = 100_000) -> str:
     return "[" * depth + "]" * depth
+
+
+def shipped_text(relative: str) -> str:
+    return (Path(__file__).resolve().parent.parent / relative).read_text()
 
 
 def identity_of(profile: str) -> dict:
@@ -188,9 +192,17 @@ CASES = [
     Case("window-longer-than-the-recording", ["train", "{d}/short.csv", "--profile", "P1", "--out", "{d}/new.json"],
          "shorter than one",
          {"short.csv": lambda b: "\n".join(tiny_text(b).splitlines()[:5]) + "\n"}),
+    Case("profile-value-beyond-any-setting", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
+         "post_processing.vote_length", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
+             "vote_length = 1", "vote_length = 99999999999999999999999")}),
+    Case("operator-infinite-speed", ["run-task", "--operator", "joystick", "--operator-file", "{d}/o.toml"],
+         "deflection.full_speed", {"o.toml": lambda b: shipped_text("tasks/operator.toml").replace(
+             "full_speed = 0.20", "full_speed = inf")}),
     # 9. options
     Case("emulate-zero-hold", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "0"], "--hold"),
     Case("emulate-nan-duration", ["emulate", "--participant", "P1", "--to", "pty", "--duration", "nan"], "--duration"),
+    Case("emulate-hold-1e308", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "1e308"], "--hold"),
+    Case("sim-check-seconds-1e308", ["sim-check", "--seconds", "1e308"], "--seconds"),
     Case("record-zero-repetitions", ["record", "--profile", "P1", "--port", P1_PORT, "--out", "{d}/r.csv",
                                      "--repetitions", "0"], "--repetitions"),
     Case("record-negative-hold", ["record", "--profile", "P1", "--port", P1_PORT, "--out", "{d}/r.csv",
@@ -219,7 +231,7 @@ def materialize(case: Case, base: dict[str, bytes], directory: Path) -> list[str
     return [arg.replace("{d}", str(directory)) for arg in case.argv]
 
 
-def assert_clean_error(code: int, err: str, names: str, before: dict, directory: Path, seconds: float) -> str:
+def assert_clean_error(code: int, err: str, names: str, before: dict, directory: Path) -> str:
     lines = err.splitlines()
     assert code == 2, err
     assert len(lines) == 1 and lines[0].startswith("bomi: error: "), err
@@ -227,7 +239,6 @@ def assert_clean_error(code: int, err: str, names: str, before: dict, directory:
     assert "Traceback" not in err
     assert snapshot(directory) == before, "files were created, changed or removed"
     assert not [p for p in directory.rglob("*") if TEMP_MARK in p.name]
-    assert seconds < 10, f"took {seconds:.1f} s"
     return lines[0]
 
 
@@ -236,10 +247,8 @@ def test_bad_input_is_one_line_exit_2_and_nothing_changes(case, base, tmp_path, 
     argv = materialize(case, base, tmp_path)
     before = snapshot(tmp_path)
     capsys.readouterr()
-    start = time.monotonic()
     code = main(argv)
-    captured = capsys.readouterr()
-    assert_clean_error(code, captured.err, case.names, before, tmp_path, time.monotonic() - start)
+    assert_clean_error(code, capsys.readouterr().err, case.names, before, tmp_path)
 
 
 @pytest.mark.parametrize("case", [c for c in CASES if c.id in ("model-nested-json", "evaluate-reject-nan",
@@ -248,9 +257,8 @@ def test_the_installed_command_line_process_too(case, base, tmp_path):
     """The same through a real process (what a user runs): stderr is the one line, nothing else."""
     argv = materialize(case, base, tmp_path)
     before = snapshot(tmp_path)
-    start = time.monotonic()
-    done = subprocess.run([sys.executable, "-m", "tasks.cli", *argv], capture_output=True, text=True, timeout=60)
-    assert_clean_error(done.returncode, done.stderr, case.names, before, tmp_path, time.monotonic() - start - 3)
+    done = subprocess.run([sys.executable, "-m", "tasks.cli", *argv], capture_output=True, text=True, timeout=120)
+    assert_clean_error(done.returncode, done.stderr, case.names, before, tmp_path)
 
 
 # ------------------------------------------------------------------------------------- outputs

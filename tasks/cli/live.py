@@ -13,7 +13,7 @@ from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
 from tasks.cli import add_command
-from tasks.cli.options import non_negative_int, positive_float, positive_int
+from tasks.cli.options import non_negative_int, positive_int, seconds
 from tasks.live import (Displays, Headless, PassiveViewer, StatusLine, VideoDisplay, display_opens, has_display,
                         open_log, run_live)
 from tasks.stick import arm_profile, profile_layout
@@ -31,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument("--model", required=True, type=Path, help="model file (.json/.npz) trained for the profile")
     live.add_argument("--headless", action="store_true",
                       help="no viewer window (default: a window when a display is there)")
-    live.add_argument("--duration", type=positive_float, help="stop after this many seconds (default: until Ctrl-C or the "
+    live.add_argument("--duration", type=seconds, help="stop after this many seconds (default: until Ctrl-C or the "
                                                      "viewer closes)")
     live.add_argument("--video", type=Path, help="also film the arm (fixed camera, status line as caption) to "
                                                  "this MP4 (must not exist; default: none)")

@@ -54,6 +54,26 @@ def non_negative_float(text: str) -> float:
     return value
 
 
+# Longest time any option may ask for: a day, longer than any session, capture or episode; it keeps
+# arithmetic on times (sample counts, schedules) finite.
+MAX_SECONDS = 86_400.0
+
+
+def seconds(text: str) -> float:
+    """A duration in seconds: above 0, at most MAX_SECONDS."""
+    value = positive_float(text)
+    if value > MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"at most {MAX_SECONDS:g} s (a day), got {text!r}")
+    return value
+
+
+def non_negative_seconds(text: str) -> float:
+    value = non_negative_float(text)
+    if value > MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"at most {MAX_SECONDS:g} s (a day), got {text!r}")
+    return value
+
+
 def open_unit_interval(text: str) -> float:
     """A number strictly between 0 and 1 (a posterior threshold)."""
     value = _number(text, float)

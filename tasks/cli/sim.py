@@ -17,7 +17,7 @@ from sim.errors import SimError
 from sim.joystick import JoystickState, script_states
 from sim.render import VideoWriter, describe, write_png
 from tasks.cli import add_command
-from tasks.cli.options import add_force, check_outputs, positive_float
+from tasks.cli.options import add_force, check_outputs, positive_float, seconds
 
 # The scripted motion of ``bomi render``: pick the first cube up at A and put it down at B, with
 # the stick alone. (seconds, stick state) segments; a segment's buttons are pressed once, at its
@@ -48,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     check = add_command(subparsers, "sim-check")
     _common_options(check)
     check.add_argument("--deflection", type=positive_float, default=1.0, help="stick deflection in (0, 1] (default %(default)s)")
-    check.add_argument("--seconds", type=positive_float, default=1.0,
+    check.add_argument("--seconds", type=seconds, default=1.0,
                        help="seconds each function is held, above 0.5 (default %(default)s)")
     check.add_argument("--json", type=Path, help="also write the results as JSON here")
     add_force(check)

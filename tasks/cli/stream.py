@@ -21,8 +21,8 @@ from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamLost
 from tasks.cli import add_command
 from tasks.cli.chain import class_listing, fit_model
-from tasks.cli.options import (add_force, check_outputs, non_negative_float, non_negative_int, positive_float,
-                               positive_int, probability)
+from tasks.cli.options import (add_force, check_outputs, non_negative_int, non_negative_seconds, positive_float,
+                               positive_int, probability, seconds)
 from tasks.stick import arm_profile
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
@@ -60,13 +60,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          help="probability of altering a byte (default %(default)s)")
     emulate.add_argument("--seed", type=non_negative_int, default=0,
                          help="seed of loss, corruption and the participant's session (default %(default)s)")
-    emulate.add_argument("--duration", type=positive_float,
+    emulate.add_argument("--duration", type=seconds,
                          help="stop after this many seconds of recording (default: all of it)")
-    emulate.add_argument("--hold", type=positive_float, default=5.0,
+    emulate.add_argument("--hold", type=seconds, default=5.0,
                          help="--participant: seconds each motion is held (default %(default)s)")
-    emulate.add_argument("--neutral", type=positive_float, default=5.0,
+    emulate.add_argument("--neutral", type=seconds, default=5.0,
                          help="--participant: seconds of neutral posture between motions (default %(default)s)")
-    emulate.add_argument("--linger", type=non_negative_float, default=5.0,
+    emulate.add_argument("--linger", type=non_negative_seconds, default=5.0,
                          help="pty: after the end, wait up to this many seconds for the reader to close "
                               "(default %(default)s)")
     emulate.add_argument("--baud", type=positive_int, default=BASE_STATION_BAUD,
@@ -77,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         subparsers, "capture",
         description="Record raw frames per node (and their fused angles) into a recording CSV.")
     _add_stream_arguments(capture)
-    capture.add_argument("--duration", required=True, type=positive_float, help="seconds to record")
+    capture.add_argument("--duration", required=True, type=seconds, help="seconds to record")
     capture.add_argument("--nodes", type=_node_list, help="IMU node indices, e.g. 1,2,3 (default: those on the stream)")
     capture.add_argument("--profile", help="profile whose node calibrations fuse the angles (default: headset "
                                            "calibration for node 1, none for the others)")
@@ -94,8 +94,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="repetitions of every class in a sequence (default %(default)s)")
     record.add_argument("--amplitudes", type=_amplitude_list, default=(1.0,),
                         help="fractions of the full motion to hold, e.g. 1,0.5 (multi-amplitude; default 1)")
-    record.add_argument("--hold", type=positive_float, default=5.0, help="seconds each motion is held (default %(default)s)")
-    record.add_argument("--neutral", type=positive_float, default=5.0,
+    record.add_argument("--hold", type=seconds, default=5.0, help="seconds each motion is held (default %(default)s)")
+    record.add_argument("--neutral", type=seconds, default=5.0,
                         help="seconds of neutral posture between motions (default %(default)s)")
     record.add_argument("--train", type=Path, metavar="MODEL", help="then train the model and write it (.json/.npz)")
     add_force(record)  # --force applies to the --train model; recordings are never replaced

@@ -20,7 +20,7 @@ from tasks import metrics
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from bomi.files import atomic_output, write_text
-from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_float, positive_int
+from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_int, seconds
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participant import load_participant
@@ -411,7 +411,7 @@ def register(subparsers) -> None:
 
 
 def _episode_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--time-limit", type=positive_float, default=600.0,
+    parser.add_argument("--time-limit", type=seconds, default=600.0,
                         help="seconds of simulated time before an episode fails (default %(default)s)")
     parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
                         help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
