@@ -306,7 +306,7 @@ def main() -> None:
     slow = sorted(results, key=lambda r: -r["seconds"])[:5]
     lines = ["# Bad-input corpus: every command on damaged files and bad option values", "",
              f"`python benchmarks/bad_input_corpus.py --per-kind {args.per_kind} --seed {args.seed}`: "
-             f"{len(results)} runs of `python -m tasks.cli` on a corpus made in a temporary directory (not in the "
+             f"{len(results)} runs of the command line (`tasks.cli.main`, each in a forked process) on a corpus made in a temporary directory (not in the "
              f"repository), {record['wall_s'] / 60:.1f} min on one core. Outcome classes in the script's "
              "docstring.", "",
              "| bad input | runs | " + " | ".join(outcomes) + " |", "|---|---:|" + "---:|" * len(outcomes)]
