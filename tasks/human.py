@@ -8,9 +8,9 @@ interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: 
   ``glance_interval``, ``visual_delay`` late (hand, cubes, the mode on the arm's indicator,
   contact).  Where the cubes and B are relative to the hand is *judged*: one error per judgement,
   std ``lateral_floor + lateral_weber x distance`` across the line of sight from the eyes and
-  ``depth_ratio`` times that along it.  A judgement is made anew whenever the person starts or
-  stops a move, so a move ends where it was misjudged to end and the next look, from closer,
-  brings a corrective sub-movement.  The held cube moves with the hand and is seen where it is.
+  ``depth_ratio`` times that along it.  A judgement is made anew whenever a move of the stick
+  ends, so a move ends where it was misjudged to end and the next look, from closer, brings a
+  corrective sub-movement.  The held cube moves with the hand and is seen where it is.
 - **Timing** (``HumanTiming``): every new move or press waits a choice reaction time, drawn once:
   an ex-Gaussian simple reaction time plus ``hick_slope x log2(n + 1)`` for the n commands the
   interface offers in the current mode (Hick-Hyman); after a grasp or a release, a look to check
@@ -242,8 +242,8 @@ class HumanOperator:
             intent = replace(REST, goal=intent.goal)
         elif new_press:
             self._just_noticed = False
-        if (intent.functions, intent.button) != (self.intent.functions, self.intent.button):
-            self.eyes.rejudge()  # a move starts or stops: the person looks again
+        if self.intent.deflection and not intent.functions & self.intent.functions:
+            self.eyes.rejudge()  # a move of the stick ends: the person looks again from where the hand is
         self.intent = intent
         return intent
 
