@@ -82,3 +82,14 @@ def test_unknown_command_is_a_usage_error(capsys):
     assert main(["no-such-command"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("bomi: error: ") and err.count("\n") == 1 and "invalid choice" in err
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """`bomi evaluate ... | head`: the pipe closes while the command writes; no traceback, exit 141 like `cat`."""
+    writes_a_lot = ("import sys; from tasks import cli; "
+                    "cli._run = lambda argv: print('row\\n' * 100000) or 0; sys.exit(cli.main([]))")
+    process = subprocess.Popen([sys.executable, "-c", writes_a_lot], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()
+    err = process.stderr.read().decode()
+    assert process.wait(timeout=60) == 141
+    assert err == ""

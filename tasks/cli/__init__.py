@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import traceback
 from collections.abc import Collection
 from dataclasses import dataclass
-import traceback
 from importlib.metadata import version
 
 from bomi.errors import BomiError
@@ -88,7 +89,16 @@ def build_parser(modules: Collection[str] = COMMAND_MODULES) -> argparse.Argumen
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
+    try:
+        code = _run(sys.argv[1:] if argv is None else argv)
+        sys.stdout.flush()  # here, not at exit, so that a closed pipe is handled below
+        return code
+    except BrokenPipeError:  # the reader went away (`bomi evaluate ... | head`): stop quietly, as `cat` does
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what a shell reports for a tool stopped by a closed pipe
+
+
+def _run(argv: list[str]) -> int:
     try:
         args = build_parser(_modules_for(argv)).parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a usage error already reported in one line
@@ -101,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("bomi: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        raise
     except Exception as exc:  # a bug: one line, the traceback only when asked for
         if args.debug:
             traceback.print_exc()
