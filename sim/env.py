@@ -204,6 +204,14 @@ class ArmSim:
     def button_presses(self) -> int:
         return self.joystick.button_presses
 
+    @property
+    def automatic_switches(self) -> int:
+        return self.joystick.automatic_switches
+
+    def switch_mode(self, mode: Mode) -> None:
+        """Put the arm in ``mode`` without a button press (what an assistance does; counted apart)."""
+        self.joystick.switch_to(mode)
+
     def touching(self, geoms_a: frozenset[int], geoms_b: frozenset[int]) -> bool:
         """Whether any active contact joins a geom of ``geoms_a`` to one of ``geoms_b``."""
         contact = self.data.contact

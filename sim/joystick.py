@@ -21,7 +21,8 @@ does nothing there. Two layouts, as on the real arm:
 - wrist: F/B/R/L tip the hand as in the 3-axis wrist mode;
 - fingers: F closes, B opens.
 
-B1 steps forward through the layout's cycle, B2 backward. Holding no function holds still.
+B1 steps forward through the layout's cycle, B2 backward. Holding no function holds still. An
+assistance may also put the arm in a mode directly (``JoystickInterpreter.switch_to``).
 """
 from __future__ import annotations
 
@@ -196,6 +197,14 @@ class JoystickInterpreter:
         self.mode = self.layout.modes[0]
         self.mode_switches = 0
         self.button_presses = 0
+        self.automatic_switches = 0
+
+    def switch_to(self, mode: Mode) -> None:
+        """Put the arm in ``mode`` without a button (an assistance's switch; counted apart from the buttons')."""
+        if mode not in self.layout.modes:
+            raise ValueError(f"layout {self.layout.name} has no {mode.value} mode")
+        self.automatic_switches += mode is not self.mode
+        self.mode = mode
 
     def update(self, state: JoystickState) -> ArmCommand:
         """Apply this tick's button presses (B1 then B2), then read the functions in the new mode."""

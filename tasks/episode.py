@@ -25,6 +25,7 @@ from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combine
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
+from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label
 from tasks.human import HumanOperator, load_human
 from tasks.imu_synth import Delivery
 from tasks.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
@@ -77,10 +78,14 @@ class EpisodeLog:
     sample_period: float = SAMPLE_PERIOD_S
     amplitude: str = "gamma"  # what the decisions' amplitude is: the profile's [proportional] amplitude
     goals: tuple[str, ...] = ()  # per control tick: the scripted user's step (planner Goal.step, plain words)
+    assist: str = NONE  # the assistances on (tasks.assist.assist_label)
+    automatic: tuple[AutomaticSwitch, ...] = ()  # the mode switches the assistance made
+    grasp_helps: int = 0  # closes the grasp help started
 
 
 # allowances (s) at which the excused accuracy is also given: its curve shows what excusing buys
 ALLOWANCE_CURVE_S = tuple(round(0.1 * k, 1) for k in range(16))
+WRONG_GOAL_WINDOW_S = 1.0  # an automatic switch the user's own press undoes this soon chose the wrong mode
 
 
 def summarize(log: EpisodeLog) -> dict:
@@ -99,7 +104,12 @@ def summarize(log: EpisodeLog) -> dict:
         "cpu_time": log.cpu_time,
         "realtime_factor": sim_time / log.wall_time if log.wall_time > 0 else None,
         "realtime_factor_cpu": sim_time / log.cpu_time if log.cpu_time > 0 else None,
-        "mode_switches": metrics.count_changes(log.mode),
+        "assist": log.assist,
+        "mode_switches": metrics.user_mode_switches(log.mode, [s.tick for s in log.automatic]),
+        "automatic_switches": len(log.automatic),
+        "wrong_goal_switches": metrics.wrong_goal_switches(log.t, log.mode, [s.tick for s in log.automatic],
+                                                           WRONG_GOAL_WINDOW_S),
+        "grasp_helps": log.grasp_helps,
         "button_presses": log.presses,
         "unintended_displacement_mm": metrics.unintended_displacement_mm(log.hand_pos, log.intended_dir),
         "cube_drops": metrics.cube_drops(log.cube_pos[:, :, 2], log.touching),
@@ -424,11 +434,12 @@ def operator_user(params: OperatorParams, channel: OperatorChannel, seed: int) -
 def run_episode(channel: OperatorChannel, *, operator: str, participant: str, seed: int,
                 operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
                 video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None,
-                on_tick: Callable[[float], None] | None = None) -> EpisodeLog:
+                on_tick: Callable[[float], None] | None = None, assist: frozenset[Assist] = frozenset()) -> EpisodeLog:
     """Advance the task at the control rate until success or failure; optionally film it
     (played ``video_speedup`` times faster than simulated time).  ``operator_file``: the scripted
     user's parameters, or the file they are read from. ``on_tick`` is told the simulated time
-    after every tick (a progress bar)."""
+    after every tick (a progress bar). ``assist``: the assistances between the channel's stick and
+    the arm (tasks.assist)."""
     sim = sim or ArmSim(layout=channel.controls.layout)
     if sim.layout is not channel.controls.layout:
         raise ValueError(f"the arm has the {sim.layout.name} joystick layout, the operator's controls the "
@@ -437,6 +448,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     task.reset(seed)
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
     user = operator_user(params, channel, seed)
+    assistance = Assistance(assist, channel.controls.layout, channel.controls.buttons) if assist else None
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal", "pushing")}
     film = _Film(sim, video, video_speedup) if video is not None else None
     full_speed, previous = sim.config.control.full_speed, None
@@ -448,6 +460,8 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             seen = None if previous is None else (view.hand_pos - previous) / (sim.dt * full_speed)
             previous = view.hand_pos
             state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)
+            if assistance is not None:
+                state = assistance.step(view, state, sim)
             rows["t"].append(view.t)
             rows["hand"].append(view.hand_pos)
             rows["dir"].append(intended_direction(view.mode, intent, sim.layout))
@@ -460,7 +474,8 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             if on_tick is not None:
                 on_tick(sim.time)
             if film is not None:
-                film.tick(view.t, describe(sim.mode, state, sim.layout), channel.caption(), str(intent.goal))
+                film.tick(view.t, describe(sim.mode, state, sim.layout), channel.caption(), str(intent.goal),
+                          assistance.caption(view.t) if assistance is not None else None)
             outcome = task.outcome()
             if outcome.done:
                 break
@@ -475,12 +490,16 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         pushing=np.array(rows["pushing"], dtype=bool),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
         wall_time=time.perf_counter() - started, cpu_time=time.process_time() - started_cpu,
+        assist=assist_label(frozenset(assist)),
+        automatic=tuple(assistance.switches) if assistance is not None else (),
+        grasp_helps=assistance.grasp_helps if assistance is not None else 0,
         **channel.log_fields())
 
 
 class _Film:
     """Every n-th control tick rendered into an MP4, with a caption (time and film speed, mode and
-    stick, what the BoMI was asked and decided, the user's goal) and a legend of the discs A and B."""
+    stick, what the BoMI was asked and decided, the user's goal, the assistance's last switch) and a
+    legend of the discs A and B."""
 
     def __init__(self, sim: ArmSim, path: Path, speedup: float):
         render = sim.config.render
@@ -492,9 +511,10 @@ class _Film:
                        ("B: the target, stack them here", site_colour(sim.model, "location_b", "table")))
         self.ticks = 0
 
-    def tick(self, t: float, command: str, channel: str | None, goal: str) -> None:
+    def tick(self, t: float, command: str, channel: str | None, goal: str, assist: str | None = None) -> None:
         if self.ticks % self.every == 0:
-            lines = (f"{t:6.1f} s (film {self.speedup:g}x)  {command}", *filter(None, [channel]), f"goal: {goal}")
+            lines = (f"{t:6.1f} s (film {self.speedup:g}x)  {command}", *filter(None, [channel]), f"goal: {goal}",
+                     *filter(None, [assist]))
             self.writer.append(self.renderer.render(self.sim.data, lines, self.legend))
         self.ticks += 1
 

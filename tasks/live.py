@@ -347,9 +347,12 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
              neutral: Mapping[int, Sequence[float]] | None = None, log: IO[str] | None = None,
              status: StatusLine | None = None, display: Display = Headless(),
              watchdog: Watchdog | None = None, on_neutral: Callable[[dict], None] = lambda offsets: None,
-             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> LiveSummary:
+             clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+             assist: Callable[[JoystickState], JoystickState] | None = None) -> LiveSummary:
     """Drive ``arm`` from ``source`` until ``duration_s`` (or the display closes).
 
+    ``assist``: the assistance layer between the decided stick and the arm (``tasks.assist``;
+    it may switch the arm's mode); not consulted while the watchdog or the safety key holds the arm.
     Neutral offsets: ``neutral`` if given, else the first ``profile.neutral_samples`` samples.
     ``on_neutral`` is told the offsets once they hold. ``log`` gets one JSON line per tick.
     """
@@ -376,6 +379,8 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
             summary.neutral = None
         stale = watchdog.expired(now)
         state = guarded_stick(stick, decisions, stale or safety.standby)
+        if assist is not None and not (stale or safety.standby):
+            state = assist(state)
         command = arm.step(state)
         new_neutral = None
         if summary.neutral is None and not chain.calibrating:

@@ -140,6 +140,27 @@ def count_changes(values: list | np.ndarray) -> int:
     return sum(a != b for a, b in zip(values, values[1:]))
 
 
+def user_mode_switches(mode: list | np.ndarray, automatic_ticks: list[int]) -> int:
+    """Mode changes the user made: ``mode[i]`` is the mode at tick i, before its step; a change
+    from tick i to i + 1 at a tick in ``automatic_ticks`` was the assistance's."""
+    automatic = set(automatic_ticks)
+    return sum(a != b and i not in automatic for i, (a, b) in enumerate(zip(mode, mode[1:])))
+
+
+def wrong_goal_switches(t: np.ndarray, mode: list | np.ndarray, automatic_ticks: list[int], window_s: float) -> int:
+    """Automatic switches whose mode the user left by their own switch within ``window_s``: the
+    next change of mode after an automatic switch at tick a is the user's, at a tick j with
+    t[j] - t[a] <= window_s."""
+    automatic = set(automatic_ticks)
+    changes = [i for i, (a, b) in enumerate(zip(mode, mode[1:])) if a != b]
+    wrong = 0
+    for a in sorted(automatic):
+        later = [j for j in changes if j > a]
+        if later and later[0] not in automatic and t[later[0]] - t[a] <= window_s + 1e-9:
+            wrong += 1
+    return wrong
+
+
 def cube_drops(cube_z: np.ndarray, touching: np.ndarray, fall_m: float = 0.02, horizon: int = 60) -> int:
     """Times a cube left the fingers and then fell more than ``fall_m`` within ``horizon`` ticks.
 

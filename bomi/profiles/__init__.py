@@ -28,7 +28,7 @@ SELECT = "select"
 DEFAULT_NEUTRAL_SAMPLES = 100  # hardware.md step 6: about 100 samples of the neutral posture
 
 _TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
-             "post_processing", "joystick"}
+             "post_processing", "joystick", "assist"}
 _NODE_KEYS = {"index", "node_id", "site", "calibration"}
 _CALIBRATION_KEYS = {"hard_iron", "soft_iron", "mounting"}
 _CLASS_KEYS = {"label", "name", "function", "node"}
@@ -65,6 +65,9 @@ class Profile:
     joystick_layout: str | None = None  # the device's layout the classes drive (None: the device's default)
     select_rejection: bool = False  # rejection threshold chosen on the training recording (post.rejection_threshold unused)
     amplitude_scales: tuple[float, ...] = ()  # training also sees every motion at these fractions of its size
+    # the assistances on unless a run says otherwise ([assist] options; names checked where the
+    # profile meets the arm, tasks/assist.py)
+    assist: tuple[str, ...] = ()
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -118,7 +121,8 @@ def _parse(data: dict, source: str) -> Profile:
                    neutral_samples=_parse_neutral_samples(_section(data, "neutral", {"samples"})),
                    post=post, select_rejection=select_rejection,
                    source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
-                   joystick_layout=typed(joystick, "layout", str, "joystick", None))
+                   joystick_layout=typed(joystick, "layout", str, "joystick", None),
+                   assist=_parse_assist(_section(data, "assist", {"options"})))
 
 
 def _parse_nodes(tables: list) -> tuple[NodeConfig, ...]:
@@ -194,6 +198,13 @@ def _parse_post(post: dict) -> tuple[PostProcessing, bool]:
                          f"got {threshold!r}")
     return (PostProcessing(rejection_threshold=None if threshold == SELECT else threshold,
                            vote_length=typed(post, "vote_length", int, "post_processing", 1)), threshold == SELECT)
+
+
+def _parse_assist(assist: dict) -> tuple[str, ...]:
+    options = typed(assist, "options", list, "assist", [])
+    if not all(isinstance(name, str) for name in options):
+        raise ValueError(f"assist: options must be a list of names, got {options!r}")
+    return tuple(options)
 
 
 def _parse_node(table: Any, where: str) -> NodeConfig:

@@ -12,10 +12,13 @@ from bomi.model_io import check_model_for, load_model
 from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
 from sim.env import ArmSim
+from sim.joystick import BUTTONS
+from tasks.assist import ASSIST_HELP, Assistance, assist_option, profile_assist
 from tasks.cli import add_command
 from tasks.cli.options import non_negative_int, positive_int, seconds
 from tasks.live import (Displays, Headless, PassiveViewer, StatusLine, VideoDisplay, display_opens, has_display,
                         open_log, run_live)
+from tasks.stacking import StackingTask
 from tasks.stick import arm_profile, profile_layout
 
 
@@ -43,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                       help="baud rate of a real port (default %(default)s)")
     live.add_argument("--retries", type=non_negative_int, default=RetryPolicy.attempts,
                       help="reconnection attempts after the stream is lost (default %(default)s)")
+    live.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     live.set_defaults(func=run)
 
 
@@ -77,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
     if args.neutral_from is not None:
         offsets = recording_neutral(read_recording(args.neutral_from), model.spec.nodes, profile.neutral_samples)
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
+    options = args.assist if args.assist is not None else profile_assist(profile)
     # poll 0: a tick reads all that has arrived and never waits for more
     source = SerialSource(args.port, baudrate=args.baud, poll_s=0.0, retry=RetryPolicy(attempts=args.retries))
     source.open()  # a bad port fails before the simulator is built (what arrives meanwhile is read at once)
@@ -85,6 +90,12 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         source.close()
         raise
+    assist = None
+    if options:  # sees the arm and the scene's cubes and target, as on the table
+        functions = {cls.function for cls in profile.classes}
+        assistance = Assistance(options, sim.layout, tuple(b for b in BUTTONS if b in functions) or BUTTONS)
+        task = StackingTask(sim)
+        assist = lambda state: assistance.step(task.view(), state, sim)  # noqa: E731
     status, log, displays = StatusLine(), None, []
     try:
         with source:
@@ -93,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
             if args.video is not None:
                 displays.append(VideoDisplay(sim, args.video))
             summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
-                               status=status, display=Displays(displays), on_neutral=_print_neutral)
+                               status=status, display=Displays(displays), on_neutral=_print_neutral, assist=assist)
     finally:
         status.close()
         if log is not None:
@@ -102,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
         sim.close()
     print(f"live: {summary.ticks} ticks, {summary.frames} frames, {summary.decisions} decisions, "
           f"{summary.dropped} dropped by the sanitizer, watchdog stopped the arm {summary.watchdog_trips} time(s) "
-          f"({summary.stale_ticks} ticks), safety-key standby {summary.standby_ticks} ticks; {source.parser.summary()}")
+          f"({summary.stale_ticks} ticks), safety-key standby {summary.standby_ticks} ticks, "
+          f"{sim.automatic_switches} automatic mode switch(es); {source.parser.summary()}")
     if args.video is not None:
         print(f"wrote {args.video}")
     return 0

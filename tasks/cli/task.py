@@ -17,6 +17,7 @@ from tqdm import tqdm
 from bomi import paper
 from bomi.errors import BomiError
 from tasks import metrics
+from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option, profile_assist
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from bomi.files import atomic_output, write_text
@@ -54,11 +55,13 @@ class EpisodeJob:
     operator_file: str = str(DEFAULT_OPERATOR_FILE)
     vote_length: int = DEFAULT_VOTE
     overrides: tuple[tuple[str, Any], ...] = ()
+    assist: frozenset[Assist] | None = None  # None: as the profile says (BoMI), none (joystick)
 
     def __str__(self) -> str:
         edits = "".join(f", {key}={value!r}" for key, value in self.overrides)
         vote = f", vote {self.vote_length}" if self.operator != "joystick" else ""
-        return f"episode {self.participant} {self.operator} seed {self.seed}{vote}{edits}"
+        assist = f", assist {assist_label(self.assist)}" if self.assist is not None else ""
+        return f"episode {self.participant} {self.operator} seed {self.seed}{vote}{assist}{edits}"
 
     def edits(self, file: str) -> dict[str, Any]:
         """The overrides of one of EDITABLE_FILES, keyed relative to that file."""
@@ -72,6 +75,7 @@ def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4
     what = f"{job.participant} {job.operator} seed {job.seed}"
     params = load_participant(job.participant, job.edits("participant"))
     profile = arm_profile(params.profile, job.edits("profile"))
+    assist = job_assist(job, profile)
     if job.operator == "joystick":  # on the controls the participant's profile gives (like for like)
         channel = JoystickChannel(profile_controls(profile))
     else:
@@ -83,7 +87,15 @@ def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4
         return run_episode(channel, operator=job.operator, participant=job.participant, seed=job.seed,
                            operator_file=load_operator(job.operator_file, job.edits("operator")),
                            task_config=TaskConfig(time_limit=job.time_limit), video=video,
-                           video_speedup=video_speedup, on_tick=on_tick)
+                           video_speedup=video_speedup, on_tick=on_tick, assist=assist)
+
+
+def job_assist(job: EpisodeJob, profile) -> frozenset[Assist]:
+    """The assistances of a job: as the run says, else as the participant's profile says (the
+    joystick operator: none)."""
+    if job.assist is not None:
+        return job.assist
+    return frozenset() if job.operator == "joystick" else profile_assist(profile)
 
 
 @contextmanager
@@ -117,6 +129,8 @@ def _pooled(rs: list[dict], key: str) -> list:
     return [v for r in rs for v in r.get(key) or []]
 
 
+# what the assistance did, per episode (0 without one)
+ASSIST_KEYS = ("automatic_switches", "wrong_goal_switches", "grasp_helps")
 # the decision metrics of a row (None for an operator without a classifier)
 DECISION_KEYS = ("accuracy_all_decisions", "accuracy_excused_transitions", "scored_share", "excused_allowance_ms",
                  "relevant_share", "irrelevant_per_min", "irrelevant_longest_run_ms", "longest_error_run_ms",
@@ -127,17 +141,18 @@ def aggregate(records: list[dict]) -> list[dict]:
     """One row per (participant, operator, layout): successes with their Wilson 95 % interval,
     completion time of the successes with a Student-t 95 % interval, and the decision metrics
     (accuracies: mean over episodes; latency and irrelevant outputs: pooled over episodes)."""
-    groups: dict[tuple[str, str, str], list[dict]] = {}
+    groups: dict[tuple[str, str, str, str], list[dict]] = {}
     for r in records:  # the joystick needs no body: its rows are per layout, for anyone
         who = JOYSTICK_ANYONE if r["operator"] == "joystick" else r["participant"]
-        groups.setdefault((who, r["operator"], r["layout"]), []).append(r)
+        # records written before the assistance existed had none
+        groups.setdefault((who, r["operator"], r["layout"], r.get("assist", NONE)), []).append(r)
     rows = []
-    for (participant, operator, layout), rs in sorted(groups.items()):
+    for (participant, operator, layout, assist), rs in sorted(groups.items()):
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
         ci = metrics.mean_ci95(times)
         row = {
-            "participant": participant, "operator": operator, "layout": layout, "episodes": len(rs),
+            "participant": participant, "operator": operator, "layout": layout, "assist": assist, "episodes": len(rs),
             "seeds": [r["seed"] for r in rs], "successes": len(done),
             "success_rate": len(done) / len(rs), "success_ci95": list(metrics.success_ci95(len(done), len(rs))),
             "completion_time_mean": _mean(times),
@@ -145,6 +160,7 @@ def aggregate(records: list[dict]) -> list[dict]:
             "completion_time_ci95": None if ci is None else list(ci),
             "failures": [{"seed": r["seed"], "failure": r["failure"]} for r in rs if not r["success"]],
             "mode_switches": _mean([r["mode_switches"] for r in rs]),
+            **{key: _mean([r.get(key, 0) for r in rs]) for key in ASSIST_KEYS},
             "unintended_displacement_mm": _mean([r["unintended_displacement_mm"] for r in rs]),
             "cube_drops": sum(r["cube_drops"] for r in rs),
             "realtime_factor": _mean([r["realtime_factor"] for r in rs]),
@@ -178,15 +194,15 @@ def comparison(rows: list[dict]) -> list[dict]:
     """Per participant: our BoMI/joystick time ratio and decision figures beside the paper's.  The
     paper's real-time accuracy counts the outputs that were not irrelevant: ``relevant_share``
     is ours in that sense; the two accuracies say how often the output was the intended class."""
-    bomis = {r["participant"]: r for r in rows if r["operator"] == "bomi"}
-    sticks = {r["layout"]: r for r in rows if r["operator"] == "joystick"}
+    bomis = {(r["participant"], r["assist"]): r for r in rows if r["operator"] == "bomi"}
+    sticks = {(r["layout"], r["assist"]): r for r in rows if r["operator"] == "joystick"}
     out = []
-    for participant, bomi in sorted(bomis.items()):
-        joy = sticks.get(bomi["layout"])
+    for (participant, assist), bomi in sorted(bomis.items()):
+        joy = sticks.get((bomi["layout"], assist))  # with the same assistance
         ratio = None
         if bomi and joy and bomi["completion_time_mean"] and joy["completion_time_mean"]:
             ratio = bomi["completion_time_mean"] / joy["completion_time_mean"]
-        out.append({"participant": participant, "layout": bomi["layout"], "time_ratio": ratio,
+        out.append({"participant": participant, "layout": bomi["layout"], "assist": assist, "time_ratio": ratio,
                     "paper_time_ratio": paper.TASK["bomi_time_s"] / paper.TASK["joystick_time_s"],
                     **{key: bomi.get(key) for key in
                        ("relevant_share", "accuracy_all_decisions", "accuracy_excused_transitions",
@@ -212,7 +228,8 @@ def _interval(ci, spec: str = ".1f", scale: float = 1.0) -> str:
 # in brackets: Wilson for successes, Student-t for the mean completion time
 ROW_COLUMNS = ("layout", "successes [95 % CI]", "completion time (s) [95 % CI]", "accuracy, all decisions",
                "accuracy, transitions excused (scored share)", "relevant outputs", "irrelevant / min (longest, ms)",
-               "latency from onset median / p90 (ms)", "mode switches", "drops", "x real time")
+               "latency from onset median / p90 (ms)", "assist", "user mode switches", "automatic (wrong-goal) switches",
+               "drops", "x real time")
 
 
 def row_cells(r: dict) -> list[str]:
@@ -226,7 +243,8 @@ def row_cells(r: dict) -> list[str]:
     return [r["layout"], f"{r['successes']}/{r['episodes']}{_interval(r['success_ci95'], '.0f', 100)} %",
             f"{_fmt(r['completion_time_mean'])}{_interval(r['completion_time_ci95'])}",
             _pct(r.get("accuracy_all_decisions")), excused, _pct(r.get("relevant_share")), wild, latency,
-            _fmt(r["mode_switches"]), str(r["cube_drops"]), _fmt(r["realtime_factor"])]
+            r["assist"], _fmt(r["mode_switches"]), f"{_fmt(r['automatic_switches'])} ({_fmt(r['wrong_goal_switches'])})",
+            str(r["cube_drops"]), _fmt(r["realtime_factor"])]
 
 
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
@@ -238,12 +256,13 @@ def markdown_tables(rows: list[dict]) -> str:
     """The benchmark table and the comparison with the paper."""
     lines = [markdown_table(["participant", "operator", *ROW_COLUMNS],
                             [[r["participant"], r["operator"], *row_cells(r)] for r in rows])]
-    lines += ["", "| participant | layout | BoMI / joystick time (same layout) | paper | relevant outputs "
-              "| accuracy, all decisions | accuracy, transitions excused | paper real-time accuracy "
+    lines += ["", "| participant | layout | assist | BoMI / joystick time (same layout and assist) | paper "
+              "| relevant outputs | accuracy, all decisions | accuracy, transitions excused | paper real-time accuracy "
               "| longest irrelevant run (ms) | paper longest error run (ms) |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in comparison(rows):
-        lines.append(f"| {c['participant']} | {c['layout']} | {_fmt(c['time_ratio'], '.2f')} | {c['paper_time_ratio']:.2f} "
+        lines.append(f"| {c['participant']} | {c['layout']} | {c['assist']} | {_fmt(c['time_ratio'], '.2f')} "
+                     f"| {c['paper_time_ratio']:.2f} "
                      f"| {_pct(c['relevant_share'])} | {_pct(c['accuracy_all_decisions'])} "
                      f"| {_pct(c['accuracy_excused_transitions'])} | {_pct(c['paper_realtime_accuracy'])} "
                      f"| {_fmt(c['irrelevant_longest_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} |")
@@ -257,7 +276,8 @@ def run_many(jobs: list[EpisodeJob], engine: Engine) -> list[dict]:
 
 
 def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, time_limit: float,
-                   operator_file: str, vote_length: int = DEFAULT_VOTE, first_seed: int = 0) -> list[EpisodeJob]:
+                   operator_file: str, vote_length: int = DEFAULT_VOTE, first_seed: int = 0,
+                   assist: frozenset[Assist] | None = None) -> list[EpisodeJob]:
     """Every (participant, operator, seed) for ``seeds`` seeds from ``first_seed``.  The joystick
     needs no body: it is run once per distinct set of controls (layout and buttons) among the
     participants' profiles, so each BoMI row has a joystick row with the same controls and no
@@ -271,7 +291,7 @@ def benchmark_jobs(participants: list[str], operators: list[str], seeds: int, ti
                 if label in seen:
                     continue
                 seen.add(label)
-            jobs += [EpisodeJob(op, p, s, time_limit, operator_file, vote_length)
+            jobs += [EpisodeJob(op, p, s, time_limit, operator_file, vote_length, assist=assist)
                      for s in range(first_seed, first_seed + seeds)]
     return jobs
 
@@ -298,7 +318,8 @@ def cmd_run_task(args: argparse.Namespace) -> int:
     load_operator(args.operator_file)  # a bad file fails before any simulation
     load_participant(args.participant)  # for the joystick too: a typo is not silently ignored
     job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file),
-                     args.vote)
+                     args.vote, assist=args.assist)
+    job_assist(job, arm_profile(load_participant(job.participant).profile))  # a bad profile fails before simulating
     if outputs["--video"]:
         with atomic_output(outputs["--video"], overwrite=args.force) as video:
             log = run_job(job, video=video, progress=True)
@@ -331,7 +352,10 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     for name in participants:  # every name checked here, not inside a worker after others finished
         load_participant(name)
     jobs = benchmark_jobs(participants, _names(args.operators, OPERATORS, "operators"),
-                          args.seeds, args.time_limit, str(args.operator_file), args.vote, args.first_seed)
+                          args.seeds, args.time_limit, str(args.operator_file), args.vote, args.first_seed,
+                          args.assist)
+    for job in {(j.participant, j.operator): j for j in jobs}.values():  # a bad profile fails before simulating
+        job_assist(job, arm_profile(load_participant(job.participant).profile))
     records = run_many(jobs, engine_from_args(args))
     rows = aggregate(records)
     print(markdown_tables(rows))
@@ -352,10 +376,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     out.mkdir(exist_ok=True)
     figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force).values()
-    joystick = run_job(EpisodeJob("joystick", "P1", args.seed, args.time_limit), progress=True)
+    joystick = run_job(EpisodeJob("joystick", "P1", args.seed, args.time_limit, assist=args.assist), progress=True)
     with atomic_output(video, overwrite=args.force) as temp:
-        bomi = run_job(EpisodeJob("bomi", "P1", args.seed, args.time_limit), video=temp, video_speedup=DEMO_VIDEO_SPEEDUP,
-                       progress=True)
+        bomi = run_job(EpisodeJob("bomi", "P1", args.seed, args.time_limit, assist=args.assist), video=temp,
+                       video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
     with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=args.force) as temp:
         timeline_figure([joystick, bomi], temp)
@@ -406,6 +430,7 @@ def register(subparsers) -> None:
                       help="seconds of simulated time per episode (default %(default)s)")
     demo.add_argument("--out", type=Path, default=Path("demo_out"),
                       help="directory for timeline.png, bomi_episode.mp4 and demo.json (default %(default)s)")
+    demo.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     add_force(demo)
     demo.set_defaults(func=cmd_demo)
 
@@ -415,5 +440,6 @@ def _episode_options(parser: argparse.ArgumentParser) -> None:
                         help="seconds of simulated time before an episode fails (default %(default)s)")
     parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
                         help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
+    parser.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     parser.add_argument("--vote", type=positive_int, default=DEFAULT_VOTE,
                         help="BoMI: majority vote over this many decisions (default %(default)s)")

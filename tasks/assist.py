@@ -1,0 +1,558 @@
+"""Assistance between the decided joystick function and the arm (beyond the paper).
+
+    decided JoystickState -> Assistance.step(view, state, arm) -> JoystickState -> arm
+
+It sees what a real system could: the arm (hand pose, fingers, mode), the scene's objects (the
+cubes' poses and contacts, the target B; ``planner.View`` as the task builds it from the
+simulation) and the user's commands so far.  It never sees the scripted user's plan or goal.
+
+``Assist.AUTO_MODE``: automatic time-optimal mode switching after Herlant, Holladay and Srinivasa
+(HRI 2016).  A belief over candidate goals taken from the scene (grasp each cube; with a cube in
+the hand, set it down at B or on the other cube) is raised for the goals the user's recent motion
+heads toward.  For each goal, a careful pick-and-place path (open the hand if need be, rise to the
+travel height when low and far, travel over the goal, line the hand up with the cube, descend,
+close or open) gives which step comes next, each step "still needed" with a probability that
+falls smoothly as its error reaches the tolerance; each step needs a mode of the layout.  The time
+to the goal from a mode m is the steps' share that depends on m: the user's own presses from m to
+the mode of the next step (``press_time`` each, with the buttons the person has), in expectation
+over the goals and over which step is next.  When the stick has rested ``rest_time``, the
+automation puts the arm in the mode that minimises that time if it saves at least ``min_gain``;
+at most once per rest.  The user's own button press always wins (it is passed on untouched) and
+pauses the automation for ``pause_after_press``.
+
+``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
+the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
+the arm is put in the finger mode and closes until the fingers have touched the cube for
+``squeeze`` (or are closed); any command of the user stops it.
+
+Every switch the assistance makes is an ``AutomaticSwitch`` (tick, time, from, to, which
+assistance, the goal it served); the arm counts them apart from the button presses
+(``ArmSim.automatic_switches``).
+"""
+from __future__ import annotations
+
+import argparse
+import enum
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from bomi.config_files import load_toml
+from bomi.errors import BomiError
+from bomi.profiles import Profile
+from sim.joystick import BUTTONS, JoystickState, Kind, Layout, Mode, combine
+from tasks.planner import CUBE_SYMMETRY, View
+
+DEFAULT_ASSIST_FILE = Path(__file__).with_name("assist.toml")
+NONE = "none"
+
+
+class Assist(enum.Enum):
+    """The assistances one may choose (``--assist``, a profile's ``[assist] options``)."""
+
+    AUTO_MODE = "auto-mode"
+    GRASP_HELP = "grasp-help"
+
+
+def parse_assist(names: str | list[str] | tuple[str, ...], what: str = "--assist") -> frozenset[Assist]:
+    """``"none"``, one name or a comma list (or a list of names) -> the set of assistances."""
+    items = [n.strip() for n in names.split(",")] if isinstance(names, str) else [str(n).strip() for n in names]
+    items = [n for n in items if n]
+    what = f"{what}: " if what else ""
+    allowed = ", ".join([NONE] + [a.value for a in Assist])
+    if not items:
+        raise BomiError(f"{what}empty (expected {allowed})")
+    if NONE in items:
+        if len(items) > 1:
+            raise BomiError(f"{what}{NONE!r} cannot be combined with {', '.join(n for n in items if n != NONE)}")
+        return frozenset()
+    by_name = {a.value: a for a in Assist}
+    bad = [n for n in items if n not in by_name]
+    if bad:
+        raise BomiError(f"{what}unknown {', '.join(bad)} (expected {allowed})")
+    return frozenset(by_name[n] for n in items)
+
+
+def assist_option(text: str) -> frozenset[Assist]:
+    """``--assist`` for argparse."""
+    try:
+        return parse_assist(text, "")
+    except BomiError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+ASSIST_HELP = ("assistance between the stick and the arm: none, or a comma list of "
+               f"{', '.join(a.value for a in Assist)} (default: the profile's [assist] options; joystick: none)")
+
+
+def profile_assist(profile: Profile) -> frozenset[Assist]:
+    """The assistances a profile switches on (its ``[assist] options``)."""
+    return parse_assist(list(profile.assist), f"{profile.source}: [assist] options") if profile.assist else frozenset()
+
+
+def assist_label(options: frozenset[Assist]) -> str:
+    """The set as ``--assist`` spells it (enum order): "none", "auto-mode", "auto-mode,grasp-help"."""
+    return ",".join(a.value for a in Assist if a in options) or NONE
+
+
+# ------------------------------------------------------------------------------------ parameters
+@dataclass(frozen=True)
+class AutoModeParams:
+    rest_time: float
+    mask_time: float
+    pause_after_press: float
+    press_grace: float
+    press_time: float
+    min_gain: float
+    memory: float
+    sharpness: float
+    proximity: float
+    off_target_prior: float
+
+
+@dataclass(frozen=True)
+class PathParams:
+    clearance: float
+    release_gap: float
+    grasp_near: float
+    grasp_height: float
+    place_near: float
+    place_height: float
+    yaw_tol_deg: float
+    softness: float
+    yaw_softness_deg: float
+    open_closure: float
+    squeeze: float
+
+
+@dataclass(frozen=True)
+class GraspHelpParams:
+    hold_still: float
+    xy_tol: float
+    z_tol: float
+    yaw_tol_deg: float
+
+
+@dataclass(frozen=True)
+class AssistParams:
+    auto_mode: AutoModeParams
+    path: PathParams
+    grasp_help: GraspHelpParams
+
+
+_TABLES = {"auto_mode": AutoModeParams, "path": PathParams, "grasp_help": GraspHelpParams}
+_MAY_BE_NEGATIVE = {"off_target_prior"}
+
+
+def load_assist(path: Path | str = DEFAULT_ASSIST_FILE) -> AssistParams:
+    """Read and validate an assistance TOML file; BomiError names the file and the fault."""
+    return load_toml(path, DEFAULT_ASSIST_FILE.parent, "assist", _parse_assist)
+
+
+def _parse_assist(data: dict, source: str) -> AssistParams:
+    unknown = set(data) - set(_TABLES)
+    if unknown:
+        raise ValueError(f"unknown table(s): {', '.join(sorted(unknown))}")
+    tables = {}
+    for name, cls in _TABLES.items():
+        table = data.get(name)
+        if not isinstance(table, dict):
+            raise ValueError(f"missing table [{name}]")
+        keys = [f.name for f in fields(cls)]
+        extra = set(table) - set(keys)
+        if extra:
+            raise ValueError(f"unknown key(s) in [{name}]: {', '.join(sorted(extra))}")
+        values = {}
+        for key in keys:
+            value = table.get(key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"[{name}] {key} must be a finite number, got {value!r}")
+            if value <= 0 and key not in _MAY_BE_NEGATIVE:
+                raise ValueError(f"[{name}] {key} must be positive, got {value}")
+            values[key] = float(value)
+        tables[name] = cls(**values)
+    if not tables["path"].open_closure < 1:
+        raise ValueError("[path] open_closure must be below 1")
+    return AssistParams(**tables)
+
+
+# ------------------------------------------------------------------------------------ goals
+@dataclass(frozen=True)
+class Goal:
+    """Where a step of the task would bring the hand, as the scene shows it."""
+
+    label: str
+    point: np.ndarray  # (3,) the pinch point at the goal
+    travel_z: float  # the height a careful user travels at toward it
+    act: float  # the finger action at the goal: +1 close (grasp), -1 open (set down)
+    near: float  # the hand is over the goal when this close in xy
+    height_tol: float  # and at its height when this close
+    yaw: float | None = None  # the hand heading to line up with (a grasp), modulo a quarter turn
+    prior: float = 0.0  # log-odds before any motion is seen
+
+
+def held_cube(view: View, open_closure: float) -> int | None:
+    """The cube the fingers hold (touching and not open); the nearest to the pinch point if two."""
+    touching = [k for k, touch in enumerate(view.touching) if touch]
+    if not touching or view.closure <= open_closure:
+        return None
+    return min(touching, key=lambda k: float(np.linalg.norm(view.cube_pos[k] - view.hand_pos)))
+
+
+def _rest_z(view: View) -> float:
+    return view.table_z + view.cube_size / 2
+
+
+def _at_target(view: View, k: int, zone: float) -> bool:
+    return bool(np.linalg.norm(view.cube_pos[k][:2] - view.target_xy) <= zone)
+
+
+def _in_the_way(view: View, others: list[int], goal_xy: np.ndarray) -> float:
+    """The top of the highest cube near the straight way from the hand to ``goal_xy`` (within one
+    and a half cube widths of it), or the table."""
+    start, way = view.hand_pos[:2], goal_xy - view.hand_pos[:2]
+    length2 = float(np.dot(way, way))
+    top = view.table_z
+    for k in others:
+        xy = view.cube_pos[k][:2]
+        along = 0.0 if length2 == 0 else float(np.clip(np.dot(xy - start, way) / length2, 0.0, 1.0))
+        if np.linalg.norm(start + along * way - xy) <= 1.5 * view.cube_size:
+            top = max(top, float(view.cube_pos[k][2]) + view.cube_size / 2)
+    return top
+
+
+def candidate_goals(view: View, params: AssistParams) -> list[Goal]:
+    """The goals the scene offers: grasp any cube; with a cube in the hand, set it down at B (if
+    free) or on another cube.  Goals that leave the stack at B unfinished (grasping a cube that is
+    already there, setting one down on a cube elsewhere) start less likely (``off_target_prior``).  The way there clears the cubes near
+    it by ``clearance`` (the open fingers, or the held cube, reach half a cube below the pinch point)."""
+    path, size = params.path, view.cube_size
+    held = held_cube(view, path.open_closure)
+    others = [k for k in range(len(view.cube_pos)) if k != held]
+    zone = size  # a cube counts as at B when its centre is within a cube's width of B
+    if held is None:
+        goals = []
+        for k in others:
+            prior = params.auto_mode.off_target_prior if _at_target(view, k, zone) else 0.0  # already placed
+            point = np.asarray(view.cube_pos[k], dtype=float)
+            travel_z = _in_the_way(view, others, point[:2]) + path.clearance + size / 2
+            goals.append(Goal(f"grasp cube {k + 1}", point, travel_z, +1.0, path.grasp_near, path.grasp_height,
+                              view.cube_yaw[k], prior))
+        return goals
+    grip = view.hand_pos - view.cube_pos[held]  # where the hand holds the cube
+    goals = []
+    free_b = not any(_at_target(view, k, zone) and abs(view.cube_pos[k][2] - _rest_z(view)) < size / 4 for k in others)
+    lift = grip[2] + path.release_gap  # the hand lets go with the cube just above its support
+    places = [(f"set cube {held + 1} down at B", np.r_[view.target_xy + grip[:2], _rest_z(view) + lift], 0.0)] \
+        if free_b else []
+    places += [(f"set cube {held + 1} on cube {k + 1}", np.r_[view.cube_pos[k][:2] + grip[:2], view.cube_pos[k][2] + size + lift],
+                0.0 if _at_target(view, k, zone) else params.auto_mode.off_target_prior) for k in others]
+    for label, point, prior in places:
+        travel_z = _in_the_way(view, others, point[:2]) + path.clearance + size / 2 + grip[2]
+        goals.append(Goal(label, point, travel_z, -1.0, path.place_near, path.place_height, prior=prior))
+    return goals
+
+
+def _needed(error: float, tolerance: float, softness: float) -> float:
+    """Probability that a step with this error is still to be made: 1/2 at the tolerance."""
+    return float(1.0 / (1.0 + math.exp(-(error - tolerance) / softness)))
+
+
+def yaw_offset(hand_yaw: float, cube_yaw: float) -> float:
+    """Turn (rad) that lines the hand up with a face of the cube, in [-pi/4, pi/4)."""
+    return (cube_yaw - hand_yaw + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the path to a goal: the mode it needs and the probability that it is still to be made."""
+
+    name: str
+    mode: Mode
+    needed: float
+
+
+def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams) -> list[Step]:
+    """The careful path to ``goal``, step by step, each with the mode of ``layout`` that makes it."""
+    hand = view.hand_pos
+    error = goal.point - hand
+    xy = float(np.linalg.norm(error[:2]))
+    far = _needed(xy, goal.near, path.softness)
+    up, _ = layout.find(Kind.LINEAR, (0.0, 0.0, 1.0))
+    across, _ = layout.find(Kind.LINEAR, (1.0, 0.0, 0.0))
+    fingers, _ = layout.find(Kind.FINGERS, goal.act)
+    steps = []
+    if goal.act > 0:  # a grasp needs the hand open first
+        opener, _ = layout.find(Kind.FINGERS, -1.0)
+        steps.append(Step("open", opener, float(view.closure > path.open_closure)))
+    steps.append(Step("rise", up, far * _needed(goal.travel_z - hand[2], goal.height_tol, path.softness)))
+    steps.append(Step("travel", across, far))
+    if goal.yaw is not None:
+        turn = yaw_offset(view.hand_yaw, goal.yaw)
+        turner, _ = layout.find(Kind.ANGULAR, (0.0, 0.0, 1.0 if turn >= 0 else -1.0))
+        steps.append(Step("turn", turner, _needed(math.degrees(abs(turn)), path.yaw_tol_deg, path.yaw_softness_deg)))
+    steps.append(Step("descend", up, _needed(abs(error[2]), goal.height_tol, path.softness)))
+    steps.append(Step("close" if goal.act > 0 else "open", fingers, 1.0))
+    return steps
+
+
+def next_step_modes(steps: list[Step]) -> dict[Mode, float]:
+    """Probability that each mode is the one of the next step to be made."""
+    out: dict[Mode, float] = {}
+    left = 1.0
+    for step in steps:
+        share = left * step.needed
+        out[step.mode] = out.get(step.mode, 0.0) + share
+        left -= share
+    return out
+
+
+def presses(layout: Layout, buttons: tuple[str, ...], current: Mode, wanted: Mode) -> int:
+    """The fewest presses of the person's buttons from ``current`` to ``wanted``."""
+    return min(layout.presses(current, wanted, b) for b in buttons)
+
+
+def time_to_goal(layout: Layout, buttons: tuple[str, ...], next_modes: dict[Mode, float], press_time: float
+                 ) -> dict[Mode, float]:
+    """Per mode m of the layout: the expected time the user's presses from m to the next step's
+    mode take (the part of the time to the goal that depends on the mode the arm is in)."""
+    return {m: press_time * sum(p * presses(layout, buttons, m, need) for need, p in next_modes.items())
+            for m in layout.modes}
+
+
+# ------------------------------------------------------------------------------------ the layer
+@dataclass(frozen=True)
+class AutomaticSwitch:
+    """A mode switch the assistance made."""
+
+    tick: int
+    t: float
+    before: Mode
+    after: Mode
+    by: Assist
+    goal: str
+    undone: bool = False  # a press the user made before seeing it came within press_grace: it was undone
+
+
+class Switchable(Protocol):
+    """What the assistance needs of the arm (``sim.env.ArmSim``)."""
+
+    dt: float
+
+    @property
+    def mode(self) -> Mode: ...
+
+    def switch_mode(self, mode: Mode) -> None: ...
+
+
+@dataclass
+class GoalBelief:
+    """Log-odds per goal label: raised for goals the user's motion heads toward; while the user
+    moves, what was seen earlier fades toward the prior (time constant ``memory``)."""
+
+    logits: dict[str, float] = field(default_factory=dict)
+
+    def probabilities(self, goals: list[Goal], hand_xy: np.ndarray, proximity: float) -> np.ndarray:
+        """P(goal): the log-odds seen so far, less the goal's horizontal distance over ``proximity``
+        (a user who has stopped over a goal most likely wants that one)."""
+        distance = np.array([np.linalg.norm(g.point[:2] - hand_xy) for g in goals])
+        values = np.array([self.logits.get(g.label, g.prior) for g in goals]) - distance / proximity
+        weights = np.exp(values - values.max())
+        return weights / weights.sum()
+
+    def update(self, goals: list[Goal], scores: np.ndarray, dt: float, params: AutoModeParams) -> None:
+        keep = math.exp(-dt / params.memory)
+        self.logits = {g.label: keep * self.logits.get(g.label, g.prior) + (1 - keep) * g.prior
+                       + params.sharpness * dt * float(s) for g, s in zip(goals, scores)}
+
+
+def motion_scores(view: View, goals: list[Goal], state: JoystickState, layout: Layout, path: PathParams
+                  ) -> np.ndarray:
+    """How well the commanded motion fits each goal, in [-1, 1]: the cosine between the commanded
+    horizontal motion and the way to the goal (over it already: -0.5, it asks for none); a turn
+    about the vertical toward a grasp's heading.  Rising and descending tell nothing: every goal
+    is reached from above."""
+    linear = combine(state.deflection, layout.axes(view.mode, Kind.LINEAR))[:2]
+    angular = combine(state.deflection, layout.axes(view.mode, Kind.ANGULAR))
+    scores = np.zeros(len(goals))
+    for i, goal in enumerate(goals):
+        if np.linalg.norm(linear) > 0:
+            wanted = goal.point[:2] - view.hand_pos[:2]
+            norm = np.linalg.norm(wanted)
+            scores[i] = float(np.dot(linear, wanted) / (np.linalg.norm(linear) * norm)) if norm > goal.near else -0.5
+        elif abs(angular[2]) > 0 and goal.yaw is not None:
+            turn = yaw_offset(view.hand_yaw, goal.yaw)
+            lined_up = abs(math.degrees(turn)) <= path.yaw_tol_deg / 2
+            scores[i] = -0.5 if lined_up else math.copysign(1.0, turn * angular[2])
+    return scores
+
+
+class Assistance:
+    """The chosen assistances for one run; ``step`` once per control tick, before the arm's step."""
+
+    def __init__(self, options: frozenset[Assist], layout: Layout, buttons: tuple[str, ...] = BUTTONS,
+                 params: AssistParams | None = None):
+        self.options = frozenset(options)
+        self.layout, self.buttons = layout, tuple(buttons)
+        self.params = params or load_assist()
+        self.belief = GoalBelief()
+        self.switches: list[AutomaticSwitch] = []
+        self.grasp_helps = 0  # closes the grasp help started
+        self._tick = 0
+        self._active_at = -math.inf  # when the user last held a function or pressed a button
+        self._paused_until = -math.inf
+        self._paused_until_move = False  # after the user's press: paused until they move in a mode
+        self._switched_this_rest = False
+        self._closing_since: float | None = None  # the grasp help is closing the fingers
+        self._touch_since: float | None = None  # the fingers have touched a cube since
+        # functions held across an automatic switch: off until the stick rests, for at most mask_time
+        self._mask: frozenset[str] = frozenset()
+        self._masked_at = -math.inf
+        self._moved_since_switch = False  # the user has held a function since our last switch
+        # a mode the user left by their own press before moving in it, and where the hand was: not
+        # proposed again until the hand has gone ``near`` from there
+        self._refused: tuple[Mode, np.ndarray] | None = None
+
+    def step(self, view: View, state: JoystickState, arm: Switchable) -> JoystickState:
+        """The stick the arm gets this tick; may put ``arm`` in another mode first."""
+        tick, self._tick = self._tick, self._tick + 1
+        self._touch_since = (self._touch_since if self._touch_since is not None else view.t) if any(view.touching) \
+            else None
+        state = self._unmasked(state, view.t)
+        if not (state.deflection or state.pressed):
+            return self._at_rest(tick, view, state, arm)
+        self._active_at, self._switched_this_rest, self._closing_since = view.t, False, None
+        if state.pressed:  # the user's own press wins and pauses the automation
+            last = self.switches[-1] if self.switches else None
+            if last is not None and arm.mode is last.after and not self._moved_since_switch:
+                self._refused = (last.after, view.hand_pos.copy())
+            self._undo_unseen_switch(view, arm)
+            self._paused_until = view.t + self.params.auto_mode.pause_after_press
+            self._paused_until_move = True
+            return state
+        self._paused_until_move, self._moved_since_switch = False, True
+        if Assist.AUTO_MODE in self.options:
+            goals = candidate_goals(view, self.params)
+            self.belief.update(goals, motion_scores(view, goals, state, self.layout, self.params.path), arm.dt,
+                               self.params.auto_mode)
+            if self._fingers_done(view, state) and view.t >= self._paused_until:
+                best, goal = self.best_mode(view)
+                if best is not None:  # switch now; the finger function still held does nothing from here
+                    self._switch(tick, view, arm, best, Assist.AUTO_MODE, goal)
+                    self._mask, self._masked_at = frozenset(state.deflection), view.t
+                    return JoystickState()
+        return state
+
+    def _unmasked(self, state: JoystickState, t: float) -> JoystickState:
+        """The stick without the functions held across an early switch: until it rests, or for
+        ``mask_time`` (longer than the interface answers an old posture; a user who goes on holding
+        the same function means it in the new mode)."""
+        if not state.deflection or t - self._masked_at > self.params.auto_mode.mask_time:
+            self._mask = frozenset()
+        if not self._mask:
+            return state
+        return JoystickState({fn: v for fn, v in state.deflection.items() if fn not in self._mask}, state.pressed)
+
+    def _fingers_done(self, view: View, state: JoystickState) -> bool:
+        """The user holds a finger function that can do no more: opening fingers that are open, or
+        closing fingers that have held a cube for ``squeeze`` (the interface may still be
+        answering an earlier posture for a second: the next step's mode need not wait for it)."""
+        fingers = self.layout.axes(view.mode, Kind.FINGERS)
+        held = [fingers[fn] for fn in state.deflection if fn in fingers]
+        if not held or len(held) != len(state.deflection):
+            return False
+        if all(direction < 0 for direction in held):
+            return view.closure <= self.params.path.open_closure
+        return all(direction > 0 for direction in held) and self._touch_since is not None \
+            and view.t - self._touch_since >= self.params.path.squeeze
+    def _at_rest(self, tick: int, view: View, state: JoystickState, arm: Switchable) -> JoystickState:
+        if self._closing_since is not None:
+            return self._close(view, state)
+        rested = view.t - self._active_at
+        if view.t < self._paused_until or self._paused_until_move or self._switched_this_rest:
+            return state  # one switch per rest: the user's next move decides what comes after
+        if Assist.GRASP_HELP in self.options and rested >= self.params.grasp_help.hold_still:
+            cube = self._around(view)
+            if cube is not None:
+                fingers, _ = self.layout.find(Kind.FINGERS, 1.0)
+                self._switch(tick, view, arm, fingers, Assist.GRASP_HELP, f"grasp cube {cube + 1}")
+                self._closing_since = view.t
+                self.grasp_helps += 1
+                return self._close(view, state)
+        if Assist.AUTO_MODE in self.options and rested >= self.params.auto_mode.rest_time:
+            best, goal = self.best_mode(view)
+            if best is not None:
+                self._switch(tick, view, arm, best, Assist.AUTO_MODE, goal)
+        return state
+
+    def best_mode(self, view: View) -> tuple[Mode | None, str]:
+        """The mode that minimises the expected time to the likely goals, if it saves ``min_gain``
+        over the current one (else None), and the most likely goal's label."""
+        goals = candidate_goals(view, self.params)
+        if not goals:
+            return None, ""
+        weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
+        expected = {m: 0.0 for m in self.layout.modes}
+        for goal, weight in zip(goals, weights):
+            steps = path_steps(view, goal, self.layout, self.params.path)
+            for m, seconds in time_to_goal(self.layout, self.buttons, next_step_modes(steps),
+                                           self.params.auto_mode.press_time).items():
+                expected[m] += weight * seconds
+        best = min(self.layout.modes, key=lambda m: (expected[m], m is not view.mode))
+        likely = goals[int(np.argmax(weights))].label
+        if best is view.mode or expected[view.mode] - expected[best] < self.params.auto_mode.min_gain:
+            return None, likely
+        return best, likely
+
+    def _undo_unseen_switch(self, view: View, arm: Switchable) -> None:
+        """A press that comes within ``press_grace`` of a switch of ours was decided before the user
+        could see it (a human reaction takes longer): it is meant for the mode before the switch."""
+        last = self.switches[-1] if self.switches else None
+        if last is not None and not last.undone and view.t - last.t <= self.params.auto_mode.press_grace \
+                and arm.mode is last.after:
+            arm.switch_mode(last.before)
+            self.switches[-1] = replace(last, undone=True)
+
+    def _switch(self, tick: int, view: View, arm: Switchable, mode: Mode, by: Assist, goal: str) -> None:
+        self._switched_this_rest = True
+        if self._refused is not None and np.linalg.norm(view.hand_pos - self._refused[1]) > self.params.path.place_near:
+            self._refused = None
+        if mode is arm.mode or (self._refused is not None and mode is self._refused[0] and by is Assist.AUTO_MODE):
+            return
+        self._moved_since_switch = False
+        self.switches.append(AutomaticSwitch(tick, view.t, arm.mode, mode, by, goal))
+        arm.switch_mode(mode)
+
+    def _around(self, view: View) -> int | None:
+        """The cube the open hand is around, lined up with it (None if none)."""
+        g, path = self.params.grasp_help, self.params.path
+        if view.closure > path.open_closure:
+            return None
+        for k, cube in enumerate(view.cube_pos):
+            offset = cube - view.hand_pos
+            if (np.linalg.norm(offset[:2]) <= g.xy_tol and abs(offset[2]) <= g.z_tol
+                    and abs(math.degrees(yaw_offset(view.hand_yaw, view.cube_yaw[k]))) <= g.yaw_tol_deg):
+                return k
+        return None
+
+    def _close(self, view: View, state: JoystickState) -> JoystickState:
+        """The grasp help's stick: close until the fingers have squeezed the cube (or are closed)."""
+        done = (self._touch_since is not None and view.t - self._touch_since >= self.params.path.squeeze) \
+            or view.closure >= 0.95
+        if done:  # the automatic mode switching may then take the arm on to the next step
+            self._closing_since = None
+            self._switched_this_rest = False
+            return state
+        _, close = self.layout.find(Kind.FINGERS, 1.0)
+        return JoystickState({close: 1.0})
+
+    def caption(self, t: float, shown_for: float = 2.0) -> str:
+        """A caption line (the same number of lines every frame): the last automatic switch for
+        ``shown_for`` seconds, else which assistances are on."""
+        if not self.switches or t - self.switches[-1].t > shown_for:
+            return f"assist: {assist_label(self.options)}"
+        last = self.switches[-1]
+        return f"AUTO {last.by.value}: {last.before.value} -> {last.after.value} ({last.goal})"

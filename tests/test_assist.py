@@ -1,0 +1,234 @@
+"""The assistance layer: choosing assistances, the time-to-goal model, the goal belief, the
+user's precedence, the metrics of automatic switches, and an episode with automatic mode switching."""
+import numpy as np
+import pytest
+
+from bomi.errors import BomiError
+from bomi.profiles import PROFILE_DIR, load_profile
+from helpers import edited_copy
+from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState, Mode
+from tasks import metrics
+from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, Step, assist_label, candidate_goals, load_assist,
+                          next_step_modes, parse_assist, presses, profile_assist, time_to_goal)
+from tasks.cli import main
+from tasks.episode import JoystickChannel, run_episode, summarize
+from tasks.planner import View
+
+CUBE = 0.05
+A1, A2 = np.array([-0.14, -0.51, CUBE / 2]), np.array([-0.14, -0.39, CUBE / 2])
+B = np.array([0.14, -0.45])
+
+
+def view(hand, closure=0.0, mode=Mode.TRANSLATION, cubes=(A1, A2), touching=(False, False), yaw=0.0,
+         cube_yaw=(0.0, 0.0), t=0.0) -> View:
+    return View(t=t, hand_pos=np.asarray(hand, float), hand_yaw=yaw, hand_tilt=np.zeros(2), closure=closure,
+                mode=mode, cube_pos=tuple(np.asarray(c, float) for c in cubes), cube_yaw=tuple(cube_yaw),
+                touching=tuple(touching), target_xy=B.copy(), table_z=0.0, cube_size=CUBE)
+
+
+class FakeArm:
+    dt = 1 / 60
+
+    def __init__(self, mode=Mode.TRANSLATION):
+        self.mode = mode
+        self.switched = []
+
+    def switch_mode(self, mode):
+        self.switched.append(mode)
+        self.mode = mode
+
+
+# ------------------------------------------------------------------------------------ choosing
+def test_assist_names_parse_to_a_set_of_enums_and_back():
+    assert parse_assist("none") == frozenset()
+    assert parse_assist("auto-mode") == {Assist.AUTO_MODE}
+    both = parse_assist("grasp-help, auto-mode")
+    assert both == {Assist.AUTO_MODE, Assist.GRASP_HELP}
+    assert assist_label(both) == "auto-mode,grasp-help" and assist_label(frozenset()) == "none"
+
+
+@pytest.mark.parametrize("text", ["bogus", "", "none,auto-mode", "auto-mode,blend"])
+def test_unknown_or_contradictory_assist_names_are_one_line_errors(text):
+    with pytest.raises(BomiError, match="--assist"):
+        parse_assist(text)
+
+
+def test_run_task_rejects_an_unknown_assistance_before_running(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["run-task", "--operator", "joystick", "--assist", "bogus"])
+    assert exit_info.value.code == 2
+    assert "unknown bogus" in capsys.readouterr().err
+
+
+def test_a_profile_chooses_its_assistances_and_rejects_unknown_ones(tmp_path):
+    assert load_profile("P4").assist == ()  # off by default
+    on = edited_copy(PROFILE_DIR / "P4.toml", tmp_path / "on.toml", '[[nodes]]', '[assist]\noptions = ["auto-mode"]\n\n[[nodes]]')
+    assert load_profile(on).assist == ("auto-mode",)
+    bad = edited_copy(PROFILE_DIR / "P4.toml", tmp_path / "bad.toml", '[[nodes]]', '[assist]\noptions = ["teleport"]\n\n[[nodes]]')
+    with pytest.raises(BomiError, match=r"bad.toml: \[assist\] options: unknown teleport"):
+        profile_assist(load_profile(bad))
+    assert profile_assist(load_profile(on)) == {Assist.AUTO_MODE}
+
+
+def test_the_assist_file_is_validated_naming_the_file(tmp_path):
+    params = load_assist()
+    assert params.auto_mode.press_grace < params.auto_mode.press_time
+    bad = edited_copy(DEFAULT_ASSIST_FILE, tmp_path / "assist.toml", "rest_time = 0.10", "rest_time = -1")
+    with pytest.raises(BomiError, match=r"assist.toml: \[auto_mode\] rest_time must be positive"):
+        load_assist(bad)
+
+
+# ------------------------------------------------------------------------------------ time model
+def test_presses_with_one_button_go_round_the_two_axis_cycle():
+    assert presses(TWO_AXIS, ("B1",), Mode.HEIGHT, Mode.TRANSLATION) == 3
+    assert presses(TWO_AXIS, ("B1", "B2"), Mode.HEIGHT, Mode.TRANSLATION) == 1
+    assert presses(THREE_AXIS, ("B1", "B2"), Mode.TRANSLATION, Mode.FINGERS) == 1
+
+
+def test_time_to_goal_counts_the_users_presses_to_the_next_steps_mode():
+    # next step: fingers for sure, one button, 1.5 s a press: translation 3 presses, height 2, wrist 1
+    seconds = time_to_goal(TWO_AXIS, ("B1",), {Mode.FINGERS: 1.0}, 1.5)
+    assert seconds == {Mode.TRANSLATION: 4.5, Mode.HEIGHT: 3.0, Mode.WRIST: 1.5, Mode.FINGERS: 0.0}
+    # half height, half fingers: from translation 0.5 x 1 + 0.5 x 3 presses; from height 0.5 x 2;
+    # from fingers 0.5 x 2 (fingers -> translation -> height)
+    mixed = time_to_goal(TWO_AXIS, ("B1",), {Mode.HEIGHT: 0.5, Mode.FINGERS: 0.5}, 1.0)
+    assert mixed[Mode.TRANSLATION] == pytest.approx(2.0)
+    assert mixed[Mode.HEIGHT] == pytest.approx(1.0) and mixed[Mode.FINGERS] == pytest.approx(1.0)
+
+
+def test_the_next_step_is_the_first_one_still_needed():
+    steps = [Step("a", Mode.TRANSLATION, 0.5), Step("b", Mode.HEIGHT, 0.5), Step("c", Mode.FINGERS, 1.0),
+             Step("d", Mode.HEIGHT, 1.0)]
+    assert next_step_modes(steps) == {Mode.TRANSLATION: 0.5, Mode.HEIGHT: 0.25, Mode.FINGERS: 0.25}
+
+
+def _best(v: View, layout=TWO_AXIS, buttons=("B1",), likely: str | None = None):
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), layout, buttons)
+    if likely is not None:  # as after a motion toward it: e^3 = 20 times more likely than the rest
+        assist.belief.logits = {likely: 3.0}
+    return assist.best_mode(v)[0]
+
+
+def test_with_no_motion_seen_a_much_nearer_goal_decides_and_doubt_keeps_the_mode():
+    above = view(A1 + [0, 0, 0.08])  # cube 1 wants the descent (height), cube 2 (12 cm away) a travel:
+    # 77 % : 23 %, and a wrong guess costs three presses back, a right one saves one: stay
+    assert _best(above) is None
+    far = np.array([0.14, -0.30, CUBE / 2])  # 35 cm away: 97 % cube 1
+    assert _best(view(A1 + [0, 0, 0.08], cubes=(A1, far))) is Mode.HEIGHT
+    between = view((A1 + A2) / 2 + [0, 0, 0.08])  # 6 cm from each: both want a travel first
+    assert _best(between) is None
+
+
+def test_over_the_likely_cube_the_next_mode_is_the_descent_then_the_fingers():
+    above = view(A1 + [0, 0, 0.08])
+    assert _best(above, likely="grasp cube 1") is Mode.HEIGHT
+    # 3-axis: the descent is in translation already
+    assert _best(above, THREE_AXIS, ("B1", "B2"), likely="grasp cube 1") is None
+    at = view(A1 + [0.002, 0, 0.002], mode=Mode.HEIGHT)
+    assert _best(at, likely="grasp cube 1") is Mode.FINGERS
+
+
+def test_a_cube_held_low_at_a_is_raised_before_it_travels():
+    grip = np.array([0.0, 0.0, 0.0])
+    held = view(A1 + grip, closure=0.5, mode=Mode.FINGERS, touching=(True, False))
+    goals = candidate_goals(held, load_assist())
+    assert [g.label for g in goals] == ["set cube 1 down at B", "set cube 1 on cube 2"]
+    assert _best(held) is Mode.HEIGHT
+    lifted = A1 + [0, 0, 0.09]
+    high = view(lifted, closure=0.5, mode=Mode.HEIGHT, cubes=(lifted, A2), touching=(True, False))
+    assert _best(high) is Mode.TRANSLATION
+
+
+def test_motion_toward_a_cube_raises_its_probability_until_motion_toward_another_takes_over():
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), THREE_AXIS)
+    arm = FakeArm()
+    start = np.array([-0.14, -0.45, 0.15])  # between the two cubes (they lie along y)
+    for tick in range(30):  # half a second of F: toward y-, cube 1
+        assist.step(view(start, t=tick / 60), JoystickState({"F": 0.5}), arm)
+    goals = candidate_goals(view(start), assist.params)
+    p = assist.belief.probabilities(goals, start[:2], assist.params.auto_mode.proximity)
+    assert p[0] > 0.65 > 0.35 > p[1]
+    for tick in range(600):  # ten seconds at rest: what was seen is kept
+        assist.step(view(start, t=0.5 + tick / 60), JoystickState(), arm)
+    assert assist.belief.probabilities(goals, start[:2], assist.params.auto_mode.proximity)[0] == pytest.approx(p[0])
+    for tick in range(60):  # a second of B: toward y+, cube 2
+        assist.step(view(start, t=10.5 + tick / 60), JoystickState({"B": 0.5}), arm)
+    assert assist.belief.probabilities(goals, start[:2], assist.params.auto_mode.proximity)[1] > 0.65
+
+
+def test_the_users_press_wins_and_pauses_the_automation_until_they_move():
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    assist.belief.logits = {"grasp cube 1": 3.0}
+    arm = FakeArm(Mode.TRANSLATION)
+    above = A1 + [0, 0, 0.08]
+    state = assist.step(view(above, t=0.0), JoystickState(pressed=frozenset({"B1"})), arm)
+    assert state.pressed == {"B1"} and not arm.switched  # passed on untouched
+    arm.mode = Mode.HEIGHT  # the arm applied the press
+    for tick in range(1, 300):  # five seconds at rest: no switch however long
+        assist.step(view(above + [0.03, 0, 0], mode=arm.mode, t=tick / 60), JoystickState(), arm)
+    assert not arm.switched
+    assist.step(view(above, mode=arm.mode, t=5.0), JoystickState({"F": 0.2}), arm)  # moves: resumes
+    for tick in range(1, 30):
+        assist.step(view(A1 + [0, 0, 0.001], mode=arm.mode, t=5.0 + tick / 60), JoystickState(), arm)
+    assert arm.switched == [Mode.FINGERS]
+    assert len(assist.switches) == 1 and assist.switches[0].before is Mode.HEIGHT
+
+
+def test_a_press_too_soon_after_an_automatic_switch_applies_to_the_mode_the_user_saw():
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    assist.belief.logits = {"grasp cube 1": 3.0}
+    arm = FakeArm(Mode.TRANSLATION)
+    above = A1 + [0, 0, 0.08]
+    for tick in range(12):
+        assist.step(view(above, mode=arm.mode, t=tick / 60), JoystickState(), arm)
+    assert arm.mode is Mode.HEIGHT
+    t_switch = assist.switches[0].t
+    assist.step(view(above, mode=arm.mode, t=t_switch + 0.1), JoystickState(pressed=frozenset({"B1"})), arm)
+    assert arm.mode is Mode.TRANSLATION and assist.switches[0].undone  # the press then goes on from translation
+
+
+# ------------------------------------------------------------------------------------ metrics
+def test_user_and_automatic_switches_are_counted_apart():
+    t = np.arange(10) * 0.5
+    mode = ["t", "t", "h", "h", "w", "w", "w", "f", "f", "t"]  # changes at ticks 1, 3, 6, 8
+    assert metrics.user_mode_switches(mode, [1, 6]) == 2
+    # automatic at 1 (to h), left by the user at tick 3 (1.0 s later): wrong; automatic at 6, user at 8 (1.0 s): wrong
+    assert metrics.wrong_goal_switches(t, mode, [1, 6], 1.0) == 2
+    assert metrics.wrong_goal_switches(t, mode, [1, 6], 0.9) == 0
+    # automatic at 1 left by another automatic switch (not the user); that one kept 1.5 s
+    assert metrics.wrong_goal_switches(t, mode, [1, 3], 1.4) == 0
+    assert metrics.wrong_goal_switches(t, mode, [1, 3], 1.5) == 1
+
+
+# ------------------------------------------------------------------------------------ episodes
+def test_automatic_mode_switching_saves_the_joystick_users_presses_and_keeps_the_keys():
+    plain = summarize(run_episode(JoystickChannel(), operator="joystick", participant="P1", seed=300))
+    assisted_log = run_episode(JoystickChannel(), operator="joystick", participant="P1", seed=300,
+                               assist=frozenset({Assist.AUTO_MODE}))
+    assisted = summarize(assisted_log)
+    assert plain.keys() == assisted.keys()
+    assert plain["assist"] == "none" and assisted["assist"] == "auto-mode"
+    assert plain["automatic_switches"] == 0 and assisted["automatic_switches"] >= 3
+    assert assisted["success"] and assisted["mode_switches"] < plain["mode_switches"]
+    # every automatic switch is a change of the logged mode at its tick; every other change is the user's
+    for switch in assisted_log.automatic:
+        assert (assisted_log.mode[switch.tick], assisted_log.mode[switch.tick + 1]) == \
+            (switch.before.value, switch.after.value)
+    assert assisted["mode_switches"] + assisted["automatic_switches"] == metrics.count_changes(assisted_log.mode)
+
+
+def test_a_finger_function_held_across_an_early_switch_waits_for_the_rest_or_the_mask_time():
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    arm = FakeArm(Mode.FINGERS)
+    for tick in range(30):  # closing on the cube: after the squeeze the next step (rise) needs the height mode
+        out = assist.step(view(A1, closure=0.5, mode=arm.mode, touching=(True, False), t=tick / 60),
+                          JoystickState({"F": 0.8}), arm)
+    assert arm.switched == [Mode.HEIGHT] and out.deflection == {}  # F (up in height) is held back
+    t_switch = assist.switches[0].t
+    mask = assist.params.auto_mode.mask_time
+    held = assist.step(view(A1, closure=0.5, mode=arm.mode, touching=(True, False), t=t_switch + mask - 0.1),
+                       JoystickState({"F": 0.8}), arm)
+    assert held.deflection == {}
+    meant = assist.step(view(A1, closure=0.5, mode=arm.mode, touching=(True, False), t=t_switch + mask + 0.1),
+                        JoystickState({"F": 0.8}), arm)
+    assert meant.deflection == {"F": 0.8}  # still held after the mask time: the user means it in the new mode
