@@ -175,7 +175,9 @@ def write(cells: dict, settings: list[str], args: argparse.Namespace, todo: list
     text = "\n".join([
         f"# Assistance benchmark: seeds {seeds} ({args.seeds} per cell and setting)", "",
         f"Command: `python benchmarks/assist_benchmark.py --cells {args.cells} --seeds {args.seeds} "
-        f"--first-seed {args.first_seed} {' '.join('--assist ' + s for s in settings)} --jobs {args.jobs}`", "",
+        f"--first-seed {args.first_seed} {' '.join('--assist ' + s for s in settings)} --jobs {args.jobs}`"
+        + (f"; cells added from `bomi benchmark --assist S --json` runs on the same seeds with "
+           f"`--merge {' '.join(str(p) for p in args.merge)}`" if getattr(args, "merge", None) else ""), "",
         f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}. "
         f"Time limit {TIME_LIMIT:.0f} s. Wrong-goal switch: an automatic switch whose mode the user left by "
         f"their own press within {WRONG_GOAL_WINDOW_S:g} s.", "",
@@ -200,11 +202,24 @@ def main() -> None:
     parser.add_argument("--assist", action="append", help="a setting (repeat; the first is the reference)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--figure-only", action="store_true", help="redraw the figure from the saved JSON")
+    parser.add_argument("--merge", nargs="+", type=Path, metavar="BENCH.json",
+                        help="add the episodes of `bomi benchmark --json` files (run with --assist on the same seeds) "
+                             "to the saved results and rewrite them, instead of running")
     args = parser.parse_args()
     settings = [assist_label(parse_assist(s)) for s in (args.assist or ["none", "auto-mode"])]
     if args.figure_only:
         saved = json.loads((RESULTS / "assist.json").read_text(encoding="utf-8"))
         figure(saved["episodes"], saved["settings"], RESULTS / "assist.png")
+        return
+    if args.merge:
+        saved = json.loads((RESULTS / "assist.json").read_text(encoding="utf-8"))
+        cells = saved["episodes"]
+        for path in args.merge:
+            for r in json.loads(path.read_text(encoding="utf-8"))["episodes"]:
+                by_setting = cells.setdefault(cell_name(r["participant"], r["operator"]), {})
+                by_setting.setdefault(r["assist"], []).append(r)
+        merged = [name for name in saved["not_measured"] if name not in cells]
+        print(write(cells, saved["settings"], args, merged))
         return
     pairs = [tuple(c.split(":")) for c in args.cells.split(",")]
     cells: dict[str, dict[str, list[dict]]] = {}
