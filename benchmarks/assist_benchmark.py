@@ -171,13 +171,15 @@ def figure(cells: dict, settings: list[str], path: Path) -> None:
 
 def write(cells: dict, settings: list[str], args: argparse.Namespace, todo: list[str]) -> str:
     rows = table(cells, settings)
-    seeds = f"{args.first_seed}..{args.first_seed + args.seeds - 1}"
+    seeds = sorted({r["seed"] for by in cells.values() for records in by.values() for r in records})
     text = "\n".join([
-        f"# Assistance benchmark: seeds {seeds} ({args.seeds} per cell and setting)", "",
-        f"Command: `python benchmarks/assist_benchmark.py --cells {args.cells} --seeds {args.seeds} "
-        f"--first-seed {args.first_seed} {' '.join('--assist ' + s for s in settings)} --jobs {args.jobs}`"
-        + (f"; cells added from `bomi benchmark --assist S --json` runs on the same seeds with "
-           f"`--merge {' '.join(str(p) for p in args.merge)}`" if getattr(args, "merge", None) else ""), "",
+        f"# Assistance benchmark: seeds {seeds[0]}..{seeds[-1]} (episodes per cell and setting: the successes "
+        f"column's denominator; the same seeds with and without)", "",
+        (f"Episodes of `bomi benchmark --participants P --operators O --seeds N --first-seed S --assist A --json F` "
+         f"runs (one per cell and setting), merged with `python benchmarks/assist_benchmark.py --fresh --merge "
+         f"{' '.join(Path(p).name for p in args.merge)}`" if getattr(args, "merge", None) else
+         f"Command: `python benchmarks/assist_benchmark.py --cells {args.cells} --seeds {args.seeds} "
+         f"--first-seed {args.first_seed} {' '.join('--assist ' + s for s in settings)} --jobs {args.jobs}`"), "",
         f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}. "
         f"Time limit {TIME_LIMIT:.0f} s. Wrong-goal switch: an automatic switch whose mode the user left by "
         f"their own press within {WRONG_GOAL_WINDOW_S:g} s.", "",
@@ -186,7 +188,7 @@ def write(cells: dict, settings: list[str], args: argparse.Namespace, todo: list
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "assist.md").write_text(text, encoding="utf-8")
     (RESULTS / "assist.json").write_text(json.dumps(
-        {"seeds": list(range(args.first_seed, args.first_seed + args.seeds)), "settings": settings, "rows": rows,
+        {"seeds": seeds, "settings": settings, "rows": rows,
          "not_measured": todo, "episodes": {name: by for name, by in cells.items()}}, indent=2) + "\n",
         encoding="utf-8")
     figure(cells, settings, RESULTS / "assist.png")
@@ -205,6 +207,7 @@ def main() -> None:
     parser.add_argument("--merge", nargs="+", type=Path, metavar="BENCH.json",
                         help="add the episodes of `bomi benchmark --json` files (run with --assist on the same seeds) "
                              "to the saved results and rewrite them, instead of running")
+    parser.add_argument("--fresh", action="store_true", help="with --merge: start from no saved results")
     args = parser.parse_args()
     settings = [assist_label(parse_assist(s)) for s in (args.assist or ["none", "auto-mode"])]
     if args.figure_only:
@@ -212,7 +215,9 @@ def main() -> None:
         figure(saved["episodes"], saved["settings"], RESULTS / "assist.png")
         return
     if args.merge:
-        saved = json.loads((RESULTS / "assist.json").read_text(encoding="utf-8"))
+        saved_file = RESULTS / "assist.json"
+        saved = json.loads(saved_file.read_text(encoding="utf-8")) if saved_file.exists() and not args.fresh else \
+            {"episodes": {}, "settings": settings, "not_measured": []}
         cells = saved["episodes"]
         for path in args.merge:
             for r in json.loads(path.read_text(encoding="utf-8"))["episodes"]:
