@@ -60,10 +60,11 @@ def test_ray_retries_a_failed_episode_once_and_names_it(ray_cluster, tmp_path, c
     marker = tmp_path / "crashed-once"
 
     def crash_once(x):
-        if not marker.exists():
-            marker.touch()
-            os._exit(1)  # the worker process dies, as on a lost node
-        return x * 10
+        try:  # created atomically: of two workers starting together, only one crashes
+            os.close(os.open(marker, os.O_CREAT | os.O_EXCL))
+        except FileExistsError:
+            return x * 10
+        os._exit(1)  # the worker process dies, as on a lost node
 
     assert dict(RayCluster().run(crash_once, ["a", "b"])) == {0: "a" * 10, 1: "b" * 10}
     err = capsys.readouterr().err
