@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from bomi.errors import BomiError
@@ -26,68 +26,36 @@ def _number(text: str, kind: type) -> float | int:
     return value
 
 
-def positive_int(text: str) -> int:
-    value = _number(text, int)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
-    return value
-
-
-def non_negative_int(text: str) -> int:
-    value = _number(text, int)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must not be negative, got {text!r}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    value = _number(text, float)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be above 0, got {text!r}")
-    return value
-
-
-def non_negative_float(text: str) -> float:
-    value = _number(text, float)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must not be negative, got {text!r}")
-    return value
+def _ranged(name: str, kind: type, *checks: tuple[Callable[[float], bool], str]) -> Callable[[str], float]:
+    """An argparse ``type=``: the text as ``kind`` (a float finite), refused with the message of the
+    first ``(accepts, message)`` check it fails."""
+    def parse(text: str) -> float:
+        value = _number(text, kind)
+        for accepts, message in checks:
+            if not accepts(value):
+                raise argparse.ArgumentTypeError(f"{message}, got {text!r}")
+        return value
+    parse.__name__ = name  # argparse's name for the type
+    return parse
 
 
 # Longest time any option may ask for: a day, longer than any session, capture or episode; it keeps
 # arithmetic on times (sample counts, schedules) finite.
 MAX_SECONDS = 86_400.0
+_AT_MOST_A_DAY = (lambda v: v <= MAX_SECONDS, f"at most {MAX_SECONDS:g} s (a day)")
+_POSITIVE = (lambda v: v > 0, "must be above 0")
+_NON_NEGATIVE = (lambda v: v >= 0, "must not be negative")
 
-
-def seconds(text: str) -> float:
-    """A duration in seconds: above 0, at most MAX_SECONDS."""
-    value = positive_float(text)
-    if value > MAX_SECONDS:
-        raise argparse.ArgumentTypeError(f"at most {MAX_SECONDS:g} s (a day), got {text!r}")
-    return value
-
-
-def non_negative_seconds(text: str) -> float:
-    value = non_negative_float(text)
-    if value > MAX_SECONDS:
-        raise argparse.ArgumentTypeError(f"at most {MAX_SECONDS:g} s (a day), got {text!r}")
-    return value
-
-
-def open_unit_interval(text: str) -> float:
-    """A number strictly between 0 and 1 (a posterior threshold)."""
-    value = _number(text, float)
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"must be between 0 and 1 (exclusive), got {text!r}")
-    return value
-
-
-def probability(text: str) -> float:
-    """A probability in [0, 1) (of dropping a frame, of altering a byte)."""
-    value = _number(text, float)
-    if not 0 <= value < 1:
-        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text!r}")
-    return value
+positive_int = _ranged("positive_int", int, (lambda v: v >= 1, "must be at least 1"))
+non_negative_int = _ranged("non_negative_int", int, _NON_NEGATIVE)
+positive_float = _ranged("positive_float", float, _POSITIVE)
+non_negative_float = _ranged("non_negative_float", float, _NON_NEGATIVE)
+seconds = _ranged("seconds", float, _POSITIVE, _AT_MOST_A_DAY)  # a duration in seconds
+non_negative_seconds = _ranged("non_negative_seconds", float, _NON_NEGATIVE, _AT_MOST_A_DAY)
+# a posterior threshold
+open_unit_interval = _ranged("open_unit_interval", float, (lambda v: 0 < v < 1, "must be between 0 and 1 (exclusive)"))
+# of dropping a frame, of altering a byte
+probability = _ranged("probability", float, (lambda v: 0 <= v < 1, "must be in [0, 1)"))
 
 
 def add_force(parser: argparse.ArgumentParser) -> None:
