@@ -90,6 +90,15 @@ class TrainingWindows:
     recorded: np.ndarray     # (m,) True for the recorded windows, False for the synthesised smaller ones
 
 
+def recorded_priors(labels: np.ndarray, recorded: np.ndarray) -> np.ndarray:
+    """Class priors (sorted label order) from the recorded windows alone: a smaller copy of a motion is
+    another example of it, not a sign that the motion is more frequent, so the copies must not
+    lower the prior of the neutral posture (which is never copied)."""
+    classes = np.unique(labels)
+    counts = np.array([np.count_nonzero(labels[recorded] == c) for c in classes], dtype=float)
+    return counts / counts.sum()
+
+
 def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
                      amplitude_scales: Sequence[float] = ()) -> tuple[TrainingWindows, PreparedRecording]:
     """Single-label windows, plus every motion window again at each of ``amplitude_scales``.
@@ -131,7 +140,7 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         shrinkage = selection.shrinkage
     if select_rejection:
         post = replace(post, rejection_threshold=selection.rejection_threshold)
-    xs, ys, recorded_labels, angles = [], [], [], {i: [] for i in spec.nodes}
+    xs, ys, recorded, recorded_labels, angles = [], [], [], [], {i: [] for i in spec.nodes}
     known = {cls.label for cls in profile.classes}
     for rec in recordings:
         unknown = sorted(set(rec.require_labels().tolist()) - known)
@@ -140,18 +149,19 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         windows, prepared = training_windows(rec, spec, profile.neutral_samples, profile.amplitude_scales)
         xs.append(windows.features)
         ys.append(windows.labels)
+        recorded.append(windows.recorded)
         ends = windows.ends[windows.recorded]   # amplitude ranges: the recorded motions only
         recorded_labels.append(windows.labels[windows.recorded])
         for k, i in enumerate(spec.nodes):
             angles[i].append(prepared.states[ends, k * _WIDTH:k * _WIDTH + 3])
-    x, y = np.concatenate(xs), np.concatenate(ys)
+    x, y, recorded = np.concatenate(xs), np.concatenate(ys), np.concatenate(recorded)
     sources = ", ".join(rec.source for rec in recordings)
     if len(np.unique(y)) < 3:
         raise BomiError(f"{sources}: training needs windows of at least three classes held for {spec.window} "
                         f"samples each, found {np.unique(y).tolist() or 'none'}")
     with np.errstate(all="ignore"):  # degenerate signals are reported below, as defects of the model
         try:
-            classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage))
+            classes, coef, intercept = linear_parameters(fit_lda(x, y, shrinkage, recorded_priors(y, recorded)))
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise BomiError(f"{sources}: cannot train on these signals ({' '.join(str(exc).split())})") from None
         amplitude = amplitude_ranges({i: np.concatenate(a) for i, a in angles.items()}, np.concatenate(recorded_labels),
@@ -418,15 +428,17 @@ def _cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinka
         if len(np.unique(windows.labels[fit_rows])) < 3 or not test_rows[k].any():
             continue   # a fold without enough classes to fit, or nothing to test: left out
         for part, shrinkage in zip(parts, shrinkages):
-            model = _fit(windows.features[fit_rows], windows.labels[fit_rows], spec, shrinkage)
+            model = _fit(windows.features[fit_rows], windows.labels[fit_rows], spec, shrinkage,
+                         recorded_priors(windows.labels[fit_rows], windows.recorded[fit_rows]))
             for feats in test_features[1:] if references else test_features:
                 rows = test_rows[k]
                 part.append((prepared.labels[rows], model.classes, posteriors(model, feats[rows])))
     return parts
 
 
-def _fit(features: np.ndarray, labels: np.ndarray, spec: FeatureSpec, shrinkage: float | str | None) -> Model:
-    classes, coef, intercept = linear_parameters(fit_lda(features, labels, shrinkage))
+def _fit(features: np.ndarray, labels: np.ndarray, spec: FeatureSpec, shrinkage: float | str | None,
+         priors: np.ndarray) -> Model:
+    classes, coef, intercept = linear_parameters(fit_lda(features, labels, shrinkage, priors))
     return Model(classes=classes, coef=coef, intercept=intercept, spec=spec, amplitude={}, shrinkage=shrinkage)
 
 

@@ -14,8 +14,8 @@ from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
 from bomi.model_io import load_model
-from bomi.profiles import SELECT, load_profile
-from bomi.recording import NodeData, Recording, node_columns, write_recording
+from bomi.profiles import SELECT, load_profile, save_profile
+from bomi.recording import NodeData, Recording, node_columns, read_recording, write_recording
 from tasks.cli import main
 from tests.helpers import edited_copy
 
@@ -51,8 +51,8 @@ def plain_lda_accuracy(train_rec: Recording, test_rec: Recording) -> float:
 
 def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_days):
     day1, day2 = head_files
-    model_path = tmp_path / "head.json"
-    assert main(["train", str(day1), "--out", str(model_path), "--verbose"]) == 0
+    model_path, profile_path = tmp_path / "head.json", tmp_path / "head.toml"
+    assert main(["train", str(day1), "--out", str(model_path), "--save-profile", str(profile_path), "--verbose"]) == 0
     printed = capsys.readouterr().out
     assert f"{day1}: ignored 4 variable(s): Time, Commands, Gain, Who" in printed
     assert (f"no --profile: derived from {day1}: node(s) [1], FV3 (angles + GYRO), classes c0 neutral, c1 F (node 1), "
@@ -65,6 +65,17 @@ def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_day
                  "--png", str(tmp_path / "c.png")]) == 0
     accuracy = json.loads(out.read_text())["results"][0]["accuracy"]
     assert accuracy >= plain_lda_accuracy(head_only(p1_days[1]), head_only(p1_days[2])) - 0.002
+    # the derived profile, saved, is read back as itself, and the model is accepted under it
+    saved = load_profile(profile_path)
+    assert saved == replace(derive_profile([read_recording(day1)]), source=str(profile_path))
+    assert main(["evaluate", "--train", str(model_path), "--test", str(day2), "--profile", str(profile_path),
+                 "--json", str(out), "--png", str(tmp_path / "c.png"), "--force"]) == 0
+    assert json.loads(out.read_text())["results"][0]["accuracy"] == accuracy
+    before = profile_path.read_bytes()
+    assert main(["train", str(day1), "--out", str(tmp_path / "again.json"), "--save-profile", str(profile_path)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"bomi: error: {profile_path}: file exists, not overwriting it (use --force to replace it)"]
+    assert profile_path.read_bytes() == before and not (tmp_path / "again.json").exists()
     assert main(["fuse", str(day1), "--out", str(tmp_path / "fused.csv")]) == 0
     # --profile still rules, and a profile whose nodes the recording lacks is one line
     assert main(["train", str(day1), "--profile", "P1", "--out", str(tmp_path / "p1.json")]) == 2
@@ -72,6 +83,20 @@ def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_day
     assert err == [f"bomi: error: {day1}: a FV3 model needs angles, GYRO of node(s) [1, 2, 3]; missing "
                    "node 2 (none of its columns), node 3 (none of its columns)"]
     assert not (tmp_path / "p1.json").exists()
+
+
+@pytest.mark.parametrize("name", ["P1", "P4", "P5"])
+def test_saved_profile_reads_back_as_itself(tmp_path, name):
+    shipped = load_profile(name)
+    edited = replace(shipped, shrinkage=SELECT, select_rejection=True, amplitude_scales=(0.75, 0.5))
+    for k, profile in enumerate((shipped, edited)):
+        path = tmp_path / f"{name}{k}.toml"
+        save_profile(path, profile)
+        assert load_profile(path) == replace(profile, source=str(path))
+        assert load_profile(path).identity == profile.identity
+    with pytest.raises(BomiError, match="file exists"):
+        save_profile(path, shipped)
+    assert load_profile(path) == replace(edited, source=str(path))
 
 
 def test_angles_only_recording_gets_fv1(p1_days):
@@ -178,3 +203,20 @@ def test_smaller_copies_recognise_a_motion_made_at_half_its_size():
 def evaluate_labels(model, rec: Recording, label: int) -> np.ndarray:
     ev = evaluate(model, rec, 100)
     return ev.predicted[ev.truth == label]
+
+
+def test_smaller_copies_leave_the_class_priors_to_the_recorded_windows():
+    # held_motions: 10 neutral segments and 3 of each motion, 150 samples each: 143 single-label
+    # 8-sample windows per segment, so 1430 neutral and 429 per motion (by hand)
+    training = held_motions(0, {1: 20.0, 2: 20.0, 3: 20.0})
+    profile = replace(derive_profile([training]), shrinkage=None, select_rejection=False)
+    model = train([training], profile)
+    windows, _ = training_windows(training, profile.spec, 100, profile.amplitude_scales)
+    assert np.bincount(windows.labels).tolist() == [1430, 3 * 429, 3 * 429, 3 * 429]
+    priors = np.array([1430, 429, 429, 429]) / 2717
+    independent = LinearDiscriminantAnalysis(solver="lsqr", priors=priors).fit(windows.features, windows.labels)
+    np.testing.assert_allclose(model.intercept, independent.intercept_, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(model.coef, independent.coef_, rtol=1e-9, atol=1e-9)
+    # the copies' frequencies (neutral 1430/5291) would give another model
+    frequencies = LinearDiscriminantAnalysis(solver="lsqr").fit(windows.features, windows.labels)
+    assert np.abs(frequencies.intercept_ - model.intercept).max() > 1.0

@@ -15,6 +15,7 @@ from typing import Any
 
 from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
 from bomi.config_files import check_table, load_toml, typed
+from bomi.files import write_text
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration
 
@@ -99,6 +100,41 @@ def load_profile(path_or_name: str | Path, overrides: Mapping[str, Any] | None =
     """Load and validate a profile file, or a shipped one by name (P1, P4, P5); ``overrides``: dotted
     keys set before validation (``{"post_processing.rejection_threshold": 0.99}``)."""
     return load_toml(path_or_name, PROFILE_DIR, "profile", _parse, overrides)
+
+
+def profile_document(profile: Profile) -> dict:
+    """The TOML document ``load_profile`` reads back as ``profile`` (all but its ``source``)."""
+    classifier = {"shrinkage": "none" if profile.shrinkage is None else profile.shrinkage}
+    if profile.amplitude_scales:
+        classifier["amplitude_scales"] = list(profile.amplitude_scales)
+    post: dict[str, Any] = {"vote_length": profile.post.vote_length}
+    if profile.select_rejection or profile.post.rejection_threshold is not None:
+        post["rejection_threshold"] = SELECT if profile.select_rejection else profile.post.rejection_threshold
+    doc: dict[str, Any] = {
+        "name": profile.name, "description": profile.description,
+        "features": {"vector": profile.spec.kind, "window": profile.spec.window, "stride": profile.spec.stride},
+        "classifier": classifier, "neutral": {"samples": profile.neutral_samples},
+        "proportional": {"amplitude": profile.amplitude}, "post_processing": post}
+    if profile.joystick_layout is not None:
+        doc["joystick"] = {"layout": profile.joystick_layout}
+    if profile.assist:
+        doc["assist"] = {"options": list(profile.assist)}
+    doc["nodes"] = [{"index": n.index, "node_id": n.node_id, "site": n.site,
+                     "calibration": {"hard_iron": list(n.calibration.hard_iron),
+                                     "soft_iron": [list(row) for row in n.calibration.soft_iron],
+                                     "mounting": [list(row) for row in n.calibration.mounting]}}
+                    for n in profile.nodes]
+    doc["classes"] = [{"label": c.label, "name": c.name, "function": c.function} | ({} if c.node is None else {"node": c.node})
+                      for c in profile.classes]
+    return doc
+
+
+def save_profile(path: str | Path, profile: Profile, *, overwrite: bool = False) -> None:
+    """Write ``profile`` as a TOML file (atomically; an existing file only with ``overwrite``)."""
+    import tomli_w
+
+    header = f"# profile written by bomi from: {profile.source}\n"
+    write_text(path, header + tomli_w.dumps(profile_document(profile)), overwrite=overwrite)
 
 
 def _section(data: dict, name: str, allowed: set[str]) -> dict:

@@ -18,7 +18,7 @@ from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.files import atomic_output, check_input, write_text
 from bomi.fusion import NodeCalibration, fused_recording
 from bomi.model_io import SUFFIXES, check_model_for, load_model, save_model
-from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, SELECT, Profile
+from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, SELECT, Profile, save_profile
 from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_recording, write_recording
 from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
@@ -34,6 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--features", choices=FEATURE_KINDS, help="override the profile's feature vector (default: "
                                                               "the profile's)")
     p.add_argument("--out", required=True, help="model file to write (.json or .npz)")
+    p.add_argument("--save-profile", metavar="PATH", help="also write the profile the model was trained for as TOML "
+                                                          "(e.g. the derived one), for --profile PATH of live/evaluate")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     add_force(p)
     p.set_defaults(func=train_command)
@@ -143,7 +145,9 @@ def _derived(recordings: Sequence[Recording]) -> Profile:
 
 
 def train_command(args: argparse.Namespace) -> int:
-    out = check_outputs({"--out": (args.out, SUFFIXES)}, inputs=args.recordings, force=args.force)["--out"]
+    outputs = check_outputs({"--out": (args.out, SUFFIXES), "--save-profile": (args.save_profile, (".toml",))},
+                            inputs=args.recordings + ([args.profile] if args.profile else []), force=args.force)
+    out = outputs["--out"]
     for path in args.recordings:
         check_input(path, "recording")
     profile = arm_profile(args.profile) if args.profile else None
@@ -154,6 +158,10 @@ def train_command(args: argparse.Namespace) -> int:
     rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
     print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}, "
           f"rejection threshold {rejection}: wrote {out}")
+    if outputs["--save-profile"]:
+        save_profile(outputs["--save-profile"], profile, overwrite=args.force)
+        print(f"profile {profile.name}: wrote {outputs['--save-profile']} (bomi live --profile "
+              f"{outputs['--save-profile']} --model {out} ...)")
     print(class_listing(profile, model.classes.tolist()))
     return 0
 
