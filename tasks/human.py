@@ -10,7 +10,9 @@ interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: 
   std ``lateral_floor + lateral_weber x distance`` across the line of sight from the eyes and
   ``depth_ratio`` times that along it.  A judgement is made anew whenever a move of the stick
   ends, so a move ends where it was misjudged to end and the next look, from closer, brings a
-  corrective sub-movement.  The held cube moves with the hand and is seen where it is.
+  corrective sub-movement; and, during a long move, whenever a look from where the hand is now
+  would be ``closer_look`` times as uncertain as the last judgement (the homing phase is watched;
+  near the goal the error's floor stops further re-judging).  The held cube moves with the hand and is seen where it is.
 - **Timing** (``HumanTiming``): every new move or press waits a choice reaction time, drawn once:
   an ex-Gaussian simple reaction time plus ``hick_slope x log2(n + 1)`` for the n commands the
   interface offers in the current mode (Hick-Hyman); after a grasp or a release, a look to check
@@ -50,6 +52,7 @@ class HumanParams:
     lateral_floor: float
     lateral_weber: float
     depth_ratio: float
+    closer_look: float
     rt_mu: float
     rt_sigma: float
     rt_tau: float
@@ -63,7 +66,7 @@ class HumanParams:
 
 
 _SECTIONS = {
-    "perception": ("glance_interval", "visual_delay", "eye", "lateral_floor", "lateral_weber", "depth_ratio"),
+    "perception": ("glance_interval", "visual_delay", "eye", "lateral_floor", "lateral_weber", "depth_ratio", "closer_look"),
     "timing": ("rt_mu", "rt_sigma", "rt_tau", "hick_slope", "fitts_slope", "check_pause"),
     "slips": ("wrong_mode_rate", "notice_move", "notice_turn_deg", "notice_timeout"),
 }
@@ -88,7 +91,8 @@ def _parse_human(data: dict, source: str) -> HumanParams:
                     raise ValueError("[perception]: eye must be three numbers (x, y, z in metres)")
                 values[key] = np.array(eye, dtype=float)
             else:
-                values[key] = number(table, key, f"[{section}]", 0.0, 1.0 if key == "wrong_mode_rate" else math.inf)
+                values[key] = number(table, key, f"[{section}]", 0.0,
+                                     1.0 if key in ("wrong_mode_rate", "closer_look") else math.inf)
     if values["depth_ratio"] <= 0 or values["rt_sigma"] <= 0 or values["rt_tau"] <= 0:
         raise ValueError("[perception] depth_ratio, [timing] rt_sigma and rt_tau must be positive")
     return HumanParams(**values)
@@ -151,8 +155,12 @@ def judgement_error(p: HumanParams, hand: np.ndarray, distance: float, rng: np.r
     sight = sight / np.linalg.norm(sight)
     z = rng.standard_normal(3)
     along = float(np.dot(z, sight))
-    sigma = p.lateral_floor + p.lateral_weber * distance
-    return sigma * ((z - along * sight) + p.depth_ratio * along * sight)
+    return judgement_sigma(p, distance) * ((z - along * sight) + p.depth_ratio * along * sight)
+
+
+def judgement_sigma(p: HumanParams, distance: float) -> float:
+    """Std (m) across the line of sight of a judgement made from ``distance``."""
+    return p.lateral_floor + p.lateral_weber * distance
 
 
 def landmark_distance(view: View) -> float:
@@ -171,6 +179,7 @@ class Eyes:
         self._frames: deque[View] = deque()
         self._next_glance = -math.inf
         self._error: np.ndarray | None = None  # None: judge anew at the next glance
+        self._judged_sigma = math.inf  # the error std of the current judgement (judgement_sigma)
 
     def rejudge(self) -> None:
         self._error = None
@@ -184,8 +193,11 @@ class Eyes:
             return None
         self._next_glance = view.t + self.params.glance_interval
         seen = self._frames[0]
-        if self._error is None:
-            self._error = judgement_error(self.params, seen.hand_pos, landmark_distance(seen), self.rng)
+        distance = landmark_distance(seen)
+        sigma = judgement_sigma(self.params, distance)
+        if self._error is None or sigma < self.params.closer_look * self._judged_sigma:
+            self._error = judgement_error(self.params, seen.hand_pos, distance, self.rng)
+            self._judged_sigma = sigma
         e = self._error
         cubes = tuple(pos if touch else pos + e for pos, touch in zip(seen.cube_pos, seen.touching))
         return replace(seen, cube_pos=cubes, target_xy=seen.target_xy + e[:2])

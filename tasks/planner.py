@@ -24,6 +24,7 @@ from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
 CUBE_SYMMETRY = math.pi / 2  # a cube looks the same every quarter turn
 NO_HUMAN_MODEL = "none"  # [human] model: the fixed timing of [timing] alone
+OPENING_PROGRESS = 0.02  # closure the fingers must lose to be seen opening (0 open .. 1 closed)
 
 
 @dataclass(frozen=True)
@@ -209,6 +210,8 @@ class Memory:
     stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
     closing_since: float | None = None  # when the fingers (in the finger mode) began closing on a cube they do not touch yet
     opening: bool = False  # the person is opening the fingers: that goes on until the hand is open
+    missed: bool = False  # the last grasp closed on nothing: open the hand fully before trying again
+    fingers_blocked: float | None = None  # hand height where the fingers stopped opening (caught on a cube): rise first
     controls: Controls = Controls()  # the same all episode
 
 
@@ -216,17 +219,19 @@ class Memory:
 # geometry of the task, as the person judges it
 
 def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]:
-    """(cube resting on the table at B, cube resting on top of it), None where there is none."""
+    """(cube resting on the table at B, cube resting on top of it), None where there is none.  A cube
+    the fingers touch is placed only if the hand is open (it rests there; the hand is not holding it)."""
     rest_z = view.table_z + view.cube_size / 2
+    gripped = [touch and view.closure > p.open_closure for touch in view.touching]
     bottom = None
     for k, pos in enumerate(view.cube_pos):
         at_b = np.linalg.norm(pos[:2] - view.target_xy) <= p.target_zone
-        if at_b and abs(pos[2] - rest_z) <= p.placed and not view.touching[k]:
+        if at_b and abs(pos[2] - rest_z) <= p.placed and not gripped[k]:
             bottom = k
     if bottom is None:
         return None, None
     for k, pos in enumerate(view.cube_pos):
-        if k == bottom or view.touching[k]:
+        if k == bottom or gripped[k]:
             continue
         on_top = np.linalg.norm(pos[:2] - view.cube_pos[bottom][:2]) <= p.placed
         if on_top and abs(pos[2] - view.cube_pos[bottom][2] - view.cube_size) <= p.placed:
@@ -332,6 +337,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     bottom, top = placed_cubes(view, p)
     stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
     open_hand = view.closure <= p.open_closure
+    if memory.fingers_blocked is not None and not open_hand:  # the fingers are caught: lift them clear first
+        return _move("free the fingers", Phase.RISE, np.r_[view.hand_pos[:2], memory.fingers_blocked + p.hover])
     if memory.opening and not open_hand:  # a release is not taken back half-way (the touch may flicker)
         return _open("open hand")
     tilt_tolerance = math.radians(p.tilt_deg) * (p.settled_share if memory.turning else 1.0)
@@ -381,7 +388,7 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
     at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= p.reach * p.align
                 and (abs(hand[2] - grasp[2]) <= p.reach * p.stop or memory.stalled))
-    if at_grasp and (view.touching[k] or not open_hand):
+    if at_grasp and not memory.missed and (view.touching[k] or not open_hand):
         if missed_grasp(view, memory, p):
             return _open(f"missed cube {k + 1}: open hand")
         return _close(f"grasp cube {k + 1}")
@@ -435,9 +442,14 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
     _, opening_fn = memory.controls.layout.find(Kind.FINGERS, -1.0)
     closing = action.kind is ActionKind.CLOSE and view.mode is finger_mode and not any(view.touching)
+    missed = missed_grasp(view, memory, p)
+    freed = memory.fingers_blocked is not None and (
+        view.closure <= p.open_closure or view.hand_pos[2] >= memory.fingers_blocked + p.hover - p.stop)
     memory = replace(memory, turning=action.kind is ActionKind.TURN, descending=descending,
                      stalled=memory.stalled and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE))
-                     and not missed_grasp(view, memory, p),
+                     and not missed,
+                     missed=(memory.missed or missed) and not any(view.touching) and view.closure > p.open_closure,
+                     fingers_blocked=None if freed else memory.fingers_blocked,
                      closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
                      opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
     anticipation = p.anticipation if anticipation is None else anticipation
@@ -584,6 +596,7 @@ class ScriptedUser:
     _last_moving: float = -math.inf  # when the hand was last seen moving
     _released_move: bool = False  # the last thing let go was a stick move (not a button)
     _height_seen: tuple[float, float] = (-math.inf, 0.0)  # (since when, hand height) during a descent
+    _closure_seen: tuple[float, float] = (-math.inf, 0.0)  # (since when, closure) while opening the fingers
     timing: Timing | None = None  # default: FixedTiming(params)
     _reaction: float = 0.0  # the reaction drawn for the move being waited for
     _let_go_of: frozenset[Kind] = frozenset()  # what the last move let go did (nothing for a press)
@@ -606,6 +619,7 @@ class ScriptedUser:
             self._last_moving = view.t
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         self._watch_descent(view)
+        self._watch_opening(view)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation, self.timing.pace)
         if self.current.button is not None and view.mode is not self._mode_at_start:
@@ -659,6 +673,19 @@ class ScriptedUser:
             self._height_seen = (view.t, float(view.hand_pos[2]))
         elif view.t - since > self.params.stall_time:
             self.memory = replace(self.memory, stalled=True)
+
+    def _watch_opening(self, view: View) -> None:
+        """Fingers pushed open for ``miss_time`` without opening further are caught (on a cube set
+        down askew, between the cubes): the person lifts the hand before opening on."""
+        effects = self.memory.controls.layout.effects[view.mode]
+        opening = any(fn in effects and effects[fn].kind is Kind.FINGERS and effects[fn].axis < 0
+                      for fn in self.current.deflection)
+        since, closure = self._closure_seen
+        if not opening or closure - view.closure > OPENING_PROGRESS:
+            self._closure_seen = (view.t, view.closure)
+        elif view.t - since > self.params.miss_time:
+            self.memory = replace(self.memory, fingers_blocked=float(view.hand_pos[2]))
+            self._closure_seen = (view.t, view.closure)
 
     def _learn_settling(self) -> None:
         """Before a new move: update how long the hand went on moving after the last stick move was

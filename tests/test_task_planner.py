@@ -397,3 +397,43 @@ def test_a_goal_reads_as_words_and_only_a_descent_under_way_counts_as_descending
     assert str(pressing) == "reach cube 1: descend: height mode" and not pressing.descending
     assert str(Goal("grasp cube 2")) == "grasp cube 2" and not Goal("grasp cube 2").descending
     assert str(Goal()) == "rest"
+
+
+def test_after_a_missed_grasp_the_hand_opens_fully_before_trying_again():
+    off = (-0.14 + 0.01, -0.39, HALF)  # at grasp height, 1 cm beside the cube
+    intent, memory = plan(view(hand=off, mode=Mode.FINGERS, closure=0.3), Memory(), P, combine_axes=False)
+    assert str(intent.goal) == "grasp cube 1"  # closing there
+    missed = replace(memory, closing_since=0.0)
+    intent, memory = plan(view(hand=off, mode=Mode.FINGERS, closure=0.7, t=P.miss_time + 0.1), missed, P,
+                          combine_axes=False)
+    assert str(intent.goal) == "missed cube 1: open hand" and memory.missed
+    # the next look, the fingers still closed (they have not started opening): open on, not close again
+    intent, memory = plan(view(hand=off, mode=Mode.FINGERS, closure=0.7, t=P.miss_time + 0.2), memory, P,
+                          combine_axes=False)
+    assert str(intent.goal) == "open hand" and set(intent.deflection) == {"B"} and memory.missed
+    _, memory = plan(view(hand=off, mode=Mode.FINGERS, closure=0.1, t=P.miss_time + 2), memory, P, combine_axes=False)
+    assert not memory.missed  # open: the grasp is tried anew
+
+
+def test_fingers_that_stop_opening_are_lifted_clear_then_opened():
+    user = ScriptedUser(P, combine_axes=False)
+    low = (0.14, -0.45, 0.06)
+    t = 0.0
+    while t < 1.0 or not user.current.deflection:  # a half-closed hand over B, nothing held: open it
+        t += 1 / 60
+        user.stick_intent(view(hand=low, mode=Mode.FINGERS, closure=0.33, t=t, cubes=((0.14, -0.45), (0.3, -0.3))))
+    assert str(user.current.goal) == "open hand" and set(user.current.deflection) == {"B"}
+    start = t
+    while t < start + P.miss_time + 0.2:  # the fingers do not open any further
+        t += 1 / 60
+        intent = user.stick_intent(view(hand=low, mode=Mode.FINGERS, closure=0.33, t=t, cubes=((0.14, -0.45), (0.3, -0.3))))
+    assert user.memory.fingers_blocked == pytest.approx(0.06)
+    assert str(intent.goal) == "free the fingers: rise: translation mode"
+    _, memory = plan(view(hand=(0.14, -0.45, 0.06 + P.hover), closure=0.33), user.memory, P, combine_axes=False)
+    assert memory.fingers_blocked is None  # lifted clear: opening goes on from there
+
+
+def test_a_top_cube_touched_by_an_open_hand_is_placed_but_not_by_a_closed_one():
+    stacked = dict(cubes=((0.14, -0.45), (0.14, -0.45)), cube_z=(HALF, 3 * HALF), touching=(False, True))
+    assert placed_cubes(view(closure=0.05, **stacked), P) == (0, 1)
+    assert placed_cubes(view(closure=0.6, **stacked), P) == (0, None)
