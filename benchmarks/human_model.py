@@ -45,7 +45,7 @@ def episode(job: EpisodeJob) -> dict:
     record = summarize(log)
     dt = float(log.t[1] - log.t[0])
     until = int(round(log.completion_time / dt)) if log.success else None
-    record["phase_times"] = metrics.phase_times(log.goals, dt, until)
+    record["phase_times"] = metrics.phase_times(log.goals, dt, until, log.stages)
     record["mode_switch_time"] = metrics.mode_switch_time(log.mode, log.pushing, dt, until)
     return record
 

@@ -78,6 +78,7 @@ class EpisodeLog:
     sample_period: float = SAMPLE_PERIOD_S
     amplitude: str = "gamma"  # what the decisions' amplitude is: the profile's [proportional] amplitude
     goals: tuple[str, ...] = ()  # per control tick: the scripted user's step (planner Goal.step, plain words)
+    stages: tuple[str, ...] = ()  # per control tick: the stage of the step's approach (planner Phase value, or "")
     assist: str = NONE  # the assistances on (tasks.assist.assist_label)
     automatic: tuple[AutomaticSwitch, ...] = ()  # the mode switches the assistance made
     grasp_helps: int = 0  # closes the grasp help started
@@ -449,7 +450,8 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
     user = operator_user(params, channel, seed)
     assistance = Assistance(assist, channel.controls.layout, channel.controls.buttons) if assist else None
-    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal", "pushing")}
+    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal", "stage",
+                                                   "pushing")}
     film = _Film(sim, video, video_speedup) if video is not None else None
     full_speed, previous = sim.config.control.full_speed, None
     started, started_cpu = time.perf_counter(), time.process_time()
@@ -469,6 +471,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             rows["cubes"].append(np.array(view.cube_pos))
             rows["touching"].append(view.touching)
             rows["goal"].append(intent.goal.step)
+            rows["stage"].append("" if intent.goal.phase is None else intent.goal.phase.value)
             rows["pushing"].append(bool(intent.deflection))
             sim.step(state)
             if on_tick is not None:
@@ -487,6 +490,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
         touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(), goals=tuple(rows["goal"]),
+        stages=tuple(rows["stage"]),
         pushing=np.array(rows["pushing"], dtype=bool),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
         wall_time=time.perf_counter() - started, cpu_time=time.process_time() - started_cpu,

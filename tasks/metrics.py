@@ -200,13 +200,17 @@ class TaskPhase(str, enum.Enum):
 
     REACH = "reach"  # to a cube and down to it
     GRASP = "grasp"  # closing on it (and a missed grasp opened again)
-    CARRY = "carry"  # the held cube up, over its place and set down on it
+    CARRY = "carry"  # the held cube up and over its place
+    PLACE = "place"  # the held cube lowered onto its place
     RELEASE = "release"  # opening the hand, rising clear
     OTHER = "other"  # levelling a tipped hand, opening the hand before a grasp
 
 
-def phase_of(step: str) -> TaskPhase:
-    """The phase a step of the scripted user ("reach cube 1", "carry cube 2", ...) belongs to."""
+def phase_of(step: str, stage: str = "") -> TaskPhase:
+    """The phase a step of the scripted user ("reach cube 1", "carry cube 2", ...) belongs to, at
+    ``stage`` of its approach (planner ``Phase`` value: a carry's descent is the placing)."""
+    if step.startswith("carry") and stage == "descend":
+        return TaskPhase.PLACE
     for phase, starts in ((TaskPhase.REACH, ("reach",)), (TaskPhase.GRASP, ("grasp", "missed")),
                           (TaskPhase.CARRY, ("carry",)), (TaskPhase.RELEASE, ("release", "retreat", "done"))):
         if step.startswith(starts):
@@ -214,11 +218,14 @@ def phase_of(step: str) -> TaskPhase:
     return TaskPhase.OTHER
 
 
-def phase_times(steps: Sequence[str], dt: float, until: int | None = None) -> dict[str, float]:
-    """Seconds spent in each phase over the first ``until`` ticks (all by default)."""
+def phase_times(steps: Sequence[str], dt: float, until: int | None = None,
+                stages: Sequence[str] | None = None) -> dict[str, float]:
+    """Seconds spent in each phase over the first ``until`` ticks (all by default); ``stages``: the
+    approach stage per tick (without them no time counts as placing)."""
     out = {phase.value: 0.0 for phase in TaskPhase}
-    for step in steps[:until]:
-        out[phase_of(step).value] += dt
+    stages = stages if stages is not None else [""] * len(steps)
+    for step, stage in zip(steps[:until], stages[:until]):
+        out[phase_of(step, stage).value] += dt
     return out
 
 

@@ -151,8 +151,12 @@ def test_phase_times_follow_the_steps():
     from tasks.metrics import phase_times
     steps = (["reach cube 1"] * 3 + ["grasp cube 1"] * 2 + ["carry cube 1"] * 5 + ["release cube 1"]
              + ["level the hand"])
-    assert phase_times(steps, 0.5) == {"reach": 1.5, "grasp": 1.0, "carry": 2.5, "release": 0.5, "other": 0.5}
+    assert phase_times(steps, 0.5) == {"reach": 1.5, "grasp": 1.0, "carry": 2.5, "place": 0.0, "release": 0.5,
+                                       "other": 0.5}
     assert phase_times(steps, 0.5, until=4)["grasp"] == 0.5
+    stages = [""] * 5 + ["rise", "travel", "travel", "descend", "descend"] + ["", ""]
+    placing = phase_times(steps, 0.5, stages=stages)
+    assert placing["carry"] == 1.5 and placing["place"] == 1.0 and sum(placing.values()) == 6.0
 
 
 def test_mode_switch_time_spans_from_the_last_push_to_the_next():
