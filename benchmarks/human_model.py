@@ -1,16 +1,22 @@
 """The human operator model: its one fitted parameter on the joystick, then the BoMI as a prediction.
 
     python benchmarks/human_model.py calibrate [--seeds 20] [--slopes 0.35,0.5,0.65] [--jobs 1]
-    python benchmarks/human_model.py predict [--participants P1,P4,P5] [--seeds 5] [--jobs 1]
+    python benchmarks/human_model.py predict [--participants P1,P4,P5] [--seeds 5] [--first-seed 0] [--name N] [--jobs 1]
+    python benchmarks/human_model.py sensitivity [--params K,K] [--seeds 5] [--first-seed 0] [--jobs 1]
 
 ``calibrate`` runs the joystick operator (tasks/human.toml, only ``timing.fitts_slope`` varied) on
 dev seeds 0..N-1 and interpolates the slope at which the mean completion time is the paper's
 joystick mean (58 s): benchmarks/results/human_calibration.{md,json}.  Nothing of the BoMI is run.
 
 ``predict`` runs the joystick and the BoMI of each participant with tasks/human.toml as shipped
-(the operator file's ``[human] model = "human"``) on dev seeds 0..N-1: completion times against the
-paper, the BoMI/joystick ratio, time per phase and the share of time spent switching modes
-(Herlant et al. 2016: 17.4 % for able-bodied JACO users): benchmarks/results/human_model.{md,json,png}.
+(the operator file's ``[human] model = "human"``): completion times against the paper, the
+BoMI/joystick ratio, time per phase, the share of time spent switching modes (Herlant et al. 2016:
+17.4 % for able-bodied JACO users), the fastest joystick and P1 BoMI trials in the paper's layout:
+benchmarks/results/N.{md,json,png}, N_phases.png, N_best.png.  Development seeds by default; a
+held-out range (1000-4999) only once the model is frozen.
+
+``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
+benchmarks/results/human_sensitivity.{md,json}.
 """
 from __future__ import annotations
 
@@ -31,7 +37,8 @@ from tasks import metrics  # noqa: E402
 from tasks.cli.engine import ProcessPool  # noqa: E402
 from tasks.cli.task import EpisodeJob, run_job  # noqa: E402
 from tasks.episode import summarize  # noqa: E402
-from tasks.human import DEFAULT_HUMAN_FILE  # noqa: E402
+from tasks.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
+from tasks.timeline import timeline_figure  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_JOYSTICK_S = paper.TASK["joystick_time_s"]
@@ -56,27 +63,26 @@ def run(jobs: list[EpisodeJob], workers: int) -> list[dict]:
 
 
 def mean_ci(values: list[float]) -> tuple[float, float]:
-    """Mean and half-width of its 95 % Student-t interval."""
-    import scipy.stats
-    m = statistics.fmean(values)
-    if len(values) < 2:
-        return m, float("nan")
-    return m, float(scipy.stats.t.ppf(0.975, len(values) - 1) * statistics.stdev(values) / len(values) ** 0.5)
+    """Mean and half-width of its 95 % Student-t interval (``metrics.mean_ci95``; nan below two values)."""
+    interval = metrics.mean_ci95(values)
+    m = statistics.fmean(values) if values else float("nan")
+    return m, float("nan") if interval is None else (interval[1] - interval[0]) / 2
 
 
-def human_variant(directory: Path, fitts_slope: float) -> str:
-    """A copy of tasks/human.toml with another Fitts slope (the one parameter fitted)."""
+def human_variant(directory: Path, key: str, value: float) -> str:
+    """A copy of tasks/human.toml with ``key`` (a key of any table; they are unique) set to ``value``."""
     text = DEFAULT_HUMAN_FILE.read_text()
-    line = next(x for x in text.splitlines() if x.startswith("fitts_slope"))
-    path = directory / f"human_fitts_{fitts_slope:g}.toml"
-    path.write_text(text.replace(line, f"fitts_slope = {fitts_slope!r}"))
+    line = next(x for x in text.splitlines() if x.split("=")[0].strip() == key)
+    comment = line[line.index("#"):] if "#" in line else ""
+    path = directory / f"human_{key}_{value:g}.toml"
+    path.write_text(text.replace(line, f"{key} = {value!r}  {comment}"))
     return str(path)
 
 
 def calibrate(args: argparse.Namespace) -> None:
     slopes = [float(x) for x in args.slopes.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
-        jobs = [EpisodeJob("joystick", "P1", seed, overrides=(("operator.human.model", human_variant(Path(tmp), b)),))
+        jobs = [EpisodeJob("joystick", "P1", seed, overrides=(("operator.human.model", human_variant(Path(tmp), "fitts_slope", b)),))
                 for b in slopes for seed in range(args.seeds)]
         records = run(jobs, args.jobs)
     rows = []
@@ -103,40 +109,71 @@ def calibrate(args: argparse.Namespace) -> None:
     print("\n".join(lines))
 
 
+HUMAN_ON = (("operator.human.model", "human"),)
+PHASES = ("reach", "grasp", "carry", "place", "release", "other")
+
+
+def condition(job: EpisodeJob) -> str:
+    return "joystick" if job.operator == "joystick" else f"{job.participant} BoMI"
+
+
 def predict(args: argparse.Namespace) -> None:
     participants = args.participants.split(",")
-    human = (("operator.human.model", "human"),)
-    jobs = [EpisodeJob("joystick", "P1", seed, overrides=human) for seed in range(args.seeds)]
-    jobs += [EpisodeJob("bomi", p, seed, overrides=human) for p in participants for seed in range(args.seeds)]
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    jobs = [EpisodeJob("joystick", "P1", seed, overrides=HUMAN_ON) for seed in seeds]
+    jobs += [EpisodeJob("bomi", p, seed, overrides=HUMAN_ON) for p in participants for seed in seeds]
     records = run(jobs, args.jobs)
     groups: dict[str, list[dict]] = {}
     for job, r in zip(jobs, records):
-        groups.setdefault("joystick" if job.operator == "joystick" else f"{job.participant} BoMI", []).append(r)
+        groups.setdefault(condition(job), []).append(r)
     joystick = statistics.fmean(r["completion_time"] for r in groups["joystick"] if r["success"])
     paper_times = {"joystick": PAPER_JOYSTICK_S, "P1 BoMI": PAPER_BOMI_S}
-    lines = ["# Human model: joystick and BoMI completion times (dev seeds)", "",
-             f"`python benchmarks/human_model.py predict --participants {args.participants} --seeds {args.seeds}`: "
-             f"tasks/human.toml as shipped (fitted on the joystick only), seeds 0-{args.seeds - 1}.", "",
-             "| condition | successes | completion time mean (s) | 95 % CI | paper (s) | / joystick | paper ratio | "
-             "mode-switch share | reach | grasp | carry | release | other |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    seed_words = f"seeds {seeds[0]}-{seeds[-1]}" + (" (held out)" if seeds[0] >= 1000 else " (development)")
+    lines = [f"# Human model: joystick and BoMI completion times, {seed_words}", "",
+             f"`python benchmarks/human_model.py predict --participants {args.participants} --seeds {args.seeds} "
+             f"--first-seed {args.first_seed} --name {args.name}`: tasks/human.toml as shipped (fitted on the joystick "
+             f"only).", "",
+             "| condition | successes [95 % CI] | completion time mean (s) [95 % CI] | paper (s) | within 25 % | "
+             "/ joystick | paper ratio | mode-switch share | " + " | ".join(PHASES) + " |",
+             "|---|---|---|---|---|---|---|---|" + "---|" * len(PHASES)]
     for name, rs in groups.items():
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
         m, h = mean_ci(times) if times else (float("nan"), float("nan"))
+        low, high = metrics.success_ci95(len(done), len(rs))
         share = statistics.fmean(r["mode_switch_time"] / r["completion_time"] for r in done) if done else float("nan")
-        phases = {k: statistics.fmean(r["phase_times"][k] for r in done) if done else float("nan")
-                  for k in ("reach", "grasp", "carry", "release", "other")}
+        phases = {k: statistics.fmean(r["phase_times"][k] for r in done) if done else float("nan") for k in PHASES}
         ref = paper_times.get(name)
-        lines.append(f"| {name} | {len(done)}/{len(rs)} | {m:.1f} | ±{h:.1f} | {'' if ref is None else ref:} | "
-                     f"{m / joystick:.2f} | {f'{PAPER_BOMI_S / PAPER_JOYSTICK_S:.2f}' if name == 'P1 BoMI' else ''} | {100 * share:.1f} % | "
-                     + " | ".join(f"{phases[k]:.1f}" for k in phases) + " |")
-    lines += ["", f"Mode-switch share: time from the last push before a mode change to the first push after it, "
-                  f"over the completion time (Herlant et al. 2016 measured {100 * HERLANT_MODE_SWITCH_SHARE:.1f} % "
-                  f"for able-bodied JACO joystick users). Phases in seconds (mean over successful episodes)."]
+        near = "" if ref is None else ("yes" if abs(m - ref) <= 0.25 * ref else f"no ({100 * (m / ref - 1):+.0f} %)")
+        lines.append(f"| {name} | {len(done)}/{len(rs)} [{100 * low:.0f}, {100 * high:.0f}] % | {m:.1f} "
+                     f"[{m - h:.1f}, {m + h:.1f}] | {'' if ref is None else f'{ref:g}'} | {near} | {m / joystick:.2f} | "
+                     f"{f'{PAPER_BOMI_S / PAPER_JOYSTICK_S:.2f}' if name == 'P1 BoMI' else ''} | {100 * share:.1f} % | "
+                     + " | ".join(f"{phases[k]:.1f}" for k in PHASES) + " |")
+    failed = [f"{r['participant']} {r['operator']} seed {r['seed']} ({r['failure']})"
+              for rs in groups.values() for r in rs if not r["success"]]
+    lines += ["", f"Failed: {', '.join(failed) if failed else 'none'}.", "",
+              f"Mode-switch share: time from the last push before a mode change to the first push after it, "
+              f"over the completion time (Herlant et al. 2016 measured {100 * HERLANT_MODE_SWITCH_SHARE:.1f} % "
+              f"for able-bodied JACO joystick users). Phases: mean seconds over the successful episodes "
+              f"(`tasks.metrics.TaskPhase`: place = the carried cube lowered onto its place). Figures: "
+              f"{args.name}.png (times), {args.name}_phases.png (phases), {args.name}_best.png (the fastest "
+              f"joystick and P1 BoMI trials in the paper's layout: hand relative to B, then the BoMI's "
+              f"decisions and amplitude)."]
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "human_model.md").write_text("\n".join(lines) + "\n")
-    (RESULTS / "human_model.json").write_text(json.dumps({"groups": groups}, indent=1))
+    (RESULTS / f"{args.name}.md").write_text("\n".join(lines) + "\n")
+    (RESULTS / f"{args.name}.json").write_text(json.dumps({"groups": groups}, indent=1))
+    times_figure(groups, RESULTS / f"{args.name}.png")
+    phases_figure(groups, RESULTS / f"{args.name}_phases.png")
+    best = [min((r for r, j in zip(records, jobs) if condition(j) == name and r["success"]),
+                key=lambda r: r["completion_time"], default=None) for name in ("joystick", "P1 BoMI")]
+    logs = [run_job(EpisodeJob(r["operator"], r["participant"], r["seed"], overrides=HUMAN_ON))
+            for r in best if r is not None]
+    if logs:
+        timeline_figure(logs, RESULTS / f"{args.name}_best.png")
+    print("\n".join(lines))
+
+
+def times_figure(groups: dict[str, list[dict]], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(8, 4))
     for k, (name, rs) in enumerate(groups.items()):
         times = [r["completion_time"] for r in rs if r["success"]]
@@ -147,7 +184,70 @@ def predict(args: argparse.Namespace) -> None:
     ax.set_ylabel("completion time (s)")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(RESULTS / "human_model.png", dpi=110)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def phases_figure(groups: dict[str, list[dict]], path: Path) -> None:
+    """Mean seconds per task phase, one stacked bar per condition."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    names = list(groups)
+    bottom = np.zeros(len(names))
+    for phase in PHASES:
+        means = np.array([statistics.fmean(r["phase_times"][phase] for r in groups[n] if r["success"])
+                          if any(r["success"] for r in groups[n]) else 0.0 for n in names])
+        ax.bar(names, means, bottom=bottom, label=phase)
+        bottom += means
+    ax.set_ylabel("mean time per phase (s), successful episodes")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+SENSITIVE = ("fitts_slope", "rt_mu", "hick_slope", "visual_delay", "glance_interval", "lateral_weber", "depth_ratio",
+             "check_pause", "wrong_mode_rate")
+
+
+def sensitivity(args: argparse.Namespace) -> None:
+    """Each human parameter alone at 50 % and 150 % of its shipped value: joystick and P1 BoMI times, ratio."""
+    params = load_human()
+    keys = args.params.split(",")
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = [(None, None)] + [(k, f * float(getattr(params, k))) for k in keys for f in (0.5, 1.5)]
+        jobs, cells = [], []
+        for key, value in settings:
+            human = "human" if key is None else human_variant(Path(tmp), key, value)
+            for operator in ("joystick", "bomi"):
+                for seed in seeds:
+                    jobs.append(EpisodeJob(operator, "P1", seed, overrides=(("operator.human.model", human),)))
+                    cells.append((key, value, operator))
+        records = run(jobs, args.jobs)
+    table: dict[tuple, dict[str, list[float]]] = {}
+    for (key, value, operator), r in zip(cells, records):
+        entry = table.setdefault((key, value), {"joystick": [], "bomi": [], "failed": []})
+        (entry[operator] if r["success"] else entry["failed"]).append(r["completion_time"] or 0.0)
+    base = table[(None, None)]
+    base_j, base_b = statistics.fmean(base["joystick"]), statistics.fmean(base["bomi"])
+    lines = [f"# Human model sensitivity (seeds {seeds[0]}-{seeds[-1]})", "",
+             f"`python benchmarks/human_model.py sensitivity --seeds {args.seeds} --first-seed {args.first_seed}`: "
+             f"each parameter of tasks/human.toml alone at 50 % and 150 %, the same seeds; mean completion time "
+             f"of the successful episodes, P1.", "",
+             "| parameter | value | joystick (s) | change | P1 BoMI (s) | change | ratio | failures |",
+             "|---|---|---|---|---|---|---|---|",
+             f"| as shipped | | {base_j:.1f} | | {base_b:.1f} | | {base_b / base_j:.2f} | {len(base['failed'])} |"]
+    for (key, value), e in table.items():
+        if key is None:
+            continue
+        j = statistics.fmean(e["joystick"]) if e["joystick"] else float("nan")
+        b = statistics.fmean(e["bomi"]) if e["bomi"] else float("nan")
+        lines.append(f"| {key} | {value:g} | {j:.1f} | {100 * (j / base_j - 1):+.0f} % | {b:.1f} | "
+                     f"{100 * (b / base_b - 1):+.0f} % | {b / j:.2f} | {len(e['failed'])} |")
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "human_sensitivity.md").write_text("\n".join(lines) + "\n")
+    (RESULTS / "human_sensitivity.json").write_text(json.dumps(
+        [{"parameter": k, "value": v, **e} for (k, v), e in table.items()], indent=1))
     print("\n".join(lines))
 
 
@@ -157,13 +257,19 @@ def main() -> None:
     cal = sub.add_parser("calibrate", help="fit the Fitts slope on the joystick (dev seeds)")
     cal.add_argument("--seeds", type=int, default=20, help="dev seeds 0..N-1 (default 20)")
     cal.add_argument("--slopes", default="0.35,0.5,0.65", help="Fitts slopes tried, s/bit (default 0.35,0.5,0.65)")
-    pred = sub.add_parser("predict", help="joystick and BoMI with the shipped human model (dev seeds)")
+    pred = sub.add_parser("predict", help="joystick and BoMI with the shipped human model")
     pred.add_argument("--participants", default="P1,P4,P5", help="BoMI participants (default P1,P4,P5)")
-    pred.add_argument("--seeds", type=int, default=5, help="dev seeds 0..N-1 (default 5)")
-    for p in (cal, pred):
+    pred.add_argument("--name", default="human_model", help="results file name (default human_model)")
+    sens = sub.add_parser("sensitivity", help="each human parameter at 50 %% and 150 %%, joystick and P1 BoMI")
+    sens.add_argument("--params", default=",".join(SENSITIVE), help="parameters varied (default: the timing, "
+                      "perception and slip parameters)")
+    for p in (pred, sens):
+        p.add_argument("--seeds", type=int, default=5, help="episodes per condition (default 5)")
+        p.add_argument("--first-seed", type=int, default=0, help="first seed (default 0: development seeds)")
+    for p in (cal, pred, sens):
         p.add_argument("--jobs", type=int, default=1, help="parallel episodes (default 1)")
     args = parser.parse_args()
-    calibrate(args) if args.command == "calibrate" else predict(args)
+    {"calibrate": calibrate, "predict": predict, "sensitivity": sensitivity}[args.command](args)
 
 
 if __name__ == "__main__":
