@@ -36,6 +36,7 @@ import enum
 import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
+from collections.abc import Iterable
 from typing import Protocol
 
 import numpy as np
@@ -126,6 +127,7 @@ class PathParams:
     yaw_softness_deg: float
     open_closure: float
     squeeze: float
+    revisit: float
 
 
 @dataclass(frozen=True)
@@ -224,12 +226,14 @@ def _in_the_way(view: View, others: list[int], goal_xy: np.ndarray) -> float:
     return top
 
 
-def candidate_goals(view: View, params: AssistParams) -> list[Goal]:
+def candidate_goals(view: View, params: AssistParams, clearance: float | None = None) -> list[Goal]:
     """The goals the scene offers: grasp any cube; with a cube in the hand, set it down at B (if
     free) or on another cube.  Goals that leave the stack at B unfinished (grasping a cube that is
     already there, setting one down on a cube elsewhere) start less likely (``off_target_prior``).  The way there clears the cubes near
-    it by ``clearance`` (the open fingers, or the held cube, reach half a cube below the pinch point)."""
+    it by ``clearance`` (the open fingers, or the held cube, reach half a cube below the pinch point):
+    the one this user has been seen travelling at, else ``[path] clearance``."""
     path, size = params.path, view.cube_size
+    clearance = path.clearance if clearance is None else clearance
     held = held_cube(view, path.open_closure)
     others = [k for k in range(len(view.cube_pos)) if k != held]
     zone = size  # a cube counts as at B when its centre is within a cube's width of B
@@ -238,7 +242,7 @@ def candidate_goals(view: View, params: AssistParams) -> list[Goal]:
         for k in others:
             prior = params.auto_mode.off_target_prior if _at_target(view, k, zone) else 0.0  # already placed
             point = np.asarray(view.cube_pos[k], dtype=float)
-            travel_z = _in_the_way(view, others, point[:2]) + path.clearance + size / 2
+            travel_z = _in_the_way(view, others, point[:2]) + clearance + size / 2
             goals.append(Goal(f"grasp cube {k + 1}", point, travel_z, +1.0, path.grasp_near, path.grasp_height,
                               view.cube_yaw[k], prior))
         return goals
@@ -251,7 +255,7 @@ def candidate_goals(view: View, params: AssistParams) -> list[Goal]:
     places += [(f"set cube {held + 1} on cube {k + 1}", np.r_[view.cube_pos[k][:2] + grip[:2], view.cube_pos[k][2] + size + lift],
                 0.0 if _at_target(view, k, zone) else params.auto_mode.off_target_prior) for k in others]
     for label, point, prior in places:
-        travel_z = _in_the_way(view, others, point[:2]) + path.clearance + size / 2 + grip[2]
+        travel_z = _in_the_way(view, others, point[:2]) + clearance + size / 2 + grip[2]
         goals.append(Goal(label, point, travel_z, -1.0, path.place_near, path.place_height, prior=prior))
     return goals
 
@@ -266,37 +270,79 @@ def yaw_offset(hand_yaw: float, cube_yaw: float) -> float:
     return (cube_yaw - hand_yaw + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
 
 
+class PathStep(enum.Enum):
+    """The steps of a careful path to a goal, in their order."""
+
+    OPEN_HAND = "open"
+    RISE = "rise"
+    TRAVEL = "travel"
+    TURN = "turn"
+    DESCEND = "descend"
+    CLOSE = "close"
+    RELEASE = "release"
+
+
+PATH_ORDER = tuple(PathStep)
+
+
 @dataclass(frozen=True)
 class Step:
     """One step of the path to a goal: the mode it needs and the probability that it is still to be made."""
 
-    name: str
+    name: PathStep
     mode: Mode
     needed: float
 
 
-def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams) -> list[Step]:
-    """The careful path to ``goal``, step by step, each with the mode of ``layout`` that makes it."""
+def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working_on: PathStep | None = None
+               ) -> list[Step]:
+    """The careful path to ``goal``, step by step, each with the mode of ``layout`` that makes it.
+    ``working_on``: the step the user was last seen making; the steps before it are done as the
+    user sees them unless they are off by ``revisit`` times their tolerance (a person who has moved
+    on to a later step goes back only for a clearly larger error)."""
+    passed = PATH_ORDER[:PATH_ORDER.index(working_on)] if working_on is not None else ()
+    scale = {step: path.revisit if step in passed else 1.0 for step in PathStep}
     hand = view.hand_pos
     error = goal.point - hand
     xy = float(np.linalg.norm(error[:2]))
-    far = _needed(xy, goal.near, path.softness)
     up, _ = layout.find(Kind.LINEAR, (0.0, 0.0, 1.0))
     across, _ = layout.find(Kind.LINEAR, (1.0, 0.0, 0.0))
     fingers, _ = layout.find(Kind.FINGERS, goal.act)
     steps = []
     if goal.act > 0:  # a grasp needs the hand open first
         opener, _ = layout.find(Kind.FINGERS, -1.0)
-        steps.append(Step("open", opener, float(view.closure > path.open_closure)))
-    steps.append(Step("rise", up, far * _needed(goal.travel_z - hand[2], goal.height_tol, path.softness)))
-    steps.append(Step("travel", across, far))
+        steps.append(Step(PathStep.OPEN_HAND, opener, float(view.closure > path.open_closure)))
+    far = _needed(xy, goal.near, path.softness)
+    low = _needed(goal.travel_z - hand[2], goal.height_tol * scale[PathStep.RISE], path.softness)
+    steps.append(Step(PathStep.RISE, up, far * low))
+    steps.append(Step(PathStep.TRAVEL, across, _needed(xy, goal.near * scale[PathStep.TRAVEL], path.softness)))
     if goal.yaw is not None:
         turn = yaw_offset(view.hand_yaw, goal.yaw)
         turner, _ = layout.find(Kind.ANGULAR, (0.0, 0.0, 1.0 if turn >= 0 else -1.0))
-        steps.append(Step("turn", turner, _needed(math.degrees(abs(turn)), path.yaw_tol_deg, path.yaw_softness_deg)))
-    steps.append(Step("descend", up, _needed(abs(error[2]), goal.height_tol, path.softness)))
-    steps.append(Step("close" if goal.act > 0 else "open", fingers, 1.0))
+        steps.append(Step(PathStep.TURN, turner, _needed(math.degrees(abs(turn)),
+                                                         path.yaw_tol_deg * scale[PathStep.TURN], path.yaw_softness_deg)))
+    steps.append(Step(PathStep.DESCEND, up, _needed(abs(error[2]), goal.height_tol * scale[PathStep.DESCEND],
+                                                    path.softness)))
+    steps.append(Step(PathStep.CLOSE if goal.act > 0 else PathStep.RELEASE, fingers, 1.0))
     return steps
+
+
+def step_of_move(layout: Layout, mode: Mode, functions: Iterable[str], holding_cube: bool) -> PathStep | None:
+    """The path step a move of the user makes: what the held functions do in ``mode`` (the latest
+    in the path's order if several; None for a tilt of the hand, which no path step needs)."""
+    found = []
+    for fn in functions:
+        effect = layout.effects[mode].get(fn)
+        if effect is None:
+            continue
+        if effect.kind is Kind.FINGERS:
+            found.append(PathStep.CLOSE if effect.axis > 0 else PathStep.RELEASE if holding_cube else PathStep.OPEN_HAND)
+        elif effect.kind is Kind.LINEAR:
+            found.append(PathStep.TRAVEL if effect.axis[2] == 0 else PathStep.RISE if effect.axis[2] > 0
+                         else PathStep.DESCEND)
+        elif effect.axis[2] != 0:
+            found.append(PathStep.TURN)
+    return max(found, key=PATH_ORDER.index) if found else None
 
 
 def next_step_modes(steps: list[Step]) -> dict[Mode, float]:
@@ -415,6 +461,10 @@ class Assistance:
         # a mode the user left by their own press before moving in it, and where the hand was: not
         # proposed again until the hand has gone ``near`` from there
         self._refused: tuple[Mode, np.ndarray] | None = None
+        # the step the user's latest move made, and the cube held then (a grasp or a release starts anew)
+        self._working_on: tuple[int | None, PathStep] | None = None
+        # how high above the cubes in its way this user travels (seconds of travel far from the goal, their sum)
+        self._travel_seen = (0.0, 0.0)
 
     def step(self, view: View, state: JoystickState, arm: Switchable) -> JoystickState:
         """The stick the arm gets this tick; may put ``arm`` in another mode first."""
@@ -434,8 +484,14 @@ class Assistance:
             self._paused_until_move = True
             return state
         self._paused_until_move, self._moved_since_switch = False, True
+        held = held_cube(view, self.params.path.open_closure)
+        working_on = step_of_move(self.layout, view.mode, state.deflection, held is not None)
+        if working_on is not None:
+            self._working_on = (held, working_on)
         if Assist.AUTO_MODE in self.options:
-            goals = candidate_goals(view, self.params)
+            goals = candidate_goals(view, self.params, self.clearance)
+            if working_on is PathStep.TRAVEL:
+                self._learn_clearance(view, goals, arm.dt)
             self.belief.update(goals, motion_scores(view, goals, state, self.layout, self.params.path), arm.dt,
                                self.params.auto_mode)
             if self._fingers_done(view, state) and view.t >= self._paused_until:
@@ -488,16 +544,37 @@ class Assistance:
                 self._switch(tick, view, arm, best, Assist.AUTO_MODE, goal)
         return state
 
+    @property
+    def clearance(self) -> float | None:
+        """How high above the cubes in its way this user travels (the mean over the travels seen far
+        from the goal), or None before any."""
+        seconds, total = self._travel_seen
+        return total / seconds if seconds > 0 else None
+
+    def _learn_clearance(self, view: View, goals: list[Goal], dt: float) -> None:
+        """A travel toward the likely goal from farther than ``revisit`` times its nearness (not a
+        correction over it) shows the height this user travels at."""
+        weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
+        goal = goals[int(np.argmax(weights))]
+        if np.linalg.norm(goal.point[:2] - view.hand_pos[:2]) <= self.params.path.revisit * goal.near:
+            return
+        clearance = self.params.path.clearance if self.clearance is None else self.clearance
+        seen = float(view.hand_pos[2]) - (goal.travel_z - clearance)
+        seconds, total = self._travel_seen
+        self._travel_seen = (seconds + dt, total + dt * seen)
+
     def best_mode(self, view: View) -> tuple[Mode | None, str]:
         """The mode that minimises the expected time to the likely goals, if it saves ``min_gain``
         over the current one (else None), and the most likely goal's label."""
-        goals = candidate_goals(view, self.params)
+        goals = candidate_goals(view, self.params, self.clearance)
         if not goals:
             return None, ""
         weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
+        held = held_cube(view, self.params.path.open_closure)
+        working_on = self._working_on[1] if self._working_on is not None and self._working_on[0] == held else None
         expected = {m: 0.0 for m in self.layout.modes}
         for goal, weight in zip(goals, weights):
-            steps = path_steps(view, goal, self.layout, self.params.path)
+            steps = path_steps(view, goal, self.layout, self.params.path, working_on)
             for m, seconds in time_to_goal(self.layout, self.buttons, next_step_modes(steps),
                                            self.params.auto_mode.press_time).items():
                 expected[m] += weight * seconds

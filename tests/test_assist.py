@@ -8,8 +8,9 @@ from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import edited_copy
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks import metrics
-from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, Step, assist_label, candidate_goals, load_assist,
-                          next_step_modes, parse_assist, presses, profile_assist, time_to_goal)
+from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, PathStep, Step, assist_label, candidate_goals,
+                          load_assist, next_step_modes, parse_assist, presses, profile_assist, step_of_move,
+                          time_to_goal)
 from tasks.cli import main
 from tasks.episode import JoystickChannel, run_episode, summarize
 from tasks.planner import View
@@ -136,6 +137,57 @@ def test_a_cube_held_low_at_a_is_raised_before_it_travels():
     lifted = A1 + [0, 0, 0.09]
     high = view(lifted, closure=0.5, mode=Mode.HEIGHT, cubes=(lifted, A2), touching=(True, False))
     assert _best(high) is Mode.TRANSLATION
+
+
+def test_a_move_tells_which_path_step_the_user_is_making():
+    assert step_of_move(TWO_AXIS, Mode.TRANSLATION, {"R": 0.3}, False) is PathStep.TRAVEL
+    assert step_of_move(TWO_AXIS, Mode.HEIGHT, {"F": 0.3}, False) is PathStep.RISE  # F is up in the height mode
+    assert step_of_move(TWO_AXIS, Mode.HEIGHT, {"B": 0.3}, True) is PathStep.DESCEND
+    assert step_of_move(TWO_AXIS, Mode.HEIGHT, {"R": 0.3}, False) is PathStep.TURN
+    assert step_of_move(TWO_AXIS, Mode.FINGERS, {"B": 1.0}, True) is PathStep.RELEASE
+    assert step_of_move(TWO_AXIS, Mode.FINGERS, {"B": 1.0}, False) is PathStep.OPEN_HAND
+    assert step_of_move(TWO_AXIS, Mode.WRIST, {"F": 0.3}, False) is None  # a tilt: no path step
+    assert step_of_move(THREE_AXIS, Mode.TRANSLATION, {"R": 0.3, "Lr": 0.3}, False) is PathStep.DESCEND  # the later
+
+
+def _rest_after(assist, arm, hand, move, t0, mode=Mode.TRANSLATION):
+    """Half a second of ``move`` at ``hand``, then a second at rest."""
+    for tick in range(30):
+        assist.step(view(hand, mode=arm.mode, t=t0 + tick / 60), JoystickState(move), arm)
+    for tick in range(60):
+        assist.step(view(hand, mode=arm.mode, t=t0 + 0.5 + tick / 60), JoystickState(), arm)
+
+
+def test_a_user_seen_travelling_low_is_not_sent_to_rise_first():
+    # 3.5 cm beside cube 1, 18 mm below the travel height over it (its top + 2 cm + half a cube):
+    # by the path alone the rise (height mode) comes first ...
+    hand = A1 + [0.035, 0.0, CUBE / 2 + 0.02 + CUBE / 2 - 0.018]
+    assert _best(view(hand), likely="grasp cube 1") is Mode.HEIGHT
+    # ... but a user who has just travelled toward it (R: x-) at this height has the rise behind them
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    assist.belief.logits = {"grasp cube 1": 3.0}
+    arm = FakeArm(Mode.TRANSLATION)
+    _rest_after(assist, arm, hand, {"R": 0.3}, 0.0)
+    assert not arm.switched
+    # 5 cm below the travel height (more than twice its 12 mm tolerance) it rises first all the same
+    _rest_after(assist, arm, hand - [0, 0, 0.032], {"R": 0.3}, 2.0)
+    assert arm.switched == [Mode.HEIGHT]
+
+
+def test_the_travel_height_is_learnt_from_the_users_travels_far_from_the_goal():
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    assist.belief.logits = {"grasp cube 1": 3.0}
+    arm = FakeArm(Mode.TRANSLATION)
+    over = A1 + [0, 0, CUBE / 2 + CUBE / 2]  # cube 1's top + half a cube: the open fingers just clear it
+    _rest_after(assist, arm, over + [0.03, 0, 0.06], {"R": 0.3}, 0.0)  # 3 cm away: a correction
+    assert assist.clearance is None
+    _rest_after(assist, arm, over + [0.12, 0, 0.06], {"R": 0.3}, 2.0)  # 12 cm away: a travel, 6 cm over
+    assert assist.clearance == pytest.approx(0.06)
+    # 12 cm away and 3 cm lower than that user travels: rise first (the prior 2 cm would have said travel on)
+    low = over + [0.12, 0, 0.03]
+    assert assist.best_mode(view(low, mode=Mode.TRANSLATION))[0] is Mode.HEIGHT
+    assert Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",)).best_mode(view(low, mode=Mode.TRANSLATION))[0] \
+        is None
 
 
 def test_motion_toward_a_cube_raises_its_probability_until_motion_toward_another_takes_over():
