@@ -418,17 +418,21 @@ class GoalBelief:
 def motion_scores(view: View, goals: list[Goal], state: JoystickState, layout: Layout, path: PathParams
                   ) -> np.ndarray:
     """How well the commanded motion fits each goal, in [-1, 1]: the cosine between the commanded
-    horizontal motion and the way to the goal (over it already: -0.5, it asks for none); a turn
-    about the vertical toward a grasp's heading.  Rising and descending tell nothing: every goal
-    is reached from above."""
-    linear = combine(state.deflection, layout.axes(view.mode, Kind.LINEAR))[:2]
+    horizontal motion and the way to the goal (over it already: -0.5, it asks for none); a descent
+    fits the goals below the hand (over them within ``revisit`` times their nearness: +1, the
+    others -0.5: a person goes down only onto their goal); a turn about the vertical toward a
+    grasp's heading.  Rising tells nothing: every goal is left upward."""
+    linear = combine(state.deflection, layout.axes(view.mode, Kind.LINEAR))
     angular = combine(state.deflection, layout.axes(view.mode, Kind.ANGULAR))
     scores = np.zeros(len(goals))
     for i, goal in enumerate(goals):
-        if np.linalg.norm(linear) > 0:
-            wanted = goal.point[:2] - view.hand_pos[:2]
-            norm = np.linalg.norm(wanted)
-            scores[i] = float(np.dot(linear, wanted) / (np.linalg.norm(linear) * norm)) if norm > goal.near else -0.5
+        wanted = goal.point - view.hand_pos
+        xy = float(np.linalg.norm(wanted[:2]))
+        if np.linalg.norm(linear[:2]) > 0:
+            scores[i] = float(np.dot(linear[:2], wanted[:2]) / (np.linalg.norm(linear[:2]) * xy)) if xy > goal.near \
+                else -0.5
+        elif linear[2] < 0:
+            scores[i] = 1.0 if xy <= path.revisit * goal.near and wanted[2] < 0 else -0.5
         elif abs(angular[2]) > 0 and goal.yaw is not None:
             turn = yaw_offset(view.hand_yaw, goal.yaw)
             lined_up = abs(math.degrees(turn)) <= path.yaw_tol_deg / 2
@@ -463,8 +467,10 @@ class Assistance:
         self._refused: tuple[Mode, np.ndarray] | None = None
         # the step the user's latest move made, and the cube held then (a grasp or a release starts anew)
         self._working_on: tuple[int | None, PathStep] | None = None
-        # how high above the cubes in its way this user travels (seconds of travel far from the goal, their sum)
-        self._travel_seen = (0.0, 0.0)
+        # how high above the cubes in its way this user travels (None: not seen yet), and whether the
+        # user's latest moves were a rise (a travel right after it shows the height they chose)
+        self._clearance: float | None = None
+        self._rose = False
 
     def step(self, view: View, state: JoystickState, arm: Switchable) -> JoystickState:
         """The stick the arm gets this tick; may put ``arm`` in another mode first."""
@@ -491,7 +497,9 @@ class Assistance:
         if Assist.AUTO_MODE in self.options:
             goals = candidate_goals(view, self.params, self.clearance)
             if working_on is PathStep.TRAVEL:
-                self._learn_clearance(view, goals, arm.dt)
+                self._learn_clearance(view, goals)
+            elif working_on is not None:
+                self._rose = working_on is PathStep.RISE
             self.belief.update(goals, motion_scores(view, goals, state, self.layout, self.params.path), arm.dt,
                                self.params.auto_mode)
             if self._fingers_done(view, state) and view.t >= self._paused_until:
@@ -546,22 +554,21 @@ class Assistance:
 
     @property
     def clearance(self) -> float | None:
-        """How high above the cubes in its way this user travels (the mean over the travels seen far
-        from the goal), or None before any."""
-        seconds, total = self._travel_seen
-        return total / seconds if seconds > 0 else None
+        """How high above the cubes in its way this user travels, as seen (None before any travel
+        told it)."""
+        return self._clearance
 
-    def _learn_clearance(self, view: View, goals: list[Goal], dt: float) -> None:
+    def _learn_clearance(self, view: View, goals: list[Goal]) -> None:
         """A travel toward the likely goal from farther than ``revisit`` times its nearness (not a
-        correction over it) shows the height this user travels at."""
+        correction over it): right after a rise, its height is the one this user chose; otherwise
+        the user travels at whatever height they are, and it only shows that they need no more."""
         weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
         goal = goals[int(np.argmax(weights))]
         if np.linalg.norm(goal.point[:2] - view.hand_pos[:2]) <= self.params.path.revisit * goal.near:
             return
-        clearance = self.params.path.clearance if self.clearance is None else self.clearance
+        clearance = self.params.path.clearance if self._clearance is None else self._clearance
         seen = float(view.hand_pos[2]) - (goal.travel_z - clearance)
-        seconds, total = self._travel_seen
-        self._travel_seen = (seconds + dt, total + dt * seen)
+        self._clearance = seen if self._rose else min(clearance, seen)
 
     def best_mode(self, view: View) -> tuple[Mode | None, str]:
         """The mode that minimises the expected time to the likely goals, if it saves ``min_gain``

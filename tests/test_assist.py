@@ -139,6 +139,26 @@ def test_a_cube_held_low_at_a_is_raised_before_it_travels():
     assert _best(high) is Mode.TRANSLATION
 
 
+def test_a_descent_points_at_the_goal_below_the_hand():
+    # over cube 1 but, after a travel that seemed to head for cube 2, cube 2 is thought the goal
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    assist.belief.logits = {"grasp cube 2": 3.0}
+    arm = FakeArm(Mode.HEIGHT)
+    above = A1 + [0.005, 0, 0.07]
+    goals = candidate_goals(view(above), assist.params)
+    before = assist.belief.probabilities(goals, above[:2], assist.params.auto_mode.proximity)
+    for tick in range(60):  # a second of B (down, in the height mode)
+        assist.step(view(above - [0, 0, 0.0005 * tick], mode=arm.mode, t=tick / 60), JoystickState({"B": 0.3}), arm)
+    after = assist.belief.probabilities(goals, above[:2], assist.params.auto_mode.proximity)
+    assert after[0] > 0.5 > before[0]
+    # rising says nothing: the same second of F leaves the belief as it was (less what fades)
+    rising = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    rising.belief.logits = {"grasp cube 2": 3.0}
+    for tick in range(60):
+        rising.step(view(above, mode=Mode.HEIGHT, t=tick / 60), JoystickState({"F": 0.3}), FakeArm(Mode.HEIGHT))
+    assert rising.belief.probabilities(goals, above[:2], rising.params.auto_mode.proximity)[0] < 0.5
+
+
 def test_a_move_tells_which_path_step_the_user_is_making():
     assert step_of_move(TWO_AXIS, Mode.TRANSLATION, {"R": 0.3}, False) is PathStep.TRAVEL
     assert step_of_move(TWO_AXIS, Mode.HEIGHT, {"F": 0.3}, False) is PathStep.RISE  # F is up in the height mode
@@ -174,14 +194,23 @@ def test_a_user_seen_travelling_low_is_not_sent_to_rise_first():
     assert arm.switched == [Mode.HEIGHT]
 
 
-def test_the_travel_height_is_learnt_from_the_users_travels_far_from_the_goal():
+def test_the_travel_height_is_learnt_from_the_users_rise_then_travel():
     assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
     assist.belief.logits = {"grasp cube 1": 3.0}
     arm = FakeArm(Mode.TRANSLATION)
     over = A1 + [0, 0, CUBE / 2 + CUBE / 2]  # cube 1's top + half a cube: the open fingers just clear it
-    _rest_after(assist, arm, over + [0.03, 0, 0.06], {"R": 0.3}, 0.0)  # 3 cm away: a correction
+    _rest_after(assist, arm, over + [0.03, 0, 0.06], {"R": 0.3}, 0.0)  # 3 cm away: a correction, tells nothing
     assert assist.clearance is None
-    _rest_after(assist, arm, over + [0.12, 0, 0.06], {"R": 0.3}, 2.0)  # 12 cm away: a travel, 6 cm over
+    arm.mode = Mode.TRANSLATION
+    _rest_after(assist, arm, over + [0.12, 0, 0.06], {"R": 0.3}, 2.0)  # a travel high up: no more than 2 cm needed
+    assert assist.clearance == pytest.approx(0.02)
+    arm.mode = Mode.TRANSLATION
+    _rest_after(assist, arm, over + [0.12, 0, 0.01], {"R": 0.3}, 4.0)  # a travel 1 cm over: 1 cm will do
+    assert assist.clearance == pytest.approx(0.01)
+    arm.mode = Mode.HEIGHT
+    _rest_after(assist, arm, over + [0.12, 0, 0.03], {"F": 0.3}, 6.0)  # F in the height mode: a rise ...
+    arm.mode = Mode.TRANSLATION
+    _rest_after(assist, arm, over + [0.12, 0, 0.06], {"R": 0.3}, 8.0)  # ... then a travel: the height they chose
     assert assist.clearance == pytest.approx(0.06)
     # 12 cm away and 3 cm lower than that user travels: rise first (the prior 2 cm would have said travel on)
     low = over + [0.12, 0, 0.03]
