@@ -7,7 +7,7 @@ Node state = neutral-subtracted (pitch, roll, yaw) + gyroscope as the recording 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -82,41 +82,91 @@ def prepare(rec: Recording, spec: FeatureSpec, neutral_samples: int) -> Prepared
 
 @dataclass
 class TrainingWindows:
-    """The single-label windows of one recording (and the smaller copies of its motions) to fit on."""
+    """The single-label windows of one recording (and the synthesised copies of its motions) to fit on."""
 
     features: np.ndarray     # (m, F)
     labels: np.ndarray       # (m,)
     ends: np.ndarray         # (m,) last sample of each window in the recording (a copy shares its original's)
-    recorded: np.ndarray     # (m,) True for the recorded windows, False for the synthesised smaller ones
+    recorded: np.ndarray     # (m,) True for the recorded windows, False for the synthesised copies
 
 
 def recorded_priors(labels: np.ndarray, recorded: np.ndarray) -> np.ndarray:
-    """Class priors (sorted label order) from the recorded windows alone: a smaller copy of a motion is
-    another example of it, not a sign that the motion is more frequent, so the copies must not
+    """Class priors (sorted label order) from the recorded windows alone: a synthesised copy of a motion
+    is another example of it, not a sign that the motion is more frequent, so the copies must not
     lower the prior of the neutral posture (which is never copied)."""
     classes = np.unique(labels)
     counts = np.array([np.count_nonzero(labels[recorded] == c) for c in classes], dtype=float)
     return counts / counts.sum()
 
 
+@dataclass(frozen=True)
+class MotionCopies:
+    """The synthesised training copies of the recorded motions (a profile's ``[classifier]`` options).
+
+    ``scales``: every motion again at these fractions of its size. ``spread_degrees``: the motions of
+    ``spread_nodes`` (class -> carrying node) again with their angle changes on that node turned by
+    +-spread about each of the two axes perpendicular to the class's mean direction.
+    """
+
+    scales: tuple[float, ...] = ()
+    spread_degrees: float = 0.0
+    spread_nodes: Mapping[int, int] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, profile: Profile) -> MotionCopies:
+        return cls(profile.amplitude_scales, profile.direction_spread,
+                   profile.lone_class_nodes if profile.direction_spread else {})
+
+
+def rotated_about(vectors: np.ndarray, axis: np.ndarray, radians: float) -> np.ndarray:
+    """(n, 3) vectors turned by ``radians`` about the unit ``axis`` (Rodrigues' formula)."""
+    c, s = np.cos(radians), np.sin(radians)
+    return vectors * c + np.cross(axis, vectors) * s + np.outer(vectors @ axis, axis) * (1.0 - c)
+
+
+def _spread_states(states: np.ndarray, labels: np.ndarray, slot: int, radians: float) -> list[np.ndarray]:
+    """Copies of ``states`` with the angles (node ``slot``) of the samples labelled by the class turned
+    by +-radians about the two axes perpendicular to the class's mean angle change."""
+    angles = slice(slot * _WIDTH, slot * _WIDTH + 3)
+    direction = states[labels, angles].mean(axis=0)
+    direction /= np.linalg.norm(direction)
+    perpendicular = np.linalg.svd(direction[None])[2][1:]   # two unit axes orthogonal to it and to each other
+    copies = []
+    for axis in perpendicular:
+        for sign in (1.0, -1.0):
+            turned = states.copy()
+            turned[labels, angles] = rotated_about(states[labels, angles], axis, sign * radians)
+            copies.append(turned)
+    return copies
+
+
 def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
-                     amplitude_scales: Sequence[float] = ()) -> tuple[TrainingWindows, PreparedRecording]:
-    """Single-label windows, plus every motion window again at each of ``amplitude_scales``.
+                     copies: MotionCopies = MotionCopies()) -> tuple[TrainingWindows, PreparedRecording]:
+    """Single-label windows, plus the ``copies`` of the motion windows.
 
     A smaller copy of a motion scales every node's neutral-subtracted angles and gyroscope over the
     motion's samples by the factor (the same motion made smaller: the paper's multiple-amplitude
-    training), then its features are computed as for a recorded window. Neutral windows are not copied.
+    training); a turned copy turns the carrying node's angle change about the neutral posture (the
+    same motion made in a somewhat other direction; the gyroscope, whose axes are not the angles',
+    is left as recorded). Features are computed as for a recorded window. Neutral windows are not copied.
     """
     prepared = prepare(rec, spec, neutral_samples)
     pure = prepared.pure
     parts = [(prepared.features[pure], prepared.labels[pure], prepared.ends[pure], True)]
     motion_samples = rec.labels != NEUTRAL_LABEL
     motion_windows = pure & (prepared.labels != NEUTRAL_LABEL)
-    for scale in amplitude_scales:
+    for scale in copies.scales:
         states = prepared.states.copy()
         states[motion_samples] *= scale
         parts.append((window_features(states, spec)[motion_windows], prepared.labels[motion_windows],
                       prepared.ends[motion_windows], False))
+    for label, node in copies.spread_nodes.items():
+        samples, windows = rec.labels == label, pure & (prepared.labels == label)
+        if not samples.any():
+            continue
+        for states in _spread_states(prepared.states, samples, spec.nodes.index(node),
+                                     np.radians(copies.spread_degrees)):
+            parts.append((window_features(states, spec)[windows], prepared.labels[windows], prepared.ends[windows], False))
     windows = TrainingWindows(*(np.concatenate([part[k] for part in parts]) for k in range(3)),
                               np.concatenate([np.full(len(part[1]), part[3]) for part in parts]))
     return windows, prepared
@@ -146,7 +196,7 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         unknown = sorted(set(rec.require_labels().tolist()) - known)
         if unknown:
             raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of profile {profile.name}")
-        windows, prepared = training_windows(rec, spec, profile.neutral_samples, profile.amplitude_scales)
+        windows, prepared = training_windows(rec, spec, profile.neutral_samples, MotionCopies.of(profile))
         xs.append(windows.features)
         ys.append(windows.labels)
         recorded.append(windows.recorded)
@@ -414,7 +464,7 @@ def _align(piece: tuple, classes: np.ndarray) -> tuple:
 def _cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec, shrinkages: Sequence[float | str | None],
                     n_folds: int, drift: bool) -> list[list[tuple]]:
     labels = rec.require_labels()
-    windows, prepared = training_windows(rec, spec, profile.neutral_samples, profile.amplitude_scales)
+    windows, prepared = training_windows(rec, spec, profile.neutral_samples, MotionCopies.of(profile))
     folds = segment_folds(labels, n_folds)
     inside = single_label_windows(labels * n_folds + folds, spec.window, spec.stride)  # not across a chunk boundary
     train_fold = np.where(inside[(windows.ends - (spec.window - 1)) // spec.stride], folds[windows.ends], -1)
@@ -468,6 +518,10 @@ def select_settings(recordings: Sequence[Recording], profile: Profile, spec: Fea
     on a tie); rejection threshold: the highest of THRESHOLD_GRID that rejects at most
     MAX_CV_REJECTED of the drift-aware CV windows, rejection off when none does. Without enough data
     for the cross-validation: Ledoit-Wolf shrinkage, rejection off."""
+    # The turned copies (direction_spread) stand for how a motion's direction changes from one day to
+    # another, which a cross-validation within the recording cannot see (it is chosen across days):
+    # the settings are compared without them.
+    profile = replace(profile, direction_spread=0.0)
     try:
         results = cross_validate(recordings, profile, spec, SHRINKAGE_GRID, drift=True)
     except BomiError as exc:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -165,10 +166,13 @@ def test_command_errors_are_one_line(tmp_path, capsys, shared_data):
 
 
 def test_p1_profile_ships_the_day1_selection(p1_days, p1_profile):
-    """P1.toml's LDA shrinkage is what the drift-aware cross-validation on day 1 alone chooses."""
+    """P1.toml's LDA shrinkage is what the drift-aware cross-validation on day 1 alone chooses (the
+    cross-validation leaves P1's turned shoulder copies out: it cannot judge a cross-day setting)."""
     chosen = select_settings([p1_days[1]], p1_profile, p1_profile.spec)
-    assert chosen.shrinkage == p1_profile.shrinkage
+    assert chosen.shrinkage == p1_profile.shrinkage == 0.001 and p1_profile.direction_spread == 30
     assert chosen.drift_accuracy[chosen.shrinkage] == max(chosen.drift_accuracy.values())
     assert chosen.drift_rejected[chosen.rejection_threshold] <= 0.01
+    assert chosen.drift_accuracy == select_settings([p1_days[1]], replace(p1_profile, direction_spread=0.0),
+                                                    p1_profile.spec).drift_accuracy
     # re-referencing with later neutral postures is what separates the candidates: unshrunk FV3 suffers
     assert chosen.drift_accuracy[None] < chosen.drift_accuracy[chosen.shrinkage] - 0.003

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from bomi.chain import prepare
+from bomi.chain import MotionCopies, prepare, recorded_priors, training_windows
 from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, class_amplitude,
                              classify_windows, fit_lda, gamma, majority_vote, posteriors, proportional, reject)
 from tasks.cli import main
@@ -16,9 +16,10 @@ from bomi.model_io import FORMAT_VERSION, load_model, save_model
 
 def test_posteriors_are_sklearns(p1_days, p1_profile, day1_fv1_model):
     """The exported linear discriminant reproduces the fitted sklearn estimator on real data."""
-    prepared = prepare(p1_days[1], day1_fv1_model.spec, p1_profile.neutral_samples)
-    x, y = prepared.features[prepared.pure], prepared.labels[prepared.pure]
-    lda = fit_lda(x, y, day1_fv1_model.shrinkage)
+    windows, _ = training_windows(p1_days[1], day1_fv1_model.spec, p1_profile.neutral_samples,
+                                  MotionCopies.of(p1_profile))   # P1's turned shoulder copies too
+    lda = fit_lda(windows.features, windows.labels, day1_fv1_model.shrinkage,
+                  recorded_priors(windows.labels, windows.recorded))
     test = prepare(p1_days[2], day1_fv1_model.spec, p1_profile.neutral_samples).features
     assert np.allclose(posteriors(day1_fv1_model, test), lda.predict_proba(test), rtol=0, atol=1e-12)
     assert np.array_equal(classify_windows(day1_fv1_model, test).raw, lda.predict(test))

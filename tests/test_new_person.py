@@ -9,7 +9,7 @@ import pytest
 import scipy.io
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
-from bomi.chain import MAX_CV_REJECTED, evaluate, prepare, select_settings, train, training_windows
+from bomi.chain import MAX_CV_REJECTED, MotionCopies, evaluate, prepare, select_settings, train, training_windows
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
@@ -88,7 +88,7 @@ def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_day
 @pytest.mark.parametrize("name", ["P1", "P4", "P5"])
 def test_saved_profile_reads_back_as_itself(tmp_path, name):
     shipped = load_profile(name)
-    edited = replace(shipped, shrinkage=SELECT, select_rejection=True, amplitude_scales=(0.75, 0.5))
+    edited = replace(shipped, shrinkage=SELECT, select_rejection=True, amplitude_scales=(0.75, 0.5), direction_spread=12.5)
     for k, profile in enumerate((shipped, edited)):
         path = tmp_path / f"{name}{k}.toml"
         save_profile(path, profile)
@@ -147,7 +147,7 @@ def test_settings_rule_always_returns_a_usable_choice():
 def test_smaller_copies_scale_every_node_and_keep_the_amplitude_ranges(p1_days, p1_profile):
     rec = p1_days[1]
     spec = FeatureSpec("FV1", p1_profile.node_indices)
-    windows, prepared = training_windows(rec, spec, 100, (0.5,))
+    windows, prepared = training_windows(rec, spec, 100, MotionCopies((0.5,)))
     recorded, copies = windows.recorded, ~windows.recorded
     assert np.all(windows.labels[copies] != 0) and recorded.sum() == prepared.pure.sum()
     # FV1 is a window mean: a copy of a motion window is exactly half the recorded one (by hand)
@@ -168,6 +168,7 @@ def test_profile_settings_select_and_scales(tmp_path):
     profile = load_profile(path)
     assert profile.shrinkage == SELECT and profile.select_rejection and profile.amplitude_scales == (0.75, 0.5)
     for old, new, message in [("amplitude_scales = [0.75, 0.5]", "amplitude_scales = [1.5]", "amplitude_scales must be fractions"),
+                              ("direction_spread = 30", "direction_spread = 90", r"'direction_spread' must be a number in \[0.0, 89.0\]"),
                               ('rejection_threshold = "select"', 'rejection_threshold = "best"', "rejection_threshold must be"),
                               ('shrinkage = "select"', 'shrinkage = "pick"', 'shrinkage must be "select"')]:
         bad = edited_copy(path, tmp_path / "bad.toml", old, new)
@@ -211,7 +212,7 @@ def test_smaller_copies_leave_the_class_priors_to_the_recorded_windows():
     training = held_motions(0, {1: 20.0, 2: 20.0, 3: 20.0})
     profile = replace(derive_profile([training]), shrinkage=None, select_rejection=False)
     model = train([training], profile)
-    windows, _ = training_windows(training, profile.spec, 100, profile.amplitude_scales)
+    windows, _ = training_windows(training, profile.spec, 100, MotionCopies.of(profile))
     assert np.bincount(windows.labels).tolist() == [1430, 3 * 429, 3 * 429, 3 * 429]
     priors = np.array([1430, 429, 429, 429]) / 2717
     independent = LinearDiscriminantAnalysis(solver="lsqr", priors=priors).fit(windows.features, windows.labels)
@@ -220,3 +221,35 @@ def test_smaller_copies_leave_the_class_priors_to_the_recorded_windows():
     # the copies' frequencies (neutral 1430/5291) would give another model
     frequencies = LinearDiscriminantAnalysis(solver="lsqr").fit(windows.features, windows.labels)
     assert np.abs(frequencies.intercept_ - model.intercept).max() > 1.0
+
+
+def test_turned_copies_keep_the_size_and_turn_the_direction_by_the_spread():
+    # node 1 carries c1 and c2, node 2 carries c3 alone: only c3 is turned; its samples move node 2
+    # by exactly 20 deg of roll, so every turned copy keeps roll 20 cos 30 = 17.32 and puts
+    # 20 sin 30 = 10 deg on the two perpendicular axes: over the four copies of one window the
+    # squared pitch sums to 2 * 10^2 = 200 (FV1 holds node 2's pitch and roll, not its yaw)
+    labels = np.concatenate([np.zeros(150, int)] + [np.repeat([k, 0], 150) for _ in range(3) for k in (1, 2, 3)])
+    head, shoulder = np.zeros((len(labels), 3)), np.zeros((len(labels), 3))
+    head[labels == 1, 0], head[labels == 2, 1], shoulder[labels == 3, 1] = 20.0, 20.0, 20.0
+    rec = Recording({1: NodeData(angles=head), 2: NodeData(angles=shoulder)}, labels, source="turned")
+    profile = replace(derive_profile([rec]), amplitude_scales=(), direction_spread=30.0)
+    assert profile.lone_class_nodes == {3: 2}
+    windows, _ = training_windows(rec, replace(profile.spec, kind="FV1"), 100, MotionCopies.of(profile))
+    copies = ~windows.recorded
+    assert set(windows.labels[copies].tolist()) == {3} and copies.sum() == 4 * 3 * 143
+    pitch, roll = windows.features[copies, 3], windows.features[copies, 4]   # node 2: features 3, 4 of FV1
+    np.testing.assert_allclose(roll, 20 * np.cos(np.radians(30)), atol=1e-9)
+    by_window = (pitch ** 2).reshape(4, -1).sum(axis=0)
+    np.testing.assert_allclose(by_window, 200.0, atol=1e-9)
+    np.testing.assert_allclose(windows.features[copies][:, :3], 0.0, atol=1e-12)   # node 1 untouched
+
+
+def test_turned_copies_read_a_shoulder_motion_made_in_another_direction(p1_days, p1_profile):
+    # P1's right shoulder (c7) is roll -21, pitch +3 deg on day 5 and roll -10, pitch +8 on day 4:
+    # the day-5 model reads 7 % of day 4's c7 windows as c7, trained with c7 turned by +-30 deg 89 %
+    recall = {}
+    for spread in (0.0, 30.0):
+        ev = evaluate(train([p1_days[5]], replace(p1_profile, direction_spread=spread)), p1_days[4], 100)
+        recall[spread] = np.mean(ev.predicted[ev.truth == 7] == 7)
+        assert np.mean(ev.predicted[ev.truth == 0] == 0) > 0.999   # and the neutral posture stays neutral
+    assert recall[0.0] < 0.1 and recall[30.0] > 0.85

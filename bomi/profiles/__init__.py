@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
-from bomi.config_files import check_table, load_toml, typed
+from bomi.config_files import check_table, load_toml, number, typed
 from bomi.files import write_text
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.fusion import NodeCalibration
@@ -66,6 +66,9 @@ class Profile:
     joystick_layout: str | None = None  # the device's layout the classes drive (None: the device's default)
     select_rejection: bool = False  # rejection threshold chosen on the training recording (post.rejection_threshold unused)
     amplitude_scales: tuple[float, ...] = ()  # training also sees every motion at these fractions of its size
+    # training also sees each motion alone on its carrying node turned by +-this many degrees about
+    # the neutral posture (bomi.chain.MotionCopies); 0: off
+    direction_spread: float = 0.0
     # the assistances on unless a run says otherwise ([assist] options; names checked where the
     # profile meets the arm, tasks/assist.py)
     assist: tuple[str, ...] = ()
@@ -77,6 +80,13 @@ class Profile:
     @property
     def class_nodes(self) -> dict[int, int]:
         return {cls.label: cls.node for cls in self.classes if cls.node is not None}
+
+    @property
+    def lone_class_nodes(self) -> dict[int, int]:
+        """Motion class -> carrying node, for the classes that are the only one their node carries:
+        there the node's direction only tells the motion from the neutral posture, not from another motion."""
+        nodes = list(self.class_nodes.values())
+        return {label: node for label, node in self.class_nodes.items() if nodes.count(node) == 1}
 
     @property
     def identity(self) -> ProfileIdentity:
@@ -107,6 +117,8 @@ def profile_document(profile: Profile) -> dict:
     classifier = {"shrinkage": "none" if profile.shrinkage is None else profile.shrinkage}
     if profile.amplitude_scales:
         classifier["amplitude_scales"] = list(profile.amplitude_scales)
+    if profile.direction_spread:
+        classifier["direction_spread"] = profile.direction_spread
     post: dict[str, Any] = {"vote_length": profile.post.vote_length}
     if profile.select_rejection or profile.post.rejection_threshold is not None:
         post["rejection_threshold"] = SELECT if profile.select_rejection else profile.post.rejection_threshold
@@ -148,12 +160,13 @@ def _parse(data: dict, source: str) -> Profile:
     indices = [node.index for node in nodes]
     classes = _parse_classes(typed(data, "classes", list, "profile"), set(indices))
     joystick = _section(data, "joystick", {"layout"})
-    classifier = _section(data, "classifier", {"shrinkage", "amplitude_scales"})
+    classifier = _section(data, "classifier", {"shrinkage", "amplitude_scales", "direction_spread"})
     post, select_rejection = _parse_post(_section(data, "post_processing", {"rejection_threshold", "vote_length"}))
     return Profile(name=typed(data, "name", str, "profile"), description=typed(data, "description", str, "profile", ""),
                    nodes=nodes, classes=classes, spec=_parse_spec(_section(data, "features", {"vector", "window", "stride"}),
                                                                   tuple(indices)),
                    shrinkage=_parse_shrinkage(classifier), amplitude_scales=_parse_amplitude_scales(classifier),
+                   direction_spread=number(classifier, "direction_spread", "classifier", 0.0, 89.0, default=0.0),
                    neutral_samples=_parse_neutral_samples(_section(data, "neutral", {"samples"})),
                    post=post, select_rejection=select_rejection,
                    source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
