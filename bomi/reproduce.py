@@ -1,8 +1,9 @@
 """The paper's "reliability over days" table on the published P1 recordings (`bomi reproduce`,
 benchmarks/reproduce_table.py): the day-1 model tested on days 2..5 for FV1, FV2 and FV3, every
-setting (LDA shrinkage, rejection threshold) chosen on day 1 alone; beside it the 5 x 5 day-pair
-matrix (a model trained on each day, tested on every other day) for P1's shipped settings and for
-the per-person rule, each with and without training on smaller copies of the motions."""
+setting (LDA shrinkage, rejection threshold) chosen on day 1 alone (P1's direction spread, chosen
+leave-one-day-out by benchmarks/direction_spread.py, comes with the profile); beside it the 5 x 5
+day-pair matrix (a model trained on each day, tested on every other day) for P1's shipped settings
+and for the per-person rule, each with and without training on smaller copies of the motions."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
