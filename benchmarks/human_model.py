@@ -234,7 +234,7 @@ def sensitivity(args: argparse.Namespace) -> None:
              f"`python benchmarks/human_model.py sensitivity --seeds {args.seeds} --first-seed {args.first_seed}`: "
              f"each parameter of tasks/human.toml alone at 50 % and 150 %, the same seeds; mean completion time "
              f"of the successful episodes, P1.", "",
-             "| parameter | value | joystick (s) | change | P1 BoMI (s) | change | ratio | failures |",
+             "| parameter | value | joystick (s) | change | P1 BoMI (s) | change | ratio | failures (joystick + BoMI) |",
              "|---|---|---|---|---|---|---|---|",
              f"| as shipped | | {base_j:.1f} | | {base_b:.1f} | | {base_b / base_j:.2f} | {len(base['failed'])} |"]
     for (key, value), e in table.items():
