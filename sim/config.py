@@ -17,6 +17,12 @@ from sim.errors import SimError
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 DEFAULT_CONFIG = MODELS_DIR / "sim.toml"
 
+# Upper bounds for anyone: the JACO's own control loop runs at 100 Hz, so 1 kHz is ample; 100
+# substeps at 1 kHz is already a 10 us physics step. Beyond them an episode would only crawl.
+MAX_CONTROL_HZ = 1000.0
+MAX_SUBSTEPS = 100
+GAINS = ("finger_gain", "position_gain", "orientation_gain")  # 1/s: at most one control tick's worth
+
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
 Vec6 = tuple[float, float, float, float, float, float]
@@ -33,6 +39,8 @@ class PhysicsConfig:
 
     def validate(self) -> None:
         _positive(self, "control_hz", "substeps")
+        _at_most(self, MAX_CONTROL_HZ, "control_hz")
+        _at_most(self, MAX_SUBSTEPS, "substeps")
 
 
 @dataclass(frozen=True)
@@ -139,6 +147,11 @@ def load_config(path: Path | str | None = None) -> SimConfig:
     unknown = set(data) - set(sections)
     if unknown:
         raise SimError(f"{path}: unknown section(s) {sorted(unknown)}")
+    for gain in GAINS:  # a pull of g per second applied once per tick overshoots beyond g = control_hz
+        value = getattr(sections["control"], gain)
+        if value > sections["physics"].control_hz:
+            raise SimError(f"{path}: [control] {gain}: {value!r} per s exceeds [physics] control_hz "
+                           f"({sections['physics'].control_hz!r}): each tick would overshoot its target")
     return SimConfig(**sections, source=path)
 
 
@@ -190,6 +203,12 @@ def _coerce(value, kind):
     if len(value) != len(args):
         raise ValueError(f"expected {len(args)} values, got {len(value)}")
     return tuple(_coerce(item, arg) for item, arg in zip(value, args))
+
+
+def _at_most(section, limit: float, *names: str) -> None:
+    for name in names:
+        if getattr(section, name) > limit:
+            raise ValueError(f"{name}: must be at most {limit!r}, got {getattr(section, name)!r}")
 
 
 def _positive(section, *names: str) -> None:

@@ -42,6 +42,7 @@ class ArmSim:
         self.config = config or load_config()
         self.scene = build_scene(self.config, models_dir)
         self.model = self.scene.model
+        self._check_frame_size()
         self.data = mujoco.MjData(self.model)
         self.dt = 1.0 / self.config.physics.control_hz
         self.kinematics = arm_kinematics(self.scene)
@@ -54,6 +55,15 @@ class ArmSim:
         self.finger_target = np.zeros(3)
         self._renderer: FrameRenderer | None = None
         self.reset()
+
+    def _check_frame_size(self) -> None:
+        """The configured frame must fit the scene's offscreen framebuffer (MJCF ``<global offwidth
+        offheight>``): checked here, before any work, not when the first frame is filmed."""
+        render, visual = self.config.render, self.model.vis.global_
+        for name, size, buffer in (("width", render.width, visual.offwidth), ("height", render.height, visual.offheight)):
+            if size > buffer:
+                raise SimError(f"{self.config.source}: [render] {name}: {size} px exceeds the scene's offscreen "
+                               f"framebuffer ({buffer} px, <global off{name}> in the scene's MJCF)")
 
     def _solve_home(self) -> np.ndarray:
         """Joint angles of the configured home pose (hand down), checked against the joint ranges."""

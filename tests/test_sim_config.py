@@ -40,6 +40,10 @@ def test_default_config_loads_with_the_measured_timing():
     ("[render]", "[rendering]", "[render] section missing"),
     ("control_hz = 60.0", "control_hz = nan", "[physics] control_hz: expected a finite number"),
     ("[physics]", "[physics", "not valid TOML"),
+    ("control_hz = 60.0", "control_hz = 1e300", "[physics] control_hz: must be at most 1000.0"),
+    ("substeps = 8", "substeps = 1000000", "[physics] substeps: must be at most 100"),
+    ("orientation_gain = 4.0", "orientation_gain = 1e300", "[control] orientation_gain: 1e+300 per s exceeds"),
+    ("finger_gain = 10.0", "finger_gain = 61.0", "[control] finger_gain: 61.0 per s exceeds [physics] control_hz (60.0)"),
 ])
 def test_bad_config_names_file_and_problem(tmp_path, old, new, complaint):
     path = tmp_path / "sim.toml"
@@ -109,3 +113,15 @@ def test_unusable_home_pose_is_a_config_error(tmp_path, home, complaint):
     with pytest.raises(SimError) as info:
         ArmSim(load_config(path))
     assert str(info.value).startswith(f"{path}: [arm] home_tool_pos") and complaint in str(info.value)
+
+
+def test_a_frame_larger_than_the_offscreen_framebuffer_is_refused_before_any_work(tmp_path):
+    path = tmp_path / "sim.toml"
+    shutil.copy(DEFAULT_CONFIG, path)
+    edit(path, "width = 640", "width = 4000")
+    with pytest.raises(SimError) as info:
+        ArmSim(load_config(path))
+    assert str(info.value) == (f"{path}: [render] width: 4000 px exceeds the scene's offscreen framebuffer "
+                               "(1280 px, <global offwidth> in the scene's MJCF)")
+    edit(path, "width = 4000", "width = 1280")
+    ArmSim(load_config(path)).close()  # the framebuffer's own size fits
