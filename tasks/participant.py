@@ -18,7 +18,7 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 from pathlib import Path
@@ -402,14 +402,15 @@ class VirtualParticipant:
             out[which == k] = self._moves[k].at(t[which == k])
         return out
 
-    def _noise_scale(self, t: np.ndarray, attribute: str) -> np.ndarray:
-        """Per-sample std (n, nodes, 3) of sway or tremor, blended from the old to the new class over each move."""
+    def _noise_scale(self, t: np.ndarray, std: Callable[[ClassMotion], np.ndarray]) -> np.ndarray:
+        """Per-sample std (n, nodes, 3) of a hold noise (``std`` of a class: its sway or its tremor),
+        blended from the old to the new class over each move."""
         which = self._segment_index(t)
         out = np.empty((len(t), self.params.n_nodes, 3))
         for k in np.unique(which):
             seg = self._moves[k]
-            old = getattr(self.params.motion(self._moves[max(k - 1, 0)].label), attribute)
-            new = getattr(self.params.motion(seg.label), attribute)
+            old = std(self.params.motion(self._moves[max(k - 1, 0)].label))
+            new = std(self.params.motion(seg.label))
             progress = seg.progress(t[which == k])[:, None, None]
             out[which == k] = (1 - progress) * old[None] + progress * new[None]
         return out
@@ -450,8 +451,8 @@ class VirtualParticipant:
         t = index * DT
         shape = (n, self.params.n_nodes, 3)
         angles = (self._posture_at(t)
-                  + self._sway.next(n).reshape(shape) * self._noise_scale(t, "sway_std_deg")
-                  + self._tremor.next(n).reshape(shape) * self._noise_scale(t, "tremor_std_deg")
+                  + self._sway.next(n).reshape(shape) * self._noise_scale(t, lambda m: m.sway_std_deg)
+                  + self._tremor.next(n).reshape(shape) * self._noise_scale(t, lambda m: m.tremor_std_deg)
                   + self._spasms(t))
         raws = synthesize_nodes(angles, [node.calibration for node in self.profile.nodes], self._sensor_rngs,
                                 self.noise, previous_deg=self._last_angles)
