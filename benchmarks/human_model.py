@@ -113,29 +113,47 @@ HUMAN_ON = (("operator.human.model", "human"),)
 PHASES = ("reach", "grasp", "carry", "place", "release", "other")
 
 
-def condition(job: EpisodeJob) -> str:
-    return "joystick" if job.operator == "joystick" else f"{job.participant} BoMI"
+def joystick_on(controls: str) -> str:
+    """The joystick condition on these controls (a results row's ``layout``, e.g. "2-axis, B1")."""
+    return f"joystick ({controls})"
+
+
+def condition(record: dict) -> str:
+    return joystick_on(record["layout"]) if record["operator"] == "joystick" else f"{record['participant']} BoMI"
+
+
+def group_records(records: list[dict]) -> tuple[dict[str, list[dict]], dict[str, str]]:
+    """Episode records by condition (participants with the same controls share one joystick row: an
+    episode of a seed already there is not added twice), and each condition's joystick on the same controls."""
+    groups: dict[str, list[dict]] = {}
+    for r in records:
+        group = groups.setdefault(condition(r), [])
+        if not any(other["seed"] == r["seed"] for other in group):
+            group.append(r)
+    return groups, {condition(r): joystick_on(r["layout"]) for r in records}
 
 
 def predict(args: argparse.Namespace) -> None:
     participants = args.participants.split(",")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    jobs = [EpisodeJob("joystick", "P1", seed, overrides=HUMAN_ON) for seed in seeds]
+    # the joystick on the paper's controls, and on each participant's (like for like: P4/P5 have 2 axes, 1 button)
+    jobs = [EpisodeJob("joystick", p, seed, overrides=HUMAN_ON) for p in dict.fromkeys(["P1", *participants])
+            for seed in seeds]
     jobs += [EpisodeJob("bomi", p, seed, overrides=HUMAN_ON) for p in participants for seed in seeds]
     records = run(jobs, args.jobs)
-    groups: dict[str, list[dict]] = {}
-    for job, r in zip(jobs, records):
-        groups.setdefault(condition(job), []).append(r)
-    joystick = statistics.fmean(r["completion_time"] for r in groups["joystick"] if r["success"])
-    paper_times = {"joystick": PAPER_JOYSTICK_S, "P1 BoMI": PAPER_BOMI_S}
+    groups, reference = group_records(records)
+    paper_joystick = joystick_on(next(r["layout"] for r, j in zip(records, jobs) if j.participant == "P1"))
+    paper_times = {paper_joystick: PAPER_JOYSTICK_S, "P1 BoMI": PAPER_BOMI_S}
     seed_words = f"seeds {seeds[0]}-{seeds[-1]}" + (" (held out)" if seeds[0] >= 1000 else " (development)")
     lines = [f"# Human model: joystick and BoMI completion times, {seed_words}", "",
              f"`python benchmarks/human_model.py predict --participants {args.participants} --seeds {args.seeds} "
              f"--first-seed {args.first_seed} --name {args.name}`: tasks/human.toml as shipped (fitted on the joystick "
              f"only).", "",
              "| condition | successes [95 % CI] | completion time mean (s) [95 % CI] | paper (s) | within 25 % | "
-             "/ joystick | paper ratio | mode-switch share | " + " | ".join(PHASES) + " |",
+             "/ joystick on the same controls | paper ratio | mode-switch share | " + " | ".join(PHASES) + " |",
              "|---|---|---|---|---|---|---|---|" + "---|" * len(PHASES)]
+    means = {name: statistics.fmean([r["completion_time"] for r in rs if r["success"]] or [float("nan")])
+             for name, rs in groups.items()}
     for name, rs in groups.items():
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
@@ -146,7 +164,7 @@ def predict(args: argparse.Namespace) -> None:
         ref = paper_times.get(name)
         near = "" if ref is None else ("yes" if abs(m - ref) <= 0.25 * ref else f"no ({100 * (m / ref - 1):+.0f} %)")
         lines.append(f"| {name} | {len(done)}/{len(rs)} [{100 * low:.0f}, {100 * high:.0f}] % | {m:.1f} "
-                     f"[{m - h:.1f}, {m + h:.1f}] | {'' if ref is None else f'{ref:g}'} | {near} | {m / joystick:.2f} | "
+                     f"[{m - h:.1f}, {m + h:.1f}] | {'' if ref is None else f'{ref:g}'} | {near} | {m / means[reference[name]]:.2f} | "
                      f"{f'{PAPER_BOMI_S / PAPER_JOYSTICK_S:.2f}' if name == 'P1 BoMI' else ''} | {100 * share:.1f} % | "
                      + " | ".join(f"{phases[k]:.1f}" for k in PHASES) + " |")
     failed = [f"{r['participant']} {r['operator']} seed {r['seed']} ({r['failure']})"
@@ -164,8 +182,8 @@ def predict(args: argparse.Namespace) -> None:
     (RESULTS / f"{args.name}.json").write_text(json.dumps({"groups": groups}, indent=1))
     times_figure(groups, RESULTS / f"{args.name}.png")
     phases_figure(groups, RESULTS / f"{args.name}_phases.png")
-    best = [min((r for r, j in zip(records, jobs) if condition(j) == name and r["success"]),
-                key=lambda r: r["completion_time"], default=None) for name in ("joystick", "P1 BoMI")]
+    best = [min((r for r in groups.get(name, []) if r["success"]), key=lambda r: r["completion_time"], default=None)
+            for name in (paper_joystick, "P1 BoMI")]
     logs = [run_job(EpisodeJob(r["operator"], r["participant"], r["seed"], overrides=HUMAN_ON))
             for r in best if r is not None]
     if logs:

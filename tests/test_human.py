@@ -166,3 +166,23 @@ def test_mode_switch_time_spans_from_the_last_push_to_the_next():
     # last push before the change at tick 5: tick 1; first after: tick 7 -> ticks 2..6 = 5 ticks
     assert mode_switch_time(mode, pushing, 0.1) == pytest.approx(0.5)
     assert mode_switch_time(["translation"] * 10, pushing, 0.1) == 0.0
+
+
+def test_the_benchmark_compares_each_bomi_with_the_joystick_on_its_own_controls():
+    import importlib.util
+    from pathlib import Path
+    spec = importlib.util.spec_from_file_location(
+        "human_model", Path(__file__).resolve().parent.parent / "benchmarks" / "human_model.py")
+    human_model = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(human_model)
+
+    def record(operator, participant, layout, seed):
+        return {"operator": operator, "participant": participant, "layout": layout, "seed": seed}
+    records = [record("joystick", p, layout, s) for p, layout in (("P1", "3-axis, B1+B2"), ("P4", "2-axis, B1"),
+                                                                   ("P5", "2-axis, B1")) for s in (0, 1)]
+    records += [record("bomi", "P4", "2-axis, B1", s) for s in (0, 1)]
+    groups, reference = human_model.group_records(records)
+    # P4 and P5 have the same controls: one joystick row of two episodes, not two rows under two names
+    assert {name: len(rs) for name, rs in groups.items()} == {
+        "joystick (3-axis, B1+B2)": 2, "joystick (2-axis, B1)": 2, "P4 BoMI": 2}
+    assert reference["P4 BoMI"] == "joystick (2-axis, B1)"
