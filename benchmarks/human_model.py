@@ -36,7 +36,7 @@ from bomi import paper  # noqa: E402
 from tasks import metrics  # noqa: E402
 from tasks.cli.engine import ProcessPool  # noqa: E402
 from tasks.cli.task import EpisodeJob, run_job  # noqa: E402
-from tasks.episode import summarize  # noqa: E402
+from tasks.episode import participant_controls, summarize  # noqa: E402
 from tasks.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
 from tasks.timeline import timeline_figure  # noqa: E402
 
@@ -137,8 +137,10 @@ def predict(args: argparse.Namespace) -> None:
     participants = args.participants.split(",")
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     # the joystick on the paper's controls, and on each participant's (like for like: P4/P5 have 2 axes, 1 button)
-    jobs = [EpisodeJob("joystick", p, seed, overrides=HUMAN_ON) for p in dict.fromkeys(["P1", *participants])
-            for seed in seeds]
+    by_controls: dict[str, str] = {}  # one joystick run per distinct controls (P4 and P5 share theirs)
+    for p in ["P1", *participants]:
+        by_controls.setdefault(participant_controls(p).label, p)
+    jobs = [EpisodeJob("joystick", p, seed, overrides=HUMAN_ON) for p in by_controls.values() for seed in seeds]
     jobs += [EpisodeJob("bomi", p, seed, overrides=HUMAN_ON) for p in participants for seed in seeds]
     records = run(jobs, args.jobs)
     groups, reference = group_records(records)

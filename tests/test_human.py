@@ -9,6 +9,7 @@ from bomi.errors import BomiError
 from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
 from tasks.human import (DEFAULT_HUMAN_FILE, HumanOperator, HumanTiming, alternatives, choice_time, fitts_time,
                          judgement_error, load_human)
+from helpers import assert_one_line_error
 from tasks.planner import REST, Controls, View, deflection_for, load_operator
 
 H = load_human()
@@ -127,11 +128,7 @@ def test_bad_human_file_is_one_clear_error(tmp_path, text, fault):
     content = {"rate": good.replace("wrong_mode_rate = 0.10", "wrong_mode_rate = 1.5"),
                "eye": good.replace("eye = [0.0, 0.30, 0.45]", "eye = [0.0, 0.30]"),
                "unknown": good.replace("[timing]\n", "[timing]\nwobble = 1\n")}.get(text, text)
-    path = tmp_path / "human.toml"
-    path.write_text(content)
-    with pytest.raises(BomiError) as err:
-        load_human(path)
-    assert str(path) in str(err.value) and fault in str(err.value) and "\n" not in str(err.value)
+    assert_one_line_error(load_human, tmp_path / "human.toml", content, fault)
 
 
 def test_the_operator_file_names_the_human_model(tmp_path):

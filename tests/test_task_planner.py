@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from bomi.errors import BomiError
+from helpers import assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Mode
 from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
                            held_cube, load_operator, mode_button, placed_cubes, plan, turn_deflection_for)
@@ -39,12 +40,7 @@ def test_bad_operator_file_is_one_clear_error(tmp_path, text, fault):
     content = {None: good.replace("reaction_time = 0.30", 'reaction_time = "slow"'),
                "negative": good.replace("reaction_time = 0.30", "reaction_time = -0.3"),
                "unknown": good.replace("[timing]\n", "[timing]\nwobble = 1\n")}.get(text, text)
-    path = tmp_path / "op.toml"
-    path.write_text(content)
-    with pytest.raises(BomiError) as err:
-        load_operator(path)
-    message = str(err.value)
-    assert str(path) in message and fault in message and "\n" not in message
+    assert_one_line_error(load_operator, tmp_path / "op.toml", content, fault)
 
 
 def test_operator_file_by_shipped_name_and_missing_file(tmp_path):
