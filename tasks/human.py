@@ -20,6 +20,9 @@ interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: 
   (Fitts), whatever the interface's top speed allows.  A channel whose
   body adds its own reaction (the BoMI participant starts moving ``reaction_s`` after an intent)
   has that part taken off: the reaction is counted once.
+- **The interface as learnt** (``InterfaceModel``): how late and how fast the arm answers a move,
+  learnt from what is seen; a move that would be over before its start could be seen is made as a
+  pulse of the predicted length, then the person waits and looks (move-and-wait).
 - **Slips** (``HumanOperator``): a share of mode presses is forgotten; the person pushes the
   stick as if the mode had changed until they see the arm do something else (or nothing), then
   makes the press (the one right after noticing a slip is not forgotten).
@@ -28,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -130,6 +133,7 @@ class HumanTiming:
 
     params: HumanParams
     rng: np.random.Generator
+    interface: InterfaceModel
     body_reaction: float = 0.0
     pause: float = 0.0  # no rest beyond the reaction: it is the rest
 
@@ -144,6 +148,80 @@ class HumanTiming:
         movement time from D to within W / 2 is ``fitts_slope`` x log2(2D / W) (``fitts_time``):
         Fitts' law from a first-order approach (Crossman and Goodeve 1963)."""
         return self.params.fitts_slope / math.log(2.0)
+
+    def hold(self, wanted: StickIntent, settle: float) -> float:
+        return self.interface.hold(wanted, settle)
+
+
+@dataclass
+class InterfaceModel:
+    """What the person has learnt of how the arm answers the stick, from what they saw (an internal
+    forward model; adaptation to a feedback delay): how long after a move starts the hand is seen to
+    move (``onset``, 0 at first: a stick is expected to answer at once), and how fast it goes for a
+    deflection, per function (``gain``: seen peak speed / (``full_speed`` x deflection), 1 at first).
+    A move so short that it would be over before its start can be seen (its time at the expected
+    speed below ``onset``) cannot be steered by watching: it is made as a pulse of the length the
+    model predicts, then the person waits for the hand to settle and looks again (move-and-wait,
+    Ferrell 1965; Sheridan and Ferrell 1963).  Through a stick that answers at once ``onset`` is the
+    visual delay and no move is that short; through a laggy channel the small corrections become
+    pulses.  No parameter of its own: the operator file's ``learning_rate``, ``full_speed``,
+    ``still_speed``, ``max_wait``."""
+
+    learning_rate: float
+    full_speed: float  # m/s at full deflection, as the person has seen it
+    still_speed: float  # m/s: the hand is seen at rest below this
+    max_onset: float  # s: the longest onset learnt (the operator's max_wait)
+    onset: float = 0.0
+    gain: dict[str, float] = field(default_factory=dict)
+    _move: tuple[float, str, float, bool] | None = None  # (start, function, deflection, pulse) of the last move
+    _seen_onset: float | None = None  # when the hand was first seen moving since that move started
+    _peak: float = 0.0  # the fastest the hand was seen going since
+    _last: View | None = None
+
+    def hold(self, wanted: StickIntent, settle: float) -> float:
+        """The pulse length for a move of the hand (inf: steer it by watching)."""
+        if not wanted.deflection or wanted.remaining <= 0:
+            return math.inf
+        function, deflection = max(wanted.deflection.items(), key=lambda item: item[1])
+        expected = self.gain.get(function, 1.0) * self.full_speed * deflection
+        travel = wanted.remaining / expected
+        if travel >= self.onset:
+            return math.inf
+        return max(0.0, self.onset - settle) + travel
+
+    def observe(self, seen: View, current: StickIntent, started: float, hold: float) -> None:
+        """One glance: the move held now (``current``, begun at ``started``, held ``hold`` at most)."""
+        last, self._last = self._last, seen
+        speed = 0.0 if last is None or seen.t <= last.t else \
+            float(np.linalg.norm(seen.hand_pos - last.hand_pos)) / (seen.t - last.t)
+        if current.remaining > 0 and (self._move is None or started != self._move[0]):
+            self._learn(seen.t)
+            function, deflection = max(current.deflection.items(), key=lambda item: item[1])
+            self._move = (started, function, deflection, math.isfinite(hold))
+            self._seen_onset, self._peak = None, 0.0
+            return
+        if self._move is not None and speed > self.still_speed:
+            if self._seen_onset is None:
+                self._seen_onset = seen.t - self._move[0]
+            self._peak = max(self._peak, speed)
+
+    def _learn(self, now: float) -> None:
+        """A new move begins: learn from the last one.  A pulse the hand was never seen to answer
+        says the onset is longer than that; any other move that did not move the hand (pushed into
+        the table, in the wrong mode) says nothing."""
+        if self._move is None:
+            return
+        start, function, deflection, pulse = self._move
+        rate = self.learning_rate
+        if self._seen_onset is not None:
+            seen = self._seen_onset
+            seen_gain = self._peak / (self.full_speed * deflection)
+            self.gain[function] = (1 - rate) * self.gain.get(function, 1.0) + rate * seen_gain
+        elif pulse:
+            seen = now - start
+        else:
+            return
+        self.onset = (1 - rate) * self.onset + rate * min(seen, self.max_onset)
 
 
 # ------------------------------------------------------------------------------------ perception
@@ -225,7 +303,9 @@ class HumanOperator:
         eyes_rng, timing_rng, slip_rng = (np.random.default_rng(s)
                                           for s in np.random.SeedSequence([seed, HUMAN_STREAM]).spawn(3))
         self.params, self.controls, self._rng = params, controls, slip_rng
-        self.timing = HumanTiming(params, timing_rng, body_reaction)
+        self.interface = InterfaceModel(operator.learning_rate, operator.full_speed, operator.still_speed,
+                                        operator.max_wait)
+        self.timing = HumanTiming(params, timing_rng, self.interface, body_reaction)
         self.user = ScriptedUser(operator, combine_axes=combine_axes, memory=Memory(controls=controls),
                                  timing=self.timing)
         self.eyes = Eyes(params, eyes_rng)
@@ -256,6 +336,7 @@ class HumanOperator:
             self._just_noticed = False
         if self.intent.deflection and not intent.functions & self.intent.functions:
             self.eyes.rejudge()  # a move of the stick ends: the person looks again from where the hand is
+        self.interface.observe(seen, self.user.current, self.user.started, self.user.hold)
         self.intent = intent
         return intent
 

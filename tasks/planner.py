@@ -167,6 +167,7 @@ class StickIntent:
     deflection: Mapping[str, float] = field(default_factory=dict)
     button: str | None = None
     goal: Goal = Goal()
+    remaining: float = 0.0  # m: a move of the hand: how far its goal still is along the pushed axes, as judged
 
     @property
     def functions(self) -> frozenset[str]:
@@ -461,7 +462,12 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     if need is not None and need is not view.mode:
         button = mode_button(view.mode, need, memory.controls)
         return StickIntent(button=button, goal=replace(action.goal, mode=need)), memory
-    return StickIntent(deflection, goal=action.goal), replace(memory, axis=axis)
+    remaining = 0.0
+    if action.kind is ActionKind.MOVE:
+        effects = memory.controls.layout.effects[view.mode]
+        remaining = max((abs(float(np.dot(action.point - view.hand_pos, effects[fn].axis))) for fn in deflection),
+                        default=0.0)
+    return StickIntent(deflection, goal=action.goal, remaining=remaining), replace(memory, axis=axis)
 
 
 def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipation: float
@@ -557,6 +563,11 @@ class Timing(Protocol):
     def pace(self, distance: float, tolerance: float) -> float:
         """Least time to cover ``distance`` to within ``tolerance`` (0: no such limit)."""
 
+    def hold(self, wanted: StickIntent, settle: float) -> float:
+        """How long to hold the move of the hand ``wanted`` (starting now) before letting go whatever
+        is seen (inf: watch the hand and let go when it is about to arrive); ``settle``: how long the
+        hand has been seen going on after a move is let go."""
+
 
 @dataclass(frozen=True)
 class FixedTiming:
@@ -573,6 +584,9 @@ class FixedTiming:
 
     def pace(self, distance: float, tolerance: float) -> float:
         return 0.0
+
+    def hold(self, wanted: StickIntent, settle: float) -> float:
+        return math.inf
 
 
 @dataclass
@@ -600,6 +614,7 @@ class ScriptedUser:
     timing: Timing | None = None  # default: FixedTiming(params)
     _reaction: float = 0.0  # the reaction drawn for the move being waited for
     _let_go_of: frozenset[Kind] = frozenset()  # what the last move let go did (nothing for a press)
+    _hold: float = math.inf  # how long the move held now is held whatever is seen (Timing.hold)
 
     def __post_init__(self) -> None:
         if self.anticipation is None:
@@ -611,6 +626,11 @@ class ScriptedUser:
     def started(self) -> float:
         """When the move or press held now (or last) began."""
         return self._started
+
+    @property
+    def hold(self) -> float:
+        """How long the move held now (or last) is held whatever is seen (``Timing.hold``; inf: watched)."""
+        return self._hold
 
     def stick_intent(self, view: View) -> StickIntent:
         """What the person does with the stick at this glance."""
@@ -628,6 +648,8 @@ class ScriptedUser:
             # the press did nothing: let go, relax as long again, then press anew
             wanted = replace(REST, goal=wanted.goal)
             self._relax_until = view.t + self.params.button_patience
+        if self.current.deflection and view.t - self._started >= self._hold - 1e-9:
+            wanted = replace(REST, goal=wanted.goal)  # the move planned without watching is over: let go, wait, look
         if wanted.is_rest or _continues(self.current, wanted):
             if wanted.is_rest and not self.current.is_rest:
                 self._let_go(view, velocity)
@@ -647,6 +669,7 @@ class ScriptedUser:
             return replace(REST, goal=wanted.goal)
         self._learn_settling()
         self.current, self._waiting_since, self._started, self._mode_at_start = wanted, None, view.t, view.mode
+        self._hold = self.timing.hold(wanted, self.settle)
         return wanted
 
     def _let_go(self, view: View, velocity: np.ndarray) -> None:

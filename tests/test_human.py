@@ -7,14 +7,15 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
-from tasks.human import (DEFAULT_HUMAN_FILE, HumanOperator, HumanTiming, alternatives, choice_time, fitts_time,
-                         judgement_error, load_human)
+from tasks.human import (DEFAULT_HUMAN_FILE, HumanOperator, HumanTiming, InterfaceModel, alternatives, choice_time,
+                         fitts_time, judgement_error, load_human)
 from helpers import assert_one_line_error
 from tasks.planner import REST, Controls, View, deflection_for, load_operator
 
 H = load_human()
 P = load_operator()
 HALF = 0.025
+INTERFACE = InterfaceModel(P.learning_rate, P.full_speed, P.still_speed, P.max_wait)
 
 
 def view(hand=(-0.14, -0.39, 0.025), mode=Mode.TRANSLATION, t=0.0, closure=0.0) -> View:
@@ -55,14 +56,15 @@ def test_body_reaction_is_not_counted_twice():
     """A channel whose body adds reaction_s after the intent gets the person's reaction minus that."""
     draws = {}
     for body in (0.0, 0.4):
-        timing = HumanTiming(replace(H, rt_sigma=1e-6, rt_tau=1e-6), np.random.default_rng(2), body_reaction=body)
+        timing = HumanTiming(replace(H, rt_sigma=1e-6, rt_tau=1e-6), np.random.default_rng(2), INTERFACE,
+                             body_reaction=body)
         draws[body] = timing.reaction(view(), REST, frozenset(), Controls())
     assert draws[0.0] - draws[0.4] == pytest.approx(0.4, abs=1e-4)
 
 
 def test_an_approach_paced_by_the_human_takes_fitts_time():
     """Speed = remaining distance / (fitts_slope / ln 2), stepped at 60 Hz, from D to within W/2."""
-    timing = HumanTiming(H, np.random.default_rng(3))
+    timing = HumanTiming(H, np.random.default_rng(3), INTERFACE)
     fine = replace(P, fine=1e-4)
     for distance in (0.05, 0.2):
         d, t, dt = distance, 0.0, 1 / 60
@@ -183,3 +185,56 @@ def test_the_benchmark_compares_each_bomi_with_the_joystick_on_its_own_controls(
     assert {name: len(rs) for name, rs in groups.items()} == {
         "joystick (3-axis, B1+B2)": 2, "joystick (2-axis, B1)": 2, "P4 BoMI": 2}
     assert reference["P4 BoMI"] == "joystick (2-axis, B1)"
+
+
+def _reach_through_a_delayed_stick(delay: float, least: float = 0.0, learns: bool = True, seed: int = 4,
+                                   seconds: float = 120.0):
+    """The person reaches cube 1 through a stick whose every command takes effect ``delay`` s late
+    (a dead time, as the BoMI's recognition of a posture and of its release) and never goes slower
+    than ``least`` of full speed (as the least lean of a BoMI posture); the hand obeys the
+    translation functions at once after it.  Ends at the press for the finger mode (at the grasp).
+    ``learns=False``: the person never learns the onset (the interface model's longest onset 0).
+    Returns (time of the press or None, the person, the hold of every move of the hand)."""
+    person = HumanOperator(replace(H, wrong_mode_rate=0.0), P, combine_axes=False, controls=Controls(), seed=seed)
+    if not learns:
+        person.interface.max_onset = 0.0
+    hand, commands, effective, holds, started = np.array([0.05, -0.28, 0.12]), [], {}, [], None
+    for tick in range(int(seconds * 60)):
+        t = tick / 60
+        intent = person.stick_intent(view(hand=tuple(hand), t=t))
+        if intent.button is not None:
+            return t, person, holds
+        if intent.deflection and person.user.started != started:
+            started = person.user.started
+            holds.append(person.user.hold)
+        commands.append((t + delay, dict(intent.deflection)))
+        while commands and commands[0][0] <= t + 1e-9:
+            effective = commands.pop(0)[1]
+        for fn, deflection in effective.items():
+            hand = hand + np.array(TRANSLATION_AXES[fn]) * P.full_speed * max(deflection, least) / 60
+    return None, person, holds
+
+
+def test_through_a_stick_that_answers_at_once_no_move_is_a_pulse():
+    t, person, holds = _reach_through_a_delayed_stick(0.0)
+    assert t is not None and len(holds) >= 3
+    # what the person learns as the onset: the visual delay, a glance and no more
+    assert 0 < person.interface.onset < 2 * (H.visual_delay + H.glance_interval)
+    assert all(math.isinf(h) for h in holds)
+
+
+def test_through_a_laggy_stick_the_person_learns_the_lag_and_corrects_by_pulses():
+    """A 1 s dead time and a least speed of 30 % (as a BoMI's recognition delay and least lean): the
+    hand is seen moving about 1 s after a push, goes on 1 s after letting go, and never slower than
+    6 cm/s, so a correction steered by watching overshoots its goal every time.  The person learns
+    the onset and the speeds from what they see and makes the small corrections as pulses of the
+    length their model predicts, then waits (move-and-wait): they reach the grasp; a person who
+    never learns the onset hunts around it for the two minutes."""
+    t, person, holds = _reach_through_a_delayed_stick(1.0, least=0.3)
+    assert person.interface.onset == pytest.approx(1.0 + H.visual_delay, abs=H.glance_interval + 0.05)
+    assert max(person.interface.gain.values()) > 3  # a fine deflection (5 %) went at 30 %: seen as 6x
+    assert sum(math.isfinite(h) for h in holds) >= 3
+    assert t is not None
+    watched, _, watched_holds = _reach_through_a_delayed_stick(1.0, least=0.3, learns=False)
+    assert watched is None and len(watched_holds) > len(holds)
+    assert all(math.isinf(h) for h in watched_holds)
