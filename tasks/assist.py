@@ -18,7 +18,10 @@ the mode of the next step (``press_time`` each, with the buttons the person has)
 over the goals and over which step is next.  When the stick has rested ``rest_time``, the
 automation puts the arm in the mode that minimises that time if it saves at least ``min_gain``;
 at most once per rest.  The user's own button press always wins (it is passed on untouched) and
-pauses the automation for ``pause_after_press``.
+pauses the automation for ``pause_after_press``.  The steps' tolerances start as ``[path]`` says
+and are then this user's, learnt online from their refusals of automatic switches (a press out of
+the switch's mode before any move in it; ``LearntTolerance``): the step they make next was not
+done, the step the switch was made for, if they skip it, was.
 
 ``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
 the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
@@ -36,7 +39,7 @@ import enum
 import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Protocol
 
 import numpy as np
@@ -112,6 +115,7 @@ class AutoModeParams:
     sharpness: float
     proximity: float
     off_target_prior: float
+    refusal_share: float
 
 
 @dataclass(frozen=True)
@@ -178,6 +182,8 @@ def _parse_assist(data: dict, source: str) -> AssistParams:
         tables[name] = cls(**values)
     if not tables["path"].open_closure < 1:
         raise ValueError("[path] open_closure must be below 1")
+    if not tables["auto_mode"].refusal_share < 1:
+        raise ValueError("[auto_mode] refusal_share must be below 1")
     return AssistParams(**tables)
 
 
@@ -294,17 +300,30 @@ class Step:
     needed: float
 
 
-def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working_on: PathStep | None = None
-               ) -> list[Step]:
+def step_errors(view: View, goal: Goal, path: PathParams) -> dict[PathStep, tuple[float, float]]:
+    """The steps whose "done" is a precision, each as (how far off the hand is, the tolerance it is
+    done within before anything is learnt of the user): the travel over the goal (xy, m), the turn
+    to the cube's faces (degrees; grasps only) and the descent onto it (height, m)."""
+    error = goal.point - view.hand_pos
+    out = {PathStep.TRAVEL: (float(np.linalg.norm(error[:2])), goal.near)}
+    if goal.yaw is not None:
+        out[PathStep.TURN] = (abs(math.degrees(yaw_offset(view.hand_yaw, goal.yaw))), path.yaw_tol_deg)
+    out[PathStep.DESCEND] = (abs(float(error[2])), goal.height_tol)
+    return out
+
+
+def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working_on: PathStep | None = None,
+               precision: Mapping[PathStep, float] | None = None) -> list[Step]:
     """The careful path to ``goal``, step by step, each with the mode of ``layout`` that makes it.
     ``working_on``: the step the user was last seen making; the steps before it are done as the
     user sees them unless they are off by ``revisit`` times their tolerance (a person who has moved
-    on to a later step goes back only for a clearly larger error)."""
+    on to a later step goes back only for a clearly larger error).  ``precision``: per step, the
+    share of its tolerance this user has been seen to need (``Assistance.precision``; 1 if absent)."""
     passed = PATH_ORDER[:PATH_ORDER.index(working_on)] if working_on is not None else ()
-    scale = {step: path.revisit if step in passed else 1.0 for step in PathStep}
+    scale = {step: (path.revisit if step in passed else 1.0) * (precision or {}).get(step, 1.0) for step in PathStep}
     hand = view.hand_pos
-    error = goal.point - hand
-    xy = float(np.linalg.norm(error[:2]))
+    errors = step_errors(view, goal, path)
+    xy = errors[PathStep.TRAVEL][0]
     up, _ = layout.find(Kind.LINEAR, (0.0, 0.0, 1.0))
     across, _ = layout.find(Kind.LINEAR, (1.0, 0.0, 0.0))
     fingers, _ = layout.find(Kind.FINGERS, goal.act)
@@ -316,13 +335,13 @@ def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working
     low = _needed(goal.travel_z - hand[2], goal.height_tol * scale[PathStep.RISE], path.softness)
     steps.append(Step(PathStep.RISE, up, far * low))
     steps.append(Step(PathStep.TRAVEL, across, _needed(xy, goal.near * scale[PathStep.TRAVEL], path.softness)))
-    if goal.yaw is not None:
+    if PathStep.TURN in errors:
         turn = yaw_offset(view.hand_yaw, goal.yaw)
         turner, _ = layout.find(Kind.ANGULAR, (0.0, 0.0, 1.0 if turn >= 0 else -1.0))
-        steps.append(Step(PathStep.TURN, turner, _needed(math.degrees(abs(turn)),
+        steps.append(Step(PathStep.TURN, turner, _needed(errors[PathStep.TURN][0],
                                                          path.yaw_tol_deg * scale[PathStep.TURN], path.yaw_softness_deg)))
-    steps.append(Step(PathStep.DESCEND, up, _needed(abs(error[2]), goal.height_tol * scale[PathStep.DESCEND],
-                                                    path.softness)))
+    steps.append(Step(PathStep.DESCEND, up, _needed(errors[PathStep.DESCEND][0],
+                                                    goal.height_tol * scale[PathStep.DESCEND], path.softness)))
     steps.append(Step(PathStep.CLOSE if goal.act > 0 else PathStep.RELEASE, fingers, 1.0))
     return steps
 
@@ -345,14 +364,21 @@ def step_of_move(layout: Layout, mode: Mode, functions: Iterable[str], holding_c
     return max(found, key=PATH_ORDER.index) if found else None
 
 
+def next_step_shares(steps: list[Step]) -> dict[PathStep, float]:
+    """Probability that each step is the next one to be made (the first still needed)."""
+    out: dict[PathStep, float] = {}
+    left = 1.0
+    for step in steps:
+        out[step.name] = left * step.needed
+        left -= out[step.name]
+    return out
+
+
 def next_step_modes(steps: list[Step]) -> dict[Mode, float]:
     """Probability that each mode is the one of the next step to be made."""
     out: dict[Mode, float] = {}
-    left = 1.0
-    for step in steps:
-        share = left * step.needed
+    for step, share in zip(steps, next_step_shares(steps).values()):
         out[step.mode] = out.get(step.mode, 0.0) + share
-        left -= share
     return out
 
 
@@ -369,6 +395,48 @@ def time_to_goal(layout: Layout, buttons: tuple[str, ...], next_modes: dict[Mode
             for m in layout.modes}
 
 
+@dataclass
+class LearntTolerance:
+    """What one user's refusals of automatic switches showed of the error within which they count
+    a path step done (for one kind of goal), and the tolerance that follows.  Two kinds of evidence,
+    each from a refusal (the user left the switch's mode by a press before moving in it):
+
+    - ``not_done_at``: the switch judged the step done, and the user's first move afterwards made
+      it: their tolerance is below that error (the smallest such error is kept);
+    - ``done_within``: the switch was made for this step (its mode), and the user's first move made
+      another: the step was done for them at that error (the largest such error is kept).
+
+    The tolerance is the middle of the two bounds; with one bound only, ``share`` of the upper one
+    or the lower one over ``share`` (with ``share`` = 1/2: halving or doubling, as a bisection);
+    the starting tolerance while nothing is known, and within the one bound seen if it is looser.
+    Evidence that contradicts the other bound (the user's tolerance depends on more than the error)
+    replaces it: the latest refusal counts."""
+
+    start: float
+    not_done_at: float | None = None
+    done_within: float | None = None
+
+    def saw_not_done(self, error: float) -> None:
+        self.not_done_at = error if self.not_done_at is None else min(self.not_done_at, error)
+        if self.done_within is not None and self.done_within >= self.not_done_at:
+            self.done_within = None
+
+    def saw_done(self, error: float) -> None:
+        self.done_within = error if self.done_within is None else max(self.done_within, error)
+        if self.not_done_at is not None and self.not_done_at <= self.done_within:
+            self.not_done_at = None
+
+    def tolerance(self, share: float) -> float:
+        low, high = self.done_within, self.not_done_at
+        if low is not None and high is not None:
+            return (low + high) / 2
+        if high is not None:
+            return min(self.start, share * high)
+        if low is not None:
+            return max(self.start, low / share)
+        return self.start
+
+
 # ------------------------------------------------------------------------------------ the layer
 @dataclass(frozen=True)
 class AutomaticSwitch:
@@ -381,6 +449,20 @@ class AutomaticSwitch:
     by: Assist
     goal: str
     undone: bool = False  # a press the user made before seeing it came within press_grace: it was undone
+
+
+@dataclass(frozen=True)
+class SwitchContext:
+    """At an automatic switch: the likely goal's finger action, its steps' (error, starting
+    tolerance) (``step_errors``), the step the switch was made for (of the steps in the mode
+    switched to, the likeliest to be the next) and the other steps of ``step_errors`` it judged
+    done (less than even odds of being needed)."""
+
+    act: float
+    errors: dict[PathStep, tuple[float, float]]
+    made_for: PathStep | None
+    judged_done: frozenset[PathStep]
+    below: bool  # the hand was below the goal's point (a move up makes the descent's step)
 
 
 class Switchable(Protocol):
@@ -471,6 +553,13 @@ class Assistance:
         # user's latest moves were a rise (a travel right after it shows the height they chose)
         self._clearance: float | None = None
         self._rose = False
+        # this user's tolerances as their refusals showed them: per (goal's finger action, step)
+        self._learnt: dict[tuple[float, PathStep], LearntTolerance] = {}
+        # at our last switch: the likely goal's finger action, its steps' (error, starting tolerance)
+        # and the step the switch was made for (the first one still needed, in the mode switched to)
+        self._switched_at: SwitchContext | None = None
+        # set by a refusal of that switch: the user's next move tells which step they still wanted
+        self._refusal: SwitchContext | None = None
 
     def step(self, view: View, state: JoystickState, arm: Switchable) -> JoystickState:
         """The stick the arm gets this tick; may put ``arm`` in another mode first."""
@@ -485,7 +574,9 @@ class Assistance:
             last = self.switches[-1] if self.switches else None
             if last is not None and arm.mode is last.after and not self._moved_since_switch:
                 self._refused = (last.after, view.hand_pos.copy())
-            self._undo_unseen_switch(view, arm)
+                self._refusal = self._switched_at
+            if self._undo_unseen_switch(view, arm):
+                self._refusal = None  # decided before the switch could be seen: it refused nothing
             self._paused_until = view.t + self.params.auto_mode.pause_after_press
             self._paused_until_move = True
             return state
@@ -494,6 +585,7 @@ class Assistance:
         working_on = step_of_move(self.layout, view.mode, state.deflection, held is not None)
         if working_on is not None:
             self._working_on = (held, working_on)
+            self._learn_precision(working_on)
         if Assist.AUTO_MODE in self.options:
             goals = candidate_goals(view, self.params, self.clearance)
             if working_on is PathStep.TRAVEL:
@@ -552,6 +644,35 @@ class Assistance:
                 self._switch(tick, view, arm, best, Assist.AUTO_MODE, goal)
         return state
 
+    def precision(self, act: float) -> dict[PathStep, float]:
+        """Per step of a path to a goal with finger action ``act`` (+1 grasp, -1 set down): this
+        user's tolerance for it as a share of the starting one (``LearntTolerance``; steps no
+        refusal has taught anything about: absent, the whole tolerance)."""
+        share = self.params.auto_mode.refusal_share
+        return {step: learnt.tolerance(share) / learnt.start for (kind, step), learnt in self._learnt.items()
+                if kind == act}
+
+    def _learn_precision(self, working_on: PathStep) -> None:
+        """After a refusal, the user's first move is the step they still wanted: if the switch
+        judged it done (less than even odds of being needed), it was not done at its error then; the step the switch was made for, if
+        another, was done for them at its error then (``LearntTolerance``).  A refusal that taught
+        something is explained: the refused mode may be proposed again."""
+        if self._refusal is None:
+            return
+        context, self._refusal = self._refusal, None
+        if working_on is PathStep.RISE and context.below:  # up to a goal above the hand: the descent's overshoot corrected
+            working_on = PathStep.DESCEND
+        lessons = []
+        if working_on in context.judged_done:
+            lessons.append((working_on, LearntTolerance.saw_not_done))
+        if context.made_for in context.errors and context.made_for is not working_on:
+            lessons.append((context.made_for, LearntTolerance.saw_done))
+        for step, lesson in lessons:
+            error, start = context.errors[step]
+            lesson(self._learnt.setdefault((context.act, step), LearntTolerance(start)), error)
+        if lessons:
+            self._refused = None
+
     @property
     def clearance(self) -> float | None:
         """How high above the cubes in its way this user travels, as seen (None before any travel
@@ -570,6 +691,11 @@ class Assistance:
         seen = float(view.hand_pos[2]) - (goal.travel_z - clearance)
         self._clearance = seen if self._rose else min(clearance, seen)
 
+    def _seen_step(self, view: View) -> PathStep | None:
+        """The step the user was last seen making, if they hold the same cube (or none) as then."""
+        held = held_cube(view, self.params.path.open_closure)
+        return self._working_on[1] if self._working_on is not None and self._working_on[0] == held else None
+
     def best_mode(self, view: View) -> tuple[Mode | None, str]:
         """The mode that minimises the expected time to the likely goals, if it saves ``min_gain``
         over the current one (else None), and the most likely goal's label."""
@@ -577,11 +703,10 @@ class Assistance:
         if not goals:
             return None, ""
         weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
-        held = held_cube(view, self.params.path.open_closure)
-        working_on = self._working_on[1] if self._working_on is not None and self._working_on[0] == held else None
+        working_on = self._seen_step(view)
         expected = {m: 0.0 for m in self.layout.modes}
         for goal, weight in zip(goals, weights):
-            steps = path_steps(view, goal, self.layout, self.params.path, working_on)
+            steps = path_steps(view, goal, self.layout, self.params.path, working_on, self.precision(goal.act))
             for m, seconds in time_to_goal(self.layout, self.buttons, next_step_modes(steps),
                                            self.params.auto_mode.press_time).items():
                 expected[m] += weight * seconds
@@ -591,14 +716,17 @@ class Assistance:
             return None, likely
         return best, likely
 
-    def _undo_unseen_switch(self, view: View, arm: Switchable) -> None:
+    def _undo_unseen_switch(self, view: View, arm: Switchable) -> bool:
         """A press that comes within ``press_grace`` of a switch of ours was decided before the user
-        could see it (a human reaction takes longer): it is meant for the mode before the switch."""
+        could see it (a human reaction takes longer): it is meant for the mode before the switch,
+        which is restored (True)."""
         last = self.switches[-1] if self.switches else None
         if last is not None and not last.undone and view.t - last.t <= self.params.auto_mode.press_grace \
                 and arm.mode is last.after:
             arm.switch_mode(last.before)
             self.switches[-1] = replace(last, undone=True)
+            return True
+        return False
 
     def _switch(self, tick: int, view: View, arm: Switchable, mode: Mode, by: Assist, goal: str) -> None:
         self._switched_this_rest = True
@@ -607,8 +735,25 @@ class Assistance:
         if mode is arm.mode or (self._refused is not None and mode is self._refused[0] and by is Assist.AUTO_MODE):
             return
         self._moved_since_switch = False
+        self._switched_at = self._context(view, mode, goal)
         self.switches.append(AutomaticSwitch(tick, view.t, arm.mode, mode, by, goal))
         arm.switch_mode(mode)
+
+    def _context(self, view: View, mode: Mode, label: str) -> SwitchContext | None:
+        """What a refusal of a switch to ``mode`` for the goal ``label`` could teach."""
+        likely = [g for g in candidate_goals(view, self.params, self.clearance) if g.label == label]
+        if not likely:
+            return None
+        goal = likely[0]
+        steps = path_steps(view, goal, self.layout, self.params.path, self._seen_step(view), self.precision(goal.act))
+        shares = next_step_shares(steps)
+        made_for = max((step for step in steps if step.mode is mode), key=lambda step: shares[step.name],
+                       default=None)
+        made_for = made_for.name if made_for is not None and shares[made_for.name] > 0 else None
+        errors = step_errors(view, goal, self.params.path)
+        judged_done = frozenset(step.name for step in steps if step.needed < 0.5 and step.name in errors
+                                and step.name is not made_for)
+        return SwitchContext(goal.act, errors, made_for, judged_done, bool(goal.point[2] > view.hand_pos[2]))
 
     def _around(self, view: View) -> int | None:
         """The cube the open hand is around, lined up with it (None if none)."""

@@ -8,7 +8,7 @@ from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import edited_copy
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks import metrics
-from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, PathStep, Step, assist_label, candidate_goals,
+from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, LearntTolerance, PathStep, Step, assist_label, candidate_goals,
                           load_assist, next_step_modes, parse_assist, presses, profile_assist, step_of_move,
                           time_to_goal)
 from tasks.cli import main
@@ -312,3 +312,96 @@ def test_a_finger_function_held_across_an_early_switch_waits_for_the_rest_or_the
     meant = assist.step(view(A1, closure=0.5, mode=arm.mode, touching=(True, False), t=t_switch + mask + 0.1),
                         JoystickState({"F": 0.8}), arm)
     assert meant.deflection == {"F": 0.8}  # still held after the mask time: the user means it in the new mode
+
+
+# ------------------------------------------------------------------------------------ this user's precision
+def _descend_and_rest(assist, arm, hand, t0, move=None):
+    """Half a second of ``move`` (default: down, B in the height mode) ending at ``hand``, then a
+    second at rest there; the modes the automation switched to meanwhile."""
+    before = len(arm.switched)
+    _rest_after(assist, arm, hand, move or {"B": 0.3}, t0)
+    return arm.switched[before:]
+
+
+def _refuse(assist, arm, t0, presses=2):
+    """The one-button user leaves the automation's mode: ``presses`` presses of B1 round the
+    cycle (the arm applies them), a second apart, without moving in between."""
+    cycle = list(TWO_AXIS.modes)
+    for k in range(presses):
+        t = t0 + k
+        assist.step(view(A1, mode=arm.mode, t=t), JoystickState(pressed=frozenset({"B1"})), arm)
+        arm.mode = cycle[(cycle.index(arm.mode) + 1) % len(cycle)]
+        for tick in range(1, 30):
+            assist.step(view(A1, mode=arm.mode, t=t + tick / 60), JoystickState(), arm)
+
+
+def _grasping_user():
+    assist = Assistance(frozenset({Assist.AUTO_MODE}), TWO_AXIS, ("B1",))
+    assist.belief.logits = {"grasp cube 1": 3.0}
+    return assist, FakeArm(Mode.HEIGHT)
+
+
+def test_a_user_who_refuses_the_fingers_at_9_mm_and_descends_on_gets_them_only_when_nearer():
+    assist, arm = _grasping_user()
+    # resting 9 mm above the cube's middle: within the 12 mm the model starts with, so the fingers
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 0.0) == [Mode.FINGERS]
+    # this user wanted to go lower: back to the height mode (two presses round the cycle), then down
+    _refuse(assist, arm, 2.0)
+    assert arm.mode is Mode.HEIGHT
+    # now 8 mm above after a descent: not done for this user (a user who never refused gets the fingers there)
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.008], 5.0) == []
+    fresh, fresh_arm = _grasping_user()
+    assert _descend_and_rest(fresh, fresh_arm, A1 + [0, 0, 0.008], 0.0) == [Mode.FINGERS]
+    # 2 mm above: done for them too
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.002], 7.0) == [Mode.FINGERS]
+    # what was learnt of grasping does not make setting a cube down any stricter
+    assert assist.precision(-1.0) == {} and assist.precision(+1.0)[PathStep.DESCEND] < 1
+
+
+def test_a_refusal_followed_by_another_step_teaches_nothing_about_the_descent():
+    assist, arm = _grasping_user()
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 0.0) == [Mode.FINGERS]
+    _refuse(assist, arm, 2.0)
+    # the first move after the refusal is a rise (F up in the height mode): the user left for
+    # another reason than the descent, which the model keeps judging done at 9 mm
+    _descend_and_rest(assist, arm, A1 + [0, 0, 0.05], 5.0, move={"F": 0.3})
+    assert assist.precision(+1.0) == {}
+    assert assist.best_mode(view(A1 + [0, 0, 0.008], mode=Mode.HEIGHT))[0] is Mode.FINGERS
+
+
+def test_a_learnt_tolerance_bisects_between_what_the_user_refused_and_what_they_left_done():
+    learnt = LearntTolerance(12.0)
+    assert learnt.tolerance(0.5) == 12.0
+    learnt.saw_not_done(9.0)  # went back to the step at 9: below that, halfway to 0
+    assert learnt.tolerance(0.5) == 4.5
+    learnt.saw_not_done(11.0)  # a larger error adds nothing
+    assert learnt.tolerance(0.5) == 4.5
+    learnt.saw_done(3.0)  # refused a switch made for it at 3: between 3 and 9
+    assert learnt.tolerance(0.5) == 6.0
+    learnt.saw_done(10.0)  # now done at 10, above the 9 refused: the latest counts, twice 10
+    assert learnt.tolerance(0.5) == 20.0
+    assert LearntTolerance(12.0, done_within=4.0).tolerance(0.5) == 12.0  # looser than the start: no stricter
+
+
+def test_a_user_who_refuses_a_travel_and_descends_is_not_sent_to_travel_for_that_error_again():
+    assist, arm = _grasping_user()
+    up = [0, 0, 0.07]  # at the travel height over cube 1
+    # after a rise, 25 mm beside cube 1 (beyond the 20 mm of the start): the travel next
+    assert _descend_and_rest(assist, arm, A1 + up + [0.025, 0, 0], 0.0, move={"F": 0.3}) == [Mode.TRANSLATION]
+    _refuse(assist, arm, 2.0, presses=1)  # back to the height mode, then down: the travel was done for them
+    assert _descend_and_rest(assist, arm, A1 + up + [0.025, 0, -0.01], 4.0) == []
+    # 45 mm beside it after a descent: a user who never refused is sent to travel (beyond twice the
+    # 20 mm, the travel being behind them); this one left it done at 25 mm: twice 50 mm
+    assert _descend_and_rest(assist, arm, A1 + up + [0, 0.045, -0.01], 6.0) == []
+    fresh, fresh_arm = _grasping_user()
+    assert _descend_and_rest(fresh, fresh_arm, A1 + up + [0.01, 0, -0.01], 0.0) == []
+    assert _descend_and_rest(fresh, fresh_arm, A1 + up + [0, 0.045, -0.01], 2.0) == [Mode.TRANSLATION]
+
+
+def test_a_user_who_overshot_below_the_cube_and_moves_up_refused_the_fingers_for_the_height():
+    assist, arm = _grasping_user()
+    assert _descend_and_rest(assist, arm, A1 - [0, 0, 0.009], 0.0) == [Mode.FINGERS]  # 9 mm too low
+    _refuse(assist, arm, 2.0)
+    # up toward the cube's middle (F in the height mode): the height was not done, not a rise away
+    assert _descend_and_rest(assist, arm, A1 - [0, 0, 0.007], 5.0, move={"F": 0.3}) == []
+    assert assist.precision(+1.0)[PathStep.DESCEND] < 1
