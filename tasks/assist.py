@@ -654,9 +654,11 @@ class Assistance:
 
     def _learn_precision(self, working_on: PathStep) -> None:
         """After a refusal, the user's first move is the step they still wanted: if the switch
-        judged it done (less than even odds of being needed), it was not done at its error then; the step the switch was made for, if
-        another, was done for them at its error then (``LearntTolerance``).  A refusal that taught
-        something is explained: the refused mode may be proposed again."""
+        judged it done (less than even odds of being needed), it was not done at its error then; the
+        step the switch was made for, if it comes before that one (the user went past it), was done
+        for them at its error then (``LearntTolerance``); a step after theirs tells nothing (they
+        may just take the steps in another order).  A refusal that taught something is explained:
+        the refused mode may be proposed again."""
         if self._refusal is None:
             return
         context, self._refusal = self._refusal, None
@@ -665,7 +667,8 @@ class Assistance:
         lessons = []
         if working_on in context.judged_done:
             lessons.append((working_on, LearntTolerance.saw_not_done))
-        if context.made_for in context.errors and context.made_for is not working_on:
+        if context.made_for in context.errors and working_on in PATH_ORDER \
+                and PATH_ORDER.index(context.made_for) < PATH_ORDER.index(working_on):
             lessons.append((context.made_for, LearntTolerance.saw_done))
         for step, lesson in lessons:
             error, start = context.errors[step]

@@ -405,3 +405,17 @@ def test_a_user_who_overshot_below_the_cube_and_moves_up_refused_the_fingers_for
     # up toward the cube's middle (F in the height mode): the height was not done, not a rise away
     assert _descend_and_rest(assist, arm, A1 - [0, 0, 0.007], 5.0, move={"F": 0.3}) == []
     assert assist.precision(+1.0)[PathStep.DESCEND] < 1
+
+
+def test_a_refused_descent_for_a_user_who_travels_first_says_nothing_of_the_descent():
+    assist, arm = _grasping_user()
+    arm.mode = Mode.TRANSLATION
+    # 12 cm above cube 1 and 15 mm beside it (the model: over it, descend next, in the height mode)
+    high = A1 + [0.015, 0, 0.12]
+    assert _descend_and_rest(assist, arm, high, 0.0, move={"R": 0.3}) == [Mode.HEIGHT]
+    _refuse(assist, arm, 2.0, presses=3)  # round the cycle back to translation, then a travel first
+    _descend_and_rest(assist, arm, A1 + [0.005, 0, 0.12], 6.0, move={"R": 0.3})
+    assert PathStep.DESCEND not in assist.precision(+1.0)  # not "done at 12 cm"
+    # over the cube 12 cm up the descent is still wanted: no switch to the fingers
+    arm.mode = Mode.HEIGHT
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.10], 8.0) == []
