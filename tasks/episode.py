@@ -216,6 +216,24 @@ class LeanFeel:
         if deflection < 1.0:
             self.zero = float(np.clip((lean - deflection) / (1.0 - deflection), 0.0, self.feel.max_zero))
 
+    def corrected(self, lean: float, further: bool) -> float:
+        """The lean one correction of ``lean`` takes (``lean_step`` further, or less far)."""
+        step = self.feel.lean_step if further else -self.feel.lean_step
+        return float(np.clip(lean + step, self.feel.least_lean, 1.0))
+
+
+@dataclass
+class Watched:
+    """The proportional posture the participant took up last, and what they have seen the arm do
+    with it: its speed along the posture's direction while the arm answers it (smoothed), including
+    after they let go of it (the arm answers late)."""
+
+    label: int
+    lean: float
+    wanted: float  # the deflection the lean was meant to give
+    speed: float = 0.0
+    judged: bool = False  # let go of and seen too fast: already taught the feel a lesser lean
+
 
 def profile_controls(profile: Profile) -> Controls:
     """The controls a profile's classes give the scripted user: its joystick layout and the mode
@@ -257,8 +275,7 @@ class BomiChannel:
         # the participant's feel for each stick-direction class (how far to lean for how fast)
         self.feel = {cls.label: LeanFeel(participant.params.feel) for cls in profile.classes
                      if cls.function in FUNCTIONS}
-        self._wanted = 0.0  # deflection wanted from the posture held now
-        self._speed = 0.0  # the arm's speed along the held posture's direction, as the person judges it
+        self._watched: Watched | None = None  # the proportional posture taken up last
         # how long the person waits for a posture (or a change of lean) to take effect before
         # leaning further: reaction + the body's move + a second of watching
         self._patience = participant.params.reaction_s + participant.params.onset_s + participant.params.feel.watch_s
@@ -324,16 +341,20 @@ class BomiChannel:
         participant watches to judge whether to lean further or less."""
         label, amplitude = self.intent_class(intent)
         held, held_amplitude = self.participant.intent
-        self._wanted = float(next(iter(intent.deflection.values()), 0.0))
+        wanted = float(next(iter(intent.deflection.values()), 0.0))
+        judged = self._watch(seen, mode)
         if label != held:
             self._take_up(label, amplitude, t)
-            self._speed = 0.0
-        elif label != NEUTRAL_LABEL:
-            lean = self._corrected_lean(label, held_amplitude, t, seen, mode)
+            if label in self.feel:
+                self._watched = Watched(label, amplitude, wanted)
+        elif label in self.feel:
+            self._watched.wanted = wanted
+            lean = self._corrected_lean(label, held_amplitude, t, judged)
             if lean != held_amplitude:
                 self._take_up(label, lean, t)
-                if label in self.feel:
-                    self.feel[label].learn(lean, self._wanted)
+                self._watched.lean = lean
+                self.feel[label].learn(lean, wanted)
+        self._learn_from_overshoot(label)
         decisions = self._feed(self._arrived(self.clock_offset + t, self.clock_offset + t_end))
         if decisions:
             self._decided = decisions[-1].label
@@ -355,26 +376,47 @@ class BomiChannel:
         self.participant.set_intent(label, amplitude, self.clock_offset + t)
         self._since = t
 
-    def _corrected_lean(self, label: int, lean: float, t: float, seen: np.ndarray | None, mode: Mode) -> float:
-        """The lean the participant holds now: further when the chain has not answered the posture
-        for a while, or (proportional classes) when the arm goes much slower than wanted; less far
-        when it goes much faster (moves of the hand only: a speed the person can see).  Each
-        correction is given the patience to take effect."""
-        function = self._function_of[label]
-        answered = self.stick.function == function
+    def _watch(self, seen: np.ndarray | None, mode: Mode) -> bool:
+        """Follow the arm's speed along the watched posture's direction while the arm answers that
+        posture (held or already let go of); whether the person can judge it now (a move of the hand
+        in ``mode``: a speed the person can see)."""
+        watched = self._watched
+        if watched is None or seen is None:
+            return False
+        function = self._function_of[watched.label]
         axis = self.controls.layout.axes(mode, Kind.LINEAR).get(function)
-        judged = axis is not None and seen is not None and label in self.feel
-        feel = self.participant.params.feel
-        if answered and judged:
+        if axis is None:
+            return False
+        if self.stick.function == function:
             along = float(np.dot(seen, axis))
-            self._speed += (along - self._speed) * min(1.0, DT / feel.speed_smoothing_s)
+            watched.speed += (along - watched.speed) * min(1.0, DT / self.participant.params.feel.speed_smoothing_s)
+        return True
+
+    def _corrected_lean(self, label: int, lean: float, t: float, judged: bool) -> float:
+        """The lean the participant holds now in the proportional class ``label``: further when the
+        chain has not answered the posture for a while or (``judged``: a speed they can see) when
+        the arm goes much slower than wanted; less far when it goes much faster.  Each correction
+        is given the patience to take effect."""
         if t - self._since <= self._patience:
             return lean
-        if not answered or (judged and self._speed < feel.too_slow * self._wanted):
-            return min(1.0, lean + feel.lean_step)
-        if judged and self._speed > feel.too_fast * self._wanted:
-            return max(feel.least_lean, lean - feel.lean_step)
+        feel, watched = self.participant.params.feel, self._watched
+        answered = self.stick.function == self._function_of[label]
+        if not answered or (judged and watched.speed < feel.too_slow * watched.wanted):
+            return self.feel[label].corrected(lean, further=True)
+        if judged and watched.speed > feel.too_fast * watched.wanted:
+            return self.feel[label].corrected(lean, further=False)
         return lean
+
+    def _learn_from_overshoot(self, held: int) -> None:
+        """A posture let go of while the arm, still answering it, went much faster than wanted (the
+        arm answers the body late: it overshoots the goal): the next move of that class leans less."""
+        watched = self._watched
+        if watched is None or watched.label == held or watched.judged:
+            return
+        if watched.speed > self.participant.params.feel.too_fast * watched.wanted:
+            feel = self.feel[watched.label]
+            feel.learn(feel.corrected(watched.lean, further=False), watched.wanted)
+            watched.judged = True
 
     def log_fields(self) -> dict:
         truth = self.participant.truth()

@@ -103,3 +103,30 @@ def test_the_participant_leans_further_when_the_arm_is_too_slow_and_less_when_to
     assert fast[-1] < start  # three times too fast: lean less
     right = _correction(model, params, profile, 1.0)
     assert np.allclose(right, start)  # the wanted speed: keep the lean
+
+
+def _let_go_while_the_arm_runs_on(model, params, profile, seen_ratio: float) -> tuple[float, float]:
+    """The lean of a move of F for 0.3 that the person lets go of as soon as the chain answers it,
+    the arm going on at ``seen_ratio`` times that speed for 1.5 s after (the BoMI answers late);
+    then the lean of the next move of F for 0.3."""
+    channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
+    axis = np.array(THREE_AXIS.axes(Mode.TRANSLATION, Kind.LINEAR)["F"])
+    wanted, t = 0.3, 0.0
+    while channel.stick.function != "F":
+        assert t < 5.0, "the chain never answered F"
+        channel.command(StickIntent({"F": wanted}), t, t + TICK, np.zeros(3), Mode.TRANSLATION)
+        t += TICK
+    first = channel.participant.intent[1]
+    for _ in range(int(1.5 / TICK)):  # let go; the arm still answers the posture
+        channel.command(StickIntent(), t, t + TICK, axis * seen_ratio * wanted, Mode.TRANSLATION)
+        t += TICK
+    channel.command(StickIntent({"F": wanted}), t, t + TICK, np.zeros(3), Mode.TRANSLATION)
+    return first, channel.participant.intent[1]
+
+
+def test_a_move_that_ran_on_much_too_fast_after_letting_go_makes_the_next_one_lean_less(p1_model):
+    params, profile, _, model = p1_model
+    first, after_overshoot = _let_go_while_the_arm_runs_on(model, params, profile, 4.0)
+    assert after_overshoot < first  # the arm overshot at four times the wanted speed: lean less next time
+    first, after_right = _let_go_while_the_arm_runs_on(model, params, profile, 1.0)
+    assert after_right == pytest.approx(first)  # it went at the wanted speed: nothing to learn
