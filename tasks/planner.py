@@ -373,13 +373,17 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
     dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
     support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
     release = np.r_[dest_xy + grip[:2], support + view.cube_size / 2 + p.release_gap + grip[2]]
-    set_down = (np.linalg.norm(cube[:2] - dest_xy) <= p.placed
-                and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop)
-    if set_down:
+    off = np.linalg.norm(cube[:2] - dest_xy)
+    if off <= p.placed and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop:
         return _open(f"release cube {held + 1}")
     carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
-    return _approach(hand, release, carry_z, p, f"carry cube {held + 1}", _open(f"release cube {held + 1}"),
-                     memory.descending, memory.stalled)
+    step = f"carry cube {held + 1}"
+    # down at the release height (within the approach's align tolerance) but farther from its place than
+    # placed_cubes accepts: slide it there first, or it would be taken up and let go of again and again
+    accepted = p.target_zone if bottom is None else p.placed
+    arrival = (_open(f"release cube {held + 1}") if off <= accepted
+               else _move(step, Phase.TRAVEL, np.r_[release[:2], hand[2]]))
+    return _approach(hand, release, carry_z, p, step, arrival, memory.descending, memory.stalled)
 
 
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:

@@ -7,7 +7,7 @@ import pytest
 
 from bomi.errors import BomiError
 from helpers import assert_one_line_error
-from sim.joystick import THREE_AXIS, TWO_AXIS, Mode
+from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
 from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
                            held_cube, load_operator, mode_button, placed_cubes, plan, turn_deflection_for)
 
@@ -433,3 +433,20 @@ def test_a_top_cube_touched_by_an_open_hand_is_placed_but_not_by_a_closed_one():
     stacked = dict(cubes=((0.14, -0.45), (0.14, -0.45)), cube_z=(HALF, 3 * HALF), touching=(False, True))
     assert placed_cubes(view(closure=0.05, **stacked), P) == (0, 1)
     assert placed_cubes(view(closure=0.6, **stacked), P) == (0, None)
+
+
+def test_a_held_cube_down_beside_its_place_is_slid_over_it_not_let_go_of_again_and_again():
+    # cube 2 rests on cube 1 at B, 15 mm off its centre: within the approach's align tolerance, outside placed
+    offset = np.array([0.011, 0.010])
+    assert P.placed < np.linalg.norm(offset) < P.align
+    top = np.r_[B + offset, 3 * HALF]
+    v = view(hand=tuple(top), cubes=(tuple(B), tuple(top[:2])), cube_z=(HALF, top[2]), closure=0.7,
+             touching=(False, True), t=5.0)
+    intent, _ = plan(v, Memory(touch_since=0.0), P, combine_axes=False)
+    assert intent.button is None and str(intent.goal) == "carry cube 2: travel"  # not "release cube 2"
+    moving = THREE_AXIS.axes(Mode.TRANSLATION, Kind.LINEAR)
+    (function, _), = intent.deflection.items()
+    assert np.dot(moving[function][:2], -offset) > 0  # toward the place
+    on_place = replace(v, hand_pos=np.r_[B + 0.004, top[2]], cube_pos=(v.cube_pos[0], np.r_[B + 0.004, top[2]]))
+    intent, _ = plan(on_place, Memory(touch_since=0.0), P, combine_axes=False)
+    assert str(intent.goal).startswith("release cube 2")
