@@ -169,6 +169,9 @@ def predict(args: argparse.Namespace) -> None:
                      f"[{m - h:.1f}, {m + h:.1f}] | {'' if ref is None else f'{ref:g}'} | {near} | {m / means[reference[name]]:.2f} | "
                      f"{f'{PAPER_BOMI_S / PAPER_JOYSTICK_S:.2f}' if name == 'P1 BoMI' else ''} | {100 * share:.1f} % | "
                      + " | ".join(f"{phases[k]:.1f}" for k in PHASES) + " |")
+    best = {name: min((r for r in groups.get(name, []) if r["success"]), key=lambda r: r["completion_time"], default=None)
+            for name in (paper_joystick, "P1 BoMI")}
+    best_names = [name for name, r in best.items() if r is not None]
     failed = [f"{r['participant']} {r['operator']} seed {r['seed']} ({r['failure']})"
               for rs in groups.values() for r in rs if not r["success"]]
     lines += ["", f"Failed: {', '.join(failed) if failed else 'none'}.", "",
@@ -177,17 +180,15 @@ def predict(args: argparse.Namespace) -> None:
               f"for able-bodied JACO joystick users). Phases: mean seconds over the successful episodes "
               f"(`tasks.metrics.TaskPhase`: place = the carried cube lowered onto its place). Figures: "
               f"{args.name}.png (times), {args.name}_phases.png (phases), {args.name}_best.png (the fastest "
-              f"joystick and P1 BoMI trials in the paper's layout: hand relative to B, then the BoMI's "
-              f"decisions and amplitude)."]
+              f"trial of {' and '.join(best_names) or 'no condition'} in the paper's layout: hand relative to B, "
+              f"then the BoMI's decisions and amplitude)."]
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f"{args.name}.md").write_text("\n".join(lines) + "\n")
     (RESULTS / f"{args.name}.json").write_text(json.dumps({"groups": groups}, indent=1))
     times_figure(groups, RESULTS / f"{args.name}.png")
     phases_figure(groups, RESULTS / f"{args.name}_phases.png")
-    best = [min((r for r in groups.get(name, []) if r["success"]), key=lambda r: r["completion_time"], default=None)
-            for name in (paper_joystick, "P1 BoMI")]
-    logs = [run_job(EpisodeJob(r["operator"], r["participant"], r["seed"], overrides=HUMAN_ON))
-            for r in best if r is not None]
+    logs = [run_job(EpisodeJob(best[name]["operator"], best[name]["participant"], best[name]["seed"], overrides=HUMAN_ON))
+            for name in best_names]
     if logs:
         timeline_figure(logs, RESULTS / f"{args.name}_best.png")
     print("\n".join(lines))
