@@ -14,6 +14,11 @@ rule alone (``confirm_frames=1``); a delivered IMU frame is a phantom when no tr
 the same node and counter lies within 4 bytes of it (a real frame with a flipped data byte is not
 a phantom: no parser can tell it without a checksum). And uniform random bytes (``--noise-bytes``):
 every frame delivered from them is a phantom; false accepts per MB, with and without the guard.
+Safety-key guard (bomi.frames): for each of five possible key frame patterns (hardware.md does not
+document it), ``--key-presses`` random presses (STANDBY, CONTROL, CALIBRATION, 40..99 periods apart)
+with 9 % frame loss: how many presses of an event that lets the arm move act, and after how many
+periods; then the same stream with ``--key-phantoms`` well-formed phantom key frames (id 40, CONTROL
+or CALIBRATION, every other byte random) at random places: how many act, with and without the guard.
 Writes benchmarks/results/parser_fuzz.{md,json}.
 """
 from __future__ import annotations
@@ -29,7 +34,8 @@ import numpy as np
 from tqdm import tqdm
 
 from bomi.frames import (
-    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame,
+    FRAME_SIZE, SAFETY_EVENT_BYTE, SAFETY_KEY_NODE_ID, START_BYTE, END_BYTE, FrameParser, ImuFrame, SafetyKey,
+    encode_imu_frame, encode_safety_key_frame,
 )
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -140,11 +146,132 @@ def phantoms(delivered: list[bytes], sent: list[bytes], max_differing: int = 4) 
 def noise_false_accepts(size: int, rng: np.random.Generator) -> dict:
     """Frames delivered from ``size`` uniform random bytes (all phantoms), framing rule alone vs guard."""
     data = rng.bytes(size)
-    counts = {}
+    counts, key_frames, key_events = {}, {}, {}
     for name, parser in (("framing rule alone", FrameParser(confirm_frames=1)), ("with the guard", FrameParser())):
         counts[name] = sum(len(parser.feed(data[i:i + CHUNK])) for i in range(0, size, CHUNK))
+        key_frames[name] = parser.skipped[SAFETY_KEY_NODE_ID]
+        key_events[name] = sum(e.event in MOVING_EVENTS for e in parser.safety_events)
     return {"bytes": size, "phantom_frames": counts,
-            "phantom_frames_per_mb": {k: v / (size / 1e6) for k, v in counts.items()}}
+            "phantom_frames_per_mb": {k: v / (size / 1e6) for k, v in counts.items()},
+            "phantom_key_frames": key_frames, "phantom_moving_key_events": key_events}
+
+
+@dataclass(frozen=True)
+class KeyPattern:
+    """One way the real safety key might send its frames."""
+
+    name: str
+    idle_frames: bool             # sends an event-0 frame every period between presses
+    frames_per_press: int         # frames carrying the event per press, one per period
+    counter_per_sent_frame: bool  # else the counter counts periods, sent or not
+    presses_per_event: int = 1    # 2: the user presses twice, DOUBLE_PRESS_PERIODS apart
+
+
+DOUBLE_PRESS_PERIODS = 8
+KEY_PATTERNS = (
+    KeyPattern("streams every period, the event in one frame", True, 1, False),
+    KeyPattern("sends only while held, the event in 5 frames", False, 5, False),
+    KeyPattern("one frame per press, counter counts sent frames", False, 1, True),
+    KeyPattern("one frame per press, counter counts periods", False, 1, False),
+    KeyPattern("one frame per press, counter counts periods, pressed twice", False, 1, False, 2),
+)
+MOVING_EVENTS = (SafetyKey.CONTROL, SafetyKey.CALIBRATION)
+PHANTOM = -1
+
+
+@dataclass
+class KeyStream:
+    frames: list[bytes]   # every one well-formed, so a parser's frame_number is its index here
+    press: list[int]      # per frame: the press it belongs to, PHANTOM, or None (idle)
+    period: list[int]     # per frame: the period it was sent in (phantoms: their predecessor's)
+    events: list[int]     # per press: its event
+
+
+def key_stream(pattern: KeyPattern, presses: int, rng: np.random.Generator) -> KeyStream:
+    """``presses`` random presses sent as ``pattern``, each frame lost with probability 0.09."""
+    stream, period, sent = KeyStream([], [], [], []), 0, 0
+
+    def send(event: int, press: int | None) -> None:
+        nonlocal sent
+        counter = (sent if pattern.counter_per_sent_frame else period) % 256
+        sent += 1
+        if rng.random() >= 0.09:
+            stream.frames.append(encode_safety_key_frame(event, counter))
+            stream.press.append(press)
+            stream.period.append(period)
+
+    for press in range(presses):
+        event = int(rng.choice(list(SafetyKey)[1:]))
+        stream.events.append(event)
+        for _ in range(int(rng.integers(40, 100))):
+            if pattern.idle_frames:
+                send(SafetyKey.NONE, None)
+            period += 1
+        for repeat in range(pattern.presses_per_event):
+            for _ in range(pattern.frames_per_press):
+                send(event, press)
+                period += 1
+            if repeat + 1 < pattern.presses_per_event:
+                period += DOUBLE_PRESS_PERIODS - pattern.frames_per_press
+    return stream
+
+
+def with_phantoms(stream: KeyStream, count: int, rng: np.random.Generator) -> KeyStream:
+    """``stream`` with ``count`` phantom key frames at random places: 0x33, id 40, a moving event in
+    byte 14, 0x34, every other byte uniform random (as noise or a shifted real frame's data bytes)."""
+    places = np.sort(rng.integers(0, len(stream.frames) + 1, count)).tolist()
+    out, k = KeyStream([], [], [], stream.events), 0
+    for i in range(len(stream.frames) + 1):
+        while k < count and places[k] == i:
+            phantom = bytearray(rng.bytes(FRAME_SIZE))
+            phantom[0], phantom[1], phantom[-1] = START_BYTE, SAFETY_KEY_NODE_ID, END_BYTE
+            phantom[SAFETY_EVENT_BYTE] = MOVING_EVENTS[int(rng.integers(2))]
+            out.frames.append(bytes(phantom))
+            out.press.append(PHANTOM)
+            out.period.append(out.period[-1] if out.period else 0)
+            k += 1
+        if i < len(stream.frames):
+            out.frames.append(stream.frames[i])
+            out.press.append(stream.press[i])
+            out.period.append(stream.period[i])
+    return out
+
+
+def key_guard_run(stream: KeyStream, parser: FrameParser) -> dict:
+    """Presses of a moving event that act (latency in periods from the press's first received frame)
+    and phantom frames that act."""
+    parser.feed(b"".join(stream.frames))
+    first_received: dict[int, int] = {}
+    for press, period in zip(stream.press, stream.period):
+        if press is not None and press != PHANTOM and stream.events[press] in MOVING_EVENTS:
+            first_received.setdefault(press, period)
+    acted: dict[int, int] = {}
+    phantoms_acted = 0
+    for event in parser.safety_events:
+        press = stream.press[event.frame_number]
+        if press == PHANTOM:
+            phantoms_acted += event.event in MOVING_EVENTS
+        elif press in first_received:
+            acted.setdefault(press, stream.period[event.frame_number] - first_received[press])
+    latency = list(acted.values()) or [0]
+    return {"moving_presses_received": len(first_received), "moving_presses_acted": len(acted),
+            "latency_periods_median": float(np.median(latency)), "latency_periods_max": max(latency),
+            "phantoms": stream.press.count(PHANTOM), "phantoms_acted": phantoms_acted,
+            "key_events_dropped": parser.key_events_unconfirmed}
+
+
+def key_guard(presses: int, phantoms: int, rng: np.random.Generator) -> dict:
+    """Every pattern, clean and with phantoms, parsed with the guard and with the framing rule alone."""
+    out = {}
+    for pattern in KEY_PATTERNS:
+        clean = key_stream(pattern, presses, rng)
+        flooded = with_phantoms(clean, phantoms, rng)
+        out[pattern.name] = {
+            f"{stream_name}, {parser_name}": key_guard_run(stream, parser())
+            for stream_name, stream in (("clean", clean), ("with phantoms", flooded))
+            for parser_name, parser in (("framing rule alone", lambda: FrameParser(confirm_frames=1)),
+                                        ("with the guard", FrameParser))}
+    return out
 
 
 def run_fuzz(stream: FuzzStream, rng: np.random.Generator, parser: FrameParser | None = None) -> dict:
@@ -196,6 +323,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fuzz-bytes", type=int, default=1_000_000)
     parser.add_argument("--noise-bytes", type=int, default=16_000_000)
+    parser.add_argument("--key-presses", type=int, default=2000)
+    parser.add_argument("--key-phantoms", type=int, default=100_000)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
@@ -217,10 +346,12 @@ def main() -> None:
                         for name, run in (("framing rule alone", unguarded), ("with the guard", fuzz))},
         "random bytes": noise_false_accepts(args.noise_bytes, rng),
     }
+    keys = key_guard(args.key_presses, args.key_phantoms, rng)
 
     record = {
         "benchmark": "parser_fuzz", "seed": args.seed, "python": platform.python_version(),
         "machine": platform.machine(), "throughput_frames_per_s": throughput, "fuzz": fuzz, "phantom_guard": guard,
+        "safety_key_guard": keys,
         "needed_frames_per_s": 6 * 62.5,
     }
     RESULTS.mkdir(exist_ok=True)
@@ -250,6 +381,26 @@ def main() -> None:
     for name, count in noise["phantom_frames"].items():
         lines.append(f"| uniform random bytes ({noise['bytes']:,} B) | {name} | - | {count} | {count} "
                      f"| {noise['phantom_frames_per_mb'][name]:.3f} per MB | - |")
+    lines += [f"| uniform random bytes ({noise['bytes']:,} B) | {name}, safety key | - | "
+              f"{noise['phantom_key_frames'][name]} key frames | {noise['phantom_moving_key_events'][name]} "
+              f"CONTROL/CALIBRATION events | - | - |" for name in noise["phantom_frames"]]
+    lines += ["", "## Safety-key guard", "",
+              f"{args.key_presses} presses per pattern (STANDBY, CONTROL, CALIBRATION at random, 40..99 periods "
+              f"apart, 9 % of key frames lost); 'moving': CONTROL or CALIBRATION. Then the same stream with "
+              f"{args.key_phantoms:,} phantom key frames (id 40, CONTROL or CALIBRATION, other bytes random) at "
+              "random places. Latency: periods from a press's first received frame to the frame that acts.", "",
+              "| key pattern | parser | moving presses acted (clean) | latency median / max (periods) | "
+              "moving presses acted (with phantoms) | phantoms acted | phantom acceptance |",
+              "|---|---|---:|---:|---:|---:|---:|"]
+    for pattern, runs in keys.items():
+        for name in ("framing rule alone", "with the guard"):
+            clean, flooded = runs[f"clean, {name}"], runs[f"with phantoms, {name}"]
+            lines.append(
+                f"| {pattern} | {name} | {clean['moving_presses_acted']} / {clean['moving_presses_received']} "
+                f"| {clean['latency_periods_median']:g} / {clean['latency_periods_max']} "
+                f"| {flooded['moving_presses_acted']} / {flooded['moving_presses_received']} "
+                f"| {flooded['phantoms_acted']} / {flooded['phantoms']} "
+                f"| {100 * flooded['phantoms_acted'] / flooded['phantoms']:.4f} % |")
     (RESULTS / "parser_fuzz.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

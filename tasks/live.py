@@ -88,7 +88,9 @@ def refusal(decision: Decision, functions: Mapping[int, str]) -> str | None:
 
 @dataclass
 class SafetySwitch:
-    """The safety key's events in order: standby holds the arm until control."""
+    """The safety key's events in order: standby holds the arm until control. The events are those the
+    parser's key guard let through (``bomi.frames``: STANDBY at once, CONTROL and CALIBRATION only
+    when the key frame before them vouches)."""
 
     standby: bool = False
     seen: int = 0

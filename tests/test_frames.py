@@ -271,6 +271,44 @@ def test_well_formed_random_frames_in_noise_are_all_refused():
     assert FrameParser().feed(stream) == []
 
 
+N, S, C, K = SafetyKey.NONE, SafetyKey.STANDBY, SafetyKey.CONTROL, SafetyKey.CALIBRATION
+
+
+@pytest.mark.parametrize("frames, delivered, dropped", [
+    # a lone key frame, nothing before it: STANDBY acts at once; what may let the arm move does not
+    ([(S, 7)], [(S, 7)], 0),
+    ([(C, 7)], [], 1),
+    ([(K, 7)], [], 1),
+    ([(9, 7)], [], 1),                                        # an unknown code is not known to be safe
+    # a key streaming a frame every period: the event acts on its first frame (across the wrap)
+    ([(N, 254), (N, 255), (C, 0), (N, 1)], [(C, 0)], 0),
+    # a key repeating the event while held, nothing before: from its second frame
+    ([(C, 50), (C, 51), (C, 52)], [(C, 51), (C, 52)], 1),
+    # one frame per press, the counter counting sent frames: the previous press vouches, the first has none
+    ([(K, 6), (S, 7), (C, 8)], [(S, 7), (C, 8)], 1),
+    # lost key frames: up to 16 counters after the key's last frame, not 17, not the same counter
+    ([(N, 0), (C, 16)], [(C, 16)], 0),
+    ([(N, 0), (C, 17)], [], 1),
+    ([(N, 5), (C, 5)], [], 1),
+    # the period byte must be the key's
+    ([(N, 5), (C, 6, 20)], [], 1),
+    # a phantom key frame (wild counter) between two presses breaks the chain for the next one only
+    ([(S, 7), (N, 200), (C, 8), (C, 9)], [(S, 7), (C, 9)], 1),
+])
+def test_key_events_that_let_the_arm_move_need_the_previous_key_frame_standby_does_not(frames, delivered, dropped):
+    """IMU frames between the key frames do not matter; hand-computed from the rule in bomi.frames."""
+    stream = b"".join(encode_safety_key_frame(*frame) + imu_frame(10, k) for k, frame in enumerate(frames))
+    parser = FrameParser()
+    parser.feed(stream)
+    assert [(e.event, e.counter) for e in parser.safety_events] == delivered
+    assert parser.key_events_unconfirmed == dropped
+    assert ("safety-key events dropped by the guard" in parser.summary()) == (dropped > 0)
+    # the framing rule alone (confirm_frames=1) takes every event, as the parser did before the guard
+    unguarded = framing()
+    unguarded.feed(stream)
+    assert [(e.event, e.counter) for e in unguarded.safety_events] == [frame[:2] for frame in frames if frame[0] != N]
+
+
 def test_sample_index_unwraps_each_nodes_counter_and_counts_lost_samples():
     """Hand-computed: node 10 starts at 254, wraps after 255 and loses counter 1; node 11 keeps its own count."""
     frames = [ImuFrame(node, 16, counter, (0, 0, 0), (0, 0, 0), (0, 0, 0))

@@ -146,18 +146,18 @@ class FakeClock:
 
 
 class ScriptedSource:
-    """Per tick a number of frames (content irrelevant: the chain is scripted too) and safety-key events."""
+    """Per tick a number of frames (content irrelevant: the chain is scripted too) and the bytes of
+    safety-key frames, which go through the parser with its guard."""
 
-    def __init__(self, frames_per_tick: list[int], safety_keys: dict[int, SafetyKey] | None = None):
+    def __init__(self, frames_per_tick: list[int], key_bytes: dict[int, bytes] | None = None):
         self.parser = FrameParser()
         self._script = frames_per_tick
-        self._keys = safety_keys or {}
+        self._keys = key_bytes or {}
 
     def batches(self):
         frame = ImuFrame(10, 16, 0, (0, 0, 0), (0, 0, 0), (0, 0, 0))
         for t, n in enumerate(self._script):
-            if t in self._keys:
-                self.parser.feed(encode_safety_key_frame(self._keys[t], t))
+            self.parser.feed(self._keys.get(t, b""))
             yield t, [frame] * n
         while True:
             yield 0, []
@@ -230,7 +230,9 @@ def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_deci
 
 
 def test_safety_key_standby_holds_the_arm_until_control_and_calibration_restarts_the_neutral():
-    keys = {5: SafetyKey.STANDBY, 10: SafetyKey.CONTROL, 15: SafetyKey.CALIBRATION}
+    # a key that sends one frame per press, its counter counting the ticks
+    keys = {t: encode_safety_key_frame(event, t)
+            for t, event in {5: SafetyKey.STANDBY, 10: SafetyKey.CONTROL, 15: SafetyKey.CALIBRATION}.items()}
     chain = ScriptedChain([decision(nu=0.5)] * 20)
     calibrations = []
     chain.begin_neutral_calibration = lambda: calibrations.append(True)
@@ -243,6 +245,26 @@ def test_safety_key_standby_holds_the_arm_until_control_and_calibration_restarts
     assert speed == pytest.approx([0.1] * 5 + [0.0] * 5 + [0.1] * 10)
     assert calibrations == [True] and summary.standby_ticks == 5
     assert [tick["tick"] for tick in ticks if "neutral" in tick] == [15]     # the new offsets are announced
+
+
+def test_a_phantom_control_frame_does_not_end_a_standby_and_the_real_key_still_does():
+    """A key streaming a frame per tick (event 0 between presses). A phantom CONTROL (id 40, event 3,
+    a counter that does not follow the key's) lands in tick 10: the arm stays held; the real CONTROL at
+    tick 15 follows the key's frame of tick 14 and ends the standby on its own tick."""
+    events = {5: SafetyKey.STANDBY, 15: SafetyKey.CONTROL}
+    keys = {t: encode_safety_key_frame(events.get(t, SafetyKey.NONE), t) for t in range(20)}
+    keys[10] += encode_safety_key_frame(SafetyKey.CONTROL, 200)
+    clock, log = FakeClock(), io.StringIO()
+    source = ScriptedSource([1] * 20, keys)
+    summary = run_live(source, ScriptedChain([decision(nu=0.5)] * 20), StickArm(), duration_s=20 * CONTROL_DT,
+                       neutral={1: (0.0, 0.0, 0.0)}, log=log, clock=clock, sleep=clock.sleep)
+    ticks = [json.loads(line) for line in log.getvalue().splitlines()]
+    assert [tick["standby"] for tick in ticks] == [False] * 5 + [True] * 10 + [False] * 5
+    speed = [np.linalg.norm(tick["linear"]) for tick in ticks]
+    assert speed == pytest.approx([0.1] * 5 + [0.0] * 10 + [0.1] * 5)
+    assert summary.standby_ticks == 10
+    assert source.parser.key_events_unconfirmed == 1
+    assert "1 safety-key events dropped by the guard" in source.parser.summary()
 
 
 # -------------------------------------------------------------------- emulator -> pty -> bomi live
