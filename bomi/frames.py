@@ -25,8 +25,8 @@ frames, so the rule is chosen to work for any pattern, at a cost that depends on
 streams a frame every period acts on the event's first frame (no added latency); one that repeats the
 event while held acts at the latest on its second frame (one key period); one that sends a single
 frame per press acts at once when its counter counts sent frames (the previous press vouches), except
-for the first press after start, and otherwise needs the press twice within ``MAX_COUNTER_GAP``
-counters. Dropped events are counted (``key_events_unconfirmed``, in ``summary``). Phantom key
+for the first press after start, and otherwise (its counter counts periods) needs the press twice
+within ``MAX_COUNTER_GAP`` counters. Dropped events are counted (``key_events_unconfirmed``, in ``summary``). Phantom key
 frames accepted (``python benchmarks/parser_fuzz.py``, 100,000 per pattern, seed 0): 100 % without
 the guard, 0.017-0.030 % with it (expected 16/65,536); costs per pattern in docs/signal_chain.md.
 """

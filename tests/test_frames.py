@@ -309,6 +309,19 @@ def test_key_events_that_let_the_arm_move_need_the_previous_key_frame_standby_do
     assert [(e.event, e.counter) for e in unguarded.safety_events] == [frame[:2] for frame in frames if frame[0] != N]
 
 
+@given(events=st.lists(st.sampled_from(list(SafetyKey)), min_size=1, max_size=40), first=st.integers(0, 255),
+       period=st.integers(1, 255), cuts=st.lists(st.integers(0, 2_000), max_size=6))
+@PROPERTY_SETTINGS
+def test_a_streaming_key_loses_no_event_to_the_guard(events, first, period, cuts):
+    """A key sending a frame every period (counter +1 each) after one idle frame: every event acts, in any chunks."""
+    frames = [(SafetyKey.NONE, first)] + [(event, (first + 1 + k) % 256) for k, event in enumerate(events)]
+    stream = b"".join(encode_safety_key_frame(event, counter, period) for event, counter in frames)
+    parser = FrameParser()
+    feed_in_chunks(parser, stream, cuts)
+    assert [(e.event, e.counter) for e in parser.safety_events] == [f for f in frames if f[0] != SafetyKey.NONE]
+    assert parser.key_events_unconfirmed == 0
+
+
 def test_sample_index_unwraps_each_nodes_counter_and_counts_lost_samples():
     """Hand-computed: node 10 starts at 254, wraps after 255 and loses counter 1; node 11 keeps its own count."""
     frames = [ImuFrame(node, 16, counter, (0, 0, 0), (0, 0, 0), (0, 0, 0))
