@@ -4,7 +4,7 @@ the same seeds.
     python benchmarks/assist_benchmark.py [--cells P4:bomi,P5:bomi,P1:bomi,P4:joystick,P1:joystick]
         [--seeds 20] [--first-seed 3000] [--assist none --assist auto-mode] [--jobs 2] [--figure-only]
 
-Writes benchmarks/results/assist.md, .json and .png after every cell (a cut-short run keeps the
+Writes benchmarks/results/NAME.md, .json and .png (``--name``, default assist) after every cell (a cut-short run keeps the
 cells it finished).  The joystick operator (the scripted user on a stick with the controls of
 the participant's profile) depends only on those controls: one cell per layout (P4 and P5 share
 "2-axis, B1").  Per cell: successes, completion time (mean +- sd of
@@ -60,12 +60,13 @@ def change(base: list[dict], assisted: list[dict], rng: np.random.Generator) -> 
 
 def summary(records: list[dict]) -> dict:
     done = [r["completion_time"] for r in records if r["success"]]
-    mean = lambda key: statistics.fmean(r[key] for r in records)  # noqa: E731
+    mean = lambda key: statistics.fmean(r[key] for r in records) if all(key in r for r in records) else None  # noqa: E731
     return {"episodes": len(records), "successes": len(done),
             "completion_time_mean": statistics.fmean(done) if done else None,
             "completion_time_sd": statistics.stdev(done) if len(done) > 1 else None,
             "mode_switches": mean("mode_switches"), "automatic_switches": mean("automatic_switches"),
-            "wrong_goal_switches": mean("wrong_goal_switches"), "grasp_helps": mean("grasp_helps"),
+            "wrong_goal_switches": mean("wrong_goal_switches"), "refused_switches": mean("refused_switches"),
+            "undone_switches": mean("undone_switches"), "grasp_helps": mean("grasp_helps"),
             "unintended_displacement_mm": mean("unintended_displacement_mm")}
 
 
@@ -91,15 +92,17 @@ def _f(value, spec=".1f") -> str:
 
 def markdown(rows: list[dict]) -> str:
     lines = ["| cell | assist | successes | completion time (s) | time vs none (95 % CI) | user mode switches "
-             "| automatic switches | wrong-goal switches | grasp helps | unintended displacement (mm) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| automatic switches | wrong-goal switches | refused / undone switches | grasp helps "
+             "| unintended displacement (mm) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         sd = f" ± {r['completion_time_sd']:.1f}" if r["completion_time_sd"] is not None else ""
         vs = "-" if r["ratio"] is None else (f"{100 * (r['ratio'] - 1):+.1f} % ({100 * (r['ratio_low'] - 1):+.1f} .. "
                                              f"{100 * (r['ratio_high'] - 1):+.1f}), {r['paired_seeds']} seeds")
         lines.append(f"| {r['cell']} | {r['assist']} | {r['successes']}/{r['episodes']} | "
                      f"{_f(r['completion_time_mean'])}{sd} | {vs} | {_f(r['mode_switches'])} | "
-                     f"{_f(r['automatic_switches'])} | {_f(r['wrong_goal_switches'])} | {_f(r['grasp_helps'])} | "
+                     f"{_f(r['automatic_switches'])} | {_f(r['wrong_goal_switches'])} | "
+                     f"{_f(r.get('refused_switches'))} / {_f(r.get('undone_switches'))} | {_f(r['grasp_helps'])} | "
                      f"{_f(r['unintended_displacement_mm'], '.0f')} |")
     return "\n".join(lines)
 
@@ -186,12 +189,18 @@ def write(cells: dict, settings: list[str], args: argparse.Namespace, todo: list
         markdown(rows), "", "Bars (issue 14):", "", *bars(rows), "",
         *([f"Not measured in this run: {', '.join(todo)}.", ""] if todo else [])])
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "assist.md").write_text(text, encoding="utf-8")
-    (RESULTS / "assist.json").write_text(json.dumps(
+    (RESULTS / f"{args.name}.md").write_text(text, encoding="utf-8")
+    (RESULTS / f"{args.name}.json").write_text(json.dumps(
         {"seeds": seeds, "settings": settings, "rows": rows,
          "not_measured": todo, "episodes": {name: by for name, by in cells.items()}}, indent=2) + "\n",
         encoding="utf-8")
-    figure(cells, settings, RESULTS / "assist.png")
+    figure(cells, settings, RESULTS / f"{args.name}.png")
+    return text
+
+
+def _stem(text: str) -> str:
+    if not text or Path(text).name != text or text.startswith("."):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a plain file name")
     return text
 
 
@@ -208,14 +217,16 @@ def main() -> None:
                         help="add the episodes of `bomi benchmark --json` files (run with --assist on the same seeds) "
                              "to the saved results and rewrite them, instead of running")
     parser.add_argument("--fresh", action="store_true", help="with --merge: start from no saved results")
+    parser.add_argument("--name", default="assist", type=_stem,
+                        help="the results' file name in benchmarks/results/ without suffix (default: assist)")
     args = parser.parse_args()
     settings = [assist_label(parse_assist(s)) for s in (args.assist or ["none", "auto-mode"])]
     if args.figure_only:
-        saved = json.loads((RESULTS / "assist.json").read_text(encoding="utf-8"))
-        figure(saved["episodes"], saved["settings"], RESULTS / "assist.png")
+        saved = json.loads((RESULTS / f"{args.name}.json").read_text(encoding="utf-8"))
+        figure(saved["episodes"], saved["settings"], RESULTS / f"{args.name}.png")
         return
     if args.merge:
-        saved_file = RESULTS / "assist.json"
+        saved_file = RESULTS / f"{args.name}.json"
         saved = json.loads(saved_file.read_text(encoding="utf-8")) if saved_file.exists() and not args.fresh else \
             {"episodes": {}, "settings": settings, "not_measured": []}
         cells = saved["episodes"]

@@ -449,6 +449,7 @@ class AutomaticSwitch:
     by: Assist
     goal: str
     undone: bool = False  # a press the user made before seeing it came within press_grace: it was undone
+    refused: bool = False  # the user left its mode by a press before moving in it (and not before seeing it)
 
 
 @dataclass(frozen=True)
@@ -572,11 +573,14 @@ class Assistance:
         self._active_at, self._switched_this_rest, self._closing_since = view.t, False, None
         if state.pressed:  # the user's own press wins and pauses the automation
             last = self.switches[-1] if self.switches else None
-            if last is not None and arm.mode is last.after and not self._moved_since_switch:
+            refusing = last is not None and arm.mode is last.after and not self._moved_since_switch
+            if refusing:
                 self._refused = (last.after, view.hand_pos.copy())
                 self._refusal = self._switched_at
             if self._undo_unseen_switch(view, arm):
                 self._refusal = None  # decided before the switch could be seen: it refused nothing
+            elif refusing:
+                self.switches[-1] = replace(last, refused=True)
             self._paused_until = view.t + self.params.auto_mode.pause_after_press
             self._paused_until_move = True
             return state

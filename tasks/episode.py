@@ -110,6 +110,8 @@ def summarize(log: EpisodeLog) -> dict:
         "automatic_switches": len(log.automatic),
         "wrong_goal_switches": metrics.wrong_goal_switches(log.t, log.mode, [s.tick for s in log.automatic],
                                                            WRONG_GOAL_WINDOW_S),
+        "refused_switches": sum(s.refused for s in log.automatic),
+        "undone_switches": sum(s.undone for s in log.automatic),
         "grasp_helps": log.grasp_helps,
         "button_presses": log.presses,
         "unintended_displacement_mm": metrics.unintended_displacement_mm(log.hand_pos, log.intended_dir),

@@ -289,6 +289,8 @@ def test_automatic_mode_switching_saves_the_joystick_users_presses_and_keeps_the
     assert plain.keys() == assisted.keys()
     assert plain["assist"] == "none" and assisted["assist"] == "auto-mode"
     assert plain["automatic_switches"] == 0 and assisted["automatic_switches"] >= 3
+    assert plain["refused_switches"] == plain["undone_switches"] == 0
+    assert assisted["refused_switches"] <= assisted["automatic_switches"]
     assert assisted["success"] and assisted["mode_switches"] < plain["mode_switches"]
     # every automatic switch is a change of the logged mode at its tick; every other change is the user's
     for switch in assisted_log.automatic:
@@ -358,6 +360,18 @@ def test_a_user_who_refuses_the_fingers_at_9_mm_and_descends_on_gets_them_only_w
     assert assist.precision(-1.0) == {} and assist.precision(+1.0)[PathStep.DESCEND] < 1
 
 
+def test_a_refusal_is_counted_on_the_switch_a_press_before_seeing_it_is_not():
+    assist, arm = _grasping_user()
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 0.0) == [Mode.FINGERS]
+    _refuse(assist, arm, 2.0)
+    assert [(s.refused, s.undone) for s in assist.switches] == [(True, False)]
+    # a press 0.1 s after the next switch was decided before it: undone, not refused
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.002], 5.0) == [Mode.FINGERS]
+    soon = assist.switches[-1].t + 0.1
+    assist.step(view(A1, mode=arm.mode, t=soon), JoystickState(pressed=frozenset({"B1"})), arm)
+    assert [(s.refused, s.undone) for s in assist.switches] == [(True, False), (False, True)]
+
+
 def test_a_refusal_followed_by_another_step_teaches_nothing_about_the_descent():
     assist, arm = _grasping_user()
     assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 0.0) == [Mode.FINGERS]
@@ -419,3 +433,49 @@ def test_a_refused_descent_for_a_user_who_travels_first_says_nothing_of_the_desc
     # over the cube 12 cm up the descent is still wanted: no switch to the fingers
     arm.mode = Mode.HEIGHT
     assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.10], 8.0) == []
+
+
+# ------------------------------------------------------------------------------------ the benchmark script
+def _assist_benchmark():
+    import importlib.util
+    from pathlib import Path
+    spec = importlib.util.spec_from_file_location("assist_benchmark", Path(__file__).resolve().parent.parent
+                                                  / "benchmarks" / "assist_benchmark.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_assist_benchmark_merges_under_a_name_and_averages_the_refusals(tmp_path, monkeypatch):
+    import json
+    import sys
+    bench = _assist_benchmark()
+    monkeypatch.setattr(bench, "RESULTS", tmp_path / "results")
+
+    def record(seed, assist, time, refused=None):
+        r = {"participant": "P4", "operator": "bomi", "seed": seed, "assist": assist, "success": True,
+             "completion_time": time, "mode_switches": 4, "automatic_switches": 0 if assist == "none" else 6,
+             "wrong_goal_switches": 0, "grasp_helps": 0, "unintended_displacement_mm": 10.0}
+        if refused is not None:  # rows of an older benchmark lack the refusal counts
+            r.update(refused_switches=refused, undone_switches=0)
+        return r
+    files = {"none.json": [record(1, "none", 100.0, 0), record(2, "none", 200.0, 0)],
+             "auto.json": [record(1, "auto-mode", 80.0, 1), record(2, "auto-mode", 150.0, 4)],
+             "old.json": [record(1, "auto-mode", 80.0), record(2, "auto-mode", 150.0)]}
+    for name, records in files.items():
+        (tmp_path / name).write_text(json.dumps({"episodes": records}))
+    merge = ["assist_benchmark.py", "--fresh", "--assist", "none", "--assist", "auto-mode", "--name", "scratch",
+             "--merge", str(tmp_path / "none.json"), str(tmp_path / "auto.json")]
+    monkeypatch.setattr(sys, "argv", merge)
+    bench.main()
+    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["scratch.json", "scratch.md", "scratch.png"]
+    rows = {r["assist"]: r for r in json.loads((tmp_path / "results" / "scratch.json").read_text())["rows"]}
+    assert rows["auto-mode"]["refused_switches"] == 2.5 and rows["none"]["refused_switches"] == 0
+    assert rows["auto-mode"]["ratio"] == pytest.approx(230 / 300)
+    monkeypatch.setattr(sys, "argv", merge[:-2] + [str(tmp_path / "none.json"), str(tmp_path / "old.json")])
+    bench.main()
+    rows = {r["assist"]: r for r in json.loads((tmp_path / "results" / "scratch.json").read_text())["rows"]}
+    assert rows["auto-mode"]["refused_switches"] is None  # not counted then: no number, not a zero
+    monkeypatch.setattr(sys, "argv", ["assist_benchmark.py", "--name", "../elsewhere", "--figure-only"])
+    with pytest.raises(SystemExit):
+        bench.main()

@@ -130,7 +130,7 @@ def _pooled(rs: list[dict], key: str) -> list:
 
 
 # what the assistance did, per episode (0 without one)
-ASSIST_KEYS = ("automatic_switches", "wrong_goal_switches", "grasp_helps")
+ASSIST_KEYS = ("automatic_switches", "wrong_goal_switches", "refused_switches", "undone_switches", "grasp_helps")
 # the decision metrics of a row (None for an operator without a classifier)
 DECISION_KEYS = ("accuracy_all_decisions", "accuracy_excused_transitions", "scored_share", "excused_allowance_ms",
                  "relevant_share", "irrelevant_per_min", "irrelevant_longest_run_ms", "longest_error_run_ms",
