@@ -109,6 +109,8 @@ class AutoModeParams:
     mask_time: float
     pause_after_press: float
     press_grace: float
+    response_quantile: float
+    response_samples: float
     press_time: float
     min_gain: float
     memory: float
@@ -184,6 +186,8 @@ def _parse_assist(data: dict, source: str) -> AssistParams:
         raise ValueError("[path] open_closure must be below 1")
     if not tables["auto_mode"].refusal_share < 1:
         raise ValueError("[auto_mode] refusal_share must be below 1")
+    if not tables["auto_mode"].response_quantile < 1:
+        raise ValueError("[auto_mode] response_quantile must be below 1")
     return AssistParams(**tables)
 
 
@@ -437,6 +441,39 @@ class LearntTolerance:
         return self.start
 
 
+@dataclass
+class PressResponse:
+    """How soon one user presses a mode button after they decide to, learnt from their own presses:
+    the time from the end of their last move, or from their last press, to the press (no automatic
+    switch between): it holds at least one decision and the whole press (through a body interface
+    a second or two of posture and classifier).  A press sooner than that after an automatic switch
+    was on its way before the switch could be seen: it is meant for the mode before it."""
+
+    grace: float  # before enough presses are seen: a human reaction to a seen change takes longer
+    quantile: float  # of the user's presses: this share of them came faster than the window
+    samples: int  # presses needed before they are trusted
+    answers: list[float] = field(default_factory=list)
+    _since: float | None = None  # the end of the last move or the last press (None: an automatic switch since)
+
+    def moved(self, t: float) -> None:
+        self._since = t
+
+    def pressed(self, t: float) -> None:
+        if self._since is not None:
+            self.answers.append(t - self._since)
+        self._since = t
+
+    def switched(self) -> None:
+        """An automatic switch: the next press may answer it."""
+        self._since = None
+
+    def unseen_within(self) -> float:
+        """Presses this soon after an automatic switch were decided before it."""
+        if len(self.answers) < self.samples:
+            return self.grace
+        return max(self.grace, float(np.quantile(self.answers, self.quantile)))
+
+
 # ------------------------------------------------------------------------------------ the layer
 @dataclass(frozen=True)
 class AutomaticSwitch:
@@ -448,7 +485,7 @@ class AutomaticSwitch:
     after: Mode
     by: Assist
     goal: str
-    undone: bool = False  # a press the user made before seeing it came within press_grace: it was undone
+    undone: bool = False  # a press came sooner than the user answers a change they see (PressResponse): undone
     refused: bool = False  # the user left its mode by a press before moving in it (and not before seeing it)
 
 
@@ -561,6 +598,8 @@ class Assistance:
         self._switched_at: SwitchContext | None = None
         # set by a refusal of that switch: the user's next move tells which step they still wanted
         self._refusal: SwitchContext | None = None
+        auto = self.params.auto_mode
+        self.press_response = PressResponse(auto.press_grace, auto.response_quantile, int(auto.response_samples))
 
     def step(self, view: View, state: JoystickState, arm: Switchable) -> JoystickState:
         """The stick the arm gets this tick; may put ``arm`` in another mode first."""
@@ -573,18 +612,18 @@ class Assistance:
         self._active_at, self._switched_this_rest, self._closing_since = view.t, False, None
         if state.pressed:  # the user's own press wins and pauses the automation
             last = self.switches[-1] if self.switches else None
-            refusing = last is not None and arm.mode is last.after and not self._moved_since_switch
-            if refusing:
+            if self._undo_unseen_switch(view, arm):
+                pass  # decided before the switch could be seen: it refused nothing
+            elif last is not None and arm.mode is last.after and not self._moved_since_switch and not last.refused:
                 self._refused = (last.after, view.hand_pos.copy())
                 self._refusal = self._switched_at
-            if self._undo_unseen_switch(view, arm):
-                self._refusal = None  # decided before the switch could be seen: it refused nothing
-            elif refusing:
                 self.switches[-1] = replace(last, refused=True)
+            self.press_response.pressed(view.t)
             self._paused_until = view.t + self.params.auto_mode.pause_after_press
             self._paused_until_move = True
             return state
         self._paused_until_move, self._moved_since_switch = False, True
+        self.press_response.moved(view.t)
         held = held_cube(view, self.params.path.open_closure)
         working_on = step_of_move(self.layout, view.mode, state.deflection, held is not None)
         if working_on is not None:
@@ -724,12 +763,12 @@ class Assistance:
         return best, likely
 
     def _undo_unseen_switch(self, view: View, arm: Switchable) -> bool:
-        """A press that comes within ``press_grace`` of a switch of ours was decided before the user
-        could see it (a human reaction takes longer): it is meant for the mode before the switch,
-        which is restored (True)."""
+        """A press that comes sooner after a switch of ours than this user's presses come after they
+        decide (``PressResponse``; ``press_grace`` before their presses have shown it) was decided
+        before they could see it: it is meant for the mode before the switch, which is restored (True)."""
         last = self.switches[-1] if self.switches else None
-        if last is not None and not last.undone and view.t - last.t <= self.params.auto_mode.press_grace \
-                and arm.mode is last.after:
+        if last is not None and not last.undone and not self._moved_since_switch and arm.mode is last.after \
+                and view.t - last.t <= self.press_response.unseen_within():
             arm.switch_mode(last.before)
             self.switches[-1] = replace(last, undone=True)
             return True
@@ -742,6 +781,7 @@ class Assistance:
         if mode is arm.mode or (self._refused is not None and mode is self._refused[0] and by is Assist.AUTO_MODE):
             return
         self._moved_since_switch = False
+        self.press_response.switched()
         self._switched_at = self._context(view, mode, goal)
         self.switches.append(AutomaticSwitch(tick, view.t, arm.mode, mode, by, goal))
         arm.switch_mode(mode)

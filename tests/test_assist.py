@@ -372,6 +372,47 @@ def test_a_refusal_is_counted_on_the_switch_a_press_before_seeing_it_is_not():
     assert [(s.refused, s.undone) for s in assist.switches] == [(True, False), (False, True)]
 
 
+def _press_round_the_cycle(assist, arm, t0, presses, apart):
+    """The one-button user presses B1 ``presses`` times ``apart`` seconds apart, without moving."""
+    cycle = list(TWO_AXIS.modes)
+    for k in range(presses):
+        t = t0 + k * apart
+        assist.step(view(A1 + [0, 0, 0.05], mode=arm.mode, t=t), JoystickState(pressed=frozenset({"B1"})), arm)
+        arm.mode = cycle[(cycle.index(arm.mode) + 1) % len(cycle)]
+        for tick in range(1, int(apart * 60)):
+            assist.step(view(A1 + [0, 0, 0.05], mode=arm.mode, t=t + tick / 60), JoystickState(), arm)
+
+
+def test_a_press_sooner_after_a_switch_than_the_user_ever_presses_was_under_way_before_it():
+    # this body user's presses come 1.8 s after their last press or move (round the cycle, they show it)
+    slow, slow_arm = _grasping_user()
+    _press_round_the_cycle(slow, slow_arm, 0.0, 4, 1.8)
+    assert slow.press_response.unseen_within() == pytest.approx(1.8, abs=0.02) and not slow.switches
+    fresh, fresh_arm = _grasping_user()
+    for assist, arm in ((slow, slow_arm), (fresh, fresh_arm)):
+        arm.mode = Mode.HEIGHT
+        assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 20.0) == [Mode.FINGERS]
+        # a press 1 s after the switch, the stick at rest since before it
+        press_at = assist.switches[-1].t + 1.0
+        assist.step(view(A1 + [0, 0, 0.009], mode=arm.mode, t=press_at), JoystickState(pressed=frozenset({"B1"})), arm)
+    # the slow user's press was on its way before the switch: it goes on from the height mode, and
+    # their next move (down) teaches nothing of their precision
+    assert slow_arm.mode is Mode.HEIGHT and [(s.undone, s.refused) for s in slow.switches] == [(True, False)]
+    _descend_and_rest(slow, slow_arm, A1 + [0, 0, 0.007], 23.0)
+    assert slow.precision(+1.0) == {}
+    # a user whose presses are not known yet refused the fingers: the descent was not done for them
+    assert fresh_arm.mode is Mode.FINGERS and [(s.undone, s.refused) for s in fresh.switches] == [(False, True)]
+    # a press is timed from the end of the last move, and not across an automatic switch
+    moving, moving_arm = _grasping_user()
+    moving.step(view(A1 + [0, 0, 0.05], mode=moving_arm.mode, t=0.0), JoystickState({"F": 0.3}), moving_arm)
+    moving.step(view(A1 + [0, 0, 0.05], mode=moving_arm.mode, t=0.5), JoystickState({"F": 0.3}), moving_arm)
+    _press_round_the_cycle(moving, moving_arm, 1.7, 1, 1.0)
+    assert moving.press_response.answers == pytest.approx([1.2])
+    assert _descend_and_rest(moving, moving_arm, A1 + [0, 0, 0.002], 10.0) == [Mode.FINGERS]
+    _press_round_the_cycle(moving, moving_arm, 13.0, 1, 1.0)
+    assert moving.press_response.answers == pytest.approx([1.2])
+
+
 def test_a_refusal_followed_by_another_step_teaches_nothing_about_the_descent():
     assist, arm = _grasping_user()
     assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 0.0) == [Mode.FINGERS]
