@@ -413,6 +413,20 @@ def test_a_press_sooner_after_a_switch_than_the_user_ever_presses_was_under_way_
     assert moving.press_response.answers == pytest.approx([1.2])
 
 
+def test_a_press_after_a_switch_as_fast_as_the_users_fastest_is_an_answer_to_it():
+    # this user's presses come 1.2 s after their last one at the fastest, mostly 1.5 s
+    assist, arm = _grasping_user()
+    _press_round_the_cycle(assist, arm, 0.0, 1, 1.2)
+    _press_round_the_cycle(assist, arm, 1.2, 3, 1.5)
+    assert assist.press_response.answers == pytest.approx([1.2, 1.5, 1.5])
+    arm.mode = Mode.HEIGHT
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 20.0) == [Mode.FINGERS]
+    # 1.24 s after the switch: slower than their fastest press, so they may have seen it: a refusal
+    press_at = assist.switches[-1].t + 1.24
+    assist.step(view(A1 + [0, 0, 0.009], mode=arm.mode, t=press_at), JoystickState(pressed=frozenset({"B1"})), arm)
+    assert [(s.undone, s.refused) for s in assist.switches] == [(False, True)] and arm.mode is Mode.FINGERS
+
+
 def test_a_refusal_followed_by_another_step_teaches_nothing_about_the_descent():
     assist, arm = _grasping_user()
     assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.009], 0.0) == [Mode.FINGERS]
