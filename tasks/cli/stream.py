@@ -270,16 +270,25 @@ def _cue(segments: list[Cue], k: int, t: float) -> str:
     return text
 
 
+def sample_times(arrival: float, count: int, previous: float) -> list[float]:
+    """Times of ``count`` rows read together at ``arrival``, one sample period apart, the last one at
+    ``arrival`` and none before ``previous`` (the last row's time). Rows that come in a bunch because the
+    host fell behind (a loaded machine, a pause of the interpreter) were sampled over that stall: timed by
+    their arrival, a whole held posture could fall into the next prompt's segment and be labelled with it."""
+    return [max(previous, arrival - (count - 1 - i) * DT) for i in range(count)]
+
+
 def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowAssembler, source: SerialSource,
                 progress: tqdm) -> Iterator[tuple[float, dict[int, ImuFrame]]]:
-    """(arrival time, complete row); BomiError if no complete row comes within NODE_WAIT_S."""
-    started = False
+    """(sample time, complete row), see :func:`sample_times`; BomiError if no complete row comes within
+    NODE_WAIT_S."""
+    started, last = False, -np.inf
     for elapsed, frames in batches:
-        for frame in frames:
-            row = assembler.push(frame)
-            if row is not None:
-                started = True
-                yield elapsed, row
+        complete = [row for row in map(assembler.push, frames) if row is not None]
+        times = sample_times(elapsed, len(complete), last)
+        for t, row in zip(times, complete):
+            started, last = True, t
+            yield t, row
         if not started and elapsed > NODE_WAIT_S:
             raise BomiError(f"{source.url}: no frames from every node id {list(assembler.node_ids)} within "
                             f"{NODE_WAIT_S:g} s (frames came from {sorted(source.parser.nodes) or 'none'})")
