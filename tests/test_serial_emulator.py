@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 import tty
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -392,6 +393,24 @@ def test_rows_read_in_a_bunch_are_timed_back_one_sample_period_apart():
     assert sample_times(1.0, 0, 0.5) == []
     np.testing.assert_allclose(sample_times(1.0, 4, 0.97), [0.97, 0.97, 1.0 - period, 1.0])  # never before the last row
 
+
+
+def test_recording_clock_starts_at_the_first_read_and_never_runs_ahead_of_it():
+    from tqdm import tqdm
+
+    from tasks.cli.stream import _timed_rows
+
+    def frames(n, first):
+        return [ImuFrame(10, 16, (first + k) % 256, (0, 0, 0), (0, 0, 0), (0, 0, 1000)) for k in range(n)]
+
+    batches = [(0.5, frames(40, 0)), (0.52, frames(1, 40)), (1.5, frames(10, 41))]  # a backlog, then a stall
+    source = SimpleNamespace(parser=FrameParser(), url="test")
+    timed = list(_timed_rows(iter(batches), RowAssembler((10,)), source, tqdm(disable=True)))
+    times = [t for t, _ in timed]
+    period = 1 / 62.5
+    assert times[:40] == [0.5] * 40  # what waited in the port's buffer belongs to the first prompt
+    assert times[40] == 0.52
+    np.testing.assert_allclose(times[41:], 1.5 - period * np.arange(9, -1, -1))
 
 def test_record_after_a_host_stall_labels_rows_by_when_they_were_sampled(tmp_path, monkeypatch):
     """The host stops reading for 0.7 s over the whole B segment (a loaded machine): the rows sampled

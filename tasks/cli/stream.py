@@ -281,11 +281,13 @@ def sample_times(arrival: float, count: int, previous: float) -> list[float]:
 def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowAssembler, source: SerialSource,
                 progress: tqdm) -> Iterator[tuple[float, dict[int, ImuFrame]]]:
     """(sample time, complete row), see :func:`sample_times`; BomiError if no complete row comes within
-    NODE_WAIT_S."""
+    NODE_WAIT_S. The rows of the first batch are all timed at its arrival: what waited in the port's
+    buffer before the recording started belongs to its first prompt, and the recording's clock never
+    runs ahead of the one the prompts are shown by."""
     started, last = False, -np.inf
     for elapsed, frames in batches:
         complete = [row for row in map(assembler.push, frames) if row is not None]
-        times = sample_times(elapsed, len(complete), last)
+        times = sample_times(elapsed, len(complete), last if started else elapsed)
         for t, row in zip(times, complete):
             started, last = True, t
             yield t, row
