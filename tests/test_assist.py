@@ -5,7 +5,7 @@ import pytest
 
 from bomi.errors import BomiError
 from bomi.profiles import PROFILE_DIR, load_profile
-from helpers import edited_copy
+from helpers import benchmark_script, edited_copy
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks import metrics
 from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, LearntTolerance, PathStep, Step, assist_label, candidate_goals,
@@ -491,20 +491,10 @@ def test_a_refused_descent_for_a_user_who_travels_first_says_nothing_of_the_desc
 
 
 # ------------------------------------------------------------------------------------ the benchmark script
-def _assist_benchmark():
-    import importlib.util
-    from pathlib import Path
-    spec = importlib.util.spec_from_file_location("assist_benchmark", Path(__file__).resolve().parent.parent
-                                                  / "benchmarks" / "assist_benchmark.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_the_assist_benchmark_merges_under_a_name_and_averages_the_refusals(tmp_path, monkeypatch):
     import json
     import sys
-    bench = _assist_benchmark()
+    bench = benchmark_script("assist_benchmark")
     monkeypatch.setattr(bench, "RESULTS", tmp_path / "results")
 
     def record(seed, assist, time, refused=None):

@@ -9,7 +9,7 @@ from bomi.errors import BomiError
 from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
 from tasks.human import (DEFAULT_HUMAN_FILE, HumanOperator, HumanTiming, InterfaceModel, alternatives, choice_time,
                          fitts_time, judgement_error, load_human)
-from helpers import assert_one_line_error
+from helpers import assert_one_line_error, benchmark_script
 from tasks.planner import REST, Controls, View, deflection_for, load_operator
 
 H = load_human()
@@ -168,12 +168,7 @@ def test_mode_switch_time_spans_from_the_last_push_to_the_next():
 
 
 def test_the_benchmark_compares_each_bomi_with_the_joystick_on_its_own_controls():
-    import importlib.util
-    from pathlib import Path
-    spec = importlib.util.spec_from_file_location(
-        "human_model", Path(__file__).resolve().parent.parent / "benchmarks" / "human_model.py")
-    human_model = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(human_model)
+    human_model = benchmark_script("human_model")
 
     def record(operator, participant, layout, seed):
         return {"operator": operator, "participant": participant, "layout": layout, "seed": seed}

@@ -1,17 +1,12 @@
 """The knobs that shaped the results are data: every one benchmarks/sensitivity.py varies is read
 from its TOML file (an edited value reaches the code), and the sensitivity scales them as it says."""
-import importlib.util
-from pathlib import Path
-
 import pytest
 
+from helpers import benchmark_script
 from tasks.participant import load_participant
 from tasks.planner import load_operator
 
-_spec = importlib.util.spec_from_file_location("sensitivity", Path(__file__).resolve().parent.parent
-                                               / "benchmarks" / "sensitivity.py")
-sensitivity = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(sensitivity)
+sensitivity = benchmark_script("sensitivity")
 
 
 def test_every_knob_of_the_sensitivity_reaches_the_code():
