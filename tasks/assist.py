@@ -19,9 +19,11 @@ over the goals and over which step is next.  When the stick has rested ``rest_ti
 automation puts the arm in the mode that minimises that time if it saves at least ``min_gain``;
 at most once per rest.  The user's own button press always wins (it is passed on untouched) and
 pauses the automation for ``pause_after_press``.  The steps' tolerances start as ``[path]`` says
-and are then this user's, learnt online from their refusals of automatic switches (a press out of
-the switch's mode before any move in it; ``LearntTolerance``): the step they make next was not
-done, the step the switch was made for, if they skip it, was.
+and are then this user's, learnt online (``LearntTolerance``) whenever the user leaves a mode by a
+press: a refusal of an automatic switch (a press out of the switch's mode before any move in it) or
+their own switch after moving in a mode.  The step they make next was not done if the automation
+judged it done then; the step it expected next in the mode they left (the one the switch was made
+for), if they skip it, was done.
 
 ``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
 the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
@@ -313,6 +315,14 @@ def step_errors(view: View, goal: Goal, path: PathParams) -> dict[PathStep, tupl
     return out
 
 
+def revisit_scale(path: PathParams, working_on: PathStep | None) -> dict[PathStep, float]:
+    """Per step, the factor on its tolerance while the user was last seen making ``working_on``:
+    ``revisit`` for the steps before it (a person who has moved on goes back only for a clearly
+    larger error), 1 for the others."""
+    passed = PATH_ORDER[:PATH_ORDER.index(working_on)] if working_on is not None else ()
+    return {step: path.revisit if step in passed else 1.0 for step in PathStep}
+
+
 def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working_on: PathStep | None = None,
                precision: Mapping[PathStep, float] | None = None) -> list[Step]:
     """The careful path to ``goal``, step by step, each with the mode of ``layout`` that makes it.
@@ -320,8 +330,8 @@ def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working
     user sees them unless they are off by ``revisit`` times their tolerance (a person who has moved
     on to a later step goes back only for a clearly larger error).  ``precision``: per step, the
     share of its tolerance this user has been seen to need (``Assistance.precision``; 1 if absent)."""
-    passed = PATH_ORDER[:PATH_ORDER.index(working_on)] if working_on is not None else ()
-    scale = {step: (path.revisit if step in passed else 1.0) * (precision or {}).get(step, 1.0) for step in PathStep}
+    revisit = revisit_scale(path, working_on)
+    scale = {step: revisit[step] * (precision or {}).get(step, 1.0) for step in PathStep}
     hand = view.hand_pos
     errors = step_errors(view, goal, path)
     xy = errors[PathStep.TRAVEL][0]
@@ -398,14 +408,16 @@ def time_to_goal(layout: Layout, buttons: tuple[str, ...], next_modes: dict[Mode
 
 @dataclass
 class LearntTolerance:
-    """What one user's refusals of automatic switches showed of the error within which they count
-    a path step done (for one kind of goal), and the tolerance that follows.  Two kinds of evidence,
-    each from a refusal (the user left the switch's mode by a press before moving in it):
+    """What one user's presses out of a mode showed of the error within which they count a path
+    step done (for one kind of goal), and the tolerance that follows.  Two kinds of evidence, each
+    from the user leaving a mode by a press (``SwitchContext``: a refusal of an automatic switch,
+    or their own switch after moving in the mode):
 
-    - ``not_done_at``: the switch judged the step done, and the user's first move afterwards made
-      it: their tolerance is below that error (the smallest such error is kept);
-    - ``done_within``: the switch was made for this step (its mode), and the user's first move made
-      another: the step was done for them at that error (the largest such error is kept).
+    - ``not_done_at``: the automation judged the step done, and the user's first move afterwards
+      made it: their tolerance is below that error (the smallest such error is kept);
+    - ``done_within``: the automation expected this step next in the mode left, and the user's
+      first move made a later one: the step was done for them at that error (the largest such
+      error is kept).
 
     The tolerance is the middle of the two bounds; with one bound only, ``share`` of the upper one
     or the lower one over ``share`` (with ``share`` = 1/2: halving or doubling, as a bisection);
@@ -491,10 +503,12 @@ class AutomaticSwitch:
 
 @dataclass(frozen=True)
 class SwitchContext:
-    """At an automatic switch: the likely goal's finger action, its steps' (error, starting
-    tolerance) (``step_errors``), the step the switch was made for (of the steps in the mode
-    switched to, the likeliest to be the next) and the other steps of ``step_errors`` it judged
-    done (less than even odds of being needed)."""
+    """What the automation judged when the user had a mode (an automatic switch to it, or the
+    user's own press out of it): the likely goal's finger action, its steps' (error, starting
+    tolerance) (``step_errors``; the error over ``revisit`` for a step before the one the user was
+    last seen making, whose tolerance was scaled by it: ``revisit_scale``), the step made for
+    that mode (of its steps, the likeliest to be the next) and the other steps of ``step_errors``
+    it judged done (less than even odds of being needed)."""
 
     act: float
     errors: dict[PathStep, tuple[float, float]]
@@ -596,8 +610,10 @@ class Assistance:
         # at our last switch: the likely goal's finger action, its steps' (error, starting tolerance)
         # and the step the switch was made for (the first one still needed, in the mode switched to)
         self._switched_at: SwitchContext | None = None
-        # set by a refusal of that switch: the user's next move tells which step they still wanted
-        self._refusal: SwitchContext | None = None
+        # set when the user leaves a mode by a press (a refusal of our switch, or their own switch
+        # after moving in it): what we judged of that mode, and whether it was a refusal; the
+        # user's next move tells which step they still wanted
+        self._left: tuple[SwitchContext | None, bool] | None = None
         auto = self.params.auto_mode
         self.press_response = PressResponse(auto.press_grace, int(auto.response_samples))
 
@@ -612,12 +628,17 @@ class Assistance:
         self._active_at, self._switched_this_rest, self._closing_since = view.t, False, None
         if state.pressed:  # the user's own press wins and pauses the automation
             last = self.switches[-1] if self.switches else None
-            if self._undo_unseen_switch(view, arm):
-                pass  # decided before the switch could be seen: it refused nothing
-            elif last is not None and arm.mode is last.after and not self._moved_since_switch and not last.refused:
+            undone = self._undo_unseen_switch(view, arm)  # decided before the switch could be seen: no refusal
+            if not undone and last is not None and arm.mode is last.after and not self._moved_since_switch \
+                    and not last.refused:
                 self._refused = (last.after, view.hand_pos.copy())
-                self._refusal = self._switched_at
+                self._left = (self._switched_at, True)
                 self.switches[-1] = replace(last, refused=True)
+            elif not self._paused_until_move and Assist.AUTO_MODE in self.options:
+                # the first press since the user moved: they leave the mode they moved in
+                goals = candidate_goals(view, self.params, self.clearance)
+                self._left = (self._context(view, arm.mode, self._likely(view, goals).label), False) if goals \
+                    else None
             self.press_response.pressed(view.t)
             self._paused_until = view.t + self.params.auto_mode.pause_after_press
             self._paused_until_move = True
@@ -696,15 +717,18 @@ class Assistance:
                 if kind == act}
 
     def _learn_precision(self, working_on: PathStep) -> None:
-        """After a refusal, the user's first move is the step they still wanted: if the switch
-        judged it done (less than even odds of being needed), it was not done at its error then; the
-        step the switch was made for, if it comes before that one (the user went past it), was done
-        for them at its error then (``LearntTolerance``); a step after theirs tells nothing (they
-        may just take the steps in another order).  A refusal that taught something is explained:
-        the refused mode may be proposed again."""
-        if self._refusal is None:
+        """After the user left a mode by a press (a refusal of our switch, or their own switch), their
+        first move is the step they still wanted: if we judged it done then (less than even odds of
+        being needed), it was not done at its error then; the step made for the mode they left (the
+        one the switch was made for), if it comes before theirs (they went past it), was done for
+        them at its error then (``LearntTolerance``); a step after theirs tells nothing (they may
+        just take the steps in another order).  A refusal that taught something is explained: the
+        refused mode may be proposed again."""
+        if self._left is None:
             return
-        context, self._refusal = self._refusal, None
+        (context, refusal), self._left = self._left, None
+        if context is None:
+            return
         if working_on is PathStep.RISE and context.below:  # up to a goal above the hand: the descent's overshoot corrected
             working_on = PathStep.DESCEND
         lessons = []
@@ -716,7 +740,7 @@ class Assistance:
         for step, lesson in lessons:
             error, start = context.errors[step]
             lesson(self._learnt.setdefault((context.act, step), LearntTolerance(start)), error)
-        if lessons:
+        if lessons and refusal:
             self._refused = None
 
     @property
@@ -729,13 +753,17 @@ class Assistance:
         """A travel toward the likely goal from farther than ``revisit`` times its nearness (not a
         correction over it): right after a rise, its height is the one this user chose; otherwise
         the user travels at whatever height they are, and it only shows that they need no more."""
-        weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
-        goal = goals[int(np.argmax(weights))]
+        goal = self._likely(view, goals)
         if np.linalg.norm(goal.point[:2] - view.hand_pos[:2]) <= self.params.path.revisit * goal.near:
             return
         clearance = self.params.path.clearance if self._clearance is None else self._clearance
         seen = float(view.hand_pos[2]) - (goal.travel_z - clearance)
         self._clearance = seen if self._rose else min(clearance, seen)
+
+    def _likely(self, view: View, goals: list[Goal]) -> Goal:
+        """The most likely of ``goals`` (``GoalBelief.probabilities``)."""
+        weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
+        return goals[int(np.argmax(weights))]
 
     def _seen_step(self, view: View) -> PathStep | None:
         """The step the user was last seen making, if they hold the same cube (or none) as then."""
@@ -787,17 +815,20 @@ class Assistance:
         arm.switch_mode(mode)
 
     def _context(self, view: View, mode: Mode, label: str) -> SwitchContext | None:
-        """What a refusal of a switch to ``mode`` for the goal ``label`` could teach."""
+        """What the user leaving ``mode`` (a refusal of our switch to it, or their own press out of
+        it) while the likely goal is ``label`` could teach."""
         likely = [g for g in candidate_goals(view, self.params, self.clearance) if g.label == label]
         if not likely:
             return None
-        goal = likely[0]
-        steps = path_steps(view, goal, self.layout, self.params.path, self._seen_step(view), self.precision(goal.act))
+        goal, working_on = likely[0], self._seen_step(view)
+        steps = path_steps(view, goal, self.layout, self.params.path, working_on, self.precision(goal.act))
         shares = next_step_shares(steps)
         made_for = max((step for step in steps if step.mode is mode), key=lambda step: shares[step.name],
                        default=None)
         made_for = made_for.name if made_for is not None and shares[made_for.name] > 0 else None
-        errors = step_errors(view, goal, self.params.path)
+        revisit = revisit_scale(self.params.path, working_on)
+        errors = {step: (error / revisit[step], start) for step, (error, start) in
+                  step_errors(view, goal, self.params.path).items()}
         judged_done = frozenset(step.name for step in steps if step.needed < 0.5 and step.name in errors
                                 and step.name is not made_for)
         return SwitchContext(goal.act, errors, made_for, judged_done, bool(goal.point[2] > view.hand_pos[2]))

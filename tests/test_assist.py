@@ -325,16 +325,17 @@ def _descend_and_rest(assist, arm, hand, t0, move=None):
     return arm.switched[before:]
 
 
-def _refuse(assist, arm, t0, presses=2):
-    """The one-button user leaves the automation's mode: ``presses`` presses of B1 round the
-    cycle (the arm applies them), a second apart, without moving in between."""
+def _refuse(assist, arm, t0, presses=2, hand=A1):
+    """The one-button user leaves the mode the arm is in (the automation's, or their own): ``presses``
+    presses of B1 round the cycle (the arm applies them), a second apart, without moving in
+    between, the hand at ``hand``."""
     cycle = list(TWO_AXIS.modes)
     for k in range(presses):
         t = t0 + k
-        assist.step(view(A1, mode=arm.mode, t=t), JoystickState(pressed=frozenset({"B1"})), arm)
+        assist.step(view(hand, mode=arm.mode, t=t), JoystickState(pressed=frozenset({"B1"})), arm)
         arm.mode = cycle[(cycle.index(arm.mode) + 1) % len(cycle)]
         for tick in range(1, 30):
-            assist.step(view(A1, mode=arm.mode, t=t + tick / 60), JoystickState(), arm)
+            assist.step(view(hand, mode=arm.mode, t=t + tick / 60), JoystickState(), arm)
 
 
 def _grasping_user():
@@ -488,6 +489,60 @@ def test_a_refused_descent_for_a_user_who_travels_first_says_nothing_of_the_desc
     # over the cube 12 cm up the descent is still wanted: no switch to the fingers
     arm.mode = Mode.HEIGHT
     assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.10], 8.0) == []
+
+
+def test_a_user_who_leaves_the_height_mode_to_correct_xy_is_sent_to_translation_there_next_time():
+    assist, arm = _grasping_user()
+    # descending onto cube 1, 15 mm beside it in x and 3 cm above: the travel is behind the user
+    # (done within twice its 20 mm), the descent still needed: the automation keeps the height mode
+    beside = A1 + [0.015, 0, 0.03]
+    assert _descend_and_rest(assist, arm, beside, 0.0) == []
+    # the user's own switch (after moving in the height mode, no automatic switch to refuse): three
+    # presses round the cycle to translation, then a correction in xy (R: x-, toward the cube)
+    _refuse(assist, arm, 2.0, presses=3, hand=beside)
+    assert arm.mode is Mode.TRANSLATION and not assist.switches
+    assert _descend_and_rest(assist, arm, A1 + [0, 0, 0.03], 5.0, move={"R": 0.3}) == [Mode.HEIGHT]
+    # the travel was not done for them at 15 mm, revisited after a descent (the 2x of a step behind
+    # the user): their tolerance is below 15 mm / 2, halved: 3.75 mm, 7.5 mm when revisited
+    tolerance = assist.precision(+1.0).get(PathStep.TRAVEL, 1.0) * assist.params.path.grasp_near
+    assert tolerance == pytest.approx(0.015 / 2 / 2) and 2 * tolerance < 0.015
+    # the same situation again: sent to translation (three presses saved); a user never seen
+    # correcting is left in the height mode there
+    assert _descend_and_rest(assist, arm, beside, 7.0) == [Mode.TRANSLATION]
+    fresh, fresh_arm = _grasping_user()
+    assert _descend_and_rest(fresh, fresh_arm, beside, 0.0) == []
+    # nearer than that after a descent the travel is still done for them
+    arm.mode = Mode.HEIGHT
+    assert _descend_and_rest(assist, arm, A1 + [0.004, 0, 0.03], 9.0) == []
+
+
+def test_a_user_who_leaves_translation_short_of_the_cube_and_descends_gets_the_height_mode_there():
+    assist, arm = _grasping_user()
+    arm.mode = Mode.TRANSLATION
+    # a travel toward cube 1 stopping 25 mm beside it (beyond the 20 mm of the start): the travel
+    # is still needed, the automation keeps translation
+    short = A1 + [0.025, 0, 0.07]
+    assert _descend_and_rest(assist, arm, short, 0.0, move={"R": 0.3}) == []
+    _refuse(assist, arm, 2.0, presses=1, hand=short)  # the user's own press to the height mode, then down
+    assert _descend_and_rest(assist, arm, short - [0, 0, 0.01], 4.0) == []
+    # the travel was done for them at 25 mm: at least twice that
+    assert assist.precision(+1.0).get(PathStep.TRAVEL, 1.0) * assist.params.path.grasp_near == pytest.approx(0.05)
+    # the same travel again: the height mode for the descent; a user never seen is left in translation
+    arm.mode = Mode.TRANSLATION
+    assert _descend_and_rest(assist, arm, short, 6.0, move={"R": 0.3}) == [Mode.HEIGHT]
+    fresh, fresh_arm = _grasping_user()
+    fresh_arm.mode = Mode.TRANSLATION
+    assert _descend_and_rest(fresh, fresh_arm, short, 0.0, move={"R": 0.3}) == []
+
+
+def test_a_user_who_leaves_a_mode_and_makes_the_step_expected_next_teaches_nothing():
+    assist, arm = _grasping_user()
+    beside = A1 + [0.015, 0, 0.03]
+    assert _descend_and_rest(assist, arm, beside, 0.0) == []
+    _refuse(assist, arm, 2.0, presses=4, hand=beside)  # round the whole cycle back to height, then down
+    assert arm.mode is Mode.HEIGHT
+    _descend_and_rest(assist, arm, beside - [0, 0, 0.01], 7.0)
+    assert assist.precision(+1.0) == {}
 
 
 # ------------------------------------------------------------------------------------ the benchmark script
