@@ -129,7 +129,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--first-seed", type=int, default=800)
     parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--none", nargs="+", type=Path, metavar="BENCH.json",
+    parser.add_argument("--none", nargs="+", action="extend", type=Path, metavar="BENCH.json",
                         help="take the episodes without assistance from these `bomi benchmark --assist none --json` files")
     parser.add_argument("--name", default="switch_ceiling")
     args = parser.parse_args()
@@ -150,7 +150,7 @@ def main() -> None:
         f"{args.first_seed + args.seeds - 1}", "",
         f"Command: `python benchmarks/switch_ceiling.py --participants {args.participants} --seeds {args.seeds} "
         f"--first-seed {args.first_seed} --jobs {args.jobs}"
-        f"{''.join(' --none ' + p.name for p in args.none or [])}`. \"free\": every mode switch the scripted user "
+        f"{' --none ' + ' '.join(p.name for p in args.none) if args.none else ''}`. \"free\": every mode switch the scripted user "
         "decides on is made at no cost (no button posture, no press): a bound no assistance can reach, "
         "not a system.", "",
         f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}. "
