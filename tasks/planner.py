@@ -23,6 +23,7 @@ from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
 CUBE_SYMMETRY = math.pi / 2  # a cube looks the same every quarter turn
+PINCH_SYMMETRY = math.pi  # the fingers close on the same pair of faces with the hand turned half a turn
 NO_HUMAN_MODEL = "none"  # [human] model: the fixed timing of [timing] alone
 OPENING_PROGRESS = 0.02  # closure the fingers must lose to be seen opening (0 open .. 1 closed)
 
@@ -212,6 +213,7 @@ class Memory:
     closing_since: float | None = None  # when the fingers (in the finger mode) began closing on a cube they do not touch yet
     opening: bool = False  # the person is opening the fingers: that goes on until the hand is open
     missed: bool = False  # the last grasp closed on nothing: open the hand fully before trying again
+    missed_faces: tuple[int, float] | None = None  # (cube, pair of its faces: hand yaw off the cube's, rad) a grasp missed on
     fingers_blocked: float | None = None  # hand height where the fingers stopped opening (caught on a cube): rise first
     controls: Controls = Controls()  # the same all episode
 
@@ -257,6 +259,13 @@ def missed_grasp(view: View, memory: Memory, p: OperatorParams) -> bool:
     return memory.closing_since is not None and view.t - memory.closing_since > p.miss_time and not any(view.touching)
 
 
+def _missed_faces(view: View, p: OperatorParams) -> tuple[int, float]:
+    """The cube a grasp has just missed (only the cube to take is grasped) and the pair of its faces
+    the fingers closed on."""
+    k = cube_to_take(view, placed_cubes(view, p)[0])
+    return k, faces_lined_up(view, k)
+
+
 def cube_to_take(view: View, bottom: int | None) -> int:
     """The next cube to pick up: the first not placed at B, unless another lies on top of it."""
     candidates = [k for k in range(len(view.cube_pos)) if k != bottom]
@@ -267,10 +276,23 @@ def cube_to_take(view: View, bottom: int | None) -> int:
     return k
 
 
-def yaw_error(view: View, k: int, grasp_yaw: float = 0.0) -> float:
-    """Wrist turn (rad) that lines the hand up with a face of cube k, in [-pi/4, pi/4)."""
-    err = view.cube_yaw[k] - view.hand_yaw - grasp_yaw
-    return (err + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
+def _wrapped(angle: float, period: float) -> float:
+    return (angle + period / 2) % period - period / 2
+
+
+def yaw_error(view: View, k: int, avoid: float | None = None) -> float:
+    """Wrist turn (rad) that lines the hand up with the nearest face of cube k, in [-pi/4, pi/4); or,
+    with ``avoid`` (a pair of faces, ``faces_lined_up``), with the other pair, in [-pi/2, pi/2)."""
+    err = view.cube_yaw[k] - view.hand_yaw
+    if avoid is None:
+        return _wrapped(err, CUBE_SYMMETRY)
+    return _wrapped(err - avoid - CUBE_SYMMETRY, PINCH_SYMMETRY)
+
+
+def faces_lined_up(view: View, k: int) -> float:
+    """The pair of faces of cube k the fingers close on now: the hand's yaw off the cube's, to the
+    nearest quarter turn, modulo half a turn (0 or pi/2)."""
+    return round((view.cube_yaw[k] - view.hand_yaw - yaw_error(view, k)) / CUBE_SYMMETRY) % 2 * CUBE_SYMMETRY
 
 
 Pace = Callable[[float, float], float]  # (distance, tolerance) -> the least time a person takes to cover it
@@ -400,7 +422,10 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
     if not open_hand:
         return _open("open hand")
     hover_z = max(grasp[2] + p.hover, stack_top + p.carry_clearance + view.cube_size)
-    turn = yaw_error(view, k)
+    # after a grasp of this cube closed on nothing, the other pair of faces: not the same pose again
+    # (e.g. a cube lying against this one holds a finger off the faces toward it; across them there is room)
+    avoid = memory.missed_faces[1] if memory.missed_faces is not None and memory.missed_faces[0] == k else None
+    turn = yaw_error(view, k, avoid)
     yaw_tolerance = math.radians(p.yaw_deg) * (p.settled_share if memory.turning else 1.0)
     if np.linalg.norm(hand[:2] - grasp[:2]) <= p.turn_reach * p.align and abs(turn) > yaw_tolerance:
         if hand[2] < grasp[2] + p.turn_clearance * p.hover and not memory.turning:  # the fingers would hit the cube
@@ -454,6 +479,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
                      stalled=memory.stalled and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE))
                      and not missed,
                      missed=(memory.missed or missed) and not any(view.touching) and view.closure > p.open_closure,
+                     missed_faces=_missed_faces(view, p) if missed else None if any(view.touching) else memory.missed_faces,
                      fingers_blocked=None if freed else memory.fingers_blocked,
                      closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
                      opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))

@@ -326,7 +326,8 @@ def test_fingers_closed_on_nothing_open_again_and_forget_the_stall():
     assert str(intent.goal) == "missed cube 1: open hand" and set(intent.deflection) == {"B"}
     assert not memory.stalled and memory.closing_since is None
     intent, _ = plan(view(hand=high, mode=Mode.FINGERS, closure=0.0), memory, P, combine_axes=False)
-    assert str(intent.goal) == "reach cube 1: descend: translation mode"  # open again: descend the rest of the way
+    # open again: not the same pose again, a new try on the other pair of faces, turned above the cube
+    assert str(intent.goal) == "reach cube 1: rise to turn: translation mode"
 
 
 def test_closing_is_timed_only_in_the_finger_mode_and_while_nothing_is_touched():
@@ -450,3 +451,37 @@ def test_a_held_cube_down_beside_its_place_is_slid_over_it_not_let_go_of_again_a
     on_place = replace(v, hand_pos=np.r_[B + 0.004, top[2]], cube_pos=(v.cube_pos[0], np.r_[B + 0.004, top[2]]))
     intent, _ = plan(on_place, Memory(touch_since=0.0), P, combine_axes=False)
     assert str(intent.goal).startswith("release cube 2")
+
+
+
+def test_after_a_grasp_beside_a_cube_lying_against_it_misses_the_hand_takes_the_other_pair_of_faces():
+    # cube 2 lies against cube 1 along x (centres 51 mm apart); the hand at yaw 0 closes along x, so one finger
+    # would have to go between the cubes (dev seed 977: nine close-miss-open cycles in one such pose)
+    beside = dict(cubes=((-0.14, -0.45), (-0.14 + 0.051, -0.45)))
+    at_grasp, above = (-0.14, -0.45, HALF), (-0.14, -0.45, HALF + P.hover)
+
+    def after_miss(hand_yaw: float, hand: tuple) -> tuple:
+        """Close at the grasp with the hand at ``hand_yaw`` for longer than miss_time, then open at ``hand``."""
+        closed = replace(view(hand=at_grasp, mode=Mode.FINGERS, closure=0.6, t=10.0 + P.miss_time + 0.1, **beside),
+                         hand_yaw=hand_yaw)
+        intent, memory = plan(closed, Memory(closing_since=10.0), P, combine_axes=False)
+        assert str(intent.goal) == "missed cube 1: open hand"
+        opened = replace(closed, closure=0.0, hand_pos=np.array(hand), t=closed.t + 2.0)
+        return opened, *plan(opened, memory, P, combine_axes=False)
+
+    opened, intent, _ = after_miss(0.0, at_grasp)
+    assert str(intent.goal) == "reach cube 1: rise to turn: translation mode"  # not "grasp cube 1" there again
+    for missed_yaw in (0.0, math.pi, 0.15):  # the faces toward cube 2 (the same pair either way round, or 9 deg off)
+        opened, intent, memory = after_miss(missed_yaw, above)
+        assert str(intent.goal) == "turn to cube 1: wrist mode"
+        for yaw, lined_up in ((missed_yaw + 0.1, False), (math.pi / 2, True), (-math.pi / 2 + 0.1, True), (0.0, False)):
+            intent, _ = plan(replace(opened, hand_yaw=yaw), memory, P, combine_axes=False)
+            assert str(intent.goal) == ("reach cube 1: descend: translation mode" if lined_up else
+                                        "turn to cube 1: wrist mode"), (missed_yaw, yaw)
+    opened, intent, memory = after_miss(math.pi / 2, above)  # a miss on the faces across x: back to those toward it
+    intent, _ = plan(replace(opened, hand_yaw=0.0), memory, P, combine_axes=False)
+    assert str(intent.goal) == "reach cube 1: descend: translation mode"
+    grasped = replace(opened, touching=(True, False), closure=0.6)  # a grasp that holds: the memory is spent
+    _, memory = plan(grasped, memory, P, combine_axes=False)
+    intent, _ = plan(replace(opened, hand_yaw=math.pi / 2), memory, P, combine_axes=False)
+    assert str(intent.goal) == "reach cube 1: descend: translation mode"
