@@ -209,7 +209,11 @@ class Memory:
     turning: bool = False  # a wrist turn goes on until the hand is well lined up
     descending: bool = False  # a descent goes on while the hand stays roughly over the goal
     last_seen: tuple[float, np.ndarray] | None = None  # (t, hand position) at the previous glance
-    stalled: bool = False  # a descent pushed on for a while without the hand going lower: it is as low as it goes
+    # arrived at the bottom of a descent, until the grasp is made or missed: a descent pushed on for a while
+    # without the hand going lower (it is as low as it goes), or a hand once judged at the grasp (a late arm
+    # coasting past it while the fingers mode is pressed does not undo that; over a cube lying on another
+    # cube nothing stops the hand, and a new correction would coast past as far again)
+    stalled: bool = False
     closing_since: float | None = None  # when the fingers (in the finger mode) began closing on a cube they do not touch yet
     opening: bool = False  # the person is opening the fingers: that goes on until the hand is open
     missed: bool = False  # the last grasp closed on nothing: open the hand fully before trying again
@@ -476,8 +480,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     freed = memory.fingers_blocked is not None and (
         view.closure <= p.open_closure or view.hand_pos[2] >= memory.fingers_blocked + p.hover - p.stop)
     memory = replace(memory, turning=action.kind is ActionKind.TURN, descending=descending,
-                     stalled=memory.stalled and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE))
-                     and not missed,
+                     stalled=(memory.stalled or action.kind is ActionKind.CLOSE)
+                     and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE)) and not missed,
                      missed=(memory.missed or missed) and not any(view.touching) and view.closure > p.open_closure,
                      missed_faces=_missed_faces(view, p) if missed else None if any(view.touching) else memory.missed_faces,
                      fingers_blocked=None if freed else memory.fingers_blocked,

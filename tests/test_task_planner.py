@@ -485,3 +485,24 @@ def test_after_a_grasp_beside_a_cube_lying_against_it_misses_the_hand_takes_the_
     _, memory = plan(grasped, memory, P, combine_axes=False)
     intent, _ = plan(replace(opened, hand_yaw=math.pi / 2), memory, P, combine_axes=False)
     assert str(intent.goal) == "reach cube 1: descend: translation mode"
+
+
+def test_a_hand_judged_at_the_grasp_of_a_cube_on_a_misplaced_stack_closes_where_a_late_arm_coasts_it():
+    # dev seed 401, P1 BoMI: cube 1 set down 32 mm from B (outside the zone), cube 2 on top of it; nothing stops
+    # the open hand going down beside the stack, and each correction of a late arm coasts past the grasp height
+    bottom = B + (0.0, -0.032)
+    top = bottom + (-0.0054, -0.0044)
+    stack = dict(cubes=(tuple(bottom), tuple(top)), cube_z=(HALF, 3 * HALF))
+    assert placed_cubes(view(**stack), P) == (None, None) and cube_to_take(view(**stack), None) == 1
+    over = (top[0] + 0.004, top[1] - 0.002)
+    intent, memory = plan(view(hand=(*over, 3 * HALF + 0.9 * P.stop), **stack), Memory(descending=True), P,
+                          combine_axes=False)
+    assert str(intent.goal) == "grasp cube 2: fingers mode" and intent.button == "B2"
+    # while the press waits for the arm to settle, the hand coasts on down past the grasp height, then further
+    goals, t = [], 0.0
+    for dz, mode in ((-P.stop - 0.001, Mode.TRANSLATION), (-3.5 * P.stop, Mode.TRANSLATION), (-3.5 * P.stop, Mode.FINGERS)):
+        t += 0.2
+        intent, memory = plan(view(hand=(*over, 3 * HALF + dz), mode=mode, t=t, **stack), memory, P, combine_axes=False)
+        goals.append(str(intent.goal))
+    assert goals == ["grasp cube 2: fingers mode"] * 2 + ["grasp cube 2"]  # not back to "reach cube 2: descend"
+    assert dict(intent.deflection) == {"F": P.coarse}  # the fingers close there
