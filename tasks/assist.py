@@ -50,7 +50,7 @@ from bomi.config_files import load_toml
 from bomi.errors import BomiError
 from bomi.profiles import Profile
 from sim.joystick import BUTTONS, JoystickState, Kind, Layout, Mode, combine
-from tasks.planner import CUBE_SYMMETRY, View
+from tasks.planner import CUBE_SYMMETRY, View, wrapped_angle
 
 DEFAULT_ASSIST_FILE = Path(__file__).with_name("assist.toml")
 NONE = "none"
@@ -276,7 +276,7 @@ def _needed(error: float, tolerance: float, softness: float) -> float:
 
 def yaw_offset(hand_yaw: float, cube_yaw: float) -> float:
     """Turn (rad) that lines the hand up with a face of the cube, in [-pi/4, pi/4)."""
-    return (cube_yaw - hand_yaw + CUBE_SYMMETRY / 2) % CUBE_SYMMETRY - CUBE_SYMMETRY / 2
+    return wrapped_angle(cube_yaw - hand_yaw, CUBE_SYMMETRY)
 
 
 class PathStep(enum.Enum):

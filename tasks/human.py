@@ -41,7 +41,7 @@ import scipy.stats
 
 from bomi.config_files import check_table, load_toml, number, typed
 from sim.joystick import Kind, Mode
-from tasks.planner import REST, Controls, Memory, OperatorParams, ScriptedUser, StickIntent, View
+from tasks.planner import REST, Controls, Memory, OperatorParams, ScriptedUser, StickIntent, View, wrapped_angle
 
 DEFAULT_HUMAN_FILE = Path(__file__).with_name("human.toml")
 HUMAN_STREAM = 0x4855  # the human's random streams: independent of the task's and the participant's
@@ -343,7 +343,7 @@ class HumanOperator:
     def _noticed(self, seen: View) -> bool:
         """The arm did something the person did not expect, or nothing for ``notice_timeout``."""
         s, p = self.slip, self.params
-        yaw = (seen.hand_yaw - s.yaw + math.pi) % (2 * math.pi) - math.pi
+        yaw = wrapped_angle(seen.hand_yaw - s.yaw, 2 * math.pi)
         turned = max(abs(yaw), float(np.max(np.abs(seen.hand_tilt - s.tilt))))
         changed = (np.linalg.norm(seen.hand_pos - s.hand) > p.notice_move or math.degrees(turned) > p.notice_turn_deg
                    or abs(seen.closure - s.closure) > 0.05)

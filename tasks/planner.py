@@ -280,7 +280,8 @@ def cube_to_take(view: View, bottom: int | None) -> int:
     return k
 
 
-def _wrapped(angle: float, period: float) -> float:
+def wrapped_angle(angle: float, period: float) -> float:
+    """``angle`` (rad) brought into [-period/2, period/2) by whole periods."""
     return (angle + period / 2) % period - period / 2
 
 
@@ -289,14 +290,14 @@ def yaw_error(view: View, k: int, avoid: float | None = None) -> float:
     with ``avoid`` (a pair of faces, ``faces_lined_up``), with the other pair, in [-pi/2, pi/2)."""
     err = view.cube_yaw[k] - view.hand_yaw
     if avoid is None:
-        return _wrapped(err, CUBE_SYMMETRY)
-    return _wrapped(err - avoid - CUBE_SYMMETRY, PINCH_SYMMETRY)
+        return wrapped_angle(err, CUBE_SYMMETRY)
+    return wrapped_angle(err - avoid - CUBE_SYMMETRY, PINCH_SYMMETRY)
 
 
 def faces_lined_up(view: View, k: int) -> float:
     """The pair of faces of cube k the fingers close on now: the hand's yaw off the cube's, to the
     nearest quarter turn, modulo half a turn (0 or pi/2)."""
-    return round((view.cube_yaw[k] - view.hand_yaw - yaw_error(view, k)) / CUBE_SYMMETRY) % 2 * CUBE_SYMMETRY
+    return round((view.cube_yaw[k] - view.hand_yaw) / CUBE_SYMMETRY) % 2 * CUBE_SYMMETRY
 
 
 Pace = Callable[[float, float], float]  # (distance, tolerance) -> the least time a person takes to cover it
