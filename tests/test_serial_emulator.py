@@ -426,17 +426,23 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     recorder = subprocess.Popen([sys.executable, "-m", "tasks.cli", "record", "--profile", str(profile), "--port", path,
                                  "--out", str(out), "--hold", "0.5", "--neutral", "0.5"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # Interrupt on the recorder's own progress: its prompt for the third segment means two are
+    # written, and 0.25 s later it is in the middle of that 0.5 s segment, 5 s before the end.
+    watchdog = threading.Timer(20, recorder.kill)
+    watchdog.start()
     try:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and (not out.exists() or out.read_text().count("\n") < 60):
-            time.sleep(0.05)
-        time.sleep(0.25)  # in the middle of a segment
+        errors, prompts = [], 0
+        while prompts < 3 and (line := recorder.stderr.readline()):
+            errors.append(line)
+            prompts += line.startswith(("relax:", "HOLD "))
+        time.sleep(0.25)
         recorder.send_signal(signal.SIGINT)
-        _, errors = recorder.communicate(timeout=10)
+        errors.append(recorder.communicate(timeout=10)[1])
     finally:
+        watchdog.cancel()
         recorder.kill()
     thread.join(10)
-    assert recorder.returncode == 130 and errors.endswith("bomi: interrupted\n")
+    assert prompts == 3 and recorder.returncode == 130 and "".join(errors).endswith("bomi: interrupted\n")
     labels = read_recording(out).labels
     runs = np.diff(np.r_[0, np.flatnonzero(np.diff(labels)) + 1, len(labels)])
     assert 2 <= len(runs) < 13 and all(abs(n - 31) <= 4 for n in runs)  # 0.5 s segments, none cut short
