@@ -23,7 +23,8 @@ and are then this user's, learnt online (``LearntTolerance``) whenever the user 
 press: a refusal of an automatic switch (a press out of the switch's mode before any move in it) or
 their own switch after moving in a mode.  The step they make next was not done if the automation
 judged it done then; the step it expected next in the mode they left (the one the switch was made
-for), if they skip it, was done.
+for), if they skip it, was done (for the rise before a travel: the user travels that far without
+rising first).
 
 ``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
 the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
@@ -315,6 +316,13 @@ def step_errors(view: View, goal: Goal, path: PathParams) -> dict[PathStep, tupl
     return out
 
 
+def rise_error(view: View, goal: Goal) -> tuple[float, float]:
+    """The rise before a travel as a precision: (how far the goal is in xy, the distance from which
+    a careful user rises first when low: its nearness).  A user who travels where the rise was
+    expected shows that they travel this far without rising (``_learn_precision``)."""
+    return float(np.linalg.norm(goal.point[:2] - view.hand_pos[:2])), goal.near
+
+
 def revisit_scale(path: PathParams, working_on: PathStep | None) -> dict[PathStep, float]:
     """Per step, the factor on its tolerance while the user was last seen making ``working_on``:
     ``revisit`` for the steps before it (a person who has moved on goes back only for a clearly
@@ -342,8 +350,9 @@ def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working
     if goal.act > 0:  # a grasp needs the hand open first
         opener, _ = layout.find(Kind.FINGERS, -1.0)
         steps.append(Step(PathStep.OPEN_HAND, opener, float(view.closure > path.open_closure)))
-    far = _needed(xy, goal.near, path.softness)
-    low = _needed(goal.travel_z - hand[2], goal.height_tol * scale[PathStep.RISE], path.softness)
+    # far: beyond the xy within which this user travels without rising first (``rise_error``)
+    far = _needed(xy, goal.near * (precision or {}).get(PathStep.RISE, 1.0), path.softness)
+    low = _needed(goal.travel_z - hand[2], goal.height_tol * revisit[PathStep.RISE], path.softness)
     steps.append(Step(PathStep.RISE, up, far * low))
     steps.append(Step(PathStep.TRAVEL, across, _needed(xy, goal.near * scale[PathStep.TRAVEL], path.softness)))
     if PathStep.TURN in errors:
@@ -506,7 +515,8 @@ class SwitchContext:
     """What the automation judged when the user had a mode (an automatic switch to it, or the
     user's own press out of it): the likely goal's finger action, its steps' (error, starting
     tolerance) (``step_errors``; the error over ``revisit`` for a step before the one the user was
-    last seen making, whose tolerance was scaled by it: ``revisit_scale``), the step made for
+    last seen making, whose tolerance was scaled by it: ``revisit_scale``; and the rise's,
+    ``rise_error``, never among those judged done), the step made for
     that mode (of its steps, the likeliest to be the next) and the other steps of ``step_errors``
     it judged done (less than even odds of being needed)."""
 
@@ -831,6 +841,7 @@ class Assistance:
                   step_errors(view, goal, self.params.path).items()}
         judged_done = frozenset(step.name for step in steps if step.needed < 0.5 and step.name in errors
                                 and step.name is not made_for)
+        errors[PathStep.RISE] = rise_error(view, goal)  # a lesson of "done" only: a person rises for other reasons too
         return SwitchContext(goal.act, errors, made_for, judged_done, bool(goal.point[2] > view.hand_pos[2]))
 
     def _around(self, view: View) -> int | None:

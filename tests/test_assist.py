@@ -592,3 +592,26 @@ def test_the_switch_ceiling_makes_the_users_presses_free_switches_of_the_arm():
     free.command(StickIntent(button="B1", goal=Goal("reach cube 1", mode=Mode.HEIGHT)), 1 / 60, 2 / 60)
     moved = free.command(StickIntent({"F": 0.4}), 2 / 60, 3 / 60)
     assert arm.switched == [Mode.HEIGHT] and free.free_switches == 1 and moved == JoystickState({"F": 0.4})
+
+
+def test_a_user_who_leaves_the_height_mode_to_travel_low_where_a_rise_was_expected_is_not_kept_there_again():
+    assist, arm = _grasping_user()
+    # after a descent, 3 cm beside cube 1 and 6 cm below the travel height over it: by the path the
+    # rise comes first (beyond the 20 mm within which a careful user travels low): the height mode stays
+    beside = A1 + [0.03, 0, 0.01]
+    assert _descend_and_rest(assist, arm, beside, 0.0) == []
+    # the user's own switch round the cycle to translation, then a travel toward the cube at that height
+    _refuse(assist, arm, 2.0, presses=3, hand=beside)
+    assert arm.mode is Mode.TRANSLATION and not assist.switches
+    _descend_and_rest(assist, arm, A1 + [0.028, 0, 0.01], 5.0, move={"R": 0.3})
+    # they travel 3 cm without rising: the rise is needed only beyond twice that (LearntTolerance)
+    assert assist.precision(+1.0)[PathStep.RISE] * assist.params.path.grasp_near == pytest.approx(0.06, abs=1e-3)
+    # 4 cm beside it after a descent: sent to translation; a user never seen travelling low is kept
+    # in the height mode to rise first
+    arm.mode = Mode.HEIGHT
+    assert _descend_and_rest(assist, arm, A1 + [0, 0.04, 0.01], 7.0) == [Mode.TRANSLATION]
+    fresh, fresh_arm = _grasping_user()
+    assert _descend_and_rest(fresh, fresh_arm, A1 + [0, 0.04, 0.01], 0.0) == []
+    # 8 cm beside it (beyond the 6 cm learnt) this user too is kept in the height mode to rise first
+    arm.mode = Mode.HEIGHT
+    assert _descend_and_rest(assist, arm, A1 + [0, -0.08, 0.01], 9.0) == []
