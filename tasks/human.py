@@ -22,7 +22,10 @@ interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: 
   has that part taken off: the reaction is counted once.
 - **The interface as learnt** (``InterfaceModel``): how late and how fast the arm answers a move,
   learnt from what is seen; a move that would be over before its start could be seen is made as a
-  pulse of the predicted length, then the person waits and looks (move-and-wait).
+  pulse of the predicted length, then the person waits and looks (move-and-wait).  From the pulses
+  answered, how far the shortest pushes go (an error under half of that, within what the grasp or
+  the release tolerates, is left); from every push answered, how long one has had to be held (a
+  push down held that long and not answered counts toward a blocked descent).
 - **Slips** (``HumanOperator``): a share of mode presses is forgotten; the person pushes the
   stick as if the mode had changed until they see the arm do something else (or nothing), then
   makes the press (the one right after noticing a slip is not forgotten).
@@ -152,6 +155,14 @@ class HumanTiming:
     def hold(self, wanted: StickIntent, settle: float) -> float:
         return self.interface.hold(wanted, settle)
 
+    @property
+    def least_step(self) -> float:
+        return self.interface.step
+
+    @property
+    def answered_hold(self) -> float:
+        return self.interface.answered_hold
+
 
 @dataclass
 class InterfaceModel:
@@ -164,8 +175,11 @@ class InterfaceModel:
     model predicts, then the person waits for the hand to settle and looks again (move-and-wait,
     Ferrell 1965; Sheridan and Ferrell 1963).  Through a stick that answers at once ``onset`` is the
     visual delay and no move is that short; through a laggy channel the small corrections become
-    pulses.  No parameter of its own: the operator file's ``learning_rate``, ``full_speed``,
-    ``still_speed``, ``max_wait``."""
+    pulses.  Also learnt: how far the hand went for the pulses it answered (``step``: the planner
+    leaves an error under half of it where the task tolerates it) and how long a push had been held
+    when it was seen answered (``answered_hold``: a push down held that long and not answered counts
+    toward a stalled descent).  No parameter of its own: the operator file's ``learning_rate``,
+    ``full_speed``, ``still_speed``, ``max_wait``."""
 
     learning_rate: float
     full_speed: float  # m/s at full deflection, as the person has seen it
@@ -173,7 +187,9 @@ class InterfaceModel:
     max_onset: float  # s: the longest onset learnt (the operator's max_wait)
     onset: float = 0.0
     gain: dict[str, float] = field(default_factory=dict)
-    _move: tuple[float, str, float, bool] | None = None  # (start, function, deflection, pulse) of the last move
+    step: float = 0.0  # m: how far the hand went for the pulses it answered (0 at first: as little as wanted)
+    answered_hold: float = 0.0  # s: how long the pushes it answered had been held when it was seen answering them
+    _move: tuple[float, str, float, float, np.ndarray] | None = None  # (start, function, deflection, hold, hand) of the last move
     _seen_onset: float | None = None  # when the hand was first seen moving since that move started
     _peak: float = 0.0  # the fastest the hand was seen going since
     _last: View | None = None
@@ -195,9 +211,9 @@ class InterfaceModel:
         speed = 0.0 if last is None or seen.t <= last.t else \
             float(np.linalg.norm(seen.hand_pos - last.hand_pos)) / (seen.t - last.t)
         if current.remaining > 0 and (self._move is None or started != self._move[0]):
-            self._learn(seen.t)
+            self._learn(seen)
             function, deflection = max(current.deflection.items(), key=lambda item: item[1])
-            self._move = (started, function, deflection, math.isfinite(hold))
+            self._move = (started, function, deflection, hold, seen.hand_pos)
             self._seen_onset, self._peak = None, 0.0
             return
         if self._move is not None and speed > self.still_speed:
@@ -205,20 +221,26 @@ class InterfaceModel:
                 self._seen_onset = seen.t - self._move[0]
             self._peak = max(self._peak, speed)
 
-    def _learn(self, now: float) -> None:
-        """A new move begins: learn from the last one.  A pulse the hand was never seen to answer
-        says the onset is longer than that; any other move that did not move the hand (pushed into
-        the table, in the wrong mode) says nothing."""
+    def _learn(self, now: View) -> None:
+        """A new move begins (the hand at rest ``now``): learn from the last one.  A pulse the hand
+        was never seen to answer says the onset is longer than that; one it answered, how far the
+        shortest push goes (``step``); any move it answered, how long a push has had to be held to be
+        answered (``answered_hold``); any other move that did not move the hand (pushed into the
+        table, in the wrong mode) says nothing."""
         if self._move is None:
             return
-        start, function, deflection, pulse = self._move
+        start, function, deflection, hold, hand = self._move
+        pulse = math.isfinite(hold)
         rate = self.learning_rate
         if self._seen_onset is not None:
             seen = self._seen_onset
+            self.answered_hold = (1 - rate) * self.answered_hold + rate * min(hold, seen)
+            if pulse:
+                self.step = (1 - rate) * self.step + rate * float(np.linalg.norm(now.hand_pos - hand))
             seen_gain = self._peak / (self.full_speed * deflection)
             self.gain[function] = (1 - rate) * self.gain.get(function, 1.0) + rate * seen_gain
         elif pulse:
-            seen = now - start
+            seen = now.t - start
         else:
             return
         self.onset = (1 - rate) * self.onset + rate * min(seen, self.max_onset)

@@ -220,6 +220,9 @@ class Memory:
     missed_faces: tuple[int, float] | None = None  # (cube, pair of its faces: hand yaw off the cube's, rad) a grasp missed on
     fingers_blocked: float | None = None  # hand height where the fingers stopped opening (caught on a cube): rise first
     controls: Controls = Controls()  # the same all episode
+    # m: how far the hand has been seen to go for the shortest pushes made (Timing.least_step): an error of less
+    # than half of it cannot be made smaller by a push, and is left where the grasp or the place tolerates it
+    least_step: float = 0.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -410,7 +413,9 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
     accepted = p.target_zone if bottom is None else p.placed
     arrival = (_open(f"release cube {held + 1}") if off <= accepted
                else _move(step, Phase.TRAVEL, np.r_[release[:2], hand[2]]))
-    return _approach(hand, release, carry_z, p, step, arrival, memory.descending, memory.stalled)
+    # an xy error no push could make smaller is left where the release tolerates it (its height is not: lower is blocked)
+    return _approach(hand, release, carry_z, p, step, arrival, memory.descending, memory.stalled,
+                     accepted=(min(memory.least_step / 2, accepted), 0.0))
 
 
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
@@ -436,21 +441,27 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
         if hand[2] < grasp[2] + p.turn_clearance * p.hover and not memory.turning:  # the fingers would hit the cube
             return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.r_[hand[:2], hover_z])
         return _turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
+    # what the grasp tolerates (at_grasp) bounds the error left when a push would move the hand too far to reduce it
+    left = memory.least_step / 2
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", _close(f"grasp cube {k + 1}"),
-                     memory.descending, memory.stalled)
+                     memory.descending, memory.stalled,
+                     accepted=(min(left, p.reach * p.align), min(left, p.reach * p.stop)))
 
 
 def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, step: str,
-              on_arrival: Action, descending: bool, stalled: bool = False) -> Action:
+              on_arrival: Action, descending: bool, stalled: bool = False,
+              accepted: tuple[float, float] = (0.0, 0.0)) -> Action:
     """Rise to the travel height if low and far, travel over the goal, go down, then act.
-    A descent already under way tolerates twice the alignment error; a stalled one has arrived."""
+    A descent already under way tolerates twice the alignment error; a stalled one has arrived.
+    ``accepted``: (xy, z) errors left as they are even where larger than the align and stop tolerances
+    (no push could make them smaller)."""
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
-    if xy_off > p.align * (2 if descending else 1):
+    if xy_off > max(p.align * (2 if descending else 1), accepted[0]):
         if hand[2] < travel_z - p.rise_margin * p.stop and xy_off > p.reach * p.align:
             return _move(step, Phase.RISE, np.r_[hand[:2], travel_z])
         return _move(step, Phase.TRAVEL, np.r_[goal[:2], hand[2]])
-    if abs(hand[2] - goal[2]) > p.stop and not stalled:
-        return _move(step, Phase.DESCEND, np.r_[hand[:2] if xy_off <= p.stop else goal[:2], goal[2]])
+    if abs(hand[2] - goal[2]) > max(p.stop, accepted[1]) and not stalled:
+        return _move(step, Phase.DESCEND, np.r_[hand[:2] if xy_off <= max(p.stop, accepted[0]) else goal[:2], goal[2]])
     return on_arrival
 
 
@@ -603,6 +614,14 @@ class Timing(Protocol):
         is seen (inf: watch the hand and let go when it is about to arrive); ``settle``: how long the
         hand has been seen going on after a move is let go."""
 
+    @property
+    def least_step(self) -> float:
+        """How far (m) the hand has been seen to go for the shortest pushes made (0: as little as wanted)."""
+
+    @property
+    def answered_hold(self) -> float:
+        """How long (s) a push has had to be held to be seen answered (0: at once)."""
+
 
 @dataclass(frozen=True)
 class FixedTiming:
@@ -622,6 +641,14 @@ class FixedTiming:
 
     def hold(self, wanted: StickIntent, settle: float) -> float:
         return math.inf
+
+    @property
+    def least_step(self) -> float:
+        return 0.0
+
+    @property
+    def answered_hold(self) -> float:
+        return 0.0
 
 
 @dataclass
@@ -644,7 +671,9 @@ class ScriptedUser:
     settle: float = 0.0  # learnt: how long the hand keeps (or starts) moving after a move is let go
     _last_moving: float = -math.inf  # when the hand was last seen moving
     _released_move: bool = False  # the last thing let go was a stick move (not a button)
-    _height_seen: tuple[float, float] = (-math.inf, 0.0)  # (since when, hand height) during a descent
+    _height_seen: tuple[float, float] = (0.0, 0.0)  # (s pushed down since the hand was last seen going lower, its height then)
+    _push_down: float = 0.0  # s: how long the push down held now (or last) has been held
+    _last_glance: float = -math.inf
     _closure_seen: tuple[float, float] = (-math.inf, 0.0)  # (since when, closure) while opening the fingers
     timing: Timing | None = None  # default: FixedTiming(params)
     _reaction: float = 0.0  # the reaction drawn for the move being waited for
@@ -675,6 +704,7 @@ class ScriptedUser:
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         self._watch_descent(view)
         self._watch_opening(view)
+        self.memory = replace(self.memory, least_step=self.timing.least_step)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation, self.timing.pace)
         if self.current.button is not None and view.mode is not self._mode_at_start:
@@ -719,17 +749,30 @@ class ScriptedUser:
 
     def _watch_descent(self, view: View) -> None:
         """A descent pushed down for ``stall_time`` without the hand going lower is stalled (the cube
-        or the fingers rest on something): the person takes it as arrived."""
+        or the fingers rest on something): the person takes it as arrived.  The time pushed down adds
+        up over the pushes of one descent (a descent made in pulses, each shorter than ``stall_time``,
+        stalls as well), and starts again when the hand goes lower or another move of the stick is made.
+        A push shorter than the interface has needed to answer (``Timing.answered_hold``) and not
+        answered says nothing of the hand: it does not count."""
         effects = self.memory.controls.layout.effects[view.mode]
         pushing_down = any(fn in effects and effects[fn].kind is Kind.LINEAR and effects[fn].axis[2] < 0
                            for fn in self.current.deflection)
-        if not (self.current.goal.descending and pushing_down):
-            self._height_seen = (view.t, float(view.hand_pos[2]))
+        descent = self.current.goal.descending and pushing_down
+        # what was held since the last glance was held this long
+        held = max(0.0, view.t - self._last_glance) if math.isfinite(self._last_glance) else 0.0
+        self._last_glance = view.t
+        pushed, height = self._height_seen
+        if (self.current.deflection and not descent) or height - view.hand_pos[2] > self.params.stop:
+            self._height_seen, self._push_down = (0.0, float(view.hand_pos[2])), 0.0
             return
-        since, height = self._height_seen
-        if height - view.hand_pos[2] > self.params.stop:
-            self._height_seen = (view.t, float(view.hand_pos[2]))
-        elif view.t - since > self.params.stall_time:
+        if descent:
+            self._push_down += held
+        counted = self._push_down if self._push_down >= self.timing.answered_hold else 0.0
+        if not descent and self._push_down > 0:  # a push down has ended
+            self._height_seen, self._push_down = (pushed + counted, height), 0.0
+        elif not descent and pushed == 0:  # no push down yet: the height to go lower than
+            self._height_seen = (0.0, float(view.hand_pos[2]))
+        elif pushed + counted > self.params.stall_time:
             self.memory = replace(self.memory, stalled=True)
 
     def _watch_opening(self, view: View) -> None:

@@ -10,7 +10,7 @@ from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
 from tasks.human import (DEFAULT_HUMAN_FILE, HumanOperator, HumanTiming, InterfaceModel, alternatives, choice_time,
                          fitts_time, judgement_error, load_human)
 from helpers import assert_one_line_error, benchmark_script
-from tasks.planner import REST, Controls, View, deflection_for, load_operator
+from tasks.planner import REST, Controls, StickIntent, View, deflection_for, load_operator
 
 H = load_human()
 P = load_operator()
@@ -233,3 +233,26 @@ def test_through_a_laggy_stick_the_person_learns_the_lag_and_corrects_by_pulses(
     watched, _, watched_holds = _reach_through_a_delayed_stick(1.0, least=0.3, learns=False)
     assert watched is None and len(watched_holds) > len(holds)
     assert all(math.isinf(h) for h in watched_holds)
+
+
+def test_the_interface_model_learns_how_far_the_answered_pulses_went():
+    """``step``: how far the hand went for a pulse it answered, learnt at the learning rate (0.5)
+    from 0; a pulse never answered and a move steered by watching teach it nothing."""
+    model = InterfaceModel(P.learning_rate, P.full_speed, P.still_speed, P.max_wait)
+    down = StickIntent({"Rr": 0.05}, remaining=0.004)
+    rest = (-0.14, -0.39, 0.05)
+
+    def glances(start, hold, positions):  # one move begun at ``start``, then the hand at 10 glances a second
+        for k, z in enumerate(positions):
+            model.observe(view(hand=(rest[0], rest[1], z), t=start + k / 10), down, start, hold)
+
+    glances(0.0, 0.3, [0.05] * 10 + [0.045, 0.04, 0.035, 0.03] + [0.03] * 6)  # answered after 1 s: 2 cm down
+    glances(2.0, 0.3, [0.03] * 20)  # begins at rest 2 cm lower: learns from the first; never answered
+    assert model.step == pytest.approx(0.5 * 0.02)
+    assert model.answered_hold == pytest.approx(0.5 * 0.3)  # the pulse was over (0.3 s) before it was seen answered
+    glances(4.0, math.inf, [0.03, 0.02, 0.01, 0.0] + [0.0] * 16)  # the unanswered pulse teaches no step
+    assert model.step == pytest.approx(0.5 * 0.02)
+    assert model.answered_hold == pytest.approx(0.5 * 0.3)  # nor how long a push must be held
+    glances(6.0, 0.3, [0.0] * 5)  # the watched move (3 cm) teaches no step either
+    assert model.step == pytest.approx(0.5 * 0.02)
+    assert model.answered_hold == pytest.approx(0.5 * 0.15 + 0.5 * 0.1)  # but was seen answered 0.1 s after its start

@@ -8,7 +8,7 @@ import pytest
 from bomi.errors import BomiError
 from helpers import assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
                            held_cube, load_operator, mode_button, placed_cubes, plan, turn_deflection_for)
 
 P = load_operator()
@@ -506,3 +506,107 @@ def test_a_hand_judged_at_the_grasp_of_a_cube_on_a_misplaced_stack_closes_where_
         goals.append(str(intent.goal))
     assert goals == ["grasp cube 2: fingers mode"] * 2 + ["grasp cube 2"]  # not back to "reach cube 2: descend"
     assert dict(intent.deflection) == {"F": P.coarse}  # the fingers close there
+
+
+class _PulsesOf:
+    """The scripted user's fixed timing, but every move of the hand is a pulse held ``seconds``, through
+    an interface seen to answer pushes once held ``answered_hold``."""
+
+    def __init__(self, seconds: float, answered_hold: float = 0.0):
+        self.fixed, self.seconds, self.answered_hold = FixedTiming(P), seconds, answered_hold
+
+    def __getattr__(self, name):
+        return getattr(self.fixed, name)
+
+    def hold(self, wanted, settle):
+        return self.seconds
+
+
+def test_a_descent_blocked_and_pushed_in_pulses_shorter_than_the_stall_time_stalls_too():
+    """3 s pulses down onto something that does not let the hand go lower: the first pushes 3 s,
+    the second 2 s more, and then the descent has been pushed the stall time (5 s): arrived."""
+    user = ScriptedUser(P, combine_axes=False, timing=_PulsesOf(3.0))
+    over = (-0.14, -0.39, 0.15)
+    first = _run_until_moving(user, over, 0.0)
+    assert str(user.current.goal) == "reach cube 1: descend"
+    t = first
+    while user.current.deflection:
+        t += 1 / 60
+        user.stick_intent(view(hand=over, t=t))
+    assert t == pytest.approx(first + 3.0, abs=1.5 / 60) and not user.memory.stalled  # let go after 3 s
+    second = _run_until_moving(user, over, t)
+    assert str(user.current.goal) == "reach cube 1: descend"
+    t = second
+    while not user.memory.stalled and t < second + 10:
+        t += 1 / 60
+        intent = user.stick_intent(view(hand=over, t=t))
+    assert t == pytest.approx(second + 2.0, abs=1.5 / 60)  # 3 + 2 s pushed
+    assert str(intent.goal).startswith("grasp cube 1")
+
+
+def test_pulses_down_that_move_the_hand_lower_never_stall():
+    """The same 3 s pulses, each answered with 1 cm down: pushing does not add up across them."""
+    user = ScriptedUser(P, combine_axes=False, timing=_PulsesOf(3.0))
+    hand = np.array([-0.14, -0.39, 0.15])
+    t = 0.0
+    for _ in range(4):
+        t = _run_until_moving(user, hand, t)
+        while user.current.deflection:
+            t += 1 / 60
+            user.stick_intent(view(hand=tuple(hand), t=t))
+        hand = hand - [0.0, 0.0, 0.01]  # it went 1 cm lower during the pulse
+        assert not user.memory.stalled
+
+
+def test_an_error_no_push_could_make_smaller_is_left_where_the_grasp_tolerates_it():
+    """Having seen the shortest pushes move the hand 3 cm, the person leaves an error of less than
+    half of that (1.5 cm) if the grasp tolerates it (z: reach x stop = 1.2 cm, xy: reach x align =
+    3.2 cm); with a stick that goes as little as wanted (0) it corrects to the stop and align
+    tolerances (6 mm, 1.6 cm)."""
+    high = (-0.14, -0.39, HALF + 0.009)  # 9 mm above the grasp height
+    assert str(plan(view(hand=high), Memory(descending=True), P, combine_axes=False)[0].goal) == "reach cube 1: descend"
+    coarse = Memory(descending=True, least_step=0.03)
+    assert str(plan(view(hand=high), coarse, P, combine_axes=False)[0].goal) == "grasp cube 1: fingers mode"
+    too_high = (-0.14, -0.39, HALF + 0.014)  # 1.4 cm: more than the grasp tolerates, corrected whatever the step
+    assert str(plan(view(hand=too_high), coarse, P, combine_axes=False)[0].goal) == "reach cube 1: descend"
+    beside = (-0.14 + 0.02, -0.39, HALF)  # 2 cm off in x at the grasp height, not yet descending
+    assert str(plan(view(hand=beside), Memory(), P, combine_axes=False)[0].goal) == "reach cube 1: travel"
+    assert str(plan(view(hand=beside), Memory(least_step=0.03), P, combine_axes=False)[0].goal) == \
+        "reach cube 1: travel"  # 2 cm is more than half of 3 cm
+    assert str(plan(view(hand=beside), Memory(least_step=0.05), P, combine_axes=False)[0].goal) == \
+        "grasp cube 1: fingers mode"
+
+
+def test_a_carried_cube_is_set_down_off_its_place_where_the_place_tolerates_it_and_no_push_would_help():
+    """Cube 1 carried 2 cm beside B (within target_zone, 2.5 cm, outside align, 1.6 cm): corrected with
+    a stick that goes as little as wanted, set down where it is once the shortest pushes have been
+    seen to go 5 cm.  Cube 2 2 cm beside cube 1 is outside placed (1.2 cm): corrected either way."""
+    off = np.array([0.02, 0.0])
+    held = np.r_[B + off, 0.12]
+    v = view(hand=tuple(held), cubes=(tuple(held[:2]), (-0.14, -0.51)), cube_z=(held[2], HALF), closure=0.7,
+             touching=(True, False), t=5.0)
+    assert str(plan(v, Memory(touch_since=0.0), P, combine_axes=False)[0].goal) == "carry cube 1: travel"
+    coarse = Memory(touch_since=0.0, least_step=0.05)
+    assert str(plan(v, coarse, P, combine_axes=False)[0].goal) == "carry cube 1: descend"
+    top = np.r_[B + off, 0.15]
+    second = view(hand=tuple(top), cubes=(tuple(B), tuple(top[:2])), cube_z=(HALF, top[2]), closure=0.7,
+                  touching=(False, True), t=5.0)
+    assert str(plan(second, coarse, P, combine_axes=False)[0].goal) == "carry cube 2: travel"
+
+
+def test_pulses_down_shorter_than_the_interface_needs_to_answer_say_nothing_of_a_blocked_hand():
+    """Through an interface that has needed pushes of 2 s to answer, unanswered pulses of 1.5 s may be
+    too short rather than blocked: 30 s of them never stall; pulses of 3 s (longer than it needs)
+    stall after 5 s pushed, as through a stick that answers at once."""
+    over = (-0.14, -0.39, 0.15)
+    for pulse, stalls_after in ((1.5, None), (3.0, 5.0)):
+        user = ScriptedUser(P, combine_axes=False, timing=_PulsesOf(pulse, answered_hold=2.0))
+        t, pushed = 0.0, 0.0
+        while t < 30.0 and not user.memory.stalled:
+            t += 1 / 60
+            user.stick_intent(view(hand=over, t=t))
+            pushed += user.current.deflection.get("Lr", 0.0) > 0 and str(user.current.goal) == "reach cube 1: descend"
+        if stalls_after is None:
+            assert not user.memory.stalled and pushed / 60 > 15  # pushed down more than 15 s in all
+        else:
+            assert user.memory.stalled and pushed / 60 == pytest.approx(stalls_after, abs=2 / 60)
