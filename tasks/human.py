@@ -23,7 +23,7 @@ interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: 
 - **The interface as learnt** (``InterfaceModel``): how late and how fast the arm answers a move,
   learnt from what is seen; a move that would be over before its start could be seen is made as a
   pulse of the predicted length, then the person waits and looks (move-and-wait).  From the pulses
-  answered, how far the shortest pushes go (an error under half of that, within what the grasp or
+  answered, how far a pulse moves the hand (an error under half of that, within what the grasp or
   the release tolerates, is left); from every push answered, how long one has had to be held (a
   push down held that long and not answered counts toward a blocked descent).
 - **Slips** (``HumanOperator``): a share of mode presses is forgotten; the person pushes the
@@ -156,8 +156,8 @@ class HumanTiming:
         return self.interface.hold(wanted, settle)
 
     @property
-    def least_step(self) -> float:
-        return self.interface.step
+    def pulse_step(self) -> float:
+        return self.interface.pulse_step
 
     @property
     def answered_hold(self) -> float:
@@ -175,7 +175,7 @@ class InterfaceModel:
     model predicts, then the person waits for the hand to settle and looks again (move-and-wait,
     Ferrell 1965; Sheridan and Ferrell 1963).  Through a stick that answers at once ``onset`` is the
     visual delay and no move is that short; through a laggy channel the small corrections become
-    pulses.  Also learnt: how far the hand went for the pulses it answered (``step``: the planner
+    pulses.  Also learnt: how far the hand went for the pulses it answered (``pulse_step``: the planner
     leaves an error under half of it where the task tolerates it) and how long a push had been held
     when it was seen answered (``answered_hold``: a push down held that long and not answered counts
     toward a stalled descent).  No parameter of its own: the operator file's ``learning_rate``,
@@ -187,7 +187,7 @@ class InterfaceModel:
     max_onset: float  # s: the longest onset learnt (the operator's max_wait)
     onset: float = 0.0
     gain: dict[str, float] = field(default_factory=dict)
-    step: float = 0.0  # m: how far the hand went for the pulses it answered (0 at first: as little as wanted)
+    pulse_step: float = 0.0  # m: how far the hand went for the pulses it answered, a running mean (0 at first: as little as wanted)
     answered_hold: float = 0.0  # s: how long the pushes it answered had been held when it was seen answering them
     _move: tuple[float, str, float, float, np.ndarray] | None = None  # (start, function, deflection, hold, hand) of the last move
     _seen_onset: float | None = None  # when the hand was first seen moving since that move started
@@ -224,8 +224,8 @@ class InterfaceModel:
     def _learn(self, now: View) -> None:
         """A new move begins (the hand at rest ``now``): learn from the last one.  A pulse the hand
         was never seen to answer says the onset is longer than that; one it answered, how far the
-        shortest push goes (``step``); any move it answered, how long a push has had to be held to be
-        answered (``answered_hold``); any other move that did not move the hand (pushed into the
+        pulse moves the hand (``pulse_step``); any move it answered, how long a push has had to be held
+        to be answered (``answered_hold``); any other move that did not move the hand (pushed into the
         table, in the wrong mode) says nothing."""
         if self._move is None:
             return
@@ -236,7 +236,7 @@ class InterfaceModel:
             seen = self._seen_onset
             self.answered_hold = (1 - rate) * self.answered_hold + rate * min(hold, seen)
             if pulse:
-                self.step = (1 - rate) * self.step + rate * float(np.linalg.norm(now.hand_pos - hand))
+                self.pulse_step = (1 - rate) * self.pulse_step + rate * float(np.linalg.norm(now.hand_pos - hand))
             seen_gain = self._peak / (self.full_speed * deflection)
             self.gain[function] = (1 - rate) * self.gain.get(function, 1.0) + rate * seen_gain
         elif pulse:

@@ -220,9 +220,9 @@ class Memory:
     missed_faces: tuple[int, float] | None = None  # (cube, pair of its faces: hand yaw off the cube's, rad) a grasp missed on
     fingers_blocked: float | None = None  # hand height where the fingers stopped opening (caught on a cube): rise first
     controls: Controls = Controls()  # the same all episode
-    # m: how far the hand has been seen to go for the shortest pushes made (Timing.least_step): an error of less
+    # m: how far the hand has been seen to go for the pulses the arm answered (Timing.pulse_step): an error of less
     # than half of it cannot be made smaller by a push, and is left where the grasp or the place tolerates it
-    least_step: float = 0.0
+    pulse_step: float = 0.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -415,7 +415,7 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
                else _move(step, Phase.TRAVEL, np.r_[release[:2], hand[2]]))
     # an xy error no push could make smaller is left where the release tolerates it (its height is not: lower is blocked)
     return _approach(hand, release, carry_z, p, step, arrival, memory.descending, memory.stalled,
-                     accepted=(min(memory.least_step / 2, accepted), 0.0))
+                     accepted=(min(memory.pulse_step / 2, accepted), 0.0))
 
 
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
@@ -442,7 +442,7 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
             return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.r_[hand[:2], hover_z])
         return _turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
     # what the grasp tolerates (at_grasp) bounds the error left when a push would move the hand too far to reduce it
-    left = memory.least_step / 2
+    left = memory.pulse_step / 2
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", _close(f"grasp cube {k + 1}"),
                      memory.descending, memory.stalled,
                      accepted=(min(left, p.reach * p.align), min(left, p.reach * p.stop)))
@@ -615,8 +615,8 @@ class Timing(Protocol):
         hand has been seen going on after a move is let go."""
 
     @property
-    def least_step(self) -> float:
-        """How far (m) the hand has been seen to go for the shortest pushes made (0: as little as wanted)."""
+    def pulse_step(self) -> float:
+        """How far (m) the hand has been seen to go for the pulses the arm answered, a running mean (0: as little as wanted)."""
 
     @property
     def answered_hold(self) -> float:
@@ -643,7 +643,7 @@ class FixedTiming:
         return math.inf
 
     @property
-    def least_step(self) -> float:
+    def pulse_step(self) -> float:
         return 0.0
 
     @property
@@ -704,7 +704,7 @@ class ScriptedUser:
         self._learn_coasting(view, float(np.linalg.norm(velocity)))
         self._watch_descent(view)
         self._watch_opening(view)
-        self.memory = replace(self.memory, least_step=self.timing.least_step)
+        self.memory = replace(self.memory, pulse_step=self.timing.pulse_step)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation, self.timing.pace)
         if self.current.button is not None and view.mode is not self._mode_at_start:

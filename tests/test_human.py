@@ -248,11 +248,11 @@ def test_the_interface_model_learns_how_far_the_answered_pulses_went():
 
     glances(0.0, 0.3, [0.05] * 10 + [0.045, 0.04, 0.035, 0.03] + [0.03] * 6)  # answered after 1 s: 2 cm down
     glances(2.0, 0.3, [0.03] * 20)  # begins at rest 2 cm lower: learns from the first; never answered
-    assert model.step == pytest.approx(0.5 * 0.02)
+    assert model.pulse_step == pytest.approx(0.5 * 0.02)
     assert model.answered_hold == pytest.approx(0.5 * 0.3)  # the pulse was over (0.3 s) before it was seen answered
     glances(4.0, math.inf, [0.03, 0.02, 0.01, 0.0] + [0.0] * 16)  # the unanswered pulse teaches no step
-    assert model.step == pytest.approx(0.5 * 0.02)
+    assert model.pulse_step == pytest.approx(0.5 * 0.02)
     assert model.answered_hold == pytest.approx(0.5 * 0.3)  # nor how long a push must be held
     glances(6.0, 0.3, [0.0] * 5)  # the watched move (3 cm) teaches no step either
-    assert model.step == pytest.approx(0.5 * 0.02)
+    assert model.pulse_step == pytest.approx(0.5 * 0.02)
     assert model.answered_hold == pytest.approx(0.5 * 0.15 + 0.5 * 0.1)  # but was seen answered 0.1 s after its start

@@ -565,15 +565,15 @@ def test_an_error_no_push_could_make_smaller_is_left_where_the_grasp_tolerates_i
     tolerances (6 mm, 1.6 cm)."""
     high = (-0.14, -0.39, HALF + 0.009)  # 9 mm above the grasp height
     assert str(plan(view(hand=high), Memory(descending=True), P, combine_axes=False)[0].goal) == "reach cube 1: descend"
-    coarse = Memory(descending=True, least_step=0.03)
+    coarse = Memory(descending=True, pulse_step=0.03)
     assert str(plan(view(hand=high), coarse, P, combine_axes=False)[0].goal) == "grasp cube 1: fingers mode"
     too_high = (-0.14, -0.39, HALF + 0.014)  # 1.4 cm: more than the grasp tolerates, corrected whatever the step
     assert str(plan(view(hand=too_high), coarse, P, combine_axes=False)[0].goal) == "reach cube 1: descend"
     beside = (-0.14 + 0.02, -0.39, HALF)  # 2 cm off in x at the grasp height, not yet descending
     assert str(plan(view(hand=beside), Memory(), P, combine_axes=False)[0].goal) == "reach cube 1: travel"
-    assert str(plan(view(hand=beside), Memory(least_step=0.03), P, combine_axes=False)[0].goal) == \
+    assert str(plan(view(hand=beside), Memory(pulse_step=0.03), P, combine_axes=False)[0].goal) == \
         "reach cube 1: travel"  # 2 cm is more than half of 3 cm
-    assert str(plan(view(hand=beside), Memory(least_step=0.05), P, combine_axes=False)[0].goal) == \
+    assert str(plan(view(hand=beside), Memory(pulse_step=0.05), P, combine_axes=False)[0].goal) == \
         "grasp cube 1: fingers mode"
 
 
@@ -586,7 +586,7 @@ def test_a_carried_cube_is_set_down_off_its_place_where_the_place_tolerates_it_a
     v = view(hand=tuple(held), cubes=(tuple(held[:2]), (-0.14, -0.51)), cube_z=(held[2], HALF), closure=0.7,
              touching=(True, False), t=5.0)
     assert str(plan(v, Memory(touch_since=0.0), P, combine_axes=False)[0].goal) == "carry cube 1: travel"
-    coarse = Memory(touch_since=0.0, least_step=0.05)
+    coarse = Memory(touch_since=0.0, pulse_step=0.05)
     assert str(plan(v, coarse, P, combine_axes=False)[0].goal) == "carry cube 1: descend"
     top = np.r_[B + off, 0.15]
     second = view(hand=tuple(top), cubes=(tuple(B), tuple(top[:2])), cube_z=(HALF, top[2]), closure=0.7,
