@@ -6,7 +6,7 @@ interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: 
 
 - **Perception** (``Eyes``), as dm_control's composer observables: the scene is seen every
   ``glance_interval``, ``visual_delay`` late (hand, cubes, the mode on the arm's indicator,
-  contact).  Where the cubes and B are relative to the hand is *judged*: one error per judgement,
+  contact).  Where the cubes, B and the table are relative to the hand is *judged*: one error per judgement,
   std ``lateral_floor + lateral_weber x distance`` across the line of sight from the eyes and
   ``depth_ratio`` times that along it.  A judgement is made anew whenever a move of the stick
   ends, so a move ends where it was misjudged to end and the next look, from closer, brings a
@@ -272,7 +272,8 @@ def landmark_distance(view: View) -> float:
 
 class Eyes:
     """What the person sees: the view ``visual_delay`` old, once per ``glance_interval``, with the
-    cubes (but the held one) and B displaced by the current judgement error."""
+    cubes (but the held one), B and the table top displaced by the current judgement error: one error for all,
+    so whether a cube rests on the table, at B or on the other cube is seen as it is."""
 
     def __init__(self, params: HumanParams, rng: np.random.Generator):
         self.params, self.rng = params, rng
@@ -300,7 +301,7 @@ class Eyes:
             self._judged_sigma = sigma
         e = self._error
         cubes = tuple(pos if touch else pos + e for pos, touch in zip(seen.cube_pos, seen.touching))
-        return replace(seen, cube_pos=cubes, target_xy=seen.target_xy + e[:2])
+        return replace(seen, cube_pos=cubes, target_xy=seen.target_xy + e[:2], table_z=seen.table_z + e[2])
 
 
 # ------------------------------------------------------------------------------------ the person
