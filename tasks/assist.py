@@ -24,7 +24,9 @@ press: a refusal of an automatic switch (a press out of the switch's mode before
 their own switch after moving in a mode.  The step they make next was not done if the automation
 judged it done then; the step it expected next in the mode they left (the one the switch was made
 for), if they skip it, was done (for the rise before a travel: the user travels that far without
-rising first).
+rising first).  The turn to a cube's faces and the travel over it come in either order: a user
+who leaves a mode to turn while the travel is still to be made shows that they turn first from
+that far from the cube (``turn_first_within``), and the path puts the turn first there.
 
 ``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
 the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
@@ -293,6 +295,27 @@ class PathStep(enum.Enum):
 
 
 PATH_ORDER = tuple(PathStep)
+# the turn about the vertical and the travel over the goal reach the same pose in either order: which
+# one a user makes first near a cube is learnt per user (``Assistance.turn_first_within``)
+EITHER_ORDER = frozenset({PathStep.TRAVEL, PathStep.TURN})
+
+
+def path_order(turn_first: bool) -> tuple[PathStep, ...]:
+    """The steps in the order the user makes them: ``PATH_ORDER``, or with the turn before the
+    travel (``turn_first``)."""
+    if not turn_first:
+        return PATH_ORDER
+    return tuple(PathStep.TURN if step is PathStep.TRAVEL else PathStep.TRAVEL if step is PathStep.TURN else step
+                 for step in PATH_ORDER)
+
+
+def user_order(view: View, goal: Goal, turn_first_within: float | None) -> tuple[PathStep, ...]:
+    """The order of the path to ``goal`` for a user seen turning to a cube's faces before the end of
+    the travel from as far as ``turn_first_within`` (xy, m; None: never seen): the turn first when
+    the goal has a heading and the hand is that near it."""
+    near = turn_first_within is not None and goal.yaw is not None \
+        and float(np.linalg.norm(goal.point[:2] - view.hand_pos[:2])) <= turn_first_within
+    return path_order(near)
 
 
 @dataclass(frozen=True)
@@ -323,22 +346,28 @@ def rise_error(view: View, goal: Goal) -> tuple[float, float]:
     return float(np.linalg.norm(goal.point[:2] - view.hand_pos[:2])), goal.near
 
 
-def revisit_scale(path: PathParams, working_on: PathStep | None) -> dict[PathStep, float]:
+def revisit_scale(path: PathParams, working_on: PathStep | None, order: tuple[PathStep, ...] = PATH_ORDER
+                  ) -> dict[PathStep, float]:
     """Per step, the factor on its tolerance while the user was last seen making ``working_on``:
-    ``revisit`` for the steps before it (a person who has moved on goes back only for a clearly
-    larger error), 1 for the others."""
-    passed = PATH_ORDER[:PATH_ORDER.index(working_on)] if working_on is not None else ()
+    ``revisit`` for the steps before it both in ``PATH_ORDER`` and in the user's ``order`` (a person
+    who has moved on goes back only for a clearly larger error; one who turns before the end of the
+    travel has not left the travel behind by turning, nor the turn by travelling there), 1 for the others."""
+    if working_on is None:
+        return {step: 1.0 for step in PathStep}
+    passed = set(PATH_ORDER[:PATH_ORDER.index(working_on)]) & set(order[:order.index(working_on)])
     return {step: path.revisit if step in passed else 1.0 for step in PathStep}
 
 
 def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working_on: PathStep | None = None,
-               precision: Mapping[PathStep, float] | None = None) -> list[Step]:
-    """The careful path to ``goal``, step by step, each with the mode of ``layout`` that makes it.
+               precision: Mapping[PathStep, float] | None = None, order: tuple[PathStep, ...] = PATH_ORDER
+               ) -> list[Step]:
+    """The careful path to ``goal``, step by step in the user's ``order`` (``user_order``), each with
+    the mode of ``layout`` that makes it.
     ``working_on``: the step the user was last seen making; the steps before it are done as the
     user sees them unless they are off by ``revisit`` times their tolerance (a person who has moved
     on to a later step goes back only for a clearly larger error).  ``precision``: per step, the
     share of its tolerance this user has been seen to need (``Assistance.precision``; 1 if absent)."""
-    revisit = revisit_scale(path, working_on)
+    revisit = revisit_scale(path, working_on, order)
     scale = {step: revisit[step] * (precision or {}).get(step, 1.0) for step in PathStep}
     hand = view.hand_pos
     errors = step_errors(view, goal, path)
@@ -363,7 +392,7 @@ def path_steps(view: View, goal: Goal, layout: Layout, path: PathParams, working
     steps.append(Step(PathStep.DESCEND, up, _needed(errors[PathStep.DESCEND][0],
                                                     goal.height_tol * scale[PathStep.DESCEND], path.softness)))
     steps.append(Step(PathStep.CLOSE if goal.act > 0 else PathStep.RELEASE, fingers, 1.0))
-    return steps
+    return sorted(steps, key=lambda step: order.index(step.name))
 
 
 def step_of_move(layout: Layout, mode: Mode, functions: Iterable[str], holding_cube: bool) -> PathStep | None:
@@ -517,14 +546,16 @@ class SwitchContext:
     tolerance) (``step_errors``; the error over ``revisit`` for a step before the one the user was
     last seen making, whose tolerance was scaled by it: ``revisit_scale``; and the rise's,
     ``rise_error``, never among those judged done), the step made for
-    that mode (of its steps, the likeliest to be the next) and the other steps of ``step_errors``
-    it judged done (less than even odds of being needed)."""
+    that mode (of its steps, the likeliest to be the next), the other steps of ``step_errors``
+    it judged done (less than even odds of being needed) and those it judged needed."""
 
     act: float
     errors: dict[PathStep, tuple[float, float]]
     made_for: PathStep | None
     judged_done: frozenset[PathStep]
-    below: bool  # the hand was below the goal's point (a move up makes the descent's step)
+    below: bool  # the hand was below the goal's point and over it (a move up makes the descent's step)
+    needed: frozenset[PathStep]  # the steps of ``step_errors`` with at least even odds of being needed
+    xy: float  # the hand's distance from the goal in xy (m)
 
 
 class Switchable(Protocol):
@@ -617,6 +648,8 @@ class Assistance:
         self._rose = False
         # this user's tolerances as their refusals showed them: per (goal's finger action, step)
         self._learnt: dict[tuple[float, PathStep], LearntTolerance] = {}
+        # how far from a cube (xy) this user has been seen to turn to its faces before the end of the travel
+        self._turn_first: float | None = None
         # at our last switch: the likely goal's finger action, its steps' (error, starting tolerance)
         # and the step the switch was made for (the first one still needed, in the mode switched to)
         self._switched_at: SwitchContext | None = None
@@ -732,8 +765,10 @@ class Assistance:
         being needed), it was not done at its error then; the step made for the mode they left (the
         one the switch was made for), if it comes before theirs (they went past it), was done for
         them at its error then (``LearntTolerance``); a step after theirs tells nothing (they may
-        just take the steps in another order).  A refusal that taught something is explained: the
-        refused mode may be proposed again."""
+        just take the steps in another order), nor do the turn and the travel of each other
+        (``EITHER_ORDER``): which of them this user makes first is their order
+        (``_learn_order``).  A refusal that taught something is explained: the refused mode may be
+        proposed again."""
         if self._left is None:
             return
         (context, refusal), self._left = self._left, None
@@ -745,13 +780,35 @@ class Assistance:
         if working_on in context.judged_done:
             lessons.append((working_on, LearntTolerance.saw_not_done))
         if context.made_for in context.errors and working_on in PATH_ORDER \
-                and PATH_ORDER.index(context.made_for) < PATH_ORDER.index(working_on):
+                and PATH_ORDER.index(context.made_for) < PATH_ORDER.index(working_on) \
+                and {context.made_for, working_on} != EITHER_ORDER:
             lessons.append((context.made_for, LearntTolerance.saw_done))
         for step, lesson in lessons:
             error, start = context.errors[step]
             lesson(self._learnt.setdefault((context.act, step), LearntTolerance(start)), error)
-        if lessons and refusal:
+        if (self._learn_order(context, working_on) or lessons) and refusal:
             self._refused = None
+
+    @property
+    def turn_first_within(self) -> float | None:
+        """How far from a cube (xy, m) this user turns the hand to its faces before the end of the
+        travel over it, as seen (None: not seen; ``user_order``)."""
+        return self._turn_first
+
+    def _learn_order(self, context: SwitchContext, working_on: PathStep) -> bool:
+        """Which of the turn and the travel this user makes first near a cube, from their first move
+        after leaving a mode by a press when both were needed: a turn shows that they turn first
+        from that far (the farthest such distance is kept); a travel from no farther than that shows
+        they do not (forgotten: the latest counts).  True if it taught something."""
+        if not EITHER_ORDER <= context.needed:
+            return False
+        if working_on is PathStep.TURN and (self._turn_first is None or context.xy > self._turn_first):
+            self._turn_first = context.xy
+            return True
+        if working_on is PathStep.TRAVEL and self._turn_first is not None and context.xy <= self._turn_first:
+            self._turn_first = None
+            return True
+        return False
 
     @property
     def clearance(self) -> float | None:
@@ -790,7 +847,8 @@ class Assistance:
         working_on = self._seen_step(view)
         expected = {m: 0.0 for m in self.layout.modes}
         for goal, weight in zip(goals, weights):
-            steps = path_steps(view, goal, self.layout, self.params.path, working_on, self.precision(goal.act))
+            steps = path_steps(view, goal, self.layout, self.params.path, working_on, self.precision(goal.act),
+                               user_order(view, goal, self._turn_first))
             for m, seconds in time_to_goal(self.layout, self.buttons, next_step_modes(steps),
                                            self.params.auto_mode.press_time).items():
                 expected[m] += weight * seconds
@@ -831,18 +889,24 @@ class Assistance:
         if not likely:
             return None
         goal, working_on = likely[0], self._seen_step(view)
-        steps = path_steps(view, goal, self.layout, self.params.path, working_on, self.precision(goal.act))
+        order = user_order(view, goal, self._turn_first)
+        steps = path_steps(view, goal, self.layout, self.params.path, working_on, self.precision(goal.act), order)
         shares = next_step_shares(steps)
         made_for = max((step for step in steps if step.mode is mode), key=lambda step: shares[step.name],
                        default=None)
         made_for = made_for.name if made_for is not None and shares[made_for.name] > 0 else None
-        revisit = revisit_scale(self.params.path, working_on)
+        revisit = revisit_scale(self.params.path, working_on, order)
         errors = {step: (error / revisit[step], start) for step, (error, start) in
                   step_errors(view, goal, self.params.path).items()}
         judged_done = frozenset(step.name for step in steps if step.needed < 0.5 and step.name in errors
                                 and step.name is not made_for)
+        needed = frozenset(step.name for step in steps if step.needed >= 0.5 and step.name in errors)
         errors[PathStep.RISE] = rise_error(view, goal)  # a lesson of "done" only: a person rises for other reasons too
-        return SwitchContext(goal.act, errors, made_for, judged_done, bool(goal.point[2] > view.hand_pos[2]))
+        xy = errors[PathStep.RISE][0]
+        # over the goal (as a descent onto it, ``motion_scores``), a move up corrects the descent;
+        # farther, it is a rise before the travel
+        below = bool(goal.point[2] > view.hand_pos[2]) and xy <= self.params.path.revisit * goal.near
+        return SwitchContext(goal.act, errors, made_for, judged_done, below, needed, xy)
 
     def _around(self, view: View) -> int | None:
         """The cube the open hand is around, lined up with it (None if none)."""
