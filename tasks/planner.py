@@ -414,8 +414,11 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
     arrival = (_open(f"release cube {held + 1}") if off <= accepted
                else _move(step, Phase.TRAVEL, np.r_[release[:2], hand[2]]))
     # an xy error no push could make smaller is left where the release tolerates it (its height is not: lower is blocked)
+    # onto the other cube, lined up with it within the place's own tolerance before going down: an xy error
+    # left for the bottom is slid away there, and a cube slid on top of the other drags or pushes it off B
+    align = p.align if bottom is None else min(p.align, p.placed)
     return _approach(hand, release, carry_z, p, step, arrival, memory.descending, memory.stalled,
-                     accepted=(min(memory.pulse_step / 2, accepted), 0.0))
+                     accepted=(min(memory.pulse_step / 2, accepted), 0.0), align=align)
 
 
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
@@ -450,13 +453,14 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
 
 def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, step: str,
               on_arrival: Action, descending: bool, stalled: bool = False,
-              accepted: tuple[float, float] = (0.0, 0.0)) -> Action:
+              accepted: tuple[float, float] = (0.0, 0.0), align: float | None = None) -> Action:
     """Rise to the travel height if low and far, travel over the goal, go down, then act.
-    A descent already under way tolerates twice the alignment error; a stalled one has arrived.
-    ``accepted``: (xy, z) errors left as they are even where larger than the align and stop tolerances
-    (no push could make them smaller)."""
+    A descent already under way tolerates twice the alignment error (``align``, default the operator's);
+    a stalled one has arrived.  ``accepted``: (xy, z) errors left as they are even where larger than the
+    align and stop tolerances (no push could make them smaller)."""
+    align = p.align if align is None else align
     xy_off = np.linalg.norm(hand[:2] - goal[:2])
-    if xy_off > max(p.align * (2 if descending else 1), accepted[0]):
+    if xy_off > max(align * (2 if descending else 1), accepted[0]):
         if hand[2] < travel_z - p.rise_margin * p.stop and xy_off > p.reach * p.align:
             return _move(step, Phase.RISE, np.r_[hand[:2], travel_z])
         return _move(step, Phase.TRAVEL, np.r_[goal[:2], hand[2]])
