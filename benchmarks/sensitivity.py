@@ -19,7 +19,7 @@ from pathlib import Path
 from tasks.cli.engine import ProcessPool
 from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, aggregate, run_many
 from bomi.errors import BomiError
-from tasks.participant import PARTICIPANT_DIR, load_participant
+from tasks.participants.participant import PARTICIPANT_DIR, load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -36,7 +36,7 @@ from sim.joystick import JoystickState, Mode
 from tasks.cli.engine import ProcessPool
 from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, episode_record
 from tasks.episode import OperatorChannel, calibrated_channel, run_episode, summarize
-from tasks.participant import load_participant
+from tasks.participants.participant import load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, REST, StickIntent, load_operator
 from tasks.stacking import TaskConfig
 from tasks.stick import arm_profile

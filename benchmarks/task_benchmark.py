@@ -27,7 +27,7 @@ from tasks.cli.engine import ProcessPool
 from tasks.cli.figures import accuracy_allowance_figure, completion_time_figure
 from tasks.cli.task import DEFAULT_VOTE, JOYSTICK_ANYONE, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many
 from tasks.episode import calibrated_channel, summarize
-from tasks.participant import VirtualParticipant, load_participant
+from tasks.participants.participant import VirtualParticipant, load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -34,8 +34,8 @@ from bomi.errors import BomiError  # noqa: E402
 from bomi.frames import FrameParser  # noqa: E402
 from bomi.profiles import load_profile  # noqa: E402
 from bomi.recording import Recording, read_recording  # noqa: E402
-from tasks.fit_participant import hold_blocks, split_sway_tremor  # noqa: E402
-from tasks.participant import calibration_session, load_participant, session_recording  # noqa: E402
+from tasks.participants.fit import hold_blocks, split_sway_tremor  # noqa: E402
+from tasks.participants.participant import calibration_session, load_participant, session_recording  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_DAY1_MODEL = {day: pct for day, pct in paper.DAY1_MODEL_PCT.items() if day > 1}  # days 2..5 (day-1 *training* file)

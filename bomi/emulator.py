@@ -1,7 +1,7 @@
 """A base station in software: plays raw samples as 32-byte frames at the real rate.
 
 The samples come from a recording, or block by block from any generator (``block_chunks``;
-``bomi emulate --participant`` plays a virtual participant that way, see tasks.participant_wire).
+``bomi emulate --participant`` plays a virtual participant that way, see tasks.participants.wire).
 
 Nodes are interleaved sample by sample (node 1, 2, ... with the same counter), optionally with
 frame loss (the counter still advances, as on the radio link) and byte corruption, deterministic

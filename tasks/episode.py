@@ -27,8 +27,8 @@ from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
 from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label
 from tasks.human import HumanOperator, load_human
-from tasks.imu_synth import Delivery
-from tasks.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
+from tasks.participants.imu_synth import Delivery
+from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
                            StickIntent, load_operator)

@@ -55,7 +55,7 @@ def day1_fv1_model(p1_days, p1_profile):
 def p1_model_file(tmp_path_factory):
     """A model file trained on the virtual P1's short calibration session (another day: seed 1)."""
     from bomi.model_io import save_model
-    from tasks.participant import calibration_session, load_participant, session_recording
+    from tasks.participants.participant import calibration_session, load_participant, session_recording
 
     params, profile = load_participant("P1"), load_profile("P1")
     session = calibration_session(params, profile, 1, repetitions=1, hold_s=2.0, neutral_s=2.0)

@@ -1,4 +1,4 @@
-"""tasks.imu_synth: hand-computed sensor readings, and the round trip through bomi.fusion."""
+"""tasks.participants.imu_synth: hand-computed sensor readings, and the round trip through bomi.fusion."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from bomi.frames import FrameParser
 from bomi.fusion import GYRO_DEG_PER_LSB, NodeCalibration, fuse
-from tasks.imu_synth import (LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
+from tasks.participants.imu_synth import (LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
                              synthesize_raw, to_int16)
 
 NO_NOISE = SensorNoise(0.0, 0.0, 0.0)

@@ -3,7 +3,7 @@ from its TOML file (an edited value reaches the code), and the sensitivity scale
 import pytest
 
 from helpers import benchmark_script
-from tasks.participant import load_participant
+from tasks.participants.participant import load_participant
 from tasks.planner import load_operator
 
 sensitivity = benchmark_script("sensitivity")

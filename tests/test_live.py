@@ -21,8 +21,8 @@ from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.stick import DecisionStick
 from tasks.live import StatusLine, Tick, Watchdog, display_opens, has_display, refusal, run_live, status_text
-from tasks.participant_wire import participant_blocks
-from tasks.participant import load_participant
+from tasks.participants.wire import participant_blocks
+from tasks.participants.participant import load_participant
 
 CONTROL_DT = 1 / 60
 FULL_SPEED = 0.2

@@ -1,4 +1,4 @@
-"""tasks.participant and tasks.fit_participant: profiles, motion model, frames, calibration, the P1 fit."""
+"""tasks.participants.participant and tasks.participants.fit: profiles, motion model, frames, calibration, the P1 fit."""
 from __future__ import annotations
 
 import dataclasses
@@ -12,8 +12,8 @@ from bomi.errors import BomiError
 from bomi.frames import FrameParser
 from bomi.fusion import DT
 from bomi.profiles import load_profile
-from tasks import fit_participant
-from tasks.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
+from tasks.participants import fit as fit_participant
+from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
                                load_participant, minimum_jerk, session_recording)
 from helpers import edited_copy
 

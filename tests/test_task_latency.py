@@ -12,7 +12,7 @@ import pytest
 from bomi.fusion import DT
 from tasks import metrics
 from tasks.episode import calibrated_channel
-from tasks.participant import load_participant
+from tasks.participants.participant import load_participant
 from tasks.planner import StickIntent
 
 SEED = 3

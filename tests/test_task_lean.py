@@ -7,7 +7,7 @@ from bomi.chain import OnlineChain, train
 from bomi.classifier import PostProcessing
 from sim.joystick import THREE_AXIS, Kind, Mode
 from tasks.episode import BomiChannel, LeanFeel, calibration_order
-from tasks.participant import VirtualParticipant, calibration_session, load_participant, session_recording
+from tasks.participants.participant import VirtualParticipant, calibration_session, load_participant, session_recording
 from tasks.planner import StickIntent
 from tasks.stick import arm_profile
 

@@ -168,8 +168,8 @@ def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
 
 def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     """The participant performs the calibration protocol; samples are made while they are played."""
-    from tasks.participant_wire import participant_blocks  # here, not at load: capture and record need no participant
-    from tasks.participant import load_participant
+    from tasks.participants.wire import participant_blocks  # here, not at load: capture and record need no participant
+    from tasks.participants.participant import load_participant
     params = load_participant(args.participant)
     profile = arm_profile(params.profile)
     cues = calibration_schedule(profile, hold_s=args.hold, neutral_s=args.neutral)

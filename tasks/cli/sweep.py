@@ -48,7 +48,7 @@ from tasks.cli.figures import completion_time_figure, metric_figure
 from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, ROW_COLUMNS, EpisodeJob, aggregate, episode_record,
                             markdown_table, row_cells, write_json)
 from tasks.episode import OPERATORS, profile_controls
-from tasks.participant import load_participant
+from tasks.participants.participant import load_participant
 from tasks.planner import load_operator
 from tasks.stick import arm_profile
 

@@ -24,7 +24,7 @@ from bomi.files import atomic_output, write_text
 from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_int, seconds
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
-from tasks.participant import load_participant
+from tasks.participants.participant import load_participant
 from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking import TaskConfig
 from tasks.stick import arm_profile

@@ -1,6 +1,6 @@
 """Fit the virtual participant P1 to the published 5-day recordings; write its TOML profile.
 
-    python -m tasks.fit_participant [--data DIR] --out tasks/participants/P1.toml
+    python -m tasks.participants.fit [--data DIR] --out tasks/participants/P1.toml
 
 Only numbers leave the data: per-class posture deltas from neutral, their variability from
 repetition to repetition and from day to day, and the slow sway and tremor in holds, all
@@ -23,7 +23,7 @@ from bomi.dataset import data_dir
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ
 from bomi.recording import Recording, read_recording
-from tasks.participant import SWAY_CUTOFF_HZ
+from tasks.participants.participant import SWAY_CUTOFF_HZ
 
 EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
 MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
@@ -32,7 +32,7 @@ SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where 
 MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
 ASSUMED_ONSET_S = 0.8          # min-jerk onset of a posture (not measurable here, see docs)
 ASSUMED_REACTION_S = 0.4       # cue-to-movement delay (likewise)
-# How the participant leans through the BoMI (tasks.participant.Feel): not in recordings of holds
+# How the participant leans through the BoMI (tasks.participants.participant.Feel): not in recordings of holds
 # either; the fit writes it as assumed, the same as P4's and P5's files.
 ASSUMED_FEEL = """
 [feel]   # how the participant drives a proportional class through the BoMI (tasks/episode.py); assumed, the same for P1, P4, P5
@@ -238,9 +238,9 @@ def _toml_matrix(m: np.ndarray) -> str:
 
 
 def fit_toml(fit: Fit, source: str) -> str:
-    """The participant profile text (see tasks/participant.py for the schema)."""
+    """The participant profile text (see tasks/participants/participant.py for the schema)."""
     lines = [
-        f"# Virtual participant P1, fitted by `python -m tasks.fit_participant` on {fit.days} days of",
+        f"# Virtual participant P1, fitted by `python -m tasks.participants.fit` on {fit.days} days of",
         f"# {source} (the published P1 test recordings). Numbers only, no data. Angles are",
         "# (pitch, roll, yaw) in degrees per node, node order of bomi profile P1. See docs/virtual_participant.md.",
         'name = "P1"',
@@ -276,7 +276,7 @@ def fit_toml(fit: Fit, source: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tasks.fit_participant", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m tasks.participants.fit", description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=None, help="directory of dayN_testp.mat (default: BOMI_DATA_DIR)")
     parser.add_argument("--out", type=Path, required=True, help="participant TOML to write")
     args = parser.parse_args(argv)
@@ -287,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
             raise BomiError(f"{directory}: no dayN_testp.mat recordings found")
         text = fit_toml(fit_recordings([read_recording(p) for p in paths]), directory.name)
     except BomiError as exc:
-        print(f"fit_participant: error: {exc}", file=sys.stderr)
+        print(f"bomi: error: {exc}", file=sys.stderr)
         return 2
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)

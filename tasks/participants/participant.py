@@ -3,9 +3,9 @@
 An intent ``(class_label, amplitude)`` set at a sim time becomes, after a reaction time, a
 minimum-jerk move from the current posture to neutral + amplitude x (the class posture + this
 session's and this repetition's offsets), held with slow sway and tremor; intent 0 returns to
-a (freshly drawn) neutral. Each node's angle trajectory goes through ``tasks.imu_synth`` to raw
+a (freshly drawn) neutral. Each node's angle trajectory goes through ``tasks.participants.imu_synth`` to raw
 sensor counts and base-station frames, with frame loss and bursty delivery. Parameters come
-from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.fit_participant``).
+from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.participants.fit``).
 Every modelling assumption is listed in docs/virtual_participant.md.
 
 TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset_s``,
@@ -35,9 +35,9 @@ from bomi.frames import SAMPLE_RATE_HZ, FrameParser, RowAssembler, SampleIndex
 from bomi.profiles import Profile
 from bomi.protocol import protocol_order
 from bomi.recording import NodeData, NodeSample, Recording
-from tasks.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
+from tasks.participants.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
 
-PARTICIPANT_DIR = Path(__file__).resolve().parent / "participants"
+PARTICIPANT_DIR = Path(__file__).resolve().parent
 SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the P1 fit
 SPASM_DRAW_S = 10.0           # spasm onsets are drawn this far ahead at a time
 

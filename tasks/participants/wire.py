@@ -10,8 +10,8 @@ from bomi.classifier import NEUTRAL_LABEL
 from bomi.frames import FrameParser
 from bomi.profiles import Profile
 from bomi.protocol import Cue
-from tasks.imu_synth import Delivery, LinkModel
-from tasks.participant import ParticipantParams, VirtualParticipant
+from tasks.participants.imu_synth import Delivery, LinkModel
+from tasks.participants.participant import ParticipantParams, VirtualParticipant
 
 LOSSLESS_LINK = LinkModel(loss_fraction=0.0)  # the emulator applies its own --loss
 

@@ -1,0 +1,12 @@
+"""Virtual participants: simulated people whose IMU frames go through the real chain.
+
+Map (data flows down):
+
+- ``participant``: the participant model (``ParticipantParams`` read from ``<name>.toml`` here,
+  ``VirtualParticipant`` performing classes, calibration sessions) -> node angles.
+- ``imu_synth``: node angles -> raw accelerometer/gyroscope/magnetometer counts -> deliveries of
+  base-station samples (link model, sensor noise).
+- ``wire``: a participant as base-station byte blocks (``bomi emulate --participant``).
+- ``fit``: the fitter that writes ``P1.toml`` from P1's five days of recordings.
+- ``P1.toml``, ``P4.toml``, ``P5.toml``: the shipped participants (numbers, no data).
+"""
