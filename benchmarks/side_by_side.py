@@ -1,94 +1,347 @@
-"""Episode speed side by side, in one run on one core: dm_control's own JACO stacking task
-(``stack_2_bricks_features``, random actions) against ``run_job`` of our joystick and BoMI episodes.
+"""Episode speed, measured fairly: our scene's physics alone (the limit), dm_control's own JACO
+stacking task in steady state, and our joystick and BoMI episodes, in one process on one core,
+the kinds interleaved round after round; then a profile of where a control tick's time goes.
 
-    python benchmarks/side_by_side.py [--rounds 3] [--seed 0]
+    python benchmarks/side_by_side.py [--rounds 3] [--first-seed 0] [--profile-seed 0]
 
-Each episode runs in a fresh process (nothing cached from an earlier one; imports done before the
-clock starts) and is timed from building its environment (for the BoMI: the virtual participant's
-calibration session and the LDA's training included) to its end, as x real time (simulated
-seconds per wall-clock second, and per second of this process's CPU time: on a shared machine
-the CPU figure is the steadier one).  The three kinds take turns ``--rounds`` times; the median
-of each is reported, and our episodes' ratios to dm_control's (bars: joystick >= 1.0, BoMI >=
-0.5).  Writes benchmarks/results/side_by_side.md and .json.
+How each kind is charged (x real time = simulated seconds per second, of wall clock and of this
+process's CPU time, ``time.process_time``):
+
+- **physics alone (the limit)**: our scene (``ArmSim``: arm, hand, cubes, contacts), reset to the
+  home pose, advanced by ``mj_step`` at its own step (1/480 s), 8 substeps per call as the episode
+  calls it, no controller, no task, no Python work between calls: ``--physics-s`` simulated seconds.
+- **dm_control** ``stack_2_bricks_features`` with uniform random actions, in steady state: its
+  environment is built once (timed apart: ``build``), each round is ``reset()`` + the episode.
+- **ours: joystick / BoMI episode** of virtual P1 (``bomi run-task``'s ``run_job``), everything
+  included: reading the participant, profile and operator files, the BoMI's calibration session
+  (the participant performs the protocol, its frames are parsed, fused and recorded) and the LDA's
+  training, and the task to its end.  Shown apart as well: the set-up (all before the first control
+  tick) and the task loop alone.  Steady state as in a sweep worker: one untimed episode of each
+  kind first, so what every episode of a participant shares (parsed files, compiled scene) is
+  cached exactly as on a worker that has run one episode before.  Each round runs another task
+  seed (``--first-seed`` + round), the same seed for both of our operators.
+- **the episode's own physics**: the ``mj_step`` calls inside our task loop, timed alone: a
+  grasping, moving arm costs more per step than the arm at rest, so this is the ceiling of an
+  episode whose every other cost were zero.
+
+Ratios are formed within a round (the same load for all kinds) and their median is reported.
+The bars (issue 30): joystick >= 0.5 of the limit and >= 1.0x dm_control; BoMI, calibration
+included, >= 0.3 of the limit and >= 0.5x dm_control.  The profile (cProfile, one BoMI and one
+joystick episode of ``--profile-seed``, after the rounds) charges every function's own time to a
+stage (a library call to the stage of our code that called it) and gives microseconds per control
+tick; cProfile slows Python calls, so its totals exceed the unprofiled ones: read its shares.
+Writes benchmarks/results/side_by_side.md and .json.
 """
 from __future__ import annotations
 
 import argparse
+import cProfile
 import json
-import multiprocessing
+import os
 import platform
+import pstats
 import statistics
 import time
+from collections import defaultdict
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from importlib.metadata import version
 from pathlib import Path
 
+import mujoco
 import numpy as np
 from dm_control import manipulation
 
-from tasks.cli.task import EpisodeJob, run_job
+import sim.env
+from sim.env import ArmSim
+from tasks.cli.task import EpisodeJob, job_assist, run_job
+from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode
+from tasks.participants.participant import load_participant
+from tasks.planner import load_operator
+from tasks.stacking import TaskConfig
+from tasks.stick import arm_profile
 
 RESULTS = Path(__file__).resolve().parent / "results"
+PHYSICS, DM, JOY, BOMI = ("physics alone (our scene, mj_step, no control): the limit",
+                          "dm_control stack_2_bricks_features, random actions, steady state",
+                          "ours: joystick episode (P1), set-up included",
+                          "ours: BoMI episode (P1), calibration and training included")
+BARS = {JOY: (0.5, 1.0), BOMI: (0.3, 0.5)}  # (share of the limit, ratio to dm_control)
 
 
-def dm_control_stacking(seed: int) -> float:
-    """One episode of dm_control's JACO stacking task with uniform random actions; its simulated time."""
-    env = manipulation.load("stack_2_bricks_features", seed=seed)
-    spec, rng = env.action_spec(), np.random.default_rng(seed)
-    step = env.reset()
-    while not step.last():
-        step = env.step(rng.uniform(spec.minimum, spec.maximum))
-    return float(env.physics.data.time)
+class StepClock:
+    """Times the ``mj_step`` calls ``sim.env`` makes (the episode's own physics)."""
+
+    def __init__(self) -> None:
+        self.wall = self.cpu = 0.0
+        self._step = mujoco.mj_step
+
+    def __enter__(self) -> StepClock:
+        step = self._step
+
+        def timed(*args, **kwargs):
+            wall, cpu = time.perf_counter(), time.process_time()
+            step(*args, **kwargs)
+            self.cpu += time.process_time() - cpu
+            self.wall += time.perf_counter() - wall
+
+        sim.env.mujoco.mj_step = timed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        sim.env.mujoco.mj_step = self._step
 
 
-def our_episode(operator: str, seed: int) -> float:
-    """One of our stacking episodes of virtual P1 (``bomi run-task``'s code); its simulated time."""
-    log = run_job(EpisodeJob(operator, "P1", seed))
-    return float(log.t[-1] + (log.t[1] - log.t[0]))
-
-
-def timed(kind: str, seed: int) -> dict:
+def clocked(run: Callable[[], dict]) -> dict:
     wall, cpu = time.perf_counter(), time.process_time()
-    sim = KINDS[kind](seed)
-    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-    return {"sim_s": sim, "wall_s": wall, "cpu_s": cpu, "x_wall": sim / wall, "x_cpu": sim / cpu}
+    out = run()
+    return out | {"wall_s": time.perf_counter() - wall, "cpu_s": time.process_time() - cpu}
 
 
-KINDS: dict[str, Callable[[int], float]] = {
-    "dm_control stack_2_bricks_features (random actions)": dm_control_stacking,
-    "ours: joystick episode (P1)": lambda seed: our_episode("joystick", seed),
-    "ours: BoMI episode (P1, calibration included)": lambda seed: our_episode("bomi", seed),
-}
-BARS = {"ours: joystick episode (P1)": 1.0, "ours: BoMI episode (P1, calibration included)": 0.5}
+def physics_alone(arm: ArmSim, seconds: float) -> dict:
+    arm.reset()
+    substeps = arm.config.physics.substeps
+    calls = round(seconds / (arm.model.opt.timestep * substeps))
+    model, data, step = arm.model, arm.data, mujoco.mj_step
+
+    def run() -> dict:
+        for _ in range(calls):
+            step(model, data, nstep=substeps)
+        return {}
+
+    return clocked(run) | {"sim_s": calls * substeps * arm.model.opt.timestep}
+
+
+def dm_control_episode(env, seed: int) -> dict:
+    spec, rng = env.action_spec(), np.random.default_rng(seed)
+
+    def run() -> dict:
+        step = env.reset()
+        while not step.last():
+            step = env.step(rng.uniform(spec.minimum, spec.maximum))
+        return {}
+
+    return clocked(run) | {"sim_s": float(env.physics.data.time)}
+
+
+def our_episode(operator: str, seed: int) -> dict:
+    with StepClock() as physics:
+        out = clocked(lambda: {"log": run_job(EpisodeJob(operator, "P1", seed))})
+    log = out.pop("log")
+    return out | {"sim_s": float(log.t[-1] + (log.t[1] - log.t[0])), "loop_wall_s": log.wall_time,
+                  "loop_cpu_s": log.cpu_time, "setup_wall_s": out["wall_s"] - log.wall_time,
+                  "setup_cpu_s": out["cpu_s"] - log.cpu_time, "physics_wall_s": physics.wall,
+                  "physics_cpu_s": physics.cpu, "ticks": len(log.t), "success": bool(log.success)}
+
+
+# ------------------------------------------------------------------------------------- profile
+STAGES = (  # (stage, path fragment, function names or None for any); first match wins
+    ("mj_step (physics)", "mj_step", None),
+    ("vote", "bomi/classifier.py", ("push",)),
+    ("LDA (posteriors)", "bomi/classifier.py", None),
+    ("frames (parse)", "bomi/frames.py", None),
+    ("fusion", "bomi/fusion.py", None),
+    ("windows + features", "bomi/features.py", None),
+    ("chain (streaming glue)", "bomi/chain.py", None),
+    ("synthesis (virtual participant, link)", "tasks/participants/", None),
+    ("IK (DLS, Pinocchio)", "sim/controller.py", None),
+    ("IK (DLS, Pinocchio)", "sim/kinematics.py", None),
+    ("arm (joystick, actuators, read-outs)", "sim/", None),
+    ("operator / planner", "tasks/planner.py", None),
+    ("operator / planner", "tasks/human.py", None),
+    ("operator / planner", "tasks/stick.py", None),
+    ("task (view, outcome)", "tasks/stacking.py", None),
+    ("episode loop, BoMI channel", "tasks/episode.py", None),
+    ("assistance", "tasks/assist.py", None),
+)
+
+
+def _own_stage(func: tuple[str, int, str]) -> str | None:
+    path, _, name = func
+    where = f"{path}:{name}"
+    for stage, fragment, names in STAGES:
+        if fragment in where and (names is None or name in names):
+            return stage
+    return None
+
+
+def stage_times(stats: pstats.Stats) -> dict[str, float]:
+    """Every function's own time charged to a stage: our code by its module, a library function
+    shared out over its callers in proportion to the time each spent in it, up to our code."""
+    raw = stats.stats  # func -> (cc, nc, tt, ct, callers{func: (cc, nc, tt, ct)})
+    memo: dict = {}
+
+    def shares(func, depth=0) -> dict[str, float]:
+        """Fractions of ``func``'s time per stage."""
+        if func in memo:
+            return memo[func]
+        own = _own_stage(func)
+        if own is not None or depth > 50:
+            memo[func] = {own or "other": 1.0}
+            return memo[func]
+        memo[func] = {"other": 1.0}  # a cycle meets this placeholder
+        callers = raw[func][4]
+        total = sum(c[3] for c in callers.values())
+        out: dict[str, float] = defaultdict(float)
+        if total <= 0:
+            out["other"] = 1.0
+        for caller, c in callers.items():
+            if total > 0:
+                for stage, f in shares(caller, depth + 1).items():
+                    out[stage] += f * c[3] / total
+        memo[func] = dict(out)
+        return memo[func]
+
+    times: dict[str, float] = defaultdict(float)
+    for func, (_, _, tt, _, _) in raw.items():
+        for stage, f in shares(func).items():
+            times[stage] += tt * f
+    return dict(times)
+
+
+def profile_episode(operator: str, seed: int) -> dict:
+    """``run_job``'s steps, the set-up and the task loop profiled apart."""
+    job = EpisodeJob(operator, "P1", seed)
+    setup, loop = cProfile.Profile(), cProfile.Profile()
+    setup.enable()
+    params = load_participant(job.participant)
+    profile = arm_profile(params.profile)
+    channel = (JoystickChannel(profile_controls(profile)) if operator == "joystick" else
+               calibrated_channel(params, seed, replace(profile.post, vote_length=job.vote_length), profile))
+    operator_params = load_operator(job.operator_file)
+    setup.disable()
+    loop.enable()
+    log = run_episode(channel, operator=operator, participant="P1", seed=seed, operator_file=operator_params,
+                      task_config=TaskConfig(time_limit=job.time_limit), assist=job_assist(job, profile))
+    loop.disable()
+    ticks = len(log.t)
+    out = {"ticks": ticks}
+    for name, prof in (("setup", setup), ("loop", loop)):
+        times = stage_times(pstats.Stats(prof))
+        out[name] = {stage: s for stage, s in sorted(times.items(), key=lambda kv: -kv[1])}
+    out["loop_us_per_tick"] = {stage: 1e6 * s / ticks for stage, s in out["loop"].items()}
+    return out
+
+
+# ---------------------------------------------------------------------------------------- main
+def ratios(rounds: list[dict[str, dict]], clock: str) -> dict[str, dict[str, float]]:
+    """Per kind: median over rounds of (its x real time / the limit's) and (/ dm_control's), same round."""
+    out = {}
+    for kind in rounds[0]:
+        x = [r[kind]["sim_s"] / r[kind][f"{clock}_s"] for r in rounds]
+        limit = [r[PHYSICS]["sim_s"] / r[PHYSICS][f"{clock}_s"] for r in rounds]
+        dm = [r[DM]["sim_s"] / r[DM][f"{clock}_s"] for r in rounds]
+        out[kind] = {"x": statistics.median(x), "of_limit": statistics.median(a / b for a, b in zip(x, limit)),
+                     "of_dm_control": statistics.median(a / b for a, b in zip(x, dm))}
+    return out
+
+
+def markdown(record: dict) -> str:
+    args, rounds, wall, cpu = record["args"], record["rounds"], record["ratios"]["wall"], record["ratios"]["cpu"]
+    m = record["machine"]
+    lines = [
+        f"# Episode speed, measured fairly ({args['rounds']} rounds, seeds {args['first_seed']}-"
+        f"{args['first_seed'] + args['rounds'] - 1}, one process pinned to one core)", "",
+        f"`python benchmarks/side_by_side.py --rounds {args['rounds']} --first-seed {args['first_seed']}` at commit "
+        f"{record['commit']}. Machine: {m['cpu']}, {m['cpu_count']} cores shared with other work; 1-min load "
+        f"average {m['load_before']:.2f} before, {m['load_after']:.2f} after the run. Python {m['python']}, "
+        f"mujoco {record['versions']['mujoco']}, dm-control {record['versions']['dm-control']}, "
+        f"pin {record['versions']['pin']}, numpy {record['versions']['numpy']}.", "",
+        "How each kind is charged: see the script's docstring. In short: physics alone = `mj_step` of our scene, "
+        "arm at rest, no control (the limit); dm_control = `reset()` + a 10 s episode of random actions, the "
+        f"environment built once ({record['dm_control_build_s']:.2f} s, not charged); ours = `run_job` whole "
+        "(files, the BoMI's calibration session and LDA training, the task), after one untimed episode of each "
+        "kind (steady state, as a sweep worker). Ratios within a round, medians over rounds.", "",
+        "| kind | x real time (wall) | of the limit (wall) | x dm_control (wall) | x real time (CPU) "
+        "| of the limit (CPU) | x dm_control (CPU) | bar (of limit, x dm_control) |",
+        "|---|---|---|---|---|---|---|---|"]
+    for kind in wall:
+        bar = BARS.get(kind)
+        bar_text = "" if bar is None else (
+            f">= {bar[0]}, >= {bar[1]}: {'met' if cpu[kind]['of_limit'] >= bar[0] and cpu[kind]['of_dm_control'] >= bar[1] else 'missed'} (CPU)")
+        lines.append(f"| {kind} | {wall[kind]['x']:.1f} | {wall[kind]['of_limit']:.2f} | {wall[kind]['of_dm_control']:.2f} "
+                     f"| {cpu[kind]['x']:.1f} | {cpu[kind]['of_limit']:.2f} | {cpu[kind]['of_dm_control']:.2f} | {bar_text} |")
+    lines += ["", "Our episodes apart (medians over rounds, CPU seconds; x real time of the task loop alone and of "
+              "the episode's own `mj_step` calls alone):", "",
+              "| kind | simulated (s) | ticks | set-up (s) | task loop (s) | loop x real time | episode's own physics (s) "
+              "| its x real time | physics share of the loop |", "|---|---|---|---|---|---|---|---|---|"]
+    for kind in (JOY, BOMI):
+        med = {k: statistics.median(r[kind][k] for r in rounds) for k in
+               ("sim_s", "ticks", "setup_cpu_s", "loop_cpu_s", "physics_cpu_s")}
+        loop_x = statistics.median(r[kind]["sim_s"] / r[kind]["loop_cpu_s"] for r in rounds)
+        phys_x = statistics.median(r[kind]["sim_s"] / r[kind]["physics_cpu_s"] for r in rounds)
+        share = statistics.median(r[kind]["physics_cpu_s"] / r[kind]["loop_cpu_s"] for r in rounds)
+        lines.append(f"| {kind} | {med['sim_s']:.1f} | {med['ticks']:.0f} | {med['setup_cpu_s']:.2f} | "
+                     f"{med['loop_cpu_s']:.2f} | {loop_x:.1f} | {med['physics_cpu_s']:.2f} | {phys_x:.1f} | {share:.2f} |")
+    lines += ["", "Every round (CPU s / wall s):", "", "| round | seed | " + " | ".join(wall) + " |",
+              "|---|---|" + "---|" * len(wall)]
+    for k, r in enumerate(rounds):
+        lines.append(f"| {k} | {args['first_seed'] + k} | " + " | ".join(
+            f"{r[kind]['sim_s']:.1f} s sim: {r[kind]['cpu_s']:.2f} / {r[kind]['wall_s']:.2f}" for kind in wall) + " |")
+    prof = record.get("profile")
+    if prof:
+        lines += ["", f"## Where a control tick's time goes (cProfile, seed {args['profile_seed']})", "",
+                  "Microseconds per control tick of the task loop, by stage (each function's own time; a library "
+                  "function's time goes to the stage of our code that called it). cProfile adds a cost to every "
+                  "Python call, so Python-heavy stages weigh more here than unprofiled.", "",
+                  "| stage | BoMI (us/tick) | joystick (us/tick) |", "|---|---|---|"]
+        stages = sorted(set(prof["bomi"]["loop_us_per_tick"]) | set(prof["joystick"]["loop_us_per_tick"]),
+                        key=lambda s: -prof["bomi"]["loop_us_per_tick"].get(s, 0.0))
+        for stage in stages:
+            lines.append(f"| {stage} | {prof['bomi']['loop_us_per_tick'].get(stage, 0.0):.0f} | "
+                         f"{prof['joystick']['loop_us_per_tick'].get(stage, 0.0):.0f} |")
+        lines.append(f"| **total** ({prof['bomi']['ticks']} / {prof['joystick']['ticks']} ticks) | "
+                     f"{sum(prof['bomi']['loop_us_per_tick'].values()):.0f} | "
+                     f"{sum(prof['joystick']['loop_us_per_tick'].values()):.0f} |")
+        lines += ["", "The BoMI episode's set-up (calibration session, recording, training), profiled seconds by stage:", "",
+                  "| stage | s |", "|---|---|"]
+        lines += [f"| {stage} | {s:.3f} |" for stage, s in prof["bomi"]["setup"].items() if s >= 0.005]
+    return "\n".join(lines) + "\n"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0, help="task seed (development seeds 0-999)")
+    parser.add_argument("--first-seed", type=int, default=0, help="task seed of the first round (development: 0-999)")
+    parser.add_argument("--profile-seed", type=int, default=0, help="task seed of the profiled episodes")
+    parser.add_argument("--physics-s", type=float, default=20.0, help="simulated seconds of physics alone per round")
+    parser.add_argument("--no-profile", action="store_true", help="skip the cProfile tables")
+    parser.add_argument("--out", default="side_by_side", help="results file name (benchmarks/results/OUT.md, .json)")
     args = parser.parse_args()
-    runs: dict[str, list[dict]] = {name: [] for name in KINDS}
-    fresh = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), max_tasks_per_child=1)
-    with fresh:
-        for _ in range(args.rounds):
-            for name in KINDS:
-                runs[name].append(fresh.submit(timed, name, args.seed).result())
-    medians = {name: {key: statistics.median(r[key] for r in rs) for key in rs[0]} for name, rs in runs.items()}
-    reference = medians[next(iter(KINDS))]
-    lines = [f"# Episode speed side by side ({args.rounds} rounds, seed {args.seed}, each episode alone in a fresh process)", "",
-             f"Machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}; "
-             "`python benchmarks/side_by_side.py`. x real time = simulated s / s, set-up included; medians.", "",
-             "| episode | simulated (s) | wall (s) | x real time (wall) | x real time (CPU) | ratio to dm_control "
-             "(wall) | ratio (CPU) | bar |", "|---|---|---|---|---|---|---|---|"]
-    for name, m in medians.items():
-        bar = f">= {BARS[name]}" if name in BARS else ""
-        lines.append(f"| {name} | {m['sim_s']:.1f} | {m['wall_s']:.2f} | {m['x_wall']:.1f} | {m['x_cpu']:.1f} "
-                     f"| {m['x_wall'] / reference['x_wall']:.2f} | {m['x_cpu'] / reference['x_cpu']:.2f} | {bar} |")
-    text = "\n".join(lines) + "\n"
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    load_before = os.getloadavg()[0]
+    arm = ArmSim()
+    built = time.perf_counter()
+    env = manipulation.load("stack_2_bricks_features", seed=args.first_seed)
+    build_s = time.perf_counter() - built
+    dm_control_episode(env, 0)   # steady state for every kind: one untimed run each
+    our_episode("joystick", args.first_seed)
+    our_episode("bomi", args.first_seed)
+    rounds = []
+    for k in range(args.rounds):
+        seed = args.first_seed + k
+        kinds = {PHYSICS: lambda: physics_alone(arm, args.physics_s), DM: lambda: dm_control_episode(env, seed),
+                 JOY: lambda: our_episode("joystick", seed), BOMI: lambda: our_episode("bomi", seed)}
+        order = list(kinds)[k % 4:] + list(kinds)[:k % 4]   # who goes first rotates
+        rounds.append({kind: r for kind, r in sorted(((kind, kinds[kind]()) for kind in order),
+                                                      key=lambda kv: list(kinds).index(kv[0]))})
+        print(f"round {k}: " + ", ".join(f"{kind.split(':')[0].split(' (')[0]} {r['sim_s'] / r['cpu_s']:.1f}x"
+                                         for kind, r in rounds[-1].items()), flush=True)
+    profile = None if args.no_profile else {op: profile_episode(op, args.profile_seed) for op in ("bomi", "joystick")}
+    commit = os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
+    record = {
+        "args": vars(args), "commit": commit,
+        "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+                    "python": platform.python_version(), "load_before": load_before, "load_after": os.getloadavg()[0]},
+        "versions": {name: version(name) for name in ("mujoco", "dm-control", "pin", "numpy")},
+        "dm_control_build_s": build_s, "rounds": rounds,
+        "ratios": {clock: ratios(rounds, clock) for clock in ("wall", "cpu")}, "profile": profile,
+    }
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "side_by_side.md").write_text(text, encoding="utf-8")
-    (RESULTS / "side_by_side.json").write_text(json.dumps({"seed": args.seed, "runs": runs, "medians": medians},
-                                                          indent=2) + "\n", encoding="utf-8")
+    text = markdown(record)
+    (RESULTS / f"{args.out}.md").write_text(text, encoding="utf-8")
+    (RESULTS / f"{args.out}.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     print(text)
 
 
