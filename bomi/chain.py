@@ -16,7 +16,8 @@ from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing,
                              classify_windows, fit_lda, linear_parameters, model_defects, posteriors, proportional,
                              rejected)
 from bomi.errors import BomiError
-from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, sliding_windows, window_ends
+from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, window_ends
+from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, neutral_offsets
 from bomi.profiles import SELECT, Profile
@@ -53,7 +54,7 @@ def node_states(rec: Recording, nodes: Sequence[int], neutral: np.ndarray) -> np
 
 def window_features(states: np.ndarray, spec: FeatureSpec) -> np.ndarray:
     """Features of every window (time order) of the node-state sequence."""
-    return features(spec.kind, sliding_windows(states[:, spec.components], spec.window, spec.stride))
+    return batch_window_features(states[:, spec.components], spec.kind, spec.window, spec.stride)
 
 
 @dataclass

@@ -37,6 +37,8 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+import numpy as np
+
 FRAME_SIZE = 32
 START_BYTE = 0x33
 END_BYTE = 0x34
@@ -134,6 +136,25 @@ def encode_imu_frame(frame: ImuFrame) -> bytes:
                        *frame.mag, *frame.gyro, *frame.acc, END_BYTE)
 
 
+# The same 32 bytes as ``_FRAME``, as a numpy record: many frames encoded in one pass.
+_FRAME_RECORD = np.dtype([("start", "u1"), ("node_id", "u1"), ("period_ms", "u1"), ("counter", "u1"), ("unused", "u1"),
+                          ("mag", ">i2", 3), ("gyro", ">i2", 3), ("acc", ">i2", 3), ("unused_tail", "u1", 8),
+                          ("end", "u1")])
+assert _FRAME_RECORD.itemsize == _FRAME.size == FRAME_SIZE
+
+
+def encode_imu_frames(node_id: int, counters: np.ndarray, mag: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
+                      period_ms: int = DEFAULT_PERIOD_MS) -> list[bytes]:
+    """``encode_imu_frame`` of n frames of one node at once: (n,) packet counters (0..255) and (n, 3)
+    int16 mag, gyro, acc -> n frames of 32 bytes, each the bytes ``encode_imu_frame`` gives."""
+    records = np.zeros(len(counters), dtype=_FRAME_RECORD)
+    records["start"], records["node_id"], records["period_ms"], records["end"] = START_BYTE, node_id, period_ms, END_BYTE
+    records["counter"] = counters
+    records["mag"], records["gyro"], records["acc"] = mag, gyro, acc
+    block = records.tobytes()
+    return [block[k:k + FRAME_SIZE] for k in range(0, len(block), FRAME_SIZE)]
+
+
 def encode_safety_key_frame(event: int, counter: int, period_ms: int = DEFAULT_PERIOD_MS) -> bytes:
     """A safety-key frame (node 40) carrying ``event`` in byte 14."""
     frame = bytearray(FRAME_SIZE)
@@ -227,23 +248,28 @@ class FrameParser:
 
     def _accept(self, buf: bytearray, start: int, now: float | None) -> list[ImuFrame]:
         self.frames_accepted += 1
-        _, node_id, period_ms, counter = _HEADER.unpack_from(buf, start)
-        if imu_index(node_id) is None:
+        node_id = buf[start + 1]
+        if not FIRST_IMU_NODE_ID <= node_id < FIRST_IMU_NODE_ID + MAX_IMU_NODES:
+            _, node_id, period_ms, counter = _HEADER.unpack_from(buf, start)
             self.skipped[node_id] += 1
             if node_id == SAFETY_KEY_NODE_ID:
                 self._key_frame(SafetyKeyEvent(buf[start + SAFETY_EVENT_BYTE], period_ms, counter,
                                                self.frames_accepted - 1))
             return []
         values = _FRAME.unpack_from(buf, start)
-        frame = ImuFrame(node_id, period_ms, counter, values[4:7], values[7:10], values[10:13])
-        entry = [frame, now, _OK]
-        self._queue.append(entry)
+        frame = ImuFrame(node_id, values[2], values[3], values[4:7], values[7:10], values[10:13])
         last = self._last.get(node_id)
         chain = self._probation.setdefault(node_id, [])
         if last is not None and self._follows(last, frame):
             self._last[node_id] = frame
-            self._drop(chain)  # the node's own stream goes on: what was on probation was not it
+            if chain:
+                self._drop(chain)  # the node's own stream goes on: what was on probation was not it
+            elif not self._queue:
+                return [self._deliver(frame, now)]  # nothing held before it: out at once (what _release does)
+            self._queue.append([frame, now, _OK])
         else:
+            entry = [frame, now, _OK]
+            self._queue.append(entry)
             if chain and not self._follows(chain[-1][0], frame):
                 self._drop(chain)
             entry[2] = _PENDING

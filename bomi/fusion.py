@@ -8,6 +8,9 @@ Angles in degrees; inputs raw int16 LSB in the sensor's own axes.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
+from itertools import chain
+from math import atan2, cos, degrees, radians, sin
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +27,7 @@ ACC_WEIGHT = 0.08
 MAG_WEIGHT = 0.01
 LOWPASS_B = 0.355   # y[n] = b x[n] + b x[n-1] + a y[n-1]: first order, 10 Hz at 62.5 Hz
 LOWPASS_A = 0.2905
+_GYRO_STEP = GYRO_DEG_PER_LSB * DT
 
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
@@ -84,12 +88,6 @@ class NodeCalibration:
         return cls() if node == 1 else cls.uncalibrated()
 
 
-def _mat_vec(m: Matrix3, x: float, y: float, z: float) -> Vector3:
-    return (m[0][0] * x + m[0][1] * y + m[0][2] * z,
-            m[1][0] * x + m[1][1] * y + m[1][2] * z,
-            m[2][0] * x + m[2][1] * y + m[2][2] * z)
-
-
 @dataclass
 class NodeFusion:
     """Streaming fusion of one node; the filter states start at zero as on the original host."""
@@ -102,31 +100,38 @@ class NodeFusion:
     roll: float = 0.0
 
     def update(self, acc, gyro, mag) -> Vector3:
-        """One sample of raw LSB (sensor axes) -> (pitch, roll, yaw) in degrees."""
+        """One sample of raw LSB (sensor axes) -> (pitch, roll, yaw) in degrees.
+
+        The matrix products (soft iron, then the mounting rotation of acc, gyro and the corrected
+        field) are written out term by term: this runs once per sample of every node."""
         cal = self.calibration
-        mount = cal.mounting
-        h = cal.hard_iron
-        corrected = _mat_vec(cal.soft_iron, mag[0] - h[0], mag[1] - h[1], -mag[2] - h[2])
-        ax, ay, az = _mat_vec(mount, acc[0], acc[1], acc[2])
-        gx, gy, gz = _mat_vec(mount, gyro[0], gyro[1], gyro[2])
-        m1, m2, m3 = _mat_vec(mount, *corrected)
-        step = GYRO_DEG_PER_LSB * DT
+        (s00, s01, s02), (s10, s11, s12), (s20, s21, s22) = cal.soft_iron
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = cal.mounting
+        h0, h1, h2 = cal.hard_iron
+        x, y, z = mag[0] - h0, mag[1] - h1, -mag[2] - h2
+        c0, c1, c2 = s00 * x + s01 * y + s02 * z, s10 * x + s11 * y + s12 * z, s20 * x + s21 * y + s22 * z
+        x, y, z = acc[0], acc[1], acc[2]
+        ax, ay, az = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
+        x, y, z = gyro[0], gyro[1], gyro[2]
+        gx, gy, gz = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
+        m1, m2, m3 = r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2
+        step = _GYRO_STEP
 
         previous_pitch_state, previous_roll_state = self.pitch_state, self.roll_state
-        self.pitch_state = (ACC_WEIGHT * math.degrees(math.atan2(-ay, -ax))
-                            + GYRO_WEIGHT * (previous_pitch_state - gz * step))
-        self.roll_state = (ACC_WEIGHT * math.degrees(math.atan2(-az, -ax))
-                           + GYRO_WEIGHT * (previous_roll_state + gy * step))
-        self.pitch = LOWPASS_B * (self.pitch_state + previous_pitch_state) + LOWPASS_A * self.pitch
-        self.roll = LOWPASS_B * (self.roll_state + previous_roll_state) + LOWPASS_A * self.roll
+        self.pitch_state = pitch_state = (ACC_WEIGHT * degrees(atan2(-ay, -ax))
+                                          + GYRO_WEIGHT * (previous_pitch_state - gz * step))
+        self.roll_state = roll_state = (ACC_WEIGHT * degrees(atan2(-az, -ax))
+                                        + GYRO_WEIGHT * (previous_roll_state + gy * step))
+        self.pitch = pitch = LOWPASS_B * (pitch_state + previous_pitch_state) + LOWPASS_A * self.pitch
+        self.roll = roll = LOWPASS_B * (roll_state + previous_roll_state) + LOWPASS_A * self.roll
 
-        p, r = math.radians(-self.pitch), math.radians(self.roll)
-        c_p, s_p, c_r, s_r = math.cos(p), math.sin(p), math.cos(r), math.sin(r)
+        p, r = radians(-pitch), radians(roll)
+        c_p, s_p, c_r, s_r = cos(p), sin(p), cos(r), sin(r)
         y_h = s_p * c_r * m1 + c_p * m2 + s_p * s_r * m3
         z_h = -s_r * m1 + c_r * m3
-        self.yaw_state = (MAG_WEIGHT * math.degrees(math.atan2(-z_h, -y_h))
-                          + (1.0 - MAG_WEIGHT) * (self.yaw_state + gx * step))
-        return self.pitch, self.roll, self.yaw_state
+        self.yaw_state = yaw = (MAG_WEIGHT * degrees(atan2(-z_h, -y_h))
+                                + (1.0 - MAG_WEIGHT) * (self.yaw_state + gx * step))
+        return pitch, roll, yaw
 
 
 def fuse(acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,
@@ -149,7 +154,7 @@ class FusedRows:
 
     calibrations: dict[int, NodeCalibration]  # by node index
     _fusion: dict[int, NodeFusion] = field(init=False, repr=False)
-    _last: dict[int, tuple[ImuFrame, NodeSample]] = field(default_factory=dict, init=False, repr=False)
+    _last: dict[int, tuple[ImuFrame, Vector3]] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._fusion = {imu_node_id(i): NodeFusion(cal) for i, cal in self.calibrations.items()}
@@ -160,14 +165,30 @@ class FusedRows:
 
     def samples(self, row: dict[int, ImuFrame]) -> dict[int, NodeSample]:
         """The row's raw values and fused angles, keyed by node index."""
+        return {imu_index(node_id): NodeSample(frame.acc, frame.gyro, frame.mag, self._angles(node_id, frame))
+                for node_id, frame in row.items()}
+
+    def columns(self, rows: list[dict[int, ImuFrame]]) -> dict[int, NodeData]:
+        """``samples`` of many rows at once (the same frames fused, in the same order), as one
+        ``NodeData`` of (n, 3) arrays per node index: a recording's columns without a per-row object."""
         out = {}
-        for node_id, frame in row.items():
-            last = self._last.get(node_id)
-            if last is None or last[0] is not frame:  # a held frame is not fused twice
-                angles = self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag)
-                last = self._last[node_id] = (frame, NodeSample(frame.acc, frame.gyro, frame.mag, angles))
-            out[imu_index(node_id)] = last[1]
+        for node_id in self._fusion:
+            frames = [row[node_id] for row in rows]
+            angles = [self._angles(node_id, frame) for frame in frames]
+            out[imu_index(node_id)] = NodeData(*(_rows_of(getattr(f, name) for f in frames) for name in ("acc", "gyro", "mag")),
+                                               angles=_rows_of(angles))
         return out
+
+    def _angles(self, node_id: int, frame: ImuFrame) -> Vector3:
+        last = self._last.get(node_id)
+        if last is None or last[0] is not frame:  # a held frame is not fused twice
+            last = self._last[node_id] = (frame, self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag))
+        return last[1]
+
+
+def _rows_of(triples: Iterable[Sequence[float]]) -> np.ndarray:
+    """3-sequences -> (n, 3) float array (one pass, no nested-list conversion)."""
+    return np.fromiter(chain.from_iterable(triples), dtype=float).reshape(-1, 3)
 
 
 def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) -> Recording:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bomi.frames import COUNTER_MODULO, DEFAULT_PERIOD_MS, ImuFrame, encode_imu_frame, imu_node_id
+from bomi.frames import COUNTER_MODULO, DEFAULT_PERIOD_MS, encode_imu_frames, imu_node_id
 from bomi.fusion import DT, GYRO_DEG_PER_LSB, NodeCalibration
 
 ACC_LSB_PER_G = 1000.0 / 0.061          # LSM9DS0 at +-2 g: 0.061 mg/LSB
@@ -202,25 +202,19 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
     generator per node, drawn sample by sample (so samples cut into pieces fare as in one piece).
     ``not_before_s`` gives per node the arrival time of its last frame of an earlier call.
     """
-    times, nodes, indices, frames = [], [], [], []
+    sample_index = np.asarray(sample_index)
+    times, nodes, indices, frames = [np.empty(0)], [np.empty(0, int)], [np.empty(0, int)], []
     for node, raw in sorted(raw_by_node.items()):
         draws = rngs[node].random((len(raw), 2))
         kept = draws[:, 0] >= link.loss_fraction
         sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[:, 1])   # exponential jitter
         kept_index = np.flatnonzero(kept)          # lost frames hold nothing up
-        arrival = np.empty(len(raw))
-        arrival[kept_index] = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
-        arrival = np.maximum(arrival, (not_before_s or {}).get(node, -np.inf)).tolist()
-        # Python numbers, converted once (per element from numpy scalars it cost more than the encoding)
-        mag, gyro, acc, index, node_id = raw.mag.tolist(), raw.gyro.tolist(), raw.acc.tolist(), \
-            np.asarray(sample_index).tolist(), imu_node_id(node)
-        for k in kept_index.tolist():
-            frame = ImuFrame(node_id, period_ms, index[k] % COUNTER_MODULO, tuple(mag[k]), tuple(gyro[k]),
-                             tuple(acc[k]))
-            frames.append(encode_imu_frame(frame))
-            times.append(arrival[k])
-            nodes.append(node)
-            indices.append(index[k])
-    order = np.lexsort((np.array(nodes), np.array(indices), np.array(times)))
-    return Delivery(np.asarray(times, float)[order], np.asarray(nodes, int)[order],
-                    np.asarray(indices, int)[order], [frames[i] for i in order])
+        arrival = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
+        times.append(np.maximum(arrival, (not_before_s or {}).get(node, -np.inf)))
+        nodes.append(np.full(len(kept_index), node))
+        indices.append(sample_index[kept_index].astype(int))
+        frames += encode_imu_frames(imu_node_id(node), indices[-1] % COUNTER_MODULO, raw.mag[kept_index],
+                                    raw.gyro[kept_index], raw.acc[kept_index], period_ms)
+    times, nodes, indices = np.concatenate(times), np.concatenate(nodes), np.concatenate(indices)
+    order = np.lexsort((nodes, indices, times))
+    return Delivery(times[order], nodes[order], indices[order], [frames[i] for i in order])

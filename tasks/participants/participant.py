@@ -31,10 +31,10 @@ from bomi.config_files import check_table, load_toml, number
 from bomi.errors import BomiError
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT, WARMUP_S, FusedRows
-from bomi.frames import SAMPLE_RATE_HZ, FrameParser, RowAssembler, SampleIndex
+from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, SampleIndex
 from bomi.profiles import Profile
 from bomi.protocol import protocol_order
-from bomi.recording import NodeData, NodeSample, Recording
+from bomi.recording import NodeData, Recording
 from tasks.participants.imu_synth import Delivery, LinkModel, SensorNoise, deliver, synthesize_nodes
 
 PARTICIPANT_DIR = Path(__file__).resolve().parent
@@ -571,7 +571,7 @@ def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recordi
     fused = FusedRows({node.index: node.calibration for node in profile.nodes})
     sample_index = SampleIndex()
     index_of: dict[tuple[int, int], int] = {}        # (node id, counter) -> sample index of that frame
-    rows: list[dict[int, NodeSample]] = []
+    rows: list[dict[int, ImuFrame]] = []
     row_index: list[int] = []
     for frame in FrameParser().feed(stream):
         if frame.node_id not in ids:
@@ -579,13 +579,11 @@ def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recordi
         index_of[(frame.node_id, frame.counter)] = sample_index(frame)
         row = assembler.push(frame)
         if row is not None:
-            rows.append(fused.samples(row))
+            rows.append(row)
             row_index.append(max(index_of[(f.node_id, f.counter)] for f in row.values()))
     if not rows:
         raise BomiError(f"{source}: no complete row of nodes {list(profile.node_indices)} in the stream")
-    nodes = {node.index: NodeData(*(np.array([getattr(r[node.index], name) for r in rows], dtype=float)
-                                    for name in ("acc", "gyro", "mag", "angles")))
-             for node in profile.nodes}
+    nodes = fused.columns(rows)
     indices = np.array(row_index)
     return Recording(nodes=nodes, labels=None, time=indices * DT, source=source), indices
 
