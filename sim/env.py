@@ -53,6 +53,7 @@ class ArmSim:
                                                       self.config.control, self.dt)
         self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed, layout)
         self.finger_target = np.zeros(3)
+        self._cube_quat_index = np.array([np.arange(a + 3, a + 7) for a in self.scene.cube_qpos], dtype=np.intp)
         self._renderer: FrameRenderer | None = None
         self.reset()
 
@@ -196,7 +197,7 @@ class ArmSim:
     @property
     def cube_quats(self) -> np.ndarray:
         """(n, 4) cube orientations (w, x, y, z)."""
-        return np.array([self.data.qpos[a + 3:a + 7] for a in self.scene.cube_qpos])
+        return self.data.qpos[self._cube_quat_index]
 
     @property
     def mode(self) -> Mode:
@@ -222,19 +223,25 @@ class ArmSim:
         """Put the arm in ``mode`` without a button press (what an assistance does; counted apart)."""
         self.joystick.switch_to(mode)
 
-    def touching(self, geoms_a: frozenset[int], geoms_b: frozenset[int]) -> bool:
-        """Whether any active contact joins a geom of ``geoms_a`` to one of ``geoms_b``."""
-        contact = self.data.contact
-        first, second = contact.geom1[:self.data.ncon], contact.geom2[:self.data.ncon]
+    def _contact_pairs(self) -> list[tuple[int, int]]:
+        """The (geom1, geom2) pairs of the active contacts."""
+        contact, n = self.data.contact, self.data.ncon
+        return list(zip(contact.geom1[:n].tolist(), contact.geom2[:n].tolist()))
+
+    def touching(self, geoms_a: frozenset[int], geoms_b: frozenset[int],
+                 pairs: list[tuple[int, int]] | None = None) -> bool:
+        """Whether any active contact (of ``pairs``, by default the current ones) joins a geom of
+        ``geoms_a`` to one of ``geoms_b``."""
         return any((a in geoms_a and b in geoms_b) or (a in geoms_b and b in geoms_a)
-                   for a, b in zip(first.tolist(), second.tolist()))
+                   for a, b in (self._contact_pairs() if pairs is None else pairs))
 
     def cube_in_grasp(self) -> np.ndarray:
         """Per cube: held between finger 1 and at least one of the opposing fingers 2, 3."""
         one, two, three = self.scene.finger_geoms
+        pairs = self._contact_pairs()  # read once for every cube and finger
         return np.array([
-            self.touching(one, frozenset({cube})) and (self.touching(two, frozenset({cube}))
-                                                       or self.touching(three, frozenset({cube})))
+            self.touching(one, frozenset({cube}), pairs) and (self.touching(two, frozenset({cube}), pairs)
+                                                              or self.touching(three, frozenset({cube}), pairs))
             for cube in self.scene.cube_geoms.tolist()])
 
     # -- rendering -------------------------------------------------------------------------------

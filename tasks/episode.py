@@ -312,8 +312,10 @@ class BomiChannel:
         return decisions
 
     def _arrived(self, now: float, t_end: float) -> bytes:
-        """Frames arriving by ``t_end``; samples are made in chunks (cheaper; the same arrival times)."""
-        if now + self._lookahead / 2 > self._asked_until:  # ask before the frames are due
+        """Frames arriving by ``t_end``; samples are made in chunks as long as the lookahead allows
+        (each chunk costs a call of the synthesis: fewer, longer chunks; the same samples, frames and
+        arrival times, as a chunk's samples do not depend on where it was cut)."""
+        if t_end > self._asked_until:  # frames of samples not made yet could arrive by t_end
             self._asked_until = max(t_end, now + self._lookahead)
             self._queue.append(self.participant.deliveries(self._asked_until))
         arrived = []

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bomi.features import WindowBuffer, component_index, features, single_label_windows, sliding_windows
+from bomi.features import WindowBuffer, component_index, features, single_label_windows, sliding_windows, window_features
 
 
 def naive_components(state_row: list[float], n_nodes: int, kind: str) -> list[float]:
@@ -88,3 +88,36 @@ def test_fv3_by_hand():
     window = np.array([1, -2, 3, 0, 5, 5, -1, 2], dtype=float).reshape(1, 8, 1)
     assert features("FV3", window).tolist() == [[-2, 3, 0.5, 6, -1, 5, 2.75, 13]]
     assert features("FV1", window).tolist() == [[13 / 8]]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), channels=st.integers(1, 24), kind=st.sampled_from(["FV1", "FV2", "FV3"]),
+       length=st.sampled_from([2, 4, 8, 10, 16, 32]), stride=st.integers(1, 3), n=st.integers(0, 80))
+def test_recording_features_equal_the_streamed_windows_bit_for_bit(seed, channels, kind, length, stride, n):
+    """window_features (a recording at once, FV3 from per-run statistics) = features of each window
+    the stream sees, to the bit, and = the naive loop of the paper's definition."""
+    samples = np.random.default_rng(seed).normal(scale=30, size=(n, channels))
+    samples[::5] = -0.0   # signed zeros: the sums must start where the stream's do
+    batch = window_features(samples, kind, length, stride)
+    buffer = WindowBuffer(length, channels, stride)
+    streamed = [features(kind, w[None])[0] for w in (buffer.push(r) for r in samples) if w is not None]
+    assert batch.shape[0] == len(streamed) == max(0, (n - length) // stride + 1)
+    if streamed:
+        assert np.array_equal(batch.view(np.int64), np.array(streamed).view(np.int64))
+        assert np.allclose(batch, naive_window_features(samples, kind, length, stride), rtol=0, atol=1e-9)
+
+
+def naive_window_features(samples: np.ndarray, kind: str, length: int, stride: int) -> np.ndarray:
+    """The paper's definition, one window and one component at a time."""
+    rows = []
+    for end in range(length - 1, len(samples), stride):
+        window = samples[end - length + 1:end + 1].tolist()
+        if kind != "FV3":
+            rows.append([sum(w[c] for w in window) / length for c in range(samples.shape[1])])
+            continue
+        row = []
+        for half in (window[:length // 2], window[length // 2:]):
+            for stat in (min, max, lambda v: sum(v) / len(v), lambda v: sum(abs(x) for x in v)):
+                row += [stat([w[c] for w in half]) for c in range(samples.shape[1])]
+        rows.append(row)
+    return np.array(rows)

@@ -5,10 +5,12 @@ import struct
 from dataclasses import dataclass
 
 import pytest
+import numpy as np
 from hypothesis import assume, given, settings, strategies as st
 
 from bomi.frames import (
-    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, SampleIndex, counter_step, encode_imu_frame, encode_safety_key_frame,
+    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, SampleIndex, counter_step, encode_imu_frame, encode_imu_frames,
+    encode_safety_key_frame,
     imu_index, imu_node_id,
 )
 
@@ -329,3 +331,14 @@ def test_sample_index_unwraps_each_nodes_counter_and_counts_lost_samples():
     index = SampleIndex()
     assert [index(f) for f in frames] == [254, 7, 255, 256, 8, 258]
     assert [counter_step(a, b) for a, b in ((254, 255), (255, 0), (0, 2), (3, 3))] == [1, 1, 2, 0]
+
+
+@settings(max_examples=50, deadline=None)
+@given(node=st.integers(1, 6), values=st.lists(st.tuples(vector3, vector3, vector3, st.integers(0, 255)), max_size=30),
+       period=st.integers(0, 255))
+def test_frames_encoded_at_once_are_the_frames_encoded_one_by_one(node, values, period):
+    mag, gyro, acc = (np.array([v[k] for v in values], dtype=np.int64).reshape(len(values), 3) for k in range(3))
+    counters = np.array([v[3] for v in values], dtype=np.int64)
+    many = encode_imu_frames(imu_node_id(node), counters, mag, gyro, acc, period)
+    one_by_one = [encode_imu_frame(ImuFrame(imu_node_id(node), period, c, m, g, a)) for m, g, a, c in values]
+    assert many == one_by_one

@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bomi.fusion import HEADSET_SOFT_IRON, NodeCalibration, NodeFusion, fuse, neutral_offsets
+from bomi.frames import ImuFrame, imu_node_id
+from bomi.fusion import HEADSET_SOFT_IRON, FusedRows, NodeCalibration, NodeFusion, fuse, neutral_offsets
 
 K_DT = 2000 / 32768 / 62.5
 # hardware.md worked example, decoded (headset, counter 42): mag, gyro, acc in raw LSB
@@ -91,3 +92,53 @@ def test_calibration_validation_and_neutral():
         NodeCalibration(hard_iron=(0, 0))
     angles = np.arange(30.0).reshape(10, 3)
     assert neutral_offsets(angles, 2).tolist() == [1.5, 2.5, 3.5]
+
+
+def naive_update(state: dict, cal: NodeCalibration, acc, gyro, mag) -> tuple[float, float, float]:
+    """hardware.md section 3 with numpy matrices (an independent form of NodeFusion.update)."""
+    mount, soft = np.array(cal.mounting), np.array(cal.soft_iron)
+    m = mount @ (soft @ (np.array([mag[0], mag[1], -mag[2]], float) - np.array(cal.hard_iron)))
+    a, g = mount @ np.array(acc, float), mount @ np.array(gyro, float)
+    step = 2000.0 / 32768.0 / 62.5
+    pitch_state = 0.08 * math.degrees(math.atan2(-a[1], -a[0])) + 0.92 * (state["ps"] - g[2] * step)
+    roll_state = 0.08 * math.degrees(math.atan2(-a[2], -a[0])) + 0.92 * (state["rs"] + g[1] * step)
+    state["p"] = 0.355 * (pitch_state + state["ps"]) + 0.2905 * state["p"]
+    state["r"] = 0.355 * (roll_state + state["rs"]) + 0.2905 * state["r"]
+    state["ps"], state["rs"] = pitch_state, roll_state
+    p, r = math.radians(-state["p"]), math.radians(state["r"])
+    y_h = math.sin(p) * math.cos(r) * m[0] + math.cos(p) * m[1] + math.sin(p) * math.sin(r) * m[2]
+    z_h = -math.sin(r) * m[0] + math.cos(r) * m[2]
+    state["y"] = 0.01 * math.degrees(math.atan2(-z_h, -y_h)) + 0.99 * (state["y"] + g[0] * step)
+    return state["p"], state["r"], state["y"]
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_update_follows_the_documented_formulas_with_any_calibration(seed):
+    rng = np.random.default_rng(seed)
+    mounting = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    mounting *= np.sign(np.linalg.det(mounting))   # a rotation
+    cal = NodeCalibration(hard_iron=rng.normal(scale=100, size=3), soft_iron=np.eye(3) * 1e-4 + rng.normal(scale=1e-5, size=(3, 3)),
+                          mounting=mounting)
+    node, state = NodeFusion(cal), {"ps": 0.0, "rs": 0.0, "p": 0.0, "r": 0.0, "y": 0.0}
+    for acc, gyro, mag in zip(*(rng.integers(-20000, 20000, (40, 3)).tolist() for _ in range(3))):
+        assert node.update(acc, gyro, mag) == pytest.approx(naive_update(state, cal, acc, gyro, mag), abs=1e-9)
+
+
+def test_recording_columns_are_the_rows_samples_and_a_held_frame_is_fused_once():
+    rng = np.random.default_rng(3)
+    frames = {node: [ImuFrame(imu_node_id(node), 16, k, *(tuple(rng.integers(-9000, 9000, 3).tolist()) for _ in range(3)))
+                     for k in range(6)] for node in (1, 2)}
+    # node 2's third frame was lost: its second one is held in the third row
+    rows = [{10: frames[1][k], 11: frames[2][k if k != 2 else 1]} for k in range(6)]
+    calibrations = {1: NodeCalibration(), 2: NodeCalibration.uncalibrated()}
+    columns = FusedRows(calibrations).columns(rows)
+    one_by_one, reference = FusedRows(calibrations), {1: NodeFusion(calibrations[1]), 2: NodeFusion(calibrations[2])}
+    samples = [one_by_one.samples(row) for row in rows]
+    for node in (1, 2):
+        assert np.array_equal(columns[node].angles, np.array([s[node].angles for s in samples]))
+        assert np.array_equal(columns[node].acc, np.array([s[node].acc for s in samples], float))
+        fused = [reference[node].update(f.acc, f.gyro, f.mag) for f in (frames[node][:2] + frames[node][3:] if node == 2
+                                                                          else frames[node])]
+        expected = fused[:2] + [fused[1]] + fused[2:] if node == 2 else fused
+        assert np.array_equal(columns[node].angles, np.array(expected))
