@@ -53,12 +53,15 @@ import numpy as np
 from dm_control import manipulation
 
 import sim.env
+from bomi.chain import OnlineChain
+from bomi.frames import FrameParser
+from sim.controller import CartesianVelocityController
 from sim.env import ArmSim
 from tasks.cli.task import EpisodeJob, job_assist, run_job
 from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode
-from tasks.participants.participant import load_participant
-from tasks.planner import load_operator
-from tasks.stacking import TaskConfig
+from tasks.participants.participant import VirtualParticipant, load_participant
+from tasks.planner import ScriptedUser, load_operator
+from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import arm_profile
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -138,7 +141,7 @@ def our_episode(operator: str, seed: int) -> dict:
 STAGES = (  # (stage, path fragment, function names or None for any); first match wins
     ("mj_step (physics)", "mj_step", None),
     ("vote", "bomi/classifier.py", ("push",)),
-    ("LDA (posteriors)", "bomi/classifier.py", None),
+    ("LDA (fit, posteriors)", "bomi/classifier.py", None),
     ("frames (parse)", "bomi/frames.py", None),
     ("fusion", "bomi/fusion.py", None),
     ("windows + features", "bomi/features.py", None),
@@ -223,6 +226,54 @@ def profile_episode(operator: str, seed: int) -> dict:
     return out
 
 
+INSTRUMENTED = (  # (stage, owner, method): the calls of a control tick timed one by one, none inside another
+    ("operator / planner (stick_intent)", ScriptedUser, "stick_intent"),
+    ("task: view", StackingTask, "view"),
+    ("task: outcome", StackingTask, "outcome"),
+    ("IK (joint_velocities)", CartesianVelocityController, "joint_velocities"),
+    ("synthesis (participant deliveries)", VirtualParticipant, "deliveries"),
+    ("frames (parser)", FrameParser, "feed"),
+    ("chain: fusion, window, features, LDA, vote (push_frame)", OnlineChain, "push_frame"),
+)
+
+
+def instrumented_episode(operator: str, seed: int) -> dict:
+    """CPU seconds per control tick of the task loop in each of the ``INSTRUMENTED`` calls and in
+    ``mj_step``, the rest (the loop's own work, the channel, the arm's joystick and actuators) apart.
+    One ``process_time`` pair per call (about a microsecond): close to the unprofiled cost."""
+    job = EpisodeJob(operator, "P1", seed)
+    params = load_participant(job.participant)
+    profile = arm_profile(params.profile)
+    channel = (JoystickChannel(profile_controls(profile)) if operator == "joystick" else
+               calibrated_channel(params, seed, replace(profile.post, vote_length=job.vote_length), profile))
+    spent: dict[str, float] = defaultdict(float)
+    originals = [(owner, name, getattr(owner, name)) for _, owner, name in INSTRUMENTED]
+
+    def timed(stage: str, method):
+        def call(*args, **kwargs):
+            cpu = time.process_time()
+            try:
+                return method(*args, **kwargs)
+            finally:
+                spent[stage] += time.process_time() - cpu
+        return call
+
+    for (stage, owner, name), (_, _, method) in zip(INSTRUMENTED, originals):
+        setattr(owner, name, timed(stage, method))
+    try:
+        with StepClock() as physics:
+            log = run_episode(channel, operator=operator, participant="P1", seed=seed,
+                              operator_file=load_operator(job.operator_file),
+                              task_config=TaskConfig(time_limit=job.time_limit), assist=job_assist(job, profile))
+    finally:
+        for owner, name, method in originals:
+            setattr(owner, name, method)
+    ticks = len(log.t)
+    out = {"mj_step (physics)": physics.cpu} | dict(spent)
+    out["the rest (loop, channel, arm's joystick and actuators)"] = log.cpu_time - sum(out.values())
+    return {"ticks": ticks, "loop_cpu_s": log.cpu_time, "us_per_tick": {k: 1e6 * v / ticks for k, v in out.items()}}
+
+
 # ---------------------------------------------------------------------------------------- main
 def ratios(rounds: list[dict[str, dict]], clock: str) -> dict[str, dict[str, float]]:
     """Per kind: median over rounds of (its x real time / the limit's) and (/ dm_control's), same round."""
@@ -280,7 +331,16 @@ def markdown(record: dict) -> str:
             f"{r[kind]['sim_s']:.1f} s sim: {r[kind]['cpu_s']:.2f} / {r[kind]['wall_s']:.2f}" for kind in wall) + " |")
     prof = record.get("profile")
     if prof:
-        lines += ["", f"## Where a control tick's time goes (cProfile, seed {args['profile_seed']})", "",
+        bomi_i, joy_i = prof["bomi"]["instrumented"], prof["joystick"]["instrumented"]
+        lines += ["", f"## Where a control tick's time goes (seed {args['profile_seed']})", "",
+                  "CPU microseconds per control tick of the task loop, unprofiled: each call below timed alone "
+                  "(`process_time` around it), the rest is the loop's own work, the channel and the arm's joystick "
+                  "and actuators.", "", "| stage | BoMI (us/tick) | joystick (us/tick) |", "|---|---|---|"]
+        for stage in bomi_i["us_per_tick"]:
+            lines.append(f"| {stage} | {bomi_i['us_per_tick'][stage]:.0f} | {joy_i['us_per_tick'].get(stage, 0.0):.0f} |")
+        lines.append(f"| **task loop** ({bomi_i['ticks']} / {joy_i['ticks']} ticks) | "
+                     f"{1e6 * bomi_i['loop_cpu_s'] / bomi_i['ticks']:.0f} | {1e6 * joy_i['loop_cpu_s'] / joy_i['ticks']:.0f} |")
+        lines += ["", f"### The same by cProfile (every function's own time, seed {args['profile_seed']})", "",
                   "Microseconds per control tick of the task loop, by stage (each function's own time; a library "
                   "function's time goes to the stage of our code that called it). cProfile adds a cost to every "
                   "Python call, so Python-heavy stages weigh more here than unprofiled.", "",
@@ -328,7 +388,8 @@ def main() -> None:
                                                       key=lambda kv: list(kinds).index(kv[0]))})
         print(f"round {k}: " + ", ".join(f"{kind.split(':')[0].split(' (')[0]} {r['sim_s'] / r['cpu_s']:.1f}x"
                                          for kind, r in rounds[-1].items()), flush=True)
-    profile = None if args.no_profile else {op: profile_episode(op, args.profile_seed) for op in ("bomi", "joystick")}
+    profile = None if args.no_profile else {op: profile_episode(op, args.profile_seed) | {
+        "instrumented": instrumented_episode(op, args.profile_seed)} for op in ("bomi", "joystick")}
     commit = os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
     record = {
         "args": vars(args), "commit": commit,

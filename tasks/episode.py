@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Protocol
 
@@ -478,6 +479,16 @@ def operator_user(params: OperatorParams, channel: OperatorChannel, seed: int) -
                          channel.body_reaction)
 
 
+@cache
+def process_arm(layout: Layout) -> ArmSim:
+    """The arm of this process's episodes with joystick ``layout`` (a module constant of
+    ``sim.joystick``), built once: every episode's task resets it (``ArmSim.reset``: MuJoCo's data,
+    controller, joystick and counters), so an episode's record does not depend on the ones run
+    before it in the process (tests/test_engine.py runs them in both orders), and a sweep's worker
+    compiles the scene and the arm's kinematics once, not once per episode."""
+    return ArmSim(layout=layout)
+
+
 def run_episode(channel: OperatorChannel, *, operator: str, participant: str, seed: int,
                 operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE, task_config: TaskConfig = TaskConfig(),
                 video: Path | None = None, video_speedup: float = 4.0, sim: ArmSim | None = None,
@@ -487,7 +498,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     user's parameters, or the file they are read from. ``on_tick`` is told the simulated time
     after every tick (a progress bar). ``assist``: the assistances between the channel's stick and
     the arm (tasks.assist)."""
-    sim = sim or ArmSim(layout=channel.controls.layout)
+    sim = sim or process_arm(channel.controls.layout)
     if sim.layout is not channel.controls.layout:
         raise ValueError(f"the arm has the {sim.layout.name} joystick layout, the operator's controls the "
                          f"{channel.controls.layout.name} one")
