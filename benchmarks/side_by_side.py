@@ -53,6 +53,7 @@ import numpy as np
 from dm_control import manipulation
 
 import sim.env
+import tasks.episode
 from bomi.chain import OnlineChain
 from bomi.frames import FrameParser
 from sim.controller import CartesianVelocityController
@@ -242,12 +243,7 @@ def instrumented_episode(operator: str, seed: int) -> dict:
     ``mj_step``, the rest (the loop's own work, the channel, the arm's joystick and actuators) apart.
     One ``process_time`` pair per call (about a microsecond): close to the unprofiled cost."""
     job = EpisodeJob(operator, "P1", seed)
-    params = load_participant(job.participant)
-    profile = arm_profile(params.profile)
-    channel = (JoystickChannel(profile_controls(profile)) if operator == "joystick" else
-               calibrated_channel(params, seed, replace(profile.post, vote_length=job.vote_length), profile))
     spent: dict[str, float] = defaultdict(float)
-    originals = [(owner, name, getattr(owner, name)) for _, owner, name in INSTRUMENTED]
 
     def timed(stage: str, method):
         def call(*args, **kwargs):
@@ -258,6 +254,23 @@ def instrumented_episode(operator: str, seed: int) -> dict:
                 spent[stage] += time.process_time() - cpu
         return call
 
+    setup = (("calibration session (synthesis)", "calibration_session"), ("its recording (parse, fuse)", "session_recording"),
+             ("LDA training", "train"), ("channel (warm-up, neutral calibration)", "BomiChannel"))
+    originals = [(tasks.episode, name, getattr(tasks.episode, name)) for _, name in setup]
+    for (stage, name), (_, _, method) in zip(setup, originals):
+        setattr(tasks.episode, name, timed(stage, method))
+    cpu = time.process_time()
+    try:
+        params = load_participant(job.participant)
+        profile = arm_profile(params.profile)
+        channel = (JoystickChannel(profile_controls(profile)) if operator == "joystick" else
+                   calibrated_channel(params, seed, replace(profile.post, vote_length=job.vote_length), profile))
+    finally:
+        for owner, name, method in originals:
+            setattr(owner, name, method)
+    setup_s = dict(spent) | {"set-up, all": time.process_time() - cpu}
+    spent.clear()
+    originals = [(owner, name, getattr(owner, name)) for _, owner, name in INSTRUMENTED]
     for (stage, owner, name), (_, _, method) in zip(INSTRUMENTED, originals):
         setattr(owner, name, timed(stage, method))
     try:
@@ -271,7 +284,8 @@ def instrumented_episode(operator: str, seed: int) -> dict:
     ticks = len(log.t)
     out = {"mj_step (physics)": physics.cpu} | dict(spent)
     out["the rest (loop, channel, arm's joystick and actuators)"] = log.cpu_time - sum(out.values())
-    return {"ticks": ticks, "loop_cpu_s": log.cpu_time, "us_per_tick": {k: 1e6 * v / ticks for k, v in out.items()}}
+    return {"ticks": ticks, "loop_cpu_s": log.cpu_time, "us_per_tick": {k: 1e6 * v / ticks for k, v in out.items()},
+            "setup_cpu_s": setup_s}
 
 
 # ---------------------------------------------------------------------------------------- main
@@ -340,6 +354,8 @@ def markdown(record: dict) -> str:
             lines.append(f"| {stage} | {bomi_i['us_per_tick'][stage]:.0f} | {joy_i['us_per_tick'].get(stage, 0.0):.0f} |")
         lines.append(f"| **task loop** ({bomi_i['ticks']} / {joy_i['ticks']} ticks) | "
                      f"{1e6 * bomi_i['loop_cpu_s'] / bomi_i['ticks']:.0f} | {1e6 * joy_i['loop_cpu_s'] / joy_i['ticks']:.0f} |")
+        lines += ["", "The BoMI episode's set-up, CPU seconds (unprofiled, the same episode): " + ", ".join(
+            f"{stage} {s:.2f}" for stage, s in bomi_i["setup_cpu_s"].items()) + "."]
         lines += ["", f"### The same by cProfile (every function's own time, seed {args['profile_seed']})", "",
                   "Microseconds per control tick of the task loop, by stage (each function's own time; a library "
                   "function's time goes to the stage of our code that called it). cProfile adds a cost to every "
