@@ -27,7 +27,7 @@ process's CPU time, ``time.process_time``):
 Ratios are formed within a round (the same load for all kinds) and their median is reported.
 The bars (issue 30): joystick >= 0.5 of the limit and >= 1.0x dm_control; BoMI, calibration
 included, >= 0.3 of the limit and >= 0.5x dm_control.  The profile (cProfile, one BoMI and one
-joystick episode of ``--profile-seed``, after the rounds) charges every function's own time to a
+joystick episode of ``--profile-seed``, after the rounds; CPU time) charges every function's own time to a
 stage (a library call to the stage of our code that called it) and gives microseconds per control
 tick; cProfile slows Python calls, so its totals exceed the unprofiled ones: read its shares.
 Writes benchmarks/results/side_by_side.md and .json.
@@ -206,7 +206,7 @@ def stage_times(stats: pstats.Stats) -> dict[str, float]:
 def profile_episode(operator: str, seed: int) -> dict:
     """``run_job``'s steps, the set-up and the task loop profiled apart."""
     job = EpisodeJob(operator, "P1", seed)
-    setup, loop = cProfile.Profile(), cProfile.Profile()
+    setup, loop = cProfile.Profile(time.process_time), cProfile.Profile(time.process_time)  # CPU, not wall
     setup.enable()
     params = load_participant(job.participant)
     profile = arm_profile(params.profile)
