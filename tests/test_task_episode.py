@@ -13,7 +13,7 @@ from helpers import edited_copy
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
 from tasks.cli.task import aggregate, benchmark_jobs, comparison
-from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode, summarize
+from tasks.episode import JoystickChannel, calibrated_channel, process_arm, profile_controls, run_episode, summarize
 from tasks.planner import Controls
 from tasks.stacking import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses
 
@@ -231,3 +231,18 @@ def test_levelling_rotation_is_bit_for_bit_the_one_made_with_numpy_cross():
         expected = np.zeros(2) if sin < 1e-12 else (axis * math.atan2(sin, cos) / sin)[:2]
         got = levelling_rotation(tool_z)
         assert got.tobytes() == expected.tobytes(), tool_z
+
+
+def test_an_episode_on_the_process_s_reused_arm_is_the_episode_on_a_fresh_arm():
+    """process_arm is built once per layout: whatever an episode leaves in it (a grasp, a mode,
+    counters, MuJoCo's warm start) must not reach the next episode's record."""
+    def episode(seed: int, sim: ArmSim | None = None):
+        return run_episode(JoystickChannel(), operator="joystick", participant="P1", seed=seed, sim=sim,
+                           task_config=TaskConfig(time_limit=6.0))
+
+    episode(1)   # leaves the shared arm moved, mode-switched, maybe holding a cube
+    reused, fresh = episode(0), episode(0, ArmSim(layout=THREE_AXIS))
+    assert process_arm(THREE_AXIS) is process_arm(THREE_AXIS)
+    assert reused.presses > 0 and reused.mode == fresh.mode and reused.presses == fresh.presses
+    for field in ("t", "hand_pos", "cube_pos", "touching"):
+        assert np.array_equal(getattr(reused, field), getattr(fresh, field)), field
