@@ -188,11 +188,12 @@ def check_training_data(recordings: Sequence[Recording], profile: Profile, spec:
         if unknown:
             raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of profile {profile.name}")
         require_for(rec, spec)
-        if len(rec) >= spec.window:
-            pure = single_label_windows(labels, spec.window, spec.stride)
-            ends = window_ends(len(rec), spec.window, spec.stride)[pure]
-            for label, n in zip(*np.unique(labels[ends], return_counts=True)):
-                counts[int(label)] = counts.get(int(label), 0) + int(n)
+        if len(rec) < spec.window:
+            raise BomiError(f"{rec.source}: {len(rec)} samples, shorter than one {spec.window}-sample window")
+        pure = single_label_windows(labels, spec.window, spec.stride)
+        ends = window_ends(len(rec), spec.window, spec.stride)[pure]
+        for label, n in zip(*np.unique(labels[ends], return_counts=True)):
+            counts[int(label)] = counts.get(int(label), 0) + int(n)
         _check_signals_change(rec, spec)
     if len(counts) < 3:
         raise BomiError(f"{sources}: training needs windows of at least three classes held for {spec.window} "
