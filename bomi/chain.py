@@ -172,7 +172,7 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
     return windows, prepared
 
 
-MIN_CLASS_WINDOWS = 30   # single-label windows a class needs to be learnt (about half a second of holding)
+MIN_CLASS_WINDOWS = 15   # single-label windows a class needs to be learnt (a quarter of a second of holding)
 
 
 def check_training_data(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> None:

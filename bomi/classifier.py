@@ -1,9 +1,12 @@
 """LDA classification, optional post-processing, and the paper's proportional output.
 
 scikit-learn fits the classifier as a ``Pipeline``: ``StandardScaler`` (every feature on one scale,
-whatever the person, sensor, unit or mounting), ``PCA`` with whitening down to the numerical rank of
+whatever the person, sensor, unit or mounting), ``PCA`` rotating onto the numerical rank of
 the standardised training windows (FV1-FV3 hold near-duplicate columns: the statistics of an
-8-sample window of a slow signal are almost equal), then ``LinearDiscriminantAnalysis``. Every
+8-sample window of a slow signal are almost equal; not whitened, so that a shrinkage keeps damping
+the directions of negligible variance, which whitening would weigh as much as any other: trained so
+on a virtual P1 session with shrinkage 0.001, the live chain read the next session's neutral
+posture as c8), then ``LinearDiscriminantAnalysis``. Every
 step is affine, so the fitted pipeline is one linear discriminant on the raw features; decisions
 use it (``Model.coef``, ``Model.intercept``) through ``posteriors``, the same softmax sklearn's
 ``predict_proba`` computes, because sklearn's per-call input validation costs ~90 us per single
@@ -71,13 +74,12 @@ RANK_TOLERANCE = 1e-4
 
 @dataclass(frozen=True)
 class PipelineParameters:
-    """The fitted parameters of StandardScaler -> PCA (whitened) -> LDA, as a model file keeps them."""
+    """The fitted parameters of StandardScaler -> PCA -> LDA, as a model file keeps them."""
 
     scaler_mean: np.ndarray      # (F,)
     scaler_scale: np.ndarray     # (F,)
     pca_mean: np.ndarray         # (F,) mean of the standardised features (about 0)
     pca_components: np.ndarray   # (R, F)
-    pca_variance: np.ndarray     # (R,) explained variance (whitening divides by its square root)
     lda_coef: np.ndarray         # (K, R)
     lda_intercept: np.ndarray    # (K,)
 
@@ -89,11 +91,10 @@ class PipelineParameters:
 
     def linear(self) -> tuple[np.ndarray, np.ndarray]:
         """The whole pipeline as one discriminant on the raw features: (coef (K, F), intercept (K,))."""
-        projection = self.pca_components / np.sqrt(self.pca_variance)[:, None] / self.scaler_scale[None, :]
+        projection = self.pca_components / self.scaler_scale[None, :]
         coef = self.lda_coef @ projection
         intercept = self.lda_intercept - self.lda_coef @ (projection @ self.scaler_mean
-                                                          + (self.pca_components @ self.pca_mean)
-                                                          / np.sqrt(self.pca_variance))
+                                                          + self.pca_components @ self.pca_mean)
         return coef, intercept
 
 
@@ -172,8 +173,9 @@ def numerical_rank(features: np.ndarray) -> int:
 
 def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None,
                  priors: np.ndarray | None = None) -> Pipeline:
-    """StandardScaler -> PCA (whitened, to the numerical rank) -> LDA with the least-squares solver
-    (supports shrinkage, which in the whitened space means the same for every person).
+    """StandardScaler -> PCA (a rotation onto the numerical rank) -> LDA with the least-squares solver
+    (supports shrinkage, which on standardised features means the same for every person, sensor and
+    unit; the PCA is not whitened, so a shrinkage still damps the directions of negligible variance).
     ``priors``: class probabilities in sorted label order (None: the class frequencies of ``labels``).
 
     BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
@@ -181,7 +183,7 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return Pipeline([("scale", StandardScaler()),
-                         ("pca", PCA(n_components=numerical_rank(features), whiten=True, svd_solver="full")),
+                         ("pca", PCA(n_components=numerical_rank(features), svd_solver="full")),
                          ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
                         ).fit(features, labels)
 
@@ -192,8 +194,8 @@ def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParamet
     if len(lda.classes_) < 3:
         raise ValueError("need at least three classes (binary LDA has a single discriminant)")
     return np.asarray(lda.classes_, dtype=np.int64), PipelineParameters(
-        scale.mean_.copy(), scale.scale_.copy(), pca.mean_.copy(), pca.components_.copy(), pca.explained_variance_.copy(),
-        lda.coef_.copy(), lda.intercept_.copy())
+        scale.mean_.copy(), scale.scale_.copy(), pca.mean_.copy(), pca.components_.copy(), lda.coef_.copy(),
+        lda.intercept_.copy())
 
 
 def posteriors(model: Model, features: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from bomi.files import check_input, write_bytes
 from bomi.profiles import Profile
 
 FORMAT_NAME = "bomi-model"
-FORMAT_VERSION = 3  # 2: the profile's identity; 3: the pipeline's parameters (standardised, whitened features)
+FORMAT_VERSION = 3  # 2: the profile's identity; 3: the pipeline's parameters (standardised features)
 SUFFIXES = (".json", ".npz")
 ARRAYS = ("classes",) + tuple(f.name for f in fields(PipelineParameters))
 
@@ -162,7 +162,7 @@ def _check_shapes(p: PipelineParameters, n_classes: int, n_features: int, kind: 
     """ValueError unless the pipeline's arrays fit together, the classes and the features, all finite."""
     rank = p.pca_components.shape[0] if p.pca_components.ndim == 2 else -1
     expected = {"scaler_mean": (n_features,), "scaler_scale": (n_features,), "pca_mean": (n_features,),
-                "pca_components": (rank, n_features), "pca_variance": (rank,), "lda_coef": (n_classes, rank),
+                "pca_components": (rank, n_features), "lda_coef": (n_classes, rank),
                 "lda_intercept": (n_classes,)}
     for name, shape in expected.items():
         value = getattr(p, name)
@@ -171,8 +171,8 @@ def _check_shapes(p: PipelineParameters, n_classes: int, n_features: int, kind: 
                              f"{n_features} {kind} features")
         if not np.all(np.isfinite(value)):
             raise ValueError(f"non-finite {name}")
-    if not (np.all(p.scaler_scale > 0) and np.all(p.pca_variance > 0)):
-        raise ValueError("scales and variances must be positive")
+    if not np.all(p.scaler_scale > 0):
+        raise ValueError("scaler_scale must be positive")
 
 
 def check_model_for(model: Model, profile: Profile, source: str | os.PathLike) -> None:

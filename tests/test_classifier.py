@@ -37,18 +37,18 @@ def test_rejection_and_vote_by_hand():
     assert [vote.push(v) for v in (4, 5, 5, 4)] == [4, 5, 5, 4]
 
 
-def one_feature(lda_coef, lda_intercept, mean=0.0, scale=1.0, variance=1.0) -> PipelineParameters:
-    """A pipeline over one feature: (x - mean) / scale, then PCA's single direction, whitened by variance."""
+def one_feature(lda_coef, lda_intercept, mean=0.0, scale=1.0, direction=1.0) -> PipelineParameters:
+    """A pipeline over one feature: (x - mean) / scale, then PCA's single direction (+-1)."""
     one = np.ones(1)
-    return PipelineParameters(mean * one, scale * one, np.zeros(1), np.ones((1, 1)), variance * one,
+    return PipelineParameters(mean * one, scale * one, np.zeros(1), direction * np.ones((1, 1)),
                               np.array(lda_coef, dtype=float)[:, None], np.array(lda_intercept, dtype=float))
 
 
 def test_pipeline_as_one_discriminant_by_hand():
-    # x -> (x - 2) / 4 -> / sqrt(0.25) = (x - 2) / 2 -> scores 3 (x - 2) / 2 + 1 = 1.5 x - 2
-    coef, intercept = one_feature([3.0, 0.0, -3.0], [1.0, 0.0, -1.0], mean=2.0, scale=4.0, variance=0.25).linear()
-    np.testing.assert_allclose(coef, [[1.5], [0.0], [-1.5]], rtol=0, atol=1e-15)
-    np.testing.assert_allclose(intercept, [-2.0, 0.0, 2.0], rtol=0, atol=1e-15)
+    # x -> (x - 2) / 4 -> times -1 (PCA's direction) -> scores 6 (2 - x) / 4 + 1 = -1.5 x + 4
+    coef, intercept = one_feature([6.0, 0.0, -6.0], [1.0, 0.0, -1.0], mean=2.0, scale=4.0, direction=-1.0).linear()
+    np.testing.assert_allclose(coef, [[-1.5], [0.0], [1.5]], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(intercept, [4.0, 0.0, -4.0], rtol=0, atol=1e-15)
 
 
 def test_decide_applies_rejection_before_vote():
@@ -126,7 +126,7 @@ def corrupt(tmp_path, day1_fv1_model, edit):
     (lambda d: d.update(format="other"), "format is 'other'"),
     (lambda d: d.pop("lda_coef"), "missing array(s) lda_coef"),
     (lambda d: d.update(lda_coef=d["lda_coef"][:-1]), "lda_coef has shape"),
-    (lambda d: d.update(pca_variance=[-v for v in d["pca_variance"]]), "variances must be positive"),
+    (lambda d: d.update(scaler_scale=[-v for v in d["scaler_scale"]]), "scaler_scale must be positive"),
     (lambda d: d.update(version=2), "model format version 2 (an LDA on unstandardised features); this program reads "
                                     f"version {FORMAT_VERSION}: retrain it with bomi train"),
     (lambda d: d["features"].update(kind="FV9"), "unknown feature vector"),

@@ -229,7 +229,7 @@ def test_smaller_copies_leave_the_class_priors_to_the_recorded_windows():
     priors = np.array([1430, 429, 429, 429]) / 2717
     independent = LinearDiscriminantAnalysis(solver="lsqr", priors=priors).fit(windows.features, windows.labels)
     # LDA without shrinkage does not depend on an affine map of the features (the pipeline's
-    # standardising and whitening) but for a term common to every class, which no decision sees
+    # standardising and rotating) but for a term common to every class, which no decision sees
     common = lambda a: a - a.mean(axis=0)  # noqa: E731
     np.testing.assert_allclose(common(model.intercept), common(independent.intercept_), rtol=1e-7, atol=1e-7)
     np.testing.assert_allclose(common(model.coef), common(independent.coef_), rtol=1e-7, atol=1e-7)
