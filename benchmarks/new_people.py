@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     out.with_suffix(".json").write_text(json.dumps(record, indent=1) + "\n")
     out.with_suffix(".md").write_text(markdown(record))
     figure(rows, out.with_suffix(".png"))
-    print(markdown(record).split("\n\n| member")[0])
+    print(markdown(record).split("\n\n| member |")[0])
     print(f"wrote {out}.{{json,md,png}}")
     return 0
 
