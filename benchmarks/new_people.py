@@ -3,7 +3,8 @@
     python benchmarks/new_people.py [--first-seed 0] [--people 100] [--no-p1] [--name NAME] [--jobs 1]
 
 Members: synthetic people drawn by ``tasks.participants.population`` (seeds first-seed ..
-first-seed + people - 1; development used seeds 0-499), each trained on pass 1 and tested on pass 2,
+first-seed + people - 1; development used seeds 0-43, confirmation 10100-10129), each trained on
+pass 1 and tested on pass 2,
 and P1's five real days (each ordered day pair, 20 members). Every member goes through what
 ``bomi train`` / ``bomi evaluate`` do without ``--profile``: the profile derived from the training
 recording and the settings chosen on it (``bomi.chain.select_settings``). Plain LDA: scikit-learn's
