@@ -504,9 +504,9 @@ class CrossValidation:
 def cross_validate(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
                    candidates: Sequence[Candidate]) -> list[CrossValidation]:
     """Cross-validation within each recording holding out whole holds (``hold_folds``), pooled; one
-    result per candidate. Training folds use the recording's own
-    neutral calibration, the candidate's smaller copies and the profile's turned copies of the
-    motions; windows straddling a label change or a fold boundary are left out of both sides.
+    result per candidate. Training folds use the recording's own neutral calibration (no
+    re-referencing), the candidate's smaller copies and the profile's turned copies of the motions;
+    windows straddling a label change or a fold boundary are left out of both sides.
     """
     with threadpool_limits(limits=1, user_api="blas"):  # many small products: see classifier.fit_pipeline
         parts = [_cross_validate(rec, profile, spec, candidates) for rec in recordings]
