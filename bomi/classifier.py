@@ -1,9 +1,18 @@
 """LDA classification, optional post-processing, and the paper's proportional output.
 
-scikit-learn fits the LDA. Decisions use the fitted linear discriminant (``coef_``, ``intercept_``)
-through ``posteriors``, the same softmax sklearn's ``predict_proba`` computes, because sklearn's
-per-call input validation costs ~90 us per single sample, more than the whole streaming budget.
-A model loaded from disk therefore predicts with exactly the arithmetic of the trained one.
+scikit-learn fits the classifier as a ``Pipeline``: ``StandardScaler`` (every feature on one scale,
+whatever the person, sensor, unit or mounting), ``PCA`` rotating onto the numerical rank of
+the standardised training windows (FV1-FV3 hold near-duplicate columns: the statistics of an
+8-sample window of a slow signal are almost equal; not whitened, so that a shrinkage keeps damping
+the directions of negligible variance, which whitening would weigh as much as any other: trained so
+on a virtual P1 session with shrinkage 0.001, the live chain read the next session's neutral
+posture as c8), then ``LinearDiscriminantAnalysis``. Every
+step is affine, so the fitted pipeline is one linear discriminant on the raw features; decisions
+use it (``Model.coef``, ``Model.intercept``) through ``posteriors``, the same softmax sklearn's
+``predict_proba`` computes, because sklearn's per-call input validation costs ~90 us per single
+sample, more than the whole streaming budget. A model file keeps the fitted parameters of each
+step (``PipelineParameters``); a loaded model composes them with the same function as the trained
+one, so it predicts with exactly the same arithmetic.
 
 Post-processing steps are separate and optional (off by default): confidence rejection (posterior
 below a threshold -> the neutral class) then a majority vote over the last N decisions.
@@ -14,7 +23,10 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from sklearn.decomposition import PCA
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
 from bomi.features import FeatureSpec
@@ -54,18 +66,59 @@ class AmplitudeRange:
     direction: tuple[float, float, float] | None = None
 
 
+# PCA keeps the directions whose singular value exceeds this share of the largest (scikit-learn's own
+# rank tolerance for its 'svd' LDA solver): only numerically empty directions are dropped, the
+# small-variance ones that separate classes stay.
+RANK_TOLERANCE = 1e-4
+
+
+@dataclass(frozen=True)
+class PipelineParameters:
+    """The fitted parameters of StandardScaler -> PCA -> LDA, as a model file keeps them."""
+
+    scaler_mean: np.ndarray      # (F,)
+    scaler_scale: np.ndarray     # (F,)
+    pca_mean: np.ndarray         # (F,) mean of the standardised features (about 0)
+    pca_components: np.ndarray   # (R, F)
+    lda_coef: np.ndarray         # (K, R)
+    lda_intercept: np.ndarray    # (K,)
+
+    def __post_init__(self) -> None:
+        # C-ordered float64 whatever the source (sklearn's lstsq gives Fortran-ordered arrays): the
+        # products in ``linear`` then sum in one order, and a loaded model predicts bit-identically
+        for name in self.__dataclass_fields__:
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype=float))
+
+    def linear(self) -> tuple[np.ndarray, np.ndarray]:
+        """The whole pipeline as one discriminant on the raw features: (coef (K, F), intercept (K,))."""
+        projection = self.pca_components / self.scaler_scale[None, :]
+        coef = self.lda_coef @ projection
+        intercept = self.lda_intercept - self.lda_coef @ (projection @ self.scaler_mean
+                                                          + self.pca_components @ self.pca_mean)
+        return coef, intercept
+
+
 @dataclass
 class Model:
-    """A trained classifier: everything needed to turn node states into decisions."""
+    """A trained classifier: everything needed to turn node states into decisions.
+
+    ``coef`` and ``intercept`` are the pipeline's single linear discriminant (``parameters.linear()``).
+    """
 
     classes: np.ndarray          # (K,) int labels, in sklearn's order
-    coef: np.ndarray             # (K, F)
-    intercept: np.ndarray        # (K,)
+    parameters: PipelineParameters
     spec: FeatureSpec
     amplitude: dict[int, AmplitudeRange]
     post: PostProcessing = field(default_factory=PostProcessing)
     shrinkage: float | str | None = None
     profile: ProfileIdentity | None = None  # the profile it was trained for (None: made in memory, e.g. a CV fold)
+    amplitude_scales: tuple[float, ...] = ()   # the smaller copies of the motions it was trained with
+    cv_accuracy: float | None = None  # the cross-validation estimate of its settings (None: not chosen by one)
+    coef: np.ndarray = field(init=False)        # (K, F)
+    intercept: np.ndarray = field(init=False)   # (K,)
+
+    def __post_init__(self) -> None:
+        self.coef, self.intercept = self.parameters.linear()
 
 
 @dataclass(frozen=True)
@@ -110,23 +163,39 @@ def model_defects(model: Model) -> list[str]:
     return defects
 
 
-def fit_lda(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None,
-            priors: np.ndarray | None = None) -> LinearDiscriminantAnalysis:
-    """sklearn LDA with the least-squares solver (supports shrinkage; ~8x faster than 'svd' on FV3).
+def numerical_rank(features: np.ndarray) -> int:
+    """How many directions of the standardised ``features`` have a singular value above
+    RANK_TOLERANCE x the largest (at least 1)."""
+    standardised = StandardScaler().fit_transform(features)
+    singular = np.linalg.svd(standardised - standardised.mean(axis=0), compute_uv=False)
+    return max(1, int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0])))
+
+
+def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None,
+                 priors: np.ndarray | None = None) -> Pipeline:
+    """StandardScaler -> PCA (a rotation onto the numerical rank) -> LDA with the least-squares solver
+    (supports shrinkage, which on standardised features means the same for every person, sensor and
+    unit; the PCA is not whitened, so a shrinkage still damps the directions of negligible variance).
     ``priors``: class probabilities in sorted label order (None: the class frequencies of ``labels``).
 
     BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
     threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
     """
     with threadpool_limits(limits=1, user_api="blas"):
-        return LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors).fit(features, labels)
+        return Pipeline([("scale", StandardScaler()),
+                         ("pca", PCA(n_components=numerical_rank(features), svd_solver="full")),
+                         ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
+                        ).fit(features, labels)
 
 
-def linear_parameters(lda: LinearDiscriminantAnalysis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(classes, coef (K, F), intercept (K,)) of a fitted multi-class LDA."""
+def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParameters]:
+    """(classes, the fitted parameters of every step) of a fitted multi-class ``fit_pipeline``."""
+    scale, pca, lda = (pipeline.named_steps[name] for name in ("scale", "pca", "lda"))
     if len(lda.classes_) < 3:
         raise ValueError("need at least three classes (binary LDA has a single discriminant)")
-    return np.asarray(lda.classes_, dtype=np.int64), np.array(lda.coef_, dtype=float), np.array(lda.intercept_, dtype=float)
+    return np.asarray(lda.classes_, dtype=np.int64), PipelineParameters(
+        scale.mean_.copy(), scale.scale_.copy(), pca.mean_.copy(), pca.components_.copy(), lda.coef_.copy(),
+        lda.intercept_.copy())
 
 
 def posteriors(model: Model, features: np.ndarray) -> np.ndarray:

@@ -5,9 +5,10 @@ vector (FV3 when every such node has its gyroscope, else FV1), its labels (c0 is
 posture, c1, c2, ... take the paper's joystick functions F, B, R, L, Rr, Lr, B1, B2 in label order),
 and the node that carries each motion (the one whose mean angle change from neutral is largest
 over the class's samples). Classifier settings are left to the person's own data
-(``shrinkage = "select"``, ``rejection_threshold = "select"``) and training also sees every motion
-at 3/4 and 1/2 of its recorded size (the paper's multiple-amplitude training: see
-docs/signal_chain.md).
+(``shrinkage = "select"``, ``rejection_threshold = "select"``): the plain setting unless the
+cross-validation on the training recording earns an extra its place, the extras being LDA
+shrinkage, training also on every motion at 3/4 and 1/2 of its recorded size (the paper's
+multiple-amplitude training), and rejection (``bomi.chain.select_settings``, docs/signal_chain.md).
 """
 from __future__ import annotations
 
@@ -82,5 +83,5 @@ def describe(profile: Profile) -> str:
     scales = ", ".join(f"{s:g}" for s in profile.amplitude_scales)
     return (f"no --profile: {profile.source}: node(s) {list(profile.node_indices)}, {kind} "
             f"({'angles + GYRO' if kind != 'FV1' else 'angles: the recording has no GYRO'}), classes {classes}; "
-            f"shrinkage and rejection threshold chosen on the training recording; motions also trained at "
-            f"{scales} of their size")
+            f"classifier plain unless the cross-validation on the training recording earns an extra its place "
+            f"(shrinkage, motions also trained at {scales} of their size, rejection)")

@@ -5,8 +5,11 @@ only with that profile (``check_model_for``); a file that could drive the arm in
 profile does not allow (NaN or empty amplitude ranges, classes or nodes the profile lacks) is
 refused on loading, and never written.
 
-JSON floats are written with Python's shortest round-trip repr, so a loaded model's parameters are
-bit-identical to the trained model's and it predicts exactly the same.
+The file keeps the fitted parameters of each step of the classifier's pipeline (StandardScaler,
+PCA, LDA: ``bomi.classifier.PipelineParameters``); loading composes them into the one linear
+discriminant with the same function training uses. JSON floats are written with Python's shortest
+round-trip repr, so a loaded model's parameters are bit-identical to the trained model's and it
+predicts exactly the same.
 """
 from __future__ import annotations
 
@@ -14,20 +17,22 @@ import io
 import json
 import os
 import zipfile
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bomi.classifier import AmplitudeRange, Model, PostProcessing, ProfileIdentity, model_defects
+from bomi.classifier import AmplitudeRange, Model, PipelineParameters, PostProcessing, ProfileIdentity, model_defects
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec, features
 from bomi.files import check_input, write_bytes
 from bomi.profiles import Profile
 
 FORMAT_NAME = "bomi-model"
-FORMAT_VERSION = 2  # 2: the profile's identity
+FORMAT_VERSION = 3  # 2: the profile's identity; 3: the pipeline's parameters (standardised features)
 SUFFIXES = (".json", ".npz")
+ARRAYS = ("classes",) + tuple(f.name for f in fields(PipelineParameters))
 
 
 def _metadata(model: Model) -> dict[str, Any]:
@@ -42,6 +47,8 @@ def _metadata(model: Model) -> dict[str, Any]:
         "post_processing": {"rejection_threshold": model.post.rejection_threshold,
                             "vote_length": model.post.vote_length},
         "shrinkage": model.shrinkage,
+        "amplitude_scales": list(model.amplitude_scales),
+        "cv_accuracy": model.cv_accuracy,
         "profile": None if model.profile is None else {"name": model.profile.name, "sha256": model.profile.digest},
     }
 
@@ -58,13 +65,12 @@ def save_model(path: str | os.PathLike, model: Model, *, overwrite: bool = False
     if defects:
         raise BomiError(f"{path}: not written, the trained model is unusable: {'; '.join(defects)}")
     meta = _metadata(model)
+    arrays = {"classes": model.classes, **{f.name: getattr(model.parameters, f.name) for f in fields(PipelineParameters)}}
     if path.suffix.lower() == ".json":
-        payload = json.dumps({**meta, "classes": model.classes.tolist(), "coef": model.coef.tolist(),
-                              "intercept": model.intercept.tolist()}, indent=1).encode()
+        payload = json.dumps({**meta, **{k: v.tolist() for k, v in arrays.items()}}, indent=1).encode()
     else:
         buffer = io.BytesIO()
-        np.savez(buffer, meta=np.array(json.dumps(meta)), classes=model.classes, coef=model.coef,
-                 intercept=model.intercept)
+        np.savez(buffer, meta=np.array(json.dumps(meta)), **arrays)
         payload = buffer.getvalue()
     write_bytes(path, payload, overwrite=overwrite)
 
@@ -77,19 +83,18 @@ def load_model(path: str | os.PathLike) -> Model:
             data = json.loads(path.read_text(encoding="utf-8"))
             if not isinstance(data, dict):
                 raise ValueError("not a JSON object")
-            meta, arrays = data, {k: data.get(k) for k in ("classes", "coef", "intercept")}
+            meta, arrays = data, {k: data.get(k) for k in ARRAYS}
         elif path.suffix.lower() == ".npz":
             if not zipfile.is_zipfile(path):
                 raise ValueError("not an NPZ archive")
             with np.load(path, allow_pickle=False) as npz:
-                missing = {"meta", "classes", "coef", "intercept"} - set(npz.files)
-                if missing:
-                    raise ValueError(f"missing array(s) {', '.join(sorted(missing))}")
+                if "meta" not in npz.files:
+                    raise ValueError("missing array meta")
                 meta = json.loads(str(npz["meta"]))
-                arrays = {k: npz[k] for k in ("classes", "coef", "intercept")}
+                arrays = {k: npz[k] if k in npz.files else None for k in ARRAYS}
         else:
             raise ValueError("model files must end in .json or .npz")
-        return _model_from(meta, arrays)
+        return _model_from(meta, arrays, path)
     except BomiError:
         raise
     except KeyError as exc:
@@ -113,39 +118,61 @@ def _amplitude_range(label: str, entry: dict) -> AmplitudeRange:
                           gamma_max=float(entry["gamma_max"]), direction=direction)
 
 
-def _model_from(meta: dict, arrays: dict) -> Model:
+def _model_from(meta: dict, arrays: dict, source: Path) -> Model:
     if meta.get("format") != FORMAT_NAME:
         raise ValueError(f"format is {meta.get('format')!r}, expected {FORMAT_NAME!r}")
+    if meta.get("version") in (1, 2):
+        raise BomiError(f"{source}: model format version {meta['version']} (an LDA on unstandardised features); this "
+                        f"program reads version {FORMAT_VERSION}: retrain it with bomi train")
     if meta.get("version") != FORMAT_VERSION:
         raise ValueError(f"format version {meta.get('version')!r}, this program reads version {FORMAT_VERSION}")
     f = meta["features"]
     spec = FeatureSpec(kind=f["kind"], nodes=tuple(int(n) for n in f["nodes"]), window=int(f["window"]),
                        stride=int(f["stride"]))
+    missing = [k for k, v in arrays.items() if v is None]
+    if missing:
+        raise ValueError(f"missing array(s) {', '.join(missing)}")
     classes = np.asarray(arrays["classes"])
-    coef = np.asarray(arrays["coef"], dtype=float)
-    intercept = np.asarray(arrays["intercept"], dtype=float)
     if classes.ndim != 1 or classes.dtype.kind not in "iu" or len(set(classes.tolist())) != len(classes):
         raise ValueError("classes must be distinct integer labels")
+    parameters = PipelineParameters(**{f.name: np.asarray(arrays[f.name], dtype=float)
+                                       for f in fields(PipelineParameters)})
     profile = meta.get("profile")
     if not (isinstance(profile, dict) and isinstance(profile.get("name"), str)
             and isinstance(profile.get("sha256"), str)):
         raise ValueError("it does not name the profile it was trained for (name and sha256); retrain it")
     n_features = features(spec.kind, np.zeros((1, spec.window, len(spec.components)))).shape[1]
-    if coef.shape != (len(classes), n_features) or intercept.shape != (len(classes),):
-        raise ValueError(f"coef/intercept shapes {coef.shape}/{intercept.shape} do not fit "
-                         f"{len(classes)} classes x {n_features} {spec.kind} features")
-    if not (np.all(np.isfinite(coef)) and np.all(np.isfinite(intercept))):
-        raise ValueError("non-finite LDA parameters")
+    _check_shapes(parameters, len(classes), n_features, spec.kind)
     amplitude = {int(label): _amplitude_range(label, r) for label, r in meta["amplitude"].items()}
     post = meta["post_processing"]
-    model = Model(classes=classes.astype(np.int64), coef=coef, intercept=intercept, spec=spec, amplitude=amplitude,
+    cv_accuracy = meta.get("cv_accuracy")
+    model = Model(classes=classes.astype(np.int64), parameters=parameters, spec=spec, amplitude=amplitude,
                   post=PostProcessing(rejection_threshold=post["rejection_threshold"],
                                       vote_length=int(post["vote_length"])),
-                  shrinkage=meta.get("shrinkage"), profile=ProfileIdentity(profile["name"], profile["sha256"]))
+                  shrinkage=meta.get("shrinkage"), profile=ProfileIdentity(profile["name"], profile["sha256"]),
+                  amplitude_scales=tuple(float(v) for v in meta.get("amplitude_scales", ())),
+                  cv_accuracy=None if cv_accuracy is None else float(cv_accuracy))
     defects = model_defects(model)
     if defects:
         raise ValueError("; ".join(defects))
     return model
+
+
+def _check_shapes(p: PipelineParameters, n_classes: int, n_features: int, kind: str) -> None:
+    """ValueError unless the pipeline's arrays fit together, the classes and the features, all finite."""
+    rank = p.pca_components.shape[0] if p.pca_components.ndim == 2 else -1
+    expected = {"scaler_mean": (n_features,), "scaler_scale": (n_features,), "pca_mean": (n_features,),
+                "pca_components": (rank, n_features), "lda_coef": (n_classes, rank),
+                "lda_intercept": (n_classes,)}
+    for name, shape in expected.items():
+        value = getattr(p, name)
+        if rank < 1 or value.shape != shape:
+            raise ValueError(f"{name} has shape {value.shape}, expected {shape} for {n_classes} classes x "
+                             f"{n_features} {kind} features")
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"non-finite {name}")
+    if not np.all(p.scaler_scale > 0):
+        raise ValueError("scaler_scale must be positive")
 
 
 def check_model_for(model: Model, profile: Profile, source: str | os.PathLike) -> None:

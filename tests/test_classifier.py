@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from bomi.chain import MotionCopies, prepare, recorded_priors, training_windows
-from bomi.classifier import (AmplitudeRange, MajorityVote, PostProcessing, amplitude_ranges, class_amplitude,
-                             classify_windows, fit_lda, gamma, majority_vote, posteriors, proportional, reject)
+from bomi.classifier import (AmplitudeRange, MajorityVote, PipelineParameters, PostProcessing, amplitude_ranges, class_amplitude,
+                             classify_windows, fit_pipeline, gamma, majority_vote, posteriors, proportional, reject)
 from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.model_io import FORMAT_VERSION, load_model, save_model
@@ -18,8 +18,8 @@ def test_posteriors_are_sklearns(p1_days, p1_profile, day1_fv1_model):
     """The exported linear discriminant reproduces the fitted sklearn estimator on real data."""
     windows, _ = training_windows(p1_days[1], day1_fv1_model.spec, p1_profile.neutral_samples,
                                   MotionCopies.of(p1_profile))   # P1's turned shoulder copies too
-    lda = fit_lda(windows.features, windows.labels, day1_fv1_model.shrinkage,
-                  recorded_priors(windows.labels, windows.recorded))
+    lda = fit_pipeline(windows.features, windows.labels, day1_fv1_model.shrinkage,
+                       recorded_priors(windows.labels, windows.recorded))
     test = prepare(p1_days[2], day1_fv1_model.spec, p1_profile.neutral_samples).features
     assert np.allclose(posteriors(day1_fv1_model, test), lda.predict_proba(test), rtol=0, atol=1e-12)
     assert np.array_equal(classify_windows(day1_fv1_model, test).raw, lda.predict(test))
@@ -37,10 +37,24 @@ def test_rejection_and_vote_by_hand():
     assert [vote.push(v) for v in (4, 5, 5, 4)] == [4, 5, 5, 4]
 
 
+def one_feature(lda_coef, lda_intercept, mean=0.0, scale=1.0, direction=1.0) -> PipelineParameters:
+    """A pipeline over one feature: (x - mean) / scale, then PCA's single direction (+-1)."""
+    one = np.ones(1)
+    return PipelineParameters(mean * one, scale * one, np.zeros(1), direction * np.ones((1, 1)),
+                              np.array(lda_coef, dtype=float)[:, None], np.array(lda_intercept, dtype=float))
+
+
+def test_pipeline_as_one_discriminant_by_hand():
+    # x -> (x - 2) / 4 -> times -1 (PCA's direction) -> scores 6 (2 - x) / 4 + 1 = -1.5 x + 4
+    coef, intercept = one_feature([6.0, 0.0, -6.0], [1.0, 0.0, -1.0], mean=2.0, scale=4.0, direction=-1.0).linear()
+    np.testing.assert_allclose(coef, [[-1.5], [0.0], [1.5]], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(intercept, [4.0, 0.0, -4.0], rtol=0, atol=1e-15)
+
+
 def test_decide_applies_rejection_before_vote():
     from bomi.classifier import Model
     from bomi.features import FeatureSpec
-    model = Model(classes=np.array([0, 1, 2]), coef=np.array([[0.0], [1.0], [-1.0]]), intercept=np.zeros(3),
+    model = Model(classes=np.array([0, 1, 2]), parameters=one_feature([0.0, 1.0, -1.0], [0.0, 0.0, 0.0]),
                   spec=FeatureSpec("FV1", (1,), window=1), amplitude={})
     x = np.array([[5.0], [0.1], [5.0], [-5.0]])
     d = classify_windows(model, x, PostProcessing(rejection_threshold=0.9, vote_length=1))
@@ -110,11 +124,14 @@ def corrupt(tmp_path, day1_fv1_model, edit):
 @pytest.mark.parametrize("edit, message", [
     (lambda d: d.update(version=FORMAT_VERSION + 1), f"format version {FORMAT_VERSION + 1}"),
     (lambda d: d.update(format="other"), "format is 'other'"),
-    (lambda d: d.pop("coef"), "coef"),
-    (lambda d: d.update(coef=d["coef"][:-1]), "do not fit"),
+    (lambda d: d.pop("lda_coef"), "missing array(s) lda_coef"),
+    (lambda d: d.update(lda_coef=d["lda_coef"][:-1]), "lda_coef has shape"),
+    (lambda d: d.update(scaler_scale=[-v for v in d["scaler_scale"]]), "scaler_scale must be positive"),
+    (lambda d: d.update(version=2), "model format version 2 (an LDA on unstandardised features); this program reads "
+                                    f"version {FORMAT_VERSION}: retrain it with bomi train"),
     (lambda d: d["features"].update(kind="FV9"), "unknown feature vector"),
     (lambda d: d.pop("features"), "missing field 'features'"),
-    (lambda d: d["coef"][0].__setitem__(0, "x"), "could not convert"),
+    (lambda d: d["lda_coef"][0].__setitem__(0, "x"), "could not convert"),
     (lambda d: d["amplitude"]["1"].update(direction=[1.0, 1.0, 0.0]), "class 1: direction must be a finite unit 3-vector"),
 ])
 def test_bad_model_files_give_clear_errors(tmp_path, day1_fv1_model, edit, message):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from bomi.chain import Evaluation, evaluate, require_for, select_settings, train
+from bomi.chain import Evaluation, check_training_data, evaluate, require_for, select_settings, train
 from bomi.classifier import Model, PostProcessing
 from bomi.dataset import data_dir
 from bomi.derived import derive_profile, describe
@@ -127,14 +127,20 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
 def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> Model:
     """Train ``profile``'s model, first checking every recording and choosing (and printing) what the
     profile leaves to the person's own data."""
-    for rec in recordings:
-        require_for(rec, spec)
+    check_training_data(recordings, profile, spec)
     selection = None
     if profile.shrinkage == SELECT or profile.select_rejection:
         print("choosing the classifier settings on the training recording (cross-validation) ...", flush=True)
         selection = select_settings(recordings, profile, spec)
         print(selection.explain())
     return train(recordings, profile, spec, selection=selection)
+
+
+def settings_text(model: Model) -> str:
+    """The classifier settings a model was trained with, in words."""
+    rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
+    copies = ", ".join(f"{s:g}" for s in model.amplitude_scales) or "none"
+    return f"shrinkage {model.shrinkage}, smaller copies {copies}, rejection threshold {rejection}"
 
 
 def _derived(recordings: Sequence[Recording]) -> Profile:
@@ -155,9 +161,9 @@ def train_command(args: argparse.Namespace) -> int:
     profile = profile or _derived(recordings)
     model = fit_model(recordings, profile, _spec(profile, args.features))
     save_model(out, model, overwrite=args.force)
-    rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
-    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}, "
-          f"rejection threshold {rejection}: wrote {out}")
+    estimate = "" if model.cv_accuracy is None else f" (CV estimate {100 * model.cv_accuracy:.2f} %)"
+    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), {settings_text(model)}{estimate}: "
+          f"wrote {out}")
     if outputs["--save-profile"]:
         save_profile(outputs["--save-profile"], profile, overwrite=args.force)
         print(f"profile {profile.name}: wrote {outputs['--save-profile']} (bomi live --profile "
@@ -207,14 +213,19 @@ def evaluate_command(args: argparse.Namespace) -> int:
     evaluations = [evaluate(model, rec, neutral_samples, post)
                    for rec in tqdm(tests, desc="evaluating", unit="file", disable=len(tests) < 2)]
     results = []
+    if model.cv_accuracy is not None:
+        print(f"model: {settings_text(model)}")
     for path, ev in zip(args.test, evaluations):
         line = f"{path}: accuracy {100 * ev.accuracy:.2f} % over {len(ev.truth)} windows"
+        if model.cv_accuracy is not None:
+            line += f" (CV estimate {100 * model.cv_accuracy:.2f} %, test {100 * ev.accuracy:.2f} %)"
         if post.rejection_threshold is not None:
             line += (f"; rejected {100 * ev.rejected_share:.2f} %, accuracy of accepted windows "
                      f"{100 * ev.accepted_accuracy:.2f} %")
         print(line)
         print(confusion_text(ev, model.classes.tolist()))
-        results.append({"test": str(path), "accuracy": ev.accuracy, "windows": int(len(ev.truth)),
+        results.append({"test": str(path), "accuracy": ev.accuracy, "cv_estimate": model.cv_accuracy,
+                        "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
     with atomic_output(outputs["--png"], overwrite=args.force) as temp:
         save_confusion_figure(temp, evaluations, model.classes.tolist())
