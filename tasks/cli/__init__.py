@@ -47,6 +47,9 @@ COMMANDS: dict[str, Command] = {
     "demo": Command("tasks.cli.task", "one joystick and one BoMI episode of P1: table, timeline figure, MP4"),
     "sweep": Command("tasks.cli.sweep", "episodes over a grid of participants x settings x seeds, resumable"),
     "live": Command("tasks.cli.live", "drive the simulated arm from a live base-station stream"),
+    "twin": Command("tasks.cli.twin", "fit a virtual participant (a twin) to a person's calibration recording(s)"),
+    "synth": Command("tasks.cli.twin", "a virtual participant performs its source recording's protocol: a new "
+                                       "recording"),
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(command.module for command in COMMANDS.values()))
 
