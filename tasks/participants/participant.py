@@ -5,7 +5,7 @@ minimum-jerk move from the current posture to neutral + amplitude x (the class p
 session's and this repetition's offsets), held with slow sway and tremor; intent 0 returns to
 a (freshly drawn) neutral. Each node's angle trajectory goes through ``tasks.participants.imu_synth`` to raw
 sensor counts and base-station frames, with frame loss and bursty delivery. Parameters come
-from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.participants.fit``).
+from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.participants.twin``).
 Every modelling assumption is listed in docs/virtual_participant.md.
 
 TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset_s``,

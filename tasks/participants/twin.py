@@ -149,9 +149,9 @@ class Transition:
         return self.t10 is None
 
 
-def transition(x: np.ndarray, before: Block, after: Block) -> Transition | None:
-    """The move from ``before``'s level to ``after``'s in the (n, k) flattened angles ``x`` (levels:
-    medians of each run's second half); None when it is too small or not complete within ``after``."""
+def transition(x: np.ndarray, time: np.ndarray, before: Block, after: Block) -> Transition | None:
+    """The move from ``before``'s level to ``after``'s in the (n, k) flattened angles ``x`` at ``time``
+    (s; levels: medians of each run's second half); None when it is too small or not complete within ``after``."""
     old = np.median(x[(before.start + before.stop) // 2:before.stop], axis=0)
     new = np.median(x[(after.start + after.stop) // 2:after.stop], axis=0)
     way = new - old
@@ -169,7 +169,8 @@ def transition(x: np.ndarray, before: Block, after: Block) -> Transition | None:
     later = crossed[1][crossed[1] > t10]
     if not len(later):
         return None
-    return Transition(t10 / SAMPLE_RATE_HZ, later[0] / SAMPLE_RATE_HZ)
+    cue = time[after.start]
+    return Transition(float(time[after.start + t10] - cue), float(time[after.start + later[0]] - cue))
 
 
 def timing_from(transitions: Sequence[Transition]) -> tuple[float, float] | None:
@@ -190,6 +191,7 @@ class Pass:
 
     source: str
     angles: np.ndarray              # (n, nodes, 3)
+    time: np.ndarray                # (n,) s: the recording's Time, else the row count at the sample rate
     blocks: list[Block]
     transitions: list[Transition]
 
@@ -209,8 +211,10 @@ class Pass:
                 for k, b in enumerate(self.blocks)]
 
     def protocol(self) -> Protocol:
+        """Each run from its first row to the next run's first row (the last: to its last row, and one period)."""
+        starts = np.r_[[self.time[b.start] for b in self.blocks], self.time[-1] + 1.0 / SAMPLE_RATE_HZ]
         return Protocol(labels=tuple(b.label for b in self.blocks),
-                        durations_s=tuple(round((b.stop - b.start) / SAMPLE_RATE_HZ, 3) for b in self.blocks),
+                        durations_s=tuple(round(float(d), 3) for d in np.diff(starts)),
                         holds_only=not self.continuous, source=Path(self.source).name)
 
 
@@ -227,8 +231,9 @@ def read_pass(rec: Recording, day: int, profile: Profile) -> Pass:
     angles = stacked_angles(rec, nodes)
     blocks = hold_blocks(labels, day)
     flat = angles.reshape(len(angles), -1)
-    moves = [transition(flat, a, b) for a, b in zip(blocks[:-1], blocks[1:])]
-    return Pass(rec.source, angles, blocks, [t for t in moves if t is not None])
+    time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
+    moves = [transition(flat, time, a, b) for a, b in zip(blocks[:-1], blocks[1:])]
+    return Pass(rec.source, angles, time, blocks, [t for t in moves if t is not None])
 
 
 def check_class_samples(passes: Sequence[Pass], profile: Profile) -> None:
@@ -433,13 +438,13 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     if missing:
         from_prior(("rep_std_deg",), "no class is repeated within a pass")
         for label in missing:
-            rep_std[label] = prior_class(prior, profile.name, label).rep_std_deg
+            rep_std[label] = prior_nodes(prior, profile, prior_class(prior, profile.name, label).rep_std_deg)
     if neutral_within:
         neutral_rep_std = np.sqrt(np.mean(np.concatenate(neutral_within) ** 2, axis=0))
         provenance["neutral.rep_std_deg"] = f"measured: spread of the neutral holds' levels within a pass ({names})"
     else:
         from_prior(("neutral.rep_std_deg",), "the neutral posture is held once per pass")
-        neutral_rep_std = prior.neutral.rep_std_deg
+        neutral_rep_std = prior_nodes(prior, profile, prior.neutral.rep_std_deg)
 
     # drift between passes
     day_gain, day_std = {}, {}
@@ -466,8 +471,10 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     if np.isnan(neutral_sway).any():
         from_prior(("neutral.sway_std_deg", "neutral.tremor_std_deg"),
                    f"no neutral hold of a node longer than {4 * EDGE_SAMPLES} samples")
-        neutral_sway = np.where(np.isnan(neutral_sway), prior.neutral.sway_std_deg, neutral_sway)
-        neutral_tremor = np.where(np.isnan(neutral_tremor), prior.neutral.tremor_std_deg, neutral_tremor)
+        neutral_sway = np.where(np.isnan(neutral_sway), prior_nodes(prior, profile, prior.neutral.sway_std_deg),
+                                neutral_sway)
+        neutral_tremor = np.where(np.isnan(neutral_tremor), prior_nodes(prior, profile, prior.neutral.tremor_std_deg),
+                                  neutral_tremor)
     neutral_sway, neutral_tremor = isotropic_yaw(neutral_sway), isotropic_yaw(neutral_tremor)
     sway = {label: isotropic_yaw(holds.per_node(holds.sway, label)) for label in labels}
     tremor = {label: isotropic_yaw(holds.per_node(holds.tremor, label)) for label in labels}
@@ -500,6 +507,14 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         neutral_rep_std=neutral_rep_std, neutral_sway_std=neutral_sway, neutral_tremor_std=neutral_tremor,
         tremor_spectrum=spectrum, postures=postures, rep_std=rep_std, day_gain_log_std=day_gain, day_std=day_std,
         sway_std=sway, tremor_std=tremor, protocol=passes[0].protocol(), provenance=provenance, fallbacks=fallbacks)
+
+
+def prior_nodes(prior: ParticipantParams, profile: Profile, matrix: np.ndarray) -> np.ndarray:
+    """A (nodes, 3) matrix of the prior for this profile's nodes: as it is for the same profile, else
+    its median node, for every node."""
+    if prior.profile == profile.name and matrix.shape[0] == len(profile.nodes):
+        return matrix
+    return np.tile(np.median(matrix, axis=0), (len(profile.nodes), 1))
 
 
 def prior_class(prior: ParticipantParams, profile: str, label: int) -> ClassMotion:
