@@ -175,8 +175,16 @@ def test_a_twin_without_a_profile_derives_it_and_is_a_participant_everywhere(tmp
     profile = arm_profile(params.profile)            # the derived profile beside the twin, whatever the cwd
     assert profile.node_indices == (1, 2) and sorted(params.classes) == [1, 2, 3, 4, 5]
     VirtualParticipant(params, profile, seed=0)       # nodes and classes match
+    # five motions: F, B, R, L, Rr and no mode button: the stacking task says so in one line
+    code, _, err = bomi(capsys, "run-task", "--operator", "bomi", "--participant", out, "--time-limit", 2)
+    assert code == 2 and err.startswith("bomi: error: ") and "no class for Lr, B1" in err and err.count("\n") == 1
+
+
+def test_run_task_takes_a_twin_file(tmp_path, shared_data, capsys):
+    out = tmp_path / "day2.toml"
+    assert bomi(capsys, "twin", shared_data / "day2_testp.mat", "--profile", "P1", "--out", out)[0] == 0
     code, stdout, err = bomi(capsys, "run-task", "--operator", "joystick", "--participant", out, "--time-limit", 2)
-    assert code in (0, 1) and "joystick" in stdout, err
+    assert code in (0, 1) and "| any | joystick |" in stdout, err
 
 
 # ------------------------------------------------------------------------------------ bad input
