@@ -10,9 +10,10 @@ S + 2i + 1). Its prediction of the real day k -> j accuracy is the session-to-se
 the mean of session 1 -> 2 and 2 -> 1. Real: train on day k, test on day j, profile P1 (what
 `bomi evaluate --train dayk --test dayj --profile P1` prints). Per pair: prediction, real, gap.
 
-With ``--population N`` (needs tasks/participants/population.py): N synthetic people with known
-parameters, two passes each; the twin of each person's first pass against the true parameters
-(recovery, per parameter) and its pass-to-pass prediction against the person's real pass 1 -> 2.
+With ``--population N``: N synthetic people (tasks/participants/population.py, people S .. S + N - 1)
+with known parameters, two passes each; the twin of each person's first pass (the person's profile,
+prior P1) against the true parameters (recovery, per parameter) and its pass-to-pass prediction
+(sessions S + 500 + 2i, + 1) against the person's pass 1 -> 2 accuracy.
 
 Writes benchmarks/results/twin_validation_S.{md,json,png}.
 """
@@ -41,6 +42,7 @@ from bomi.reproduce import DAYS, read_days  # noqa: E402
 from tasks.cli.chain import fit_model  # noqa: E402
 from tasks.participants.participant import (ParticipantParams, load_participant, protocol_session,  # noqa: E402
                                             session_recording)
+from tasks.participants.population import draw_person, pass_recordings  # noqa: E402
 from tasks.participants.twin import fit_twin, twin_toml  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -84,6 +86,71 @@ def day_pairs(days: dict[int, Recording], profile: Profile, first_seed: int, dir
         rows.append({"train_day": k, "test_day": j, "seeds": list(seeds), "predicted_pct": pred, "real_pct": real,
                      "gap_points": pred - real})
     return rows
+
+
+def _ratio(twin: np.ndarray, true: np.ndarray) -> float:
+    """Median over entries of twin / true (1: recovered)."""
+    return float(np.median(np.asarray(twin) / np.maximum(np.asarray(true), 1e-9)))
+
+
+def recovery(person, twin: ParticipantParams) -> dict[str, float]:
+    """Per parameter: how far the twin of a person's first pass is from the person's true parameters."""
+    true = person.params
+    labels = sorted(true.classes)
+    posture_error = [np.linalg.norm(twin.classes[c].posture_deg - true.classes[c].posture_deg) for c in labels]
+    posture_size = [np.linalg.norm(true.classes[c].posture_deg) for c in labels]
+    pick = lambda params, key: np.concatenate([getattr(params.classes[c], key) for c in labels])  # noqa: E731
+    peak = lambda params: float(params.tremor_spectrum[0][np.argmax(params.tremor_spectrum[1])])  # noqa: E731
+    return {
+        "posture error / size": float(np.median(np.array(posture_error) / np.array(posture_size))),
+        "posture error (deg)": float(np.median(posture_error)),
+        "rep_std_deg twin / true": _ratio(pick(twin, "rep_std_deg"), pick(true, "rep_std_deg")),
+        "neutral rep_std_deg twin / true": _ratio(twin.neutral.rep_std_deg, true.neutral.rep_std_deg),
+        "sway_std_deg twin / true": _ratio(pick(twin, "sway_std_deg")[:, :2], pick(true, "sway_std_deg")[:, :2]),
+        "tremor_std_deg twin / true": _ratio(pick(twin, "tremor_std_deg")[:, :2], pick(true, "tremor_std_deg")[:, :2]),
+        "tremor peak (Hz) twin - true": peak(twin) - peak(true),
+        "onset_s twin - true (prior)": twin.onset_s - true.onset_s,
+        "reaction_s twin - true (prior)": twin.reaction_s - true.reaction_s,
+        "day_gain_log_std twin - true (prior)": float(np.median([twin.classes[c].day_gain_log_std
+                                                                 - true.classes[c].day_gain_log_std for c in labels])),
+    }
+
+
+def population(first_seed: int, people: int, directory: Path) -> list[dict]:
+    """Each person's twin of pass 1: recovery, and its pass-to-pass prediction against the real pass 1 -> 2."""
+    prior = load_participant("P1")
+    rows = []
+    for i, seed in enumerate(tqdm(range(first_seed, first_seed + people), desc="people", unit="person")):
+        person = draw_person(seed)
+        first, second = pass_recordings(person)
+        twin = as_participant(fit_twin([first], person.profile, prior, f"twin-of-N{seed}", person.profile.name),
+                              directory)
+        seeds = (first_seed + 500 + 2 * i, first_seed + 500 + 2 * i + 1)
+        rows.append({"person": seed, "nodes": len(person.profile.nodes), "motions": len(person.params.classes),
+                     "seeds": list(seeds), "predicted_pct": predicted(twin, person.profile, seeds),
+                     "real_pct": accuracy(first, second, person.profile), **recovery(person, twin)})
+        rows[-1]["gap_points"] = rows[-1]["predicted_pct"] - rows[-1]["real_pct"]
+    return rows
+
+
+def population_markdown(rows: list[dict]) -> str:
+    keys = [k for k in rows[0] if k not in ("person", "nodes", "motions", "seeds", "predicted_pct", "real_pct",
+                                            "gap_points")]
+    gaps = np.array([r["gap_points"] for r in rows])
+    lines = ["## Synthetic people (tasks/participants/population.py): the twin of pass 1 against the truth", "",
+             "Parameter recovery, median over people (per person: median over classes and angles):", "",
+             "| parameter | median | 10th-90th percentile |", "|---|---|---|"]
+    for key in keys:
+        values = [r[key] for r in rows]
+        lines.append(f"| {key} | {np.median(values):+.3f} | {np.percentile(values, 10):+.3f} .. "
+                     f"{np.percentile(values, 90):+.3f} |")
+    lines += ["", "Prediction: the twin's session-to-session accuracy against the person's pass 1 -> 2 accuracy:", "",
+              "| person | nodes | motions | predicted % | real pass 1 -> 2 % | gap |", "|---|---|---|---|---|---|"]
+    lines += [f"| {r['person']} | {r['nodes']} | {r['motions']} | {r['predicted_pct']:.2f} | {r['real_pct']:.2f} | "
+              f"{r['gap_points']:+.2f} |" for r in rows]
+    lines += ["", f"Mean absolute gap {np.mean(np.abs(gaps)):.2f} points (mean gap {np.mean(gaps):+.2f}); within "
+              f"{BAR_POINTS:g} points for {int(np.sum(np.abs(gaps) <= BAR_POINTS))} of {len(rows)} people.", ""]
+    return "\n".join(lines)
 
 
 def markdown(rows: list[dict], first_seed: int) -> str:
@@ -140,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--first-seed", type=int, required=True, help="first synthetic-session seed (40 are used)")
     parser.add_argument("--data", type=Path, default=None, help="directory of dayN_testp.mat (default: BOMI_DATA_DIR)")
+    parser.add_argument("--population", type=int, default=0, metavar="N", help="also N synthetic people (default 0)")
+    parser.add_argument("--skip-days", action="store_true", help="only the synthetic people")
     args = parser.parse_args(argv)
     profile = load_profile("P1")
     try:
@@ -147,18 +216,26 @@ def main(argv: list[str] | None = None) -> int:
     except BomiError as exc:
         print(f"twin_validation: error: {exc}", file=sys.stderr)
         return 2
-    with tempfile.TemporaryDirectory() as temp:
-        rows = day_pairs(days, profile, args.first_seed, Path(temp))
     name = f"twin_validation_{args.first_seed}"
     RESULTS.mkdir(exist_ok=True)
-    gaps = [abs(r["gap_points"]) for r in rows]
-    record = {"first_seed": args.first_seed, "pairs": rows, "mean_abs_gap_points": float(np.mean(gaps)),
-              "pairs_within_bar": int(sum(g <= BAR_POINTS for g in gaps)), "bar_points": BAR_POINTS,
-              "bar_pairs": BAR_PAIRS}
+    record: dict = {"first_seed": args.first_seed}
+    text = ""
+    with tempfile.TemporaryDirectory() as temp:
+        if not args.skip_days:
+            rows = day_pairs(days, profile, args.first_seed, Path(temp))
+            gaps = [abs(r["gap_points"]) for r in rows]
+            record.update({"pairs": rows, "mean_abs_gap_points": float(np.mean(gaps)),
+                           "pairs_within_bar": int(sum(g <= BAR_POINTS for g in gaps)), "bar_points": BAR_POINTS,
+                           "bar_pairs": BAR_PAIRS})
+            text = markdown(rows, args.first_seed)
+            figure(rows, RESULTS / f"{name}.png")
+        if args.population:
+            people = population(args.first_seed, args.population, Path(temp))
+            record["population"] = people
+            text += "\n" + population_markdown(people)
+            name += "_population" if args.skip_days else ""
     (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1) + "\n")
-    text = markdown(rows, args.first_seed)
     (RESULTS / f"{name}.md").write_text(text)
-    figure(rows, RESULTS / f"{name}.png")
     print(text)
     return 0
 

@@ -58,6 +58,11 @@ def test_fit_helpers_on_synthetic_signals():
     assert kept_freqs.tolist() == [0, 1, 2, 3, 4] and kept.tolist() == [0.125, 0.5, 1, 0.25, 0]
     assert twin_module.isotropic_yaw(np.array([[1.0, 3.0, 9.0]])).tolist() == [[1.0, 3.0, 2.0]]
     assert twin_module.repeated_fraction(np.array([[1, 2], [1, 2], [1, 3], [1, 3]])) == pytest.approx(2 / 3)
+    # pooled within-pass spread, n - 1 degrees of freedom per pass: pass A (1, 3): 2 squares; pass B (0, 3, 6): 18;
+    # a pass shown once adds nothing -> sqrt(20 / (1 + 2))
+    groups = [np.array([[1.0], [3.0]]), np.array([[0.0], [3.0], [6.0]]), np.array([[9.0]])]
+    assert twin_module.within_pass_std(groups)[0] == pytest.approx(np.sqrt(20 / 3))
+    assert twin_module.within_pass_std([np.array([[9.0]])]) is None
 
 
 def test_a_minimum_jerk_move_is_timed_back_from_its_10_and_90_percent_times():

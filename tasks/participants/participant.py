@@ -611,7 +611,7 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
     parts += [vp.deliveries(t), vp.flush()]
     delivery = _merge(*parts)
     truth = vp.truth()
-    keep = truth.time_s <= t
+    keep = np.arange(len(truth.time_s)) <= int(np.floor(t / DT + 1e-9))   # the samples up to t, as generated
     truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
     cue = np.zeros(len(truth.time_s), dtype=int)
     for start, label in cues:

@@ -326,6 +326,16 @@ class _Holds:
         return [np.array(table[(label, d)]) for d in range(1, days + 1) if (label, d) in table]
 
 
+def within_pass_std(groups: Sequence[np.ndarray]) -> np.ndarray | None:
+    """The pooled standard deviation of repetitions around their own pass's mean (unbiased: each pass
+    with n repetitions gives n - 1 degrees of freedom); None when no pass repeats."""
+    repeated = [g for g in groups if len(g) > 1]
+    if not repeated:
+        return None
+    squares = sum(np.sum((g - g.mean(axis=0)) ** 2, axis=0) for g in repeated)
+    return np.sqrt(squares / sum(len(g) - 1 for g in repeated))
+
+
 def _day_variation(days: list[np.ndarray], day_means_of: list[np.ndarray], posture: np.ndarray, rep_var: np.ndarray
                    ) -> tuple[float, np.ndarray]:
     """(day gain log-std, day offset std) of one class from its per-day repetitions (deltas): a day's
@@ -419,17 +429,13 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
                                  f"around it ({names})")
 
     # repetition spread: of the held level within a pass; classes never repeated take the pooled spread
-    within = [reps - reps.mean(axis=0) for days in per_day_levels.values() for reps in days if len(reps) > 1]
     day_neutrals = [np.array(levels) for _, levels in sorted(holds.neutral_levels.items())]
-    neutral_within = [lv - lv.mean(axis=0) for lv in day_neutrals if len(lv) > 1]
-    pooled = np.mean(np.concatenate(within) ** 2, axis=0) if within else None
+    pooled = within_pass_std([reps for days in per_day_levels.values() for reps in days])
     rep_std: dict[int, np.ndarray] = {}
     for label in labels:
-        own = [reps - reps.mean(axis=0) for reps in per_day_levels[label] if len(reps) > 1]
-        if own:
-            rep_std[label] = np.sqrt(np.mean(np.concatenate(own) ** 2, axis=0))
-        elif pooled is not None:
-            rep_std[label] = np.sqrt(pooled)
+        own = within_pass_std(per_day_levels[label])
+        if own is not None or pooled is not None:
+            rep_std[label] = own if own is not None else pooled
     once = [label for label in labels if label in rep_std and not any(len(r) > 1 for r in per_day_levels[label])]
     provenance["rep_std_deg"] = (f"measured: spread of each class's held levels around its pass mean ({names})"
                                  + (f"; {', '.join(f'c{c}' for c in once)} shown once per pass: pooled over the "
@@ -439,8 +445,8 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         from_prior(("rep_std_deg",), "no class is repeated within a pass")
         for label in missing:
             rep_std[label] = prior_nodes(prior, profile, prior_class(prior, profile.name, label).rep_std_deg)
-    if neutral_within:
-        neutral_rep_std = np.sqrt(np.mean(np.concatenate(neutral_within) ** 2, axis=0))
+    neutral_rep_std = within_pass_std(day_neutrals)
+    if neutral_rep_std is not None:
         provenance["neutral.rep_std_deg"] = f"measured: spread of the neutral holds' levels within a pass ({names})"
     else:
         from_prior(("neutral.rep_std_deg",), "the neutral posture is held once per pass")
@@ -545,8 +551,8 @@ def twin_toml(twin: Twin, description: str) -> str:
         f"name = {_toml_string(twin.name)}",
         f"profile = {_toml_string(twin.profile)}",
         f"description = {_toml_string(description)}",
-        f"onset_s = {twin.onset_s:.3f}",
-        f"reaction_s = {twin.reaction_s:.3f}",
+        f"onset_s = {round(twin.onset_s, 3):g}",
+        f"reaction_s = {round(twin.reaction_s, 3):g}",
         "max_amplitude = 1.0",
         "",
         "[tremor]   # power spectrum of the first node's tremor (fused pitch and roll above 1 Hz) in holds",
