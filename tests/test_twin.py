@@ -230,3 +230,17 @@ def test_holds_too_short_to_measure_fall_back_and_say_so(tmp_path, known_p4, cap
     params, p1 = load_participant(out), load_participant("P1")
     assert params.provenance["tremor"].startswith("prior: P1")
     np.testing.assert_array_equal(params.tremor_spectrum[1], p1.tremor_spectrum[1])
+
+
+def test_a_sweep_grid_names_a_twin_relative_to_itself(tmp_path, shared_data, capsys):
+    from tasks.cli.sweep import cells, check_cells, load_grid
+
+    (tmp_path / "grids").mkdir()
+    assert bomi(capsys, "twin", shared_data / "day3_testp.mat", "--profile", "P1", "--out",
+                tmp_path / "grids" / "day3.toml")[0] == 0
+    grid_path = tmp_path / "grids" / "grid.toml"
+    grid_path.write_text('participants = ["day3.toml", "P1"]\noperators = ["bomi"]\nseeds = [0]\n'
+                         '[vary]\nparticipant.reaction_s = [0.3]\n')
+    grid = load_grid(grid_path)
+    assert grid.participants == (str(tmp_path / "grids" / "day3.toml"), "P1")
+    check_cells(grid, cells(grid))          # the twin and its profile load, with the edit
