@@ -153,6 +153,38 @@ def population_markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+RATIO_KEYS = ("rep_std_deg twin / true", "neutral rep_std_deg twin / true", "sway_std_deg twin / true",
+              "tremor_std_deg twin / true")
+
+
+def population_figure(rows: list[dict], path: Path) -> None:
+    """Left: the twin's prediction against each person's pass 1 -> 2 accuracy; right: recovered / true per parameter."""
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 4))
+    real = np.array([r["real_pct"] for r in rows])
+    pred = np.array([r["predicted_pct"] for r in rows])
+    lo = min(real.min(), pred.min()) - 1
+    ax.fill_between([lo, 100.5], [lo - BAR_POINTS, 100.5 - BAR_POINTS], [lo + BAR_POINTS, 100.5 + BAR_POINTS],
+                    color="C2", alpha=0.15, label=f"within {BAR_POINTS:g} points")
+    ax.plot([lo, 100.5], [lo, 100.5], "k--", lw=0.8)
+    ax.scatter(real, pred)
+    for r in rows:
+        ax.annotate(str(r["person"]), (r["real_pct"], r["predicted_pct"]), fontsize=6)
+    ax.set_xlim(lo, 100.5)
+    ax.set_ylim(lo, 100.5)
+    ax.set_xlabel("person's real accuracy, pass 1 -> pass 2 (%)")
+    ax.set_ylabel("twin of pass 1: session-to-session accuracy (%)")
+    ax.legend(loc="upper left", fontsize=8)
+    bx.boxplot([[r[k] for r in rows] for k in RATIO_KEYS])
+    bx.set_xticks(range(1, len(RATIO_KEYS) + 1), [k.replace(" twin / true", "") for k in RATIO_KEYS])
+    bx.axhline(1.0, color="k", lw=0.8, ls="--")
+    bx.set_ylabel("twin / true (median per person)")
+    bx.tick_params(axis="x", labelsize=7)
+    fig.suptitle(f"Twins of {len(rows)} synthetic people (one pass each) against their truth")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def markdown(rows: list[dict], first_seed: int) -> str:
     gaps = np.array([r["gap_points"] for r in rows])
     within = int(np.sum(np.abs(gaps) <= BAR_POINTS))
@@ -232,6 +264,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.population:
             people = population(args.first_seed, args.population, Path(temp))
             record["population"] = people
+            population_figure(people, RESULTS / f"{name}_population.png")
             text += "\n" + population_markdown(people)
             name += "_population" if args.skip_days else ""
     (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1) + "\n")

@@ -102,7 +102,7 @@ def paper_protocol(classes: list[int]) -> Protocol:
     runs = [NEUTRAL_LABEL]
     for label, _ in protocol_order(classes, PAPER_REPETITIONS, (1.0,)):
         runs += [label, NEUTRAL_LABEL]
-    return Protocol(tuple(runs), (PAPER_HOLD_S,) * len(runs), True, "the paper's protocol")
+    return Protocol(tuple(runs), (PAPER_HOLD_S,) * len(runs), True, "the paper's calibration")
 
 
 def synth_command(args: argparse.Namespace) -> int:
@@ -112,7 +112,7 @@ def synth_command(args: argparse.Namespace) -> int:
     protocol = params.protocol
     if protocol is None:
         protocol = paper_protocol(sorted(params.classes))
-        print(f"{params.name} was not fitted from a recording: performing {protocol.source} "
+        print(f"{params.name} was not fitted from a recording: performing the protocol of {protocol.source} "
               f"({len(protocol.labels)} runs of {PAPER_HOLD_S:g} s, holds only)")
     session = protocol_session(params, profile, args.seed, protocol)
     rec = session_recording(session, profile, holds_only=protocol.holds_only)
