@@ -244,3 +244,27 @@ def test_a_sweep_grid_names_a_twin_relative_to_itself(tmp_path, shared_data, cap
     grid = load_grid(grid_path)
     assert grid.participants == (str(tmp_path / "grids" / "day3.toml"), "P1")
     check_cells(grid, cells(grid))          # the twin and its profile load, with the edit
+
+
+def test_a_recording_without_the_neutral_posture_is_one_error_line(tmp_path, continuous_csv, capsys):
+    rec = read_recording(continuous_csv)
+    keep = rec.labels != 0
+    path = tmp_path / "no_neutral.csv"
+    write_recording(path, Recording(nodes={i: dataclasses.replace(d, **{s.value: getattr(d, s.value)[keep]
+                                                                      for s in d.signals})
+                                           for i, d in rec.nodes.items()},
+                                    labels=rec.labels[keep], time=rec.time[keep]))
+    code, _, err = bomi(capsys, "twin", path, "--profile", "P4", "--out", tmp_path / "t.toml")
+    assert code == 2 and err.startswith("bomi: error: ") and "no neutral posture" in err and err.count("\n") == 1
+
+
+def test_synth_of_a_participant_without_a_recording_performs_the_papers_protocol(tmp_path, capsys):
+    path = tmp_path / "p5.csv"
+    code, stdout, _ = bomi(capsys, "synth", "--participant", "P5", "--seed", 3, "--out", path)
+    assert code == 0 and "not fitted from a recording" in stdout
+    rec = read_recording(path)
+    runs = [b.label for b in twin_module.hold_blocks(rec.labels, 1)]
+    motions = sorted(load_participant("P5").classes)
+    # neutral, then every motion three times, neutral between: 1 + 2 x 3 x motions runs
+    assert len(runs) == 1 + 6 * len(motions) and runs[::2] == [0] * (1 + 3 * len(motions))
+    assert sorted(set(runs[1::2])) == motions and all(runs[1::2].count(m) == 3 for m in motions)

@@ -228,6 +228,9 @@ def read_pass(rec: Recording, day: int, profile: Profile) -> Pass:
     if unknown:
         raise BomiError(f"{rec.source}: labels {unknown} are not classes of profile {profile.name} "
                         f"({sorted(known)})")
+    if NEUTRAL_LABEL not in labels:
+        raise BomiError(f"{rec.source}: no neutral posture (label {NEUTRAL_LABEL}): a twin measures every posture "
+                        "from the neutral")
     angles = stacked_angles(rec, nodes)
     blocks = hold_blocks(labels, day)
     flat = angles.reshape(len(angles), -1)
@@ -454,6 +457,10 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
 
     # drift between passes
     day_gain, day_std = {}, {}
+    unseen = [label for label in labels if len(per_day[label]) < 2]
+    if unseen and n_passes >= 2:
+        from_prior(("day_gain_log_std", "day_std_deg"),
+                   f"{', '.join(f'c{c}' for c in unseen)} shown in one pass only")
     for label in labels:
         days = per_day[label]
         if len(days) >= 2:
@@ -461,10 +468,10 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
                                                              postures[label], rep_std[label] ** 2)
         elif prior is not None:
             day_gain[label], day_std[label], _ = prior_day_variation(prior, profile.name, label, rep_std[label])
-    if n_passes >= 2:
+    if n_passes >= 2 and not unseen:
         provenance["day_gain_log_std"] = provenance["day_std_deg"] = (
             f"measured: each class's mean posture per pass = gain x posture + offset, over {n_passes} passes ({names})")
-    else:
+    elif n_passes < 2:
         what = (prior_day_variation(prior, profile.name, labels[0], rep_std[labels[0]])[2]
                 .replace(f"class c{labels[0]}", "classes") if prior is not None else None)
         from_prior(("day_gain_log_std", "day_std_deg"), "one pass shows no drift between days", what)
