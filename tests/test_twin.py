@@ -101,7 +101,8 @@ def test_shipped_p1_is_the_twin_of_its_five_days(tmp_path, shared_data, capsys):
     # five days: the drift between days is measured; the files hold no transition: timing is assumed
     assert params.provenance["day_std_deg"].startswith("measured") and "5 passes" in params.provenance["day_std_deg"]
     assert params.provenance["onset_s"].startswith("assumed")
-    assert params.protocol.labels[:4] == (0, 2, 0, 4) and len(params.protocol.labels) == 55 and params.protocol.holds_only
+    protocol = params.protocol
+    assert protocol.labels[:4] == (0, 2, 0, 4) and len(protocol.labels) == 55 and protocol.holds_only
 
 
 def test_a_one_day_twin_takes_the_drift_from_the_prior_and_says_so(tmp_path, shared_data, capsys):
@@ -112,7 +113,8 @@ def test_a_one_day_twin_takes_the_drift_from_the_prior_and_says_so(tmp_path, sha
     assert "not measurable, prior used: onset_s, reaction_s" in stdout
     params, p1 = load_participant(out), load_participant("P1")
     assert params.provenance["day_std_deg"].startswith("prior: P1")
-    assert params.provenance["posture_deg"].startswith("measured") and "day1_testp.mat" in params.provenance["posture_deg"]
+    posture = params.provenance["posture_deg"]
+    assert posture.startswith("measured") and "day1_testp.mat" in posture
     np.testing.assert_array_equal(params.classes[8].day_std_deg, p1.classes[8].day_std_deg)
     # day 1 alone: every posture is day 1's, against a naive estimate (mean of the class's rows minus the mean of
     # the neutral rows), on the pitch and roll of the node that carries the class

@@ -432,7 +432,8 @@ def register(subparsers) -> None:
     demo = add_command(subparsers, "demo")
     demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
     demo.add_argument("--participant", default="P1",
-                      help="virtual participant: P1, P4, P5 or a TOML file (a twin from `bomi twin`; default %(default)s)")
+                      help="virtual participant: P1, P4, P5 or a TOML file (a twin from `bomi twin`; "
+                           "default %(default)s)")
     demo.add_argument("--time-limit", type=float, default=600.0,
                       help="seconds of simulated time per episode (default %(default)s)")
     demo.add_argument("--out", type=Path, default=Path("demo_out"),

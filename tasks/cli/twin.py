@@ -6,7 +6,6 @@ from dataclasses import replace
 from pathlib import Path
 
 from bomi.classifier import NEUTRAL_LABEL
-from bomi.errors import BomiError
 from bomi.files import check_input, write_text
 from bomi.derived import derive_profile, describe
 from bomi.frames import SAMPLE_RATE_HZ

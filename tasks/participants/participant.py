@@ -16,7 +16,8 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 ``sway_std_deg``, ``tremor_std_deg``; optional ``[spasm]`` with ``rate_per_s``, ``max_deg``,
 ``duration_s``, ``nodes``; ``[feel]`` (``Feel``: how they lean and correct a lean through the BoMI); a twin
 (``tasks.participants.twin``) also has ``[provenance]`` (parameter -> where it comes from) and
-``[protocol]`` (``Protocol``: the runs of its source recording). Every ``*_deg`` value is a (nodes x 3) matrix of (pitch, roll, yaw).
+``[protocol]`` (``Protocol``: the runs of its source recording). Every ``*_deg`` value is a (nodes x 3)
+matrix of (pitch, roll, yaw).
 ``profile`` is a bomi profile name or a TOML file, relative to the participant file.
 """
 from __future__ import annotations

@@ -477,7 +477,8 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         from_prior(("day_gain_log_std", "day_std_deg"), "one pass shows no drift between days", what)
 
     # sway and tremor: per class where a hold is long enough, else the neutral's, else the prior's
-    neutral_sway, neutral_tremor = holds.per_node(holds.sway, NEUTRAL_LABEL), holds.per_node(holds.tremor, NEUTRAL_LABEL)
+    neutral_sway = holds.per_node(holds.sway, NEUTRAL_LABEL)
+    neutral_tremor = holds.per_node(holds.tremor, NEUTRAL_LABEL)
     provenance["sway_std_deg"] = provenance["tremor_std_deg"] = (
         f"measured: median over holds of the std below / above {SWAY_CUTOFF_HZ:g} Hz, yaw as the mean of pitch and "
         f"roll ({names})")
@@ -510,10 +511,11 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
                              f"{WELCH_SEGMENT}-sample spectrum")
         spectrum = prior.tremor_spectrum
 
-    provenance["neutral.angles_deg"] = f"measured: median of the first pass's neutral holds ({Path(passes[0].source).name})"
+    first = Path(passes[0].source).name
+    provenance["neutral.angles_deg"] = f"measured: median of the first pass's neutral holds ({first})"
     provenance["max_amplitude"] = "definition: the postures are measured as performed (full range)"
     provenance["feel"] = "assumed: recordings of holds do not show how a person leans through the BoMI (as P4, P5)"
-    provenance["protocol"] = f"the runs of {Path(passes[0].source).name}, for bomi synth"
+    provenance["protocol"] = f"the runs of {first}, for bomi synth"
     return Twin(
         name=name, profile=profile_ref or profile.name, passes=n_passes, onset_s=onset, reaction_s=reaction,
         neutral_deg=np.median(day_neutrals[0], axis=0) if day_neutrals else np.zeros((n_nodes, 3)),
