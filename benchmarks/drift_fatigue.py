@@ -30,7 +30,7 @@ import scipy.stats  # noqa: E402
 
 from bomi.dataset import data_dir  # noqa: E402
 from bomi.recording import read_recording  # noqa: E402
-from tasks.participants.fit import hold_blocks, stacked_angles  # noqa: E402
+from tasks.participants.twin import hold_blocks, stacked_angles  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results"
 NODES = ("head", "right shoulder", "left shoulder")

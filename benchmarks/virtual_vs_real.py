@@ -34,7 +34,7 @@ from bomi.errors import BomiError  # noqa: E402
 from bomi.frames import FrameParser  # noqa: E402
 from bomi.profiles import load_profile  # noqa: E402
 from bomi.recording import Recording, read_recording  # noqa: E402
-from tasks.participants.fit import hold_blocks, split_sway_tremor  # noqa: E402
+from tasks.participants.twin import hold_blocks, split_sway_tremor  # noqa: E402
 from tasks.participants.participant import calibration_session, load_participant, session_recording  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -1,4 +1,4 @@
-"""tasks.participants.participant and tasks.participants.fit: profiles, motion model, frames, calibration, the P1 fit."""
+"""tasks.participants.participant: profiles, motion model, frames, calibration (the P1 fit: tests/test_twin.py)."""
 from __future__ import annotations
 
 import dataclasses
@@ -12,7 +12,6 @@ from bomi.errors import BomiError
 from bomi.frames import FrameParser
 from bomi.fusion import DT
 from bomi.profiles import load_profile
-from tasks.participants import fit as fit_participant
 from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
                                load_participant, minimum_jerk, session_recording)
 from helpers import edited_copy
@@ -268,43 +267,3 @@ def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
     for start, label in [(16.0, 1), (21.0, 0), (26.0, 4), (31.0, 0), (36.0, 2), (41.0, 0)]:
         hold = labels[(times > start) & (times < start + 3.0)]
         assert np.mean(hold == label) > 0.9, (label, np.bincount(hold))
-
-
-# ------------------------------------------------------------------------------------ the P1 fit
-def test_fit_helpers_on_synthetic_signals():
-    labels = np.array([0, 0, 3, 3, 3, 0, 5])
-    blocks = fit_participant.hold_blocks(labels, day=2)
-    assert [(b.label, b.start, b.stop) for b in blocks] == [(0, 0, 2), (3, 2, 5), (0, 5, 6), (5, 6, 7)]
-    t = np.arange(600) * DT
-    x = np.column_stack([2.0 * np.sin(2 * np.pi * 0.2 * t), 0.5 * np.sin(2 * np.pi * 5 * t), np.full(600, 7.0)])
-    sway, tremor = fit_participant.split_sway_tremor(x)
-    assert tremor[:, 1].std() == pytest.approx(0.5 / np.sqrt(2), rel=0.05)       # 5 Hz goes to tremor
-    assert tremor[:, 0].std() < 0.1 and sway[:, 0].std() > 1.0                   # 0.2 Hz stays in sway
-    assert np.abs(sway[:, 2]).max() < 1e-9                                       # constant: neither
-    freqs = np.arange(8.0)
-    kept_freqs, kept = fit_participant.motion_spectrum(freqs, np.array([0.5, 2, 4, 1, 0.3, 0.5, 0.1, 0.1]))
-    # relative: 0.125 0.5 1 0.25 0.075 ...: first below 10 % after the peak at 4 Hz, which becomes the zero end
-    assert kept_freqs.tolist() == [0, 1, 2, 3, 4] and kept.tolist() == [0.125, 0.5, 1, 0.25, 0]
-    assert fit_participant.isotropic_yaw(np.array([[1.0, 3.0, 9.0]])).tolist() == [[1.0, 3.0, 2.0]]
-    assert fit_participant.repeated_fraction(np.array([[1, 2], [1, 2], [1, 3], [1, 3]])) == pytest.approx(2 / 3)
-
-
-
-
-def test_shipped_p1_is_what_the_fit_of_the_real_recordings_gives(tmp_path, shared_data):
-    out = tmp_path / "P1.toml"
-    assert fit_participant.main(["--data", str(shared_data), "--out", str(out)]) == 0
-    assert out.read_text() == P1_TOML.read_text()
-    params = load_participant(out)
-    # the dataset README's day-1 means: c1 head pitch +29, c3 -26, c8 left-shoulder roll +26 (over days: less)
-    assert params.classes[1].posture_deg[0, 0] == pytest.approx(29, abs=2)
-    assert params.classes[3].posture_deg[0, 0] == pytest.approx(-26, abs=2)
-    assert 15 < params.classes[8].posture_deg[2, 1] < 27
-
-
-def test_fit_reports_a_missing_dataset_in_one_line(tmp_path, capsys):
-    out = tmp_path / "P1.toml"
-    assert fit_participant.main(["--data", str(tmp_path), "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert str(tmp_path) in err and "no dayN_testp.mat" in err and "\n" not in err
-    assert not out.exists()

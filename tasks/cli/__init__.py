@@ -44,9 +44,13 @@ COMMANDS: dict[str, Command] = {
     "render": Command("tasks.cli.sim", "render a short scripted motion of the arm to MP4"),
     "run-task": Command("tasks.cli.task", "one stacking episode with the joystick or the BoMI operator"),
     "benchmark": Command("tasks.cli.task", "many episodes in parallel; table beside the paper's figures"),
-    "demo": Command("tasks.cli.task", "one joystick and one BoMI episode of P1: table, timeline figure, MP4"),
+    "demo": Command("tasks.cli.task", "one joystick and one BoMI episode (P1 or --participant): table, timeline "
+                                      "figure, MP4"),
     "sweep": Command("tasks.cli.sweep", "episodes over a grid of participants x settings x seeds, resumable"),
     "live": Command("tasks.cli.live", "drive the simulated arm from a live base-station stream"),
+    "twin": Command("tasks.cli.twin", "fit a virtual participant (a twin) to a person's calibration recording(s)"),
+    "synth": Command("tasks.cli.twin", "a virtual participant performs its source recording's protocol: a new "
+                                       "recording"),
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(command.module for command in COMMANDS.values()))
 

@@ -2,7 +2,8 @@
 
 A grid (TOML; benchmarks/grids/ has one):
 
-    participants = ["P4"]                    # shipped names or participant files
+    participants = ["P4"]                    # shipped names or participant files (a twin from `bomi twin`),
+                                             # a relative file relative to the grid file
     operators = ["bomi"]                     # joystick and/or bomi
     seeds = {first = 0, count = 20}          # or a list: seeds = [0, 1, 2]
 
@@ -34,7 +35,7 @@ import hashlib
 import itertools
 import json
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -105,9 +106,12 @@ def load_grid(path: Path) -> Grid:
     except OSError as exc:
         raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
     try:
-        return _parse_grid(data, str(path))
+        grid = _parse_grid(data, str(path))
     except ValueError as exc:
         raise BomiError(f"{path}: {exc}") from None
+    files = tuple(str(Path(path).parent / name) if Path(name).suffix.lower() == ".toml" and not Path(name).is_absolute()
+                  else name for name in grid.participants)
+    return replace(grid, participants=files)
 
 
 def _names(data: dict, key: str) -> tuple[str, ...]:

@@ -320,6 +320,7 @@ def cmd_run_task(args: argparse.Namespace) -> int:
     job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file),
                      args.vote, assist=args.assist)
     job_assist(job, arm_profile(load_participant(job.participant).profile))  # a bad profile fails before simulating
+    participant_controls(job.participant)  # so does one without the task's controls (a twin's derived profile)
     if outputs["--video"]:
         with atomic_output(outputs["--video"], overwrite=args.force) as video:
             log = run_job(job, video=video, progress=True)
@@ -356,6 +357,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
                           args.assist)
     for job in {(j.participant, j.operator): j for j in jobs}.values():  # a bad profile fails before simulating
         job_assist(job, arm_profile(load_participant(job.participant).profile))
+        participant_controls(job.participant)
     records = run_many(jobs, engine_from_args(args))
     rows = aggregate(records)
     print(markdown_tables(rows))
@@ -376,9 +378,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     out.mkdir(exist_ok=True)
     figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force).values()
-    joystick = run_job(EpisodeJob("joystick", "P1", args.seed, args.time_limit, assist=args.assist), progress=True)
+    participant_controls(args.participant)  # a bad participant or profile fails before simulating
+    joystick = run_job(EpisodeJob("joystick", args.participant, args.seed, args.time_limit, assist=args.assist),
+                       progress=True)
     with atomic_output(video, overwrite=args.force) as temp:
-        bomi = run_job(EpisodeJob("bomi", "P1", args.seed, args.time_limit, assist=args.assist), video=temp,
+        bomi = run_job(EpisodeJob("bomi", args.participant, args.seed, args.time_limit, assist=args.assist), video=temp,
                        video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
     with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=args.force) as temp:
@@ -412,7 +416,8 @@ def register(subparsers) -> None:
 
     bench = add_command(subparsers, "benchmark")
     bench.add_argument("--participants", default="P1",
-                       help="comma-separated virtual participants, e.g. P1,P4,P5 (default %(default)s)")
+                       help="comma-separated virtual participants: P1, P4, P5 or TOML files (a twin from "
+                            "`bomi twin`), e.g. P1,P4,P5 (default %(default)s)")
     bench.add_argument("--operators", default="joystick,bomi",
                        help=f"comma-separated operators out of {','.join(OPERATORS)} (default %(default)s)")
     bench.add_argument("--seeds", type=positive_int, default=20, help="how many seeds per participant and operator "
@@ -426,6 +431,9 @@ def register(subparsers) -> None:
 
     demo = add_command(subparsers, "demo")
     demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
+    demo.add_argument("--participant", default="P1",
+                      help="virtual participant: P1, P4, P5 or a TOML file (a twin from `bomi twin`; "
+                           "default %(default)s)")
     demo.add_argument("--time-limit", type=float, default=600.0,
                       help="seconds of simulated time per episode (default %(default)s)")
     demo.add_argument("--out", type=Path, default=Path("demo_out"),

@@ -7,6 +7,8 @@ Map (data flows down):
 - ``imu_synth``: node angles -> raw accelerometer/gyroscope/magnetometer counts -> deliveries of
   base-station samples (link model, sensor noise).
 - ``wire``: a participant as base-station byte blocks (``bomi emulate --participant``).
-- ``fit``: the fitter that writes ``P1.toml`` from P1's five days of recordings.
+- ``twin``: the fitter (``bomi twin``) of a participant to a person's calibration recording(s), with
+  per-parameter provenance and the recording's protocol (``bomi synth`` performs it); ``P1.toml`` is
+  its fit of P1's five days.
 - ``P1.toml``, ``P4.toml``, ``P5.toml``: the shipped participants (numbers, no data).
 """

@@ -5,7 +5,7 @@ minimum-jerk move from the current posture to neutral + amplitude x (the class p
 session's and this repetition's offsets), held with slow sway and tremor; intent 0 returns to
 a (freshly drawn) neutral. Each node's angle trajectory goes through ``tasks.participants.imu_synth`` to raw
 sensor counts and base-station frames, with frame loss and bursty delivery. Parameters come
-from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.participants.fit``).
+from ``tasks/participants/<name>.toml`` (schema below; P1 is fitted by ``tasks.participants.twin``).
 Every modelling assumption is listed in docs/virtual_participant.md.
 
 TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset_s``,
@@ -14,12 +14,16 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 ``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg``; one
 ``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_gain_log_std``, ``day_std_deg``,
 ``sway_std_deg``, ``tremor_std_deg``; optional ``[spasm]`` with ``rate_per_s``, ``max_deg``,
-``duration_s``, ``nodes``; ``[feel]`` (``Feel``: how they lean and correct a lean through the BoMI). Every ``*_deg`` value is a (nodes x 3) matrix of (pitch, roll, yaw).
+``duration_s``, ``nodes``; ``[feel]`` (``Feel``: how they lean and correct a lean through the BoMI); a twin
+(``tasks.participants.twin``) also has ``[provenance]`` (parameter -> where it comes from) and
+``[protocol]`` (``Protocol``: the runs of its source recording). Every ``*_deg`` value is a (nodes x 3)
+matrix of (pitch, roll, yaw).
+``profile`` is a bomi profile name or a TOML file, relative to the participant file.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import IntEnum
 from pathlib import Path
 from typing import Any
@@ -42,11 +46,12 @@ SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the 
 SPASM_DRAW_S = 10.0           # spasm onsets are drawn this far ahead at a time
 
 _TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
-             "classes", "spasm", "feel"}
+             "classes", "spasm", "feel", "provenance", "protocol"}
 _NEUTRAL_KEYS = {"angles_deg", "rep_std_deg", "sway_std_deg", "tremor_std_deg"}
 _CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_gain_log_std", "day_std_deg", "sway_std_deg",
                "tremor_std_deg"}
 _SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
+_PROTOCOL_KEYS = {"source", "holds_only", "labels", "durations_s"}
 _FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero"}
 
 
@@ -88,6 +93,18 @@ class Spasm:
 
 
 @dataclass(frozen=True)
+class Protocol:
+    """A recording's calibration protocol as runs of one cued class each, in order: what
+    ``bomi synth`` performs. ``holds_only``: the recording kept only the held postures (stitched,
+    each run a hold); else it kept every row, labelled with the cue (each run is the move then the hold)."""
+
+    labels: tuple[int, ...]
+    durations_s: tuple[float, ...]
+    holds_only: bool
+    source: str
+
+
+@dataclass(frozen=True)
 class ParticipantParams:
     name: str
     profile: str
@@ -101,6 +118,8 @@ class ParticipantParams:
     spasm: Spasm | None
     feel: Feel
     source: str
+    protocol: Protocol | None = None              # a twin's: the protocol of its source recording
+    provenance: Mapping[str, str] = field(default_factory=dict)   # a twin's: parameter -> where it comes from
 
     @property
     def n_nodes(self) -> int:
@@ -114,7 +133,12 @@ class ParticipantParams:
 def load_participant(path_or_name: str | Path, overrides: Mapping[str, Any] | None = None) -> ParticipantParams:
     """Load and validate a participant file, or a shipped one by name (P1, P4, P5); ``overrides``:
     dotted keys set before validation (``{"spasm.rate_per_s": 0.2}``)."""
-    return load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse, overrides)
+    params = load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse, overrides)
+    if Path(params.profile).suffix.lower() == ".toml":  # a profile file beside the participant file
+        path, shipped = Path(path_or_name), PARTICIPANT_DIR / f"{path_or_name}.toml"
+        path = shipped if not path.suffix and shipped.is_file() else path
+        params = replace(params, profile=str((path.parent / params.profile).resolve()))
+    return params
 
 
 def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative: bool) -> np.ndarray:
@@ -144,7 +168,7 @@ def _motion(table: dict, label: int, where: str, n_nodes: int, posture_key: str 
 
 
 def _parse(data: dict, source: str) -> ParticipantParams:
-    check_table(data, "participant", _TOP_KEYS, _TOP_KEYS - {"description", "spasm"})
+    check_table(data, "participant", _TOP_KEYS, _TOP_KEYS - {"description", "spasm", "provenance", "protocol"})
     for key in ("name", "profile"):
         if not isinstance(data[key], str) or not data[key]:
             raise ValueError(f"'{key}' must be a non-empty string")
@@ -163,13 +187,17 @@ def _parse(data: dict, source: str) -> ParticipantParams:
             raise ValueError(f"{where}: 'label' must be a positive integer not used before, got {label!r}")
         classes[label] = _motion(table, label, where, n_nodes)
     spasm = _parse_spasm(data["spasm"], n_nodes) if "spasm" in data else None
+    provenance = data.get("provenance", {})
+    if not isinstance(provenance, dict) or not all(isinstance(v, str) for v in provenance.values()):
+        raise ValueError("[provenance]: each parameter's provenance must be a string")
+    protocol = _parse_protocol(data["protocol"], set(classes) | {NEUTRAL_LABEL}) if "protocol" in data else None
     return ParticipantParams(
         name=data["name"], profile=data["profile"], description=str(data.get("description", "")),
         onset_s=number(data, "onset_s", "participant", DT, 10.0),
         reaction_s=number(data, "reaction_s", "participant", 0.0, 10.0),
         max_amplitude=number(data, "max_amplitude", "participant", 0.01, 1.0),
         tremor_spectrum=(freqs, power), neutral=neutral, classes=classes, spasm=spasm,
-        feel=_parse_feel(data["feel"]), source=source)
+        feel=_parse_feel(data["feel"]), source=source, protocol=protocol, provenance=provenance)
 
 
 
@@ -187,6 +215,19 @@ def _parse_tremor(table: Any) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError("[tremor]: frequencies_hz must rise from 0 to at most "
                          f"{SAMPLE_RATE_HZ / 2} Hz, with as many non-negative relative_power values, not all 0")
     return freqs, power
+
+
+def _parse_protocol(table: Any, labels: set[int]) -> Protocol:
+    table = check_table(table, "[protocol]", _PROTOCOL_KEYS, _PROTOCOL_KEYS)
+    runs, durations = table["labels"], table["durations_s"]
+    if (not isinstance(runs, list) or not runs or not all(isinstance(v, int) and v in labels for v in runs)
+            or not isinstance(durations, list) or len(durations) != len(runs)
+            or not all(isinstance(v, (int, float)) and 0 < v <= 3600 for v in durations)):
+        raise ValueError(f"[protocol]: 'labels' must list classes of the participant ({sorted(labels)}) and "
+                         "'durations_s' as many durations in (0, 3600] s")
+    if not isinstance(table["holds_only"], bool) or not isinstance(table["source"], str):
+        raise ValueError("[protocol]: 'holds_only' must be true or false and 'source' a string")
+    return Protocol(tuple(runs), tuple(float(v) for v in durations), table["holds_only"], table["source"])
 
 
 def _parse_feel(table: Any) -> Feel:
@@ -211,7 +252,7 @@ def _parse_spasm(table: Any, n_nodes: int) -> Spasm:
 
 def check_against_profile(params: ParticipantParams, profile: Profile) -> None:
     """The participant must wear the profile's nodes and perform exactly its motion classes."""
-    if params.profile != profile.name:
+    if Path(params.profile).suffix.lower() != ".toml" and params.profile != profile.name:
         raise BomiError(f"{params.source}: made for profile {params.profile}, not {profile.name}")
     if params.n_nodes != len(profile.nodes):
         raise BomiError(f"{params.source}: {params.n_nodes} nodes per angle matrix, profile {profile.name} "
@@ -530,24 +571,48 @@ def calibration_session(params: ParticipantParams, profile: Profile, seed: int, 
     hold (and the neutral) lasts ``hold_s`` (``neutral_s``) from then. ``order`` overrides the
     default (label, amplitude) sequence.
     """
-    vp = VirtualParticipant(params, profile, seed, noise, link, Session.CALIBRATION)
     motions = list(order) if order is not None else protocol_order(sorted(params.classes), repetitions, amplitudes)
-    settle = params.reaction_s + params.onset_s
-    holds: list[tuple[float, float, int]] = [(warmup_s, warmup_s + neutral_s, NEUTRAL_LABEL)]
-    cues: list[tuple[float, int]] = [(0.0, NEUTRAL_LABEL)]
-    t = warmup_s + neutral_s
-    parts = []
+    runs = [(NEUTRAL_LABEL, 0.0, neutral_s)]
     for label, amplitude in motions:
-        for cue_label, cue_amp, duration in ((label, amplitude, hold_s), (NEUTRAL_LABEL, 0.0, neutral_s)):
-            parts.append(vp.deliveries(t))
-            vp.set_intent(cue_label, cue_amp, t)
-            cues.append((t, cue_label))
-            holds.append((t + settle, t + settle + duration, cue_label))
-            t += settle + duration
+        runs += [(label, amplitude, hold_s), (NEUTRAL_LABEL, 0.0, neutral_s)]
+    return perform_runs(params, profile, seed, runs, warmup_s, noise, link)
+
+
+def protocol_session(params: ParticipantParams, profile: Profile, seed: int, protocol: Protocol,
+                     warmup_s: float = WARMUP_S) -> CalibrationSession:
+    """A recording's protocol performed: the same runs, each as long as it was recorded. In a
+    holds-only recording a run is the hold; in a continuous one it also holds the participant's
+    move after the cue (``reaction_s + onset_s``), so the hold is that much shorter."""
+    settle = 0.0 if protocol.holds_only else params.reaction_s + params.onset_s
+    runs = [(label, 0.0 if label == NEUTRAL_LABEL else 1.0, max(duration - (settle if k else 0.0), DT))
+            for k, (label, duration) in enumerate(zip(protocol.labels, protocol.durations_s))]
+    return perform_runs(params, profile, seed, runs, warmup_s)
+
+
+def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: Sequence[tuple[int, float, float]],
+                 warmup_s: float = WARMUP_S, noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()
+                 ) -> CalibrationSession:
+    """Runs of (class, amplitude, hold s): the first held from the end of the warm-up, each next one
+    cued when the previous hold ends and held ``hold`` s once reached (``reaction_s + onset_s`` after the cue)."""
+    vp = VirtualParticipant(params, profile, seed, noise, link, Session.CALIBRATION)
+    settle = params.reaction_s + params.onset_s
+    (first, first_amp, first_s), *rest = runs
+    cues: list[tuple[float, int]] = [(0.0, first)]
+    if first != NEUTRAL_LABEL:
+        vp.set_intent(first, first_amp, 0.0)
+    holds: list[tuple[float, float, int]] = [(warmup_s, warmup_s + first_s, first)]
+    t = warmup_s + first_s
+    parts = []
+    for cue_label, cue_amp, duration in rest:
+        parts.append(vp.deliveries(t))
+        vp.set_intent(cue_label, cue_amp, t)
+        cues.append((t, cue_label))
+        holds.append((t + settle, t + settle + duration, cue_label))
+        t += settle + duration
     parts += [vp.deliveries(t), vp.flush()]
     delivery = _merge(*parts)
     truth = vp.truth()
-    keep = truth.time_s <= t
+    keep = np.arange(len(truth.time_s)) <= int(np.floor(t / DT + 1e-9))   # the samples up to t, as generated
     truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
     cue = np.zeros(len(truth.time_s), dtype=int)
     for start, label in cues:
