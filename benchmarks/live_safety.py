@@ -13,7 +13,10 @@ session of that seed, as `bomi record --train` would give), then sits facing the
 - corrupt: the calibration protocol (every class, B1/B2 included) played clean and with
   `bomi emulate --corrupt 0.002`, same seed; mode switches of each run (the corrupted run's must all be
   in the clean one: the same mode within 1.5 s);
-- video: `bomi live --video` on the neutral hold: the loop's rate and missed periods.
+- flood: from 6 s into the F hold the samples come as fast as the pty takes them: the loop's rate,
+  what the status says, and the arm (at rest on every tick of the flood, after its first second);
+- video: `bomi live --video` on the neutral hold: the loop's rate (ticks per second after the first 2 s;
+  the bar: >= 59.5 Hz) and missed periods, beside the same run without --video.
 """
 from __future__ import annotations
 
@@ -72,10 +75,14 @@ def at_rest(record: dict) -> bool:
     return not any(record["linear"]) and not any(record["angular"]) and record["finger"] == 0
 
 
-def run_in_process(name: str, seed: int, model: Path, blocks, duration_s: float) -> list[dict]:
-    """Play ``blocks`` on a pty and run the live loop on it; every tick's record with its frames' raw values."""
+def run_in_process(name: str, seed: int, model: Path, blocks, duration_s: float,
+                   flood_from_s: float | None = None) -> list[dict]:
+    """Play ``blocks`` on a pty and run the live loop on it; every tick's record with its frames' raw values.
+    ``flood_from_s``: from then on the samples are sent as fast as the pty takes them."""
     sink = PtySink(linger_s=1.0)
     chunks = block_chunks(blocks, EmulatorConfig(seed=seed), EmulatorStats())
+    if flood_from_s is not None:
+        chunks = ((min(t, flood_from_s), data) for t, data in chunks)
     thread = threading.Thread(target=lambda: (sink.wait_for_reader(), play(chunks, sink), sink.finish()), daemon=True)
     thread.start()
     records, _ = live_on(sink.description, name, model, duration_s)
@@ -184,6 +191,21 @@ def lost_bar(name: str, seed: int, model: Path, duration_s: float = 26.0) -> dic
             "all_rest_after": all(at_rest(r) for r in ticks[rest:]), "wall_s": wall, "duration_s": duration_s}
 
 
+def flood_bar(name: str, seed: int, model: Path, flood_s: float = WARM_S + 6.0) -> dict:
+    """From ``flood_s`` on (F held) the participant's samples arrive as fast as the pty takes them."""
+    params, profile = load_participant(name), arm_profile(name)
+    blocks = participant_blocks(params, profile, seed, cues_neutral_then(class_of(profile, "F"), 3000.0), 3000.0)
+    records = run_in_process(name, seed, model, blocks, flood_s + 6.0, flood_from_s=flood_s)
+    before = [r for r in records if flood_s - 3 < r["t"] < flood_s]
+    during = [r for r in records if r["t"] > flood_s + 1.0]
+    rate = (len(during) - 1) / (during[-1]["t"] - during[0]["t"])
+    per_node = sum(r["frames"] for r in during) / (during[-1]["t"] - during[0]["t"]) / len(profile.nodes)
+    return {"moving_before": any(not at_rest(r) for r in before), "rate_hz": rate, "frames_hz": per_node,
+            "rest": float(np.mean([at_rest(r) for r in during])),
+            "holds": sorted({r["hold"] for r in during if r["hold"]})[:2],
+            "status_rate_hz": min(r["loop_hz"] for r in during)}
+
+
 def switches(ticks: list[dict]) -> list[tuple[float, str]]:
     return [(b["t"], b["mode"]) for a, b in zip(ticks, ticks[1:]) if a["mode"] != b["mode"]]
 
@@ -205,18 +227,27 @@ def corrupt_bar(name: str, seed: int, model: Path, work: Path, duration_s: float
             "held_clean": runs["0"]["held"], "held_corrupt": runs["0.002"]["held"]}
 
 
-def video_bar(name: str, seed: int, model: Path, work: Path, duration_s: float = 25.0) -> dict:
-    process, port = emulator(name, seed, "--neutral", "30", "--hold", "2")
-    log, video = work / f"video-{name}-{seed}.jsonl", work / f"video-{name}-{seed}.mp4"
-    log.unlink(missing_ok=True)
-    video.unlink(missing_ok=True)
-    wall = live_cli(port, name, model, log, duration_s, "--video", str(video))
-    process.kill()
-    ticks = read_log(log)
+def loop_rate(ticks: list[dict], after_s: float = 2.0) -> tuple[float, int, float]:
+    """Ticks per second after the first ``after_s``, periods missed, lowest 1-s rate."""
     t = np.array([r["t"] for r in ticks])
-    steady = t > 2.0
-    return {"rate_hz": float((steady.sum() - 1) / (t[steady][-1] - t[steady][0])), "overruns": ticks[-1]["overruns"],
-            "min_loop_hz": min(r["loop_hz"] for r in ticks if r["t"] > 2.0), "wall_s": wall,
+    steady = t > after_s
+    return (float((steady.sum() - 1) / (t[steady][-1] - t[steady][0])), ticks[-1]["overruns"],
+            min(r["loop_hz"] for r in ticks if r["t"] > after_s))
+
+
+def video_bar(name: str, seed: int, model: Path, work: Path, duration_s: float = 25.0) -> dict:
+    """The loop's rate with --video, and without it on the same stream (the machine's own share)."""
+    out = {}
+    for filmed in (False, True):
+        process, port = emulator(name, seed, "--neutral", "30", "--hold", "2")
+        log, video = work / f"video-{filmed}-{name}-{seed}.jsonl", work / f"video-{name}-{seed}.mp4"
+        log.unlink(missing_ok=True)
+        video.unlink(missing_ok=True)
+        live_cli(port, name, model, log, duration_s, *(("--video", str(video)) if filmed else ()))
+        process.kill()
+        out[filmed] = loop_rate(read_log(log))
+    return {"rate_hz": out[True][0], "overruns": out[True][1], "min_loop_hz": out[True][2],
+            "plain_rate_hz": out[False][0], "plain_overruns": out[False][1],
             "film_bytes": video.stat().st_size if video.exists() else 0}
 
 
@@ -224,7 +255,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", required=True)
     parser.add_argument("--participants", nargs="+", default=["P1", "P4"])
-    parser.add_argument("--bars", nargs="+", default=["neutral", "lost", "bad", "corrupt", "video"])
+    parser.add_argument("--bars", nargs="+", default=["neutral", "lost", "bad", "flood", "corrupt", "video"])
     parser.add_argument("--out", type=Path, default=RESULTS / "live_safety.md")
     parser.add_argument("--jobs", type=int, default=1, help="runs one at a time (real-time runs: 1)")
     args = parser.parse_args()
@@ -249,6 +280,14 @@ def main() -> None:
                                      f"{r['held_to_end']}, status: {r['hold']})",
                                      r["rest_after_s"] <= 0.1 and r["moving_before"] and r["held_to_end"]))
                         print(rows[-1], file=sys.stderr, flush=True)
+                if "flood" in args.bars and name == args.participants[0]:
+                    r = flood_bar(name, seed, model)
+                    rows.append((name, seed, "flood (samples as fast as the pty takes them): not silent, arm at rest",
+                                 f"{r['frames_hz']:.0f} frames/s per node; loop {r['rate_hz']:.1f} Hz (status and log say "
+                                 f"{r['status_rate_hz']:.0f} Hz at the lowest), arm at rest {100 * r['rest']:.0f} % of the "
+                                 f"flood's ticks (moving before: {r['moving_before']}), status: {'; '.join(r['holds'])}",
+                                 r["rest"] == 1.0 and r["moving_before"]))
+                    print(rows[-1], file=sys.stderr, flush=True)
                 if "lost" in args.bars and name == args.participants[0]:
                     r = lost_bar(name, seed, model)
                     rows.append((name, seed, "emulator killed: ticks go on, rest, --duration kept",
@@ -268,7 +307,8 @@ def main() -> None:
                     r = video_bar(name, seed, model, work)
                     rows.append((name, seed, "live --video: control rate",
                                  f"{r['rate_hz']:.2f} Hz, {r['overruns']} periods missed, lowest 1-s rate {r['min_loop_hz']:.0f} Hz "
-                                 f"(film {r['film_bytes']} bytes)", r["rate_hz"] >= 59.5 and r["overruns"] <= 3))
+                                 f"(film {r['film_bytes']} bytes; without --video: {r['plain_rate_hz']:.2f} Hz, "
+                                 f"{r['plain_overruns']} missed)", r["rate_hz"] >= 59.5))
                     print(rows[-1], file=sys.stderr, flush=True)
     lines = [f"# Live loop safety (`python benchmarks/live_safety.py --seeds {' '.join(map(str, args.seeds))} "
              f"--participants {' '.join(args.participants)}`)", "",

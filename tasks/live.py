@@ -82,6 +82,7 @@ VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to
 BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
 FILM_START_S = 60.0  # how long the film's process may take to start (imports, the scene, the encoder)
 FILM_QUEUE = 4       # film frames waiting for the film's process; more are dropped
+FILM_NICENESS = 10   # the film's process runs at a lower priority than the control loop
 
 
 # ---------------------------------------------------------------------------------- safety
@@ -254,6 +255,7 @@ def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
     from sim.env import ArmSim
     from sim.render import VideoWriter
 
+    os.nice(FILM_NICENESS)   # on a busy machine the control loop, not the film, gets the processor
     sim = ArmSim(layout=layout)
     fps = sim.config.render.fps
     with VideoWriter(path, fps) as writer:
@@ -265,10 +267,10 @@ def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
             sim.data.qpos[:] = qpos
             mujoco.mj_kinematics(sim.model, sim.data)
             frame = sim.render(caption)
-            due = int((t - start) * fps) + 1 - written
-            for _ in range(max(due, 1 if written == 0 else 0)):
+            due = max(int((t - start) * fps) + 1 - written, 0)   # slots up to t not yet filled
+            for _ in range(due):
                 writer.append(frame)
-            written += max(due, 1 if written == 0 else 0)
+            written += due
     sim.close()
 
 
@@ -446,7 +448,7 @@ class LiveSummary:
     held_ticks: int = 0
     watchdog_trips: int = 0
     overruns: int = 0
-    holds: Counter = field(default_factory=Counter)   # why the arm was held (gate reasons), in ticks
+    holds: Counter = field(default_factory=Counter)   # why the gate held the arm, in ticks
     neutral: dict[int, tuple[float, float, float]] | None = None
 
     def count(self, tick: Tick) -> None:
@@ -460,7 +462,7 @@ class LiveSummary:
         self.held_ticks += tick.hold is not None
         self.overruns = tick.overruns
         if tick.hold is not None and not tick.stale and not tick.standby:
-            self.holds[tick.hold.split(" (")[0] if tick.hold.startswith("warming") else tick.hold] += 1
+            self.holds[tick.hold.split(" (")[0]] += 1     # the reason, without its numbers
 
 
 @dataclass
