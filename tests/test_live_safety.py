@@ -266,3 +266,49 @@ def test_a_poll_parses_the_newest_bytes_only_and_counts_the_rest():
     os.close(master)
     assert len(got) == POLL_BYTES // 32 and got[-1].counter == 1999 % 256     # the newest ones
     assert reader.dropped_bytes == len(frames) - POLL_BYTES and took < DT
+
+
+def test_the_loop_is_deterministic_given_each_ticks_frames(p1_model_file):
+    """What a replay relies on: the same frames on the same ticks give the same decisions, commands and
+    hand path, with the real chain and arm (P1 at seed 3, facing -112 deg: warm-up, neutral, then F)."""
+    from bomi.chain import OnlineChain
+    from bomi.classifier import NEUTRAL_LABEL
+    from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks
+    from bomi.frames import FrameParser
+    from bomi.model_io import load_model
+    from bomi.profiles import load_profile
+    from bomi.protocol import Cue
+    from sim.env import ArmSim
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import participant_blocks
+    from tasks.stick import profile_layout
+
+    profile = load_profile("P1")
+    f_label = next(cls.label for cls in profile.classes if cls.function == "F")
+    cues = [Cue(NEUTRAL_LABEL, "neutral", 0.0, 12.0), Cue(f_label, "F", 12.0, 20.0)]
+    chunks = list(block_chunks(participant_blocks(load_participant("P1"), profile, 3, cues, 16.0),
+                               EmulatorConfig(), EmulatorStats()))
+    parser, per_tick, i = FrameParser(), [], 0
+    for k in range(16 * 60):
+        data = b""
+        while i < len(chunks) and chunks[i][0] <= k / 60:
+            data += chunks[i][1]
+            i += 1
+        per_tick.append(parser.feed(data, k / 60))
+
+    def run() -> list[tuple]:
+        sim = ArmSim(layout=profile_layout(profile))
+        path = []
+        loop = LiveLoop(OnlineChain(load_model(p1_model_file), profile), sim,
+                        observers=[lambda tick: path.append((tick.hold, tuple(tick.command.linear),
+                                                             tuple(sim.data.qpos)))])
+        for k, frames in enumerate(per_tick):
+            loop.tick(k / 60, frames)
+        sim.close()
+        return path
+
+    first, second = run(), run()
+    assert first == second
+    holds = [hold for hold, _, _ in first]
+    assert holds[0] is not None and holds[0].startswith(("warming up", "no frames")) and holds[-1] is None
+    assert any(any(linear) for _, linear, _ in first)                                  # F drove the arm
