@@ -46,7 +46,6 @@ from tasks.stick import arm_profile, profile_layout
 
 RESULTS = Path(__file__).resolve().parent / "results"
 WARM_S = 14.0        # neutral hold before the first motion: the filter settles, then the neutral is taken
-TICK_S = 1 / 60
 
 
 def cues_neutral_then(label: int, until_s: float, at_s: float = WARM_S) -> list[Cue]:
@@ -251,11 +250,70 @@ def video_bar(name: str, seed: int, model: Path, work: Path, duration_s: float =
             "film_bytes": video.stat().st_size if video.exists() else 0}
 
 
+Row = tuple[str, str, bool]   # bar, measured, met
+
+
+def neutral_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = neutral_bar(name, seed, model)
+    return [("neutral hold: arm at rest after calibration", f"{100 * r['rest']:.1f} % of {r['ticks']} ticks "
+             f"(settled at {r['warm_s']:.1f} s, neutral at {r['neutral_s']:.1f} s)", r["rest"] >= 0.95)]
+
+
+def bad_rows(name: str, seed: int, model: Path) -> list[Row]:
+    rows = []
+    for bad in ("zero", "+32767", "-32768", "gyro saturated"):
+        r = bad_values_bar(name, seed, model, bad)
+        rows.append((f"node 1 {bad}: arm at rest after the first such frame",
+                     f"{1000 * r['rest_after_s']:.0f} ms (moving before: {r['moving_before']}, held to the end: "
+                     f"{r['held_to_end']}, status: {r['hold']})",
+                     r["rest_after_s"] <= 0.1 and r["moving_before"] and r["held_to_end"]))
+    return rows
+
+
+def flood_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = flood_bar(name, seed, model)
+    return [("flood (samples as fast as the pty takes them): not silent, arm at rest",
+             f"{r['frames_hz']:.0f} frames/s per node; loop {r['rate_hz']:.1f} Hz (status and log say "
+             f"{r['status_rate_hz']:.0f} Hz at the lowest), arm at rest {100 * r['rest']:.0f} % of the "
+             f"flood's ticks (moving before: {r['moving_before']}), status: {'; '.join(r['holds'])}",
+             r["rest"] == 1.0 and r["moving_before"])]
+
+
+def lost_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = lost_bar(name, seed, model)
+    return [("emulator killed: ticks go on, rest, --duration kept",
+             f"rest {1000 * r['rest_after_s']:.0f} ms after the last frame (moving: {r['moving_at_loss']}), "
+             f"{r['ticks_after']} ticks after it (largest gap {1000 * r['max_tick_gap_s']:.0f} ms), "
+             f"wall {r['wall_s']:.1f} s for --duration {r['duration_s']:g}",
+             r["rest_after_s"] <= 0.1 and r["moving_at_loss"] and r["all_rest_after"]
+             and r["max_tick_gap_s"] < 0.1 and abs(r["wall_s"] - r["duration_s"]) <= 1.0)]
+
+
+def corrupt_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = corrupt_bar(name, seed, model, model.parent)
+    return [("--corrupt 0.002: mode switches the clean stream does not have",
+             f"{r['extra']} (clean {r['clean']} switches, corrupted {r['corrupt']}; arm held "
+             f"{100 * r['held_clean']:.0f} % / {100 * r['held_corrupt']:.0f} % of ticks)", r["extra"] == 0)]
+
+
+def video_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = video_bar(name, seed, model, model.parent)
+    return [("live --video: control rate",
+             f"{r['rate_hz']:.2f} Hz, {r['overruns']} periods missed, lowest 1-s rate {r['min_loop_hz']:.0f} Hz "
+             f"(film {r['film_bytes']} bytes; without --video: {r['plain_rate_hz']:.2f} Hz, "
+             f"{r['plain_overruns']} missed)", r["rate_hz"] >= 59.5)]
+
+
+# bar -> (rows, for every participant or the first only)
+BARS = {"neutral": (neutral_rows, True), "bad": (bad_rows, True), "flood": (flood_rows, False),
+        "lost": (lost_rows, False), "corrupt": (corrupt_rows, False), "video": (video_rows, False)}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", required=True)
     parser.add_argument("--participants", nargs="+", default=["P1", "P4"])
-    parser.add_argument("--bars", nargs="+", default=["neutral", "lost", "bad", "flood", "corrupt", "video"])
+    parser.add_argument("--bars", nargs="+", choices=sorted(BARS), default=list(BARS))
     parser.add_argument("--out", type=Path, default=RESULTS / "live_safety.md")
     parser.add_argument("--jobs", type=int, default=1, help="runs one at a time (real-time runs: 1)")
     args = parser.parse_args()
@@ -267,49 +325,12 @@ def main() -> None:
                 model = model_for(name, seed, work)
                 heading = session_heading(seed)
                 print(f"{name} seed {seed} (heading {heading:.0f} deg)", file=sys.stderr, flush=True)
-                if "neutral" in args.bars:
-                    r = neutral_bar(name, seed, model)
-                    rows.append((name, seed, "neutral hold: arm at rest after calibration", f"{100 * r['rest']:.1f} % of {r['ticks']} ticks "
-                                 f"(settled at {r['warm_s']:.1f} s, neutral at {r['neutral_s']:.1f} s)", r["rest"] >= 0.95))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "bad" in args.bars:
-                    for bad in ("zero", "+32767", "-32768", "gyro saturated"):
-                        r = bad_values_bar(name, seed, model, bad)
-                        rows.append((name, seed, f"node 1 {bad}: arm at rest after the first such frame",
-                                     f"{1000 * r['rest_after_s']:.0f} ms (moving before: {r['moving_before']}, held to the end: "
-                                     f"{r['held_to_end']}, status: {r['hold']})",
-                                     r["rest_after_s"] <= 0.1 and r["moving_before"] and r["held_to_end"]))
-                        print(rows[-1], file=sys.stderr, flush=True)
-                if "flood" in args.bars and name == args.participants[0]:
-                    r = flood_bar(name, seed, model)
-                    rows.append((name, seed, "flood (samples as fast as the pty takes them): not silent, arm at rest",
-                                 f"{r['frames_hz']:.0f} frames/s per node; loop {r['rate_hz']:.1f} Hz (status and log say "
-                                 f"{r['status_rate_hz']:.0f} Hz at the lowest), arm at rest {100 * r['rest']:.0f} % of the "
-                                 f"flood's ticks (moving before: {r['moving_before']}), status: {'; '.join(r['holds'])}",
-                                 r["rest"] == 1.0 and r["moving_before"]))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "lost" in args.bars and name == args.participants[0]:
-                    r = lost_bar(name, seed, model)
-                    rows.append((name, seed, "emulator killed: ticks go on, rest, --duration kept",
-                                 f"rest {1000 * r['rest_after_s']:.0f} ms after the last frame (moving: {r['moving_at_loss']}), "
-                                 f"{r['ticks_after']} ticks after it (largest gap {1000 * r['max_tick_gap_s']:.0f} ms), "
-                                 f"wall {r['wall_s']:.1f} s for --duration {r['duration_s']:g}",
-                                 r["rest_after_s"] <= 0.1 + TICK_S and r["moving_at_loss"] and r["all_rest_after"]
-                                 and r["max_tick_gap_s"] < 0.1 and abs(r["wall_s"] - r["duration_s"]) <= 1.0))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "corrupt" in args.bars and name == args.participants[0]:
-                    r = corrupt_bar(name, seed, model, work)
-                    rows.append((name, seed, "--corrupt 0.002: mode switches the clean stream does not have",
-                                 f"{r['extra']} (clean {r['clean']} switches, corrupted {r['corrupt']}; arm held "
-                                 f"{100 * r['held_clean']:.0f} % / {100 * r['held_corrupt']:.0f} % of ticks)", r["extra"] == 0))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "video" in args.bars and name == args.participants[0]:
-                    r = video_bar(name, seed, model, work)
-                    rows.append((name, seed, "live --video: control rate",
-                                 f"{r['rate_hz']:.2f} Hz, {r['overruns']} periods missed, lowest 1-s rate {r['min_loop_hz']:.0f} Hz "
-                                 f"(film {r['film_bytes']} bytes; without --video: {r['plain_rate_hz']:.2f} Hz, "
-                                 f"{r['plain_overruns']} missed)", r["rate_hz"] >= 59.5))
-                    print(rows[-1], file=sys.stderr, flush=True)
+                for bar in args.bars:
+                    function, everyone = BARS[bar]
+                    if everyone or name == args.participants[0]:
+                        for row in function(name, seed, model):
+                            rows.append((name, seed, *row))
+                            print(rows[-1], file=sys.stderr, flush=True)
     lines = [f"# Live loop safety (`python benchmarks/live_safety.py --seeds {' '.join(map(str, args.seeds))} "
              f"--participants {' '.join(args.participants)}`)", "",
              f"Machine: {os.cpu_count()} cores, shared. Every run is real time (62.5 Hz frames on a pty, 60 Hz ticks).", "",

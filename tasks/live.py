@@ -18,10 +18,12 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   arm, and control resumes only after the node's signal has been plausible and steady for one
   settle window (1.6 s). Implausible frames never reach the fusion;
 - no frame at all for ``Watchdog.timeout_s`` (100 ms): the command is zero on every tick, and the
-  last decision is forgotten, so the arm moves again only on decisions made from fresh frames;
+  last decision is forgotten, so the arm moves again only on decisions made from fresh frames. Both
+  the watchdog and the gate judge a tick at the next tick's time, so the zero command comes on the
+  last tick before 100 ms without frames have passed;
 - a backlog (more than ``BACKLOG_FRAMES`` of a node in one tick) is never replayed into the arm:
-  every frame is fused, but only the newest window's frames reach the chain and only the newest
-  decision the stick (the others are counted in ``skipped``);
+  only the newest window's frames are fused and reach the chain, only the newest decision the
+  stick (the others are counted in ``skipped``); the counters then jump, so the node settles again;
 - decisions with an unknown class, a NaN or an out-of-range value are dropped before the stick
   (and counted); a button class (B1, B2) reaches the stick only once it has been decided for the
   profile's ``button_hold_s`` without a break (``bomi.gate.ButtonEvidence``);
@@ -533,7 +535,8 @@ class LiveLoop:
             self.chain.set_neutral(self._neutral)
 
     def _frames_to_chain(self, frames: Sequence[ImuFrame]) -> tuple[list[Decision], int]:
-        """Gate and fuse every frame of the model's nodes; the newest window's reach the chain."""
+        """Gate and fuse the frames of the model's nodes and give them to the chain; of a node's backlog
+        (more than BACKLOG_FRAMES this tick) only the newest window's frames (the rest: skipped)."""
         nodes = [imu_index(frame.node_id) for frame in frames]
         counts = Counter(node for node in nodes if node in self.fusion)
         keep_from = {node: count - self.chain.model.spec.window if count > BACKLOG_FRAMES else 0
@@ -544,21 +547,17 @@ class LiveLoop:
             gate = self.gate.node.get(node)
             if gate is None:
                 continue
-            position = seen[node]
             seen[node] += 1
+            if seen[node] <= keep_from[node]:
+                skipped += 1
+                continue
             if not gate.check_raw(frame.counter, frame.mag, frame.gyro, frame.acc):
                 continue
             angles = self.fusion[node].update(frame.acc, frame.gyro, frame.mag)
             gate.fused(angles)
             if not self.streaming and self.gate.settled:
                 self._start_streaming()
-            if not self.streaming:
-                continue
-            if position < keep_from[node]:
-                skipped += 1
-                continue
-            made = self.chain.push_angles(node, angles, frame.gyro)
-            if made is not None:
+            if self.streaming and (made := self.chain.push_angles(node, angles, frame.gyro)) is not None:
                 decisions.append(made)
         return decisions, skipped
 
@@ -580,8 +579,10 @@ class LiveLoop:
         if self.safety.update(key_events):
             chain.begin_neutral_calibration()
             summary.neutral = None
-        stale = self.watchdog.expired(now)
-        gate = self.gate.verdict(now)
+        # judged at the next tick's time: the arm is at rest before 100 ms without frames have passed
+        # (on the last tick before them), not on the first tick after them
+        stale = self.watchdog.expired(now + self.arm.dt)
+        gate = self.gate.verdict(now + self.arm.dt)
         hold = "no frames" if stale else "standby" if self.safety.standby else gate
         if chain.calibrating and gate is not None:
             self._recalibrate = True      # the neutral posture is taken from trusted samples only
