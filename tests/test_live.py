@@ -15,7 +15,6 @@ from bomi.chain import Decision, OnlineChain
 from tasks.cli import main
 from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame
-from bomi.fusion import DT
 from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
