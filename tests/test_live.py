@@ -406,8 +406,10 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
             assert speed[tick["tick"]] == 0 and tick["angular"] == [0, 0, 0] and tick["finger"] == 0
     # the zero command comes on the last control tick before 100 ms of silence have passed
     first_stale = next(tick for tick in silent if tick["stale"])
-    assert first_stale["t"] - before["t"] <= 0.1 + 1e-6
-    assert ticks[first_stale["tick"] - 1]["t"] - before["t"] + dt < 0.1 + 1e-6
+    previous = ticks[first_stale["tick"] - 1]
+    late = max(0.0, first_stale["t"] - previous["t"] - 1 / 60)   # a busy machine can delay a tick
+    assert first_stale["t"] - before["t"] <= 0.1 + late + 1e-6
+    assert previous["t"] - before["t"] + dt < 0.1 + 1e-6
     assert any(speed[tick["tick"]] > 0 for tick in ticks if tick["t"] > after["t"])   # resumes with the stream
     out = capsys.readouterr()
     assert "live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless" in out.err
