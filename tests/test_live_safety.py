@@ -204,7 +204,7 @@ def test_a_lost_stream_never_holds_up_a_poll_and_stop_cuts_the_backoff_short():
         time.sleep(DT)
     start = time.monotonic()
     reader.stop()
-    assert longest < 0.01 and time.monotonic() - start < 0.5
+    assert longest < 0.05 and time.monotonic() - start < 0.5             # a backoff would take 2 s
 
 
 class FullDisk(io.StringIO):
@@ -265,7 +265,7 @@ def test_a_poll_parses_the_newest_bytes_only_and_counts_the_rest():
     reader.stop()
     os.close(master)
     assert len(got) == POLL_BYTES // 32 and got[-1].counter == 1999 % 256     # the newest ones
-    assert reader.dropped_bytes == len(frames) - POLL_BYTES and took < DT
+    assert reader.dropped_bytes == len(frames) - POLL_BYTES and took < 0.05
 
 
 def test_the_loop_is_deterministic_given_each_ticks_frames(p1_model_file):
