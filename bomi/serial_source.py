@@ -193,8 +193,7 @@ class StreamReader:
                     self._chunks.append((self.source.clock(), chunk))
         except StreamLost as exc:
             if not self._stop.is_set():
-                self.error = exc
-                self.source.log(f"bomi: {exc}")
+                self.error = exc   # the caller reports it (once)
 
     def poll(self) -> tuple[list[ImuFrame], list[SafetyKeyEvent]]:
         """The IMU frames completed since the last poll, and the safety-key events the parser let through."""
