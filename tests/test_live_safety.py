@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from bomi.fusion import DT
+from bomi.fusion import DT, NodeFusion
 from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_ratio, raw_defect, settle_change
 from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
 from tasks.live import LiveLoop, TickLog, VideoDisplay
@@ -312,3 +312,25 @@ def test_the_loop_is_deterministic_given_each_ticks_frames(p1_model_file):
     holds = [hold for hold, _, _ in first]
     assert holds[0] is not None and holds[0].startswith(("warming up", "no frames")) and holds[-1] is None
     assert any(any(linear) for _, linear, _ in first)                                  # F drove the arm
+
+
+def test_the_emulated_participant_starts_as_a_real_stream_does_the_warm_up_is_visible():
+    """Raw samples from the first one, the receiver's filter from its zero state: a participant facing
+    100 deg reads yaw 0 at first, and the heading (+ P1's neutral yaw) only after the filter's decay."""
+    from bomi.classifier import NEUTRAL_LABEL
+    from bomi.profiles import load_profile
+    from bomi.protocol import Cue
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import MAX_HEADING_DEG, participant_blocks, session_heading
+
+    params, profile = load_participant("P1"), load_profile("P1")
+    block = next(participant_blocks(params, profile, 0, [Cue(NEUTRAL_LABEL, "neutral", 0.0, 12.0)], 12.0,
+                                    block_s=12.0, heading_deg=100.0))
+    fusion = NodeFusion(profile.nodes[0].calibration)
+    yaw = np.array([fusion.update(row[6:9], row[3:6], row[0:3])[2] for row in block[1].tolist()])
+    expected = 100.0 + params.neutral.posture_deg[0, 2]
+    assert abs(yaw[0]) < 2.0                                       # the filter starts at 0
+    assert abs(yaw[round(1.6 / DT)] - expected * (1 - math.exp(-1))) < 5.0   # one time constant: 63 %
+    assert abs(yaw[-60:].mean() - expected) < 3.0                  # settled after ~10 s
+    headings = [session_heading(seed) for seed in range(200)]
+    assert max(map(abs, headings)) <= MAX_HEADING_DEG and np.std(headings) > 60   # spread over the compass
