@@ -178,11 +178,12 @@ class PassiveViewer:
     """MuJoCo's interactive viewer, following the simulation, with the status line in its top-left
     corner (closing its window ends the run)."""
 
-    def __init__(self, model, data):
+    def __init__(self, model, data, key_callback: Callable[[int], None] | None = None):
         import mujoco.viewer  # needs a display; imported only when one is there
         before = set(threading.enumerate())
         # the scene fills the window; Tab and Shift+Tab bring MuJoCo's side panels back
-        self._handle = mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False)
+        self._handle = mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False,
+                                                    key_callback=key_callback)
         # the viewer draws from a thread of its own; close() waits for it, so that the process never
         # exits while it is still drawing into a window being destroyed
         self._threads = [thread for thread in threading.enumerate() if thread not in before]
@@ -350,13 +351,15 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
              status: StatusLine | None = None, display: Display = Headless(),
              watchdog: Watchdog | None = None, on_neutral: Callable[[dict], None] = lambda offsets: None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-             assist: Callable[[JoystickState], JoystickState] | None = None) -> LiveSummary:
+             assist: Callable[[JoystickState], JoystickState] | None = None,
+             observer: Callable[[Tick], None] | None = None) -> LiveSummary:
     """Drive ``arm`` from ``source`` until ``duration_s`` (or the display closes).
 
     ``assist``: the assistance layer between the decided stick and the arm (``tasks.assist``;
     it may switch the arm's mode); not consulted while the watchdog or the safety key holds the arm.
     Neutral offsets: ``neutral`` if given, else the first ``profile.neutral_samples`` samples.
-    ``on_neutral`` is told the offsets once they hold. ``log`` gets one JSON line per tick.
+    ``on_neutral`` is told the offsets once they hold. ``log`` gets one JSON line per tick;
+    ``observer`` every tick as it is (a trial runner records and scores it), before the display syncs.
     """
     watchdog = watchdog or Watchdog()
     stick, safety = DecisionStick(), SafetySwitch()
@@ -392,6 +395,8 @@ def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: 
                     chain.calibrating, decisions, dropped, state, arm.mode.value, command, new_neutral)
         if log is not None:
             log.write(json.dumps(tick.record()) + "\n")
+        if observer is not None:
+            observer(tick)
         last_decision = decisions[-1] if decisions else last_decision
         line = functools.partial(status_text, tick, source.parser, last_decision)
         display.sync(line)

@@ -47,6 +47,8 @@ COMMANDS: dict[str, Command] = {
     "demo": Command("tasks.cli.task", "one joystick and one BoMI episode of P1: table, timeline figure, MP4"),
     "sweep": Command("tasks.cli.sweep", "episodes over a grid of participants x settings x seeds, resumable"),
     "live": Command("tasks.cli.live", "drive the simulated arm from a live base-station stream"),
+    "trial": Command("tasks.cli.trial", "the paper's session: N trials per controller, scored, logged, reported"),
+    "replay": Command("tasks.cli.trial", "re-run a logged trial of `bomi trial` (or re-score it with another model)"),
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(command.module for command in COMMANDS.values()))
 

@@ -1,0 +1,190 @@
+"""Replaying a logged trial: its session's logged bytes (BoMI) or stick (joystick), tick by tick at
+the logged tick times, through the same loop, chain and simulated arm, up to the end of the trial;
+then the hand's path is set against the logged one. The simulation is deterministic, so the
+deviation is 0 up to floating point.
+
+With another model, the trial's decisions are re-scored offline: the logged frames through a
+chain of that model (the logged neutral offsets), each decision against the class the stand-in
+performed. Those decisions never reach an arm: with them the arm's path would have differed.
+"""
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bomi.chain import OnlineChain
+from bomi.classifier import Model
+from bomi.errors import BomiError
+from bomi.frames import ImuFrame
+from bomi.profiles import Profile
+from sim.env import ArmSim
+from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState
+from tasks import metrics
+from tasks.live import Headless
+from tasks.trials.dataset import SessionData
+from tasks.trials.session import (UNKNOWN, Controller, Session, TappedParser, TickRecorder, TrialArm, TrialDisplay,
+                                  TrialPlan, node1_id, run_bomi, run_joystick)
+
+
+@dataclass
+class LoggedClock:
+    """The logged tick times, one per tick: ``advance`` moves to the next; a sleep changes nothing."""
+
+    times: Sequence[float]
+    k: int = 0
+
+    def __call__(self) -> float:
+        return float(self.times[min(self.k, len(self.times) - 1)])
+
+    def advance(self, *_) -> None:
+        self.k += 1
+
+    def sleep(self, seconds: float) -> None:
+        """Time is the log's."""
+
+
+class ReplaySource:
+    """The logged bytes of each tick, as a live source gives them."""
+
+    def __init__(self, chunks: Sequence[bytes], clock: Callable[[], float]):
+        self.chunks, self.clock, self.parser = chunks, clock, TappedParser()
+
+    def batches(self) -> Iterator[tuple[float, list[ImuFrame]]]:
+        for chunk in self.chunks:
+            now = self.clock()
+            yield now, self.parser.feed(chunk, now)
+        raise BomiError("the replayed session's log ends before the trial does")
+
+
+@dataclass
+class LoggedStick:
+    """The logged stick of each tick (a ``session.StickDevice``)."""
+
+    stick: np.ndarray
+    pressed: np.ndarray
+    clock: LoggedClock
+
+    def read(self, now: float) -> JoystickState:
+        k = self.clock.k
+        if k >= len(self.stick):
+            raise BomiError("the replayed session's log ends before the trial does")
+        self.clock.advance()
+        return JoystickState({f: float(v) for f, v in zip(FUNCTIONS, self.stick[k]) if v > 0},
+                             frozenset(b for b, p in zip(BUTTONS, self.pressed[k]) if p))
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+@dataclass(frozen=True)
+class Replayed:
+    number: int
+    ticks: int
+    logged_ticks: int
+    max_deviation_m: float
+    success: bool
+    logged_success: bool
+
+
+def session_plan(data: SessionData) -> TrialPlan:
+    return TrialPlan(**json.loads(data.attrs["plan"]))
+
+
+def replay_trial(data: SessionData, number: int, profile: Profile | None, model: Model | None) -> Replayed:
+    """Re-run the session of ``data`` up to the end of trial ``number``; its hand path against the log's."""
+    row = data.trial_row(number)
+    if row is None:
+        raise BomiError(f"{data.path}: no trial {number} in this session")
+    go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
+    sim = ArmSim(layout=LAYOUTS[data.attrs["layout"]])
+    try:
+        clock = LoggedClock(data.ticks["t"])
+        controller = Controller(data.attrs["controller"])
+        arm = TrialArm(sim, session_plan(data), ready=controller is Controller.JOYSTICK, last_trial=number)
+        display = TrialDisplay(Headless(), arm)
+        if controller is Controller.BOMI:
+            chain = OnlineChain(model, profile)
+            source = ReplaySource(data.tick_bytes(), clock)
+            session = Session(controller, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "replay")
+            run_bomi(session, source, chain, display=display, on_tick=clock.advance, clock=clock, sleep=clock.sleep)
+        else:
+            session = Session(controller, arm, TickRecorder(arm), "replay")
+            device = LoggedStick(data.ticks["stick"], data.ticks["pressed"], clock)
+            run_joystick(session, device, display=display, clock=clock, sleep=clock.sleep)
+    finally:
+        sim.close()
+    result = next(r for r in arm.results if r.number == number)
+    replayed = np.array([r["hand_pos"] for r in arm.rows[result.go_tick:result.end_tick]])
+    logged = data.ticks["hand_pos"][go:end]
+    common = min(len(replayed), len(logged))
+    deviation = float(np.max(np.linalg.norm(replayed[:common] - logged[:common], axis=1))) if common else float("nan")
+    return Replayed(number, result.end_tick - result.go_tick, end - go, deviation, result.success,
+                    bool(data.trials["success"][row]))
+
+
+@dataclass(frozen=True)
+class Rescored:
+    decisions: int
+    accuracy: float
+    accuracy_excused: float
+    logged_decisions: int
+    logged_accuracy: float
+    logged_accuracy_excused: float
+
+
+def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model) -> Rescored:
+    """Trial ``number``'s logged frames through a chain of ``model`` (offline, no arm), its decisions
+    scored against the stand-in's intended classes, beside the logged decisions' score."""
+    row = data.trial_row(number)
+    if row is None:
+        raise BomiError(f"{data.path}: no trial {number} in this session")
+    if data.attrs["controller"] != Controller.BOMI.value:
+        raise BomiError(f"{data.path}: trial {number} was a joystick trial: there are no decisions to re-score")
+    if np.all(data.frames["intended"] == UNKNOWN):
+        raise BomiError(f"{data.path}: trial {number} was done by a person: nobody logged the intended classes, so "
+                        "decisions cannot be scored")
+    neutral = json.loads(data.attrs["neutral"] or "null")
+    if neutral is None:
+        raise BomiError(f"{data.path}: the session never took its neutral posture: nothing to re-score")
+    go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
+    chain = OnlineChain(model, profile)
+    chain.set_neutral({int(node): offset for node, offset in neutral.items()})
+    f = data.frames
+    decided, intended = [], []
+    for k in range(int(np.searchsorted(f["tick"], end))):
+        frame = ImuFrame(int(f["node_id"][k]), int(f["period_ms"][k]), int(f["counter"][k]),
+                         tuple(int(v) for v in f["mag"][k]), tuple(int(v) for v in f["gyro"][k]),
+                         tuple(int(v) for v in f["acc"][k]))
+        decision = chain.push_frame(frame)
+        if decision is not None and f["tick"][k] >= go:
+            decided.append(decision.label)
+            intended.append(int(f["intended"][k]))
+    allowance = int(data.attrs["allowance"])
+    d = data.decisions
+    span = (d["tick"] >= go) & (d["tick"] < end)
+    return Rescored(len(decided), metrics.accuracy_all_decisions(np.array(intended), np.array(decided)),
+                    metrics.accuracy_excused_transitions(np.array(intended), np.array(decided), allowance),
+                    int(span.sum()), metrics.accuracy_all_decisions(d["intended"][span], d["label"][span]),
+                    metrics.accuracy_excused_transitions(d["intended"][span], d["label"][span], allowance))
+
+
+def trial_controller(out: Path, number: int) -> str:
+    """Which controller's session holds trial ``number`` of the session directory ``out``."""
+    path = out / "trials.jsonl"
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot read it ({exc.strerror}); is {out} a `bomi trial` directory?") from None
+    for k, line in enumerate(lines, start=1):
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            raise BomiError(f"{path}: line {k} is not JSON") from None
+        if record.get("trial") == number:
+            return record["operator"]
+    raise BomiError(f"{path}: no trial {number} (there are {len(lines)})")
+

@@ -1,0 +1,64 @@
+"""The session report: the paper's trial table (each trial's time, mode switches and accuracy,
+beside P1's trials in the paper and, when one is named, a virtual participant's prediction for the
+same cube placements) and the timeline figure (``tasks.timeline``) of each controller's best trial."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from bomi import paper
+from tasks.episode import EpisodeLog
+from tasks.timeline import timeline_figure
+
+
+def _cell(value, spec: str = ".2f") -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def _pct(value) -> str:
+    return "-" if value is None else f"{100 * value:.1f} %"
+
+
+def best_trial(records: Sequence[dict]) -> dict | None:
+    """The successful trial done fastest (None if none succeeded)."""
+    done = [r for r in records if r["success"]]
+    return min(done, key=lambda r: r["completion_time"]) if done else None
+
+
+def trial_table(records: Sequence[dict], predictions: Sequence[dict] = ()) -> str:
+    header = "| trial | controller | who | success | time (s) | mode switches | accuracy (all decisions) |"
+    lines = [header, "|---" * (header.count("|") - 1) + "|"]
+    for r in records:
+        lines.append(f"| {r['trial']} | {r['operator']} | {r['participant']} | {'yes' if r['success'] else 'no: ' + str(r['failure'])} "
+                     f"| {_cell(r['completion_time'])} | {r['mode_switches']} | {_pct(r.get('accuracy_all_decisions'))} |")
+    for k, r in enumerate(predictions, start=1):
+        lines.append(f"| prediction {k} | {r['operator']} | {r['participant']} (simulated, seed {r['seed']}) "
+                     f"| {'yes' if r['success'] else 'no'} | {_cell(r['completion_time'])} | {r['mode_switches']} "
+                     f"| {_pct(r.get('accuracy_all_decisions'))} |")
+    for controller, times in paper.TRIALS_S.items():
+        lines.append(f"| paper | {controller} | P1 (Fall et al.) | 3/3 | {' / '.join(f'{t:.2f}' for t in times)} | - | "
+                     f"{_pct(paper.TASK['realtime_accuracy']) if controller == 'bomi' else '-'} |")
+    return "\n".join(lines)
+
+
+def write_report(out: Path, records: Sequence[dict], logs: dict[int, EpisodeLog], predictions: Sequence[dict] = (),
+                 note: str = "") -> list[Path]:
+    """report.md and one timeline figure per controller (its best trial); returns the files written."""
+    written, figures = [], []
+    for controller in dict.fromkeys(r["operator"] for r in records):
+        best = best_trial([r for r in records if r["operator"] == controller])
+        if best is None:
+            figures.append(f"No {controller} trial succeeded: no timeline figure.")
+            continue
+        path = timeline_figure([logs[best["trial"]]], out / f"timeline_{controller}.png")
+        written.append(path)
+        figures.append(f"![{controller}: trial {best['trial']}]({path.name})\n\n{controller}: the best trial, "
+                       f"trial {best['trial']} ({best['completion_time']:.2f} s).")
+    text = "\n\n".join(["# Trial session", note, "## Trials", trial_table(records, predictions),
+                        "Time: from the first command to the stack standing still (the task's success), the "
+                        "time limit counted from the go. Accuracy: every decision against the class the "
+                        "stand-in performed (- for a person: nobody knows what they intended).",
+                        "## Timelines", *figures]) + "\n"
+    report = out / "report.md"
+    report.write_text(text, encoding="utf-8")
+    return [report, *written]
