@@ -10,19 +10,25 @@ Reading: the port is opened non-blocking (timeout 0) and each read asks for up t
 bytes, so a read returns everything that has arrived, on every kind of port. ``in_waiting`` is
 not trusted: pyserial's socket:// reports 1 whatever is queued, which made a 60 Hz reader take
 one frame per tick and fall ever further behind a 3-node stream. When nothing has arrived the
-source waits ``poll_s`` (0 for a caller that paces itself, like the live loop) and yields b"".
+source waits ``poll_s`` (0 for a caller that paces itself) and yields b"".
+
+``StreamReader`` reads a source on a thread of its own, so that neither a read nor a reconnection
+(its backoff waits seconds) ever holds up a caller that must keep time: the live loop takes
+whatever has arrived with ``poll()``, which never waits.
 """
 from __future__ import annotations
 
 import sys
+import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import serial
 
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, ImuFrame
+from bomi.frames import FrameParser, ImuFrame, SafetyKeyEvent
 
 BASE_STATION_BAUD = 1_998_848
 READ_SIZE = 1 << 16  # more than a second of a full 6-node network (12 kB/s)
@@ -140,3 +146,74 @@ class SerialSource:
             return
         raise StreamLost(f"{self.url}: stream lost and not back after {len(delays)} attempts "
                          f"over {sum(delays):g} s (last error: {_one_line(exc)})")
+
+
+READER_EXIT_S = 2.0   # how long stop() waits for the reading thread
+
+
+class StreamReader:
+    """``source`` read on a daemon thread; :meth:`poll` hands over what has arrived, parsed, without waiting.
+
+    The thread keeps the raw chunks with their arrival times; parsing happens in :meth:`poll`, on
+    the caller's thread, so the parser is never shared. The source's reconnection backoff waits on
+    an event that :meth:`stop` sets, so stopping never waits for a backoff. When the source gives up
+    (``StreamLost``) the error is kept in ``error`` and ``poll`` returns nothing from then on.
+    """
+
+    def __init__(self, source: SerialSource):
+        self.source = source
+        self.error: StreamLost | None = None
+        self._chunks: deque[tuple[float, bytes]] = deque()
+        self._stop = threading.Event()
+        self._seen_events = 0
+        source.sleep = self._stop.wait   # type: ignore[assignment]  # a backoff that stop() cuts short
+        if not source.poll_s:
+            source.poll_s = POLL_S        # the thread, not a paced caller, waits between empty reads
+        self._thread = threading.Thread(target=self._read, name=f"read {source.url}", daemon=True)
+
+    @property
+    def parser(self) -> FrameParser:
+        return self.source.parser
+
+    def start(self) -> StreamReader:
+        self.source.open()
+        self._thread.start()
+        return self
+
+    def _read(self) -> None:
+        try:
+            for chunk in self.source.chunks():
+                if self._stop.is_set():
+                    return
+                if chunk:
+                    self._chunks.append((self.source.clock(), chunk))
+        except StreamLost as exc:
+            if not self._stop.is_set():
+                self.error = exc
+                self.source.log(f"bomi: {exc}")
+
+    def poll(self) -> tuple[list[ImuFrame], list[SafetyKeyEvent]]:
+        """The IMU frames completed since the last poll, and the safety-key events the parser let through."""
+        frames: list[ImuFrame] = []
+        while self._chunks:
+            arrival, chunk = self._chunks.popleft()
+            frames += self.source.parser.feed(chunk, arrival)
+        events = self.source.parser.safety_events[self._seen_events:]
+        self._seen_events += len(events)
+        return frames, events
+
+    @property
+    def queued_bytes(self) -> int:
+        return sum(len(chunk) for _, chunk in self._chunks)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=READER_EXIT_S)
+        self.source.close()
+
+    def __enter__(self) -> StreamReader:
+        return self.start()
+
+    def __exit__(self, *exc_info) -> None:
+        self.stop()

@@ -1,38 +1,65 @@
 """The live loop: a base-station stream drives the simulated arm at its 60 Hz control rate.
 
-    SerialSource -> OnlineChain -> Decision -> sanitizer -> DecisionStick -> Watchdog -> ArmSim.step
+    StreamReader (own thread) -> poll -> Gate + fusion -> OnlineChain -> sanitizer -> button evidence
+    -> DecisionStick -> Watchdog -> ArmSim.step
 
-The arm never knows where the stick came from. Ticks are paced by the wall clock; each tick reads
-whatever bytes arrived (without blocking), feeds their frames to the chain, and steps the arm once.
-Safety: when no frame has arrived for ``Watchdog.timeout_s`` the tick's stick is zero (the
-command is zero on the first tick after the timeout) and the last decision is forgotten, so the
-arm moves again only on decisions made from fresh frames; decisions with an unknown class, a
-NaN or an out-of-range value are dropped before the stick (and counted); the safety key's
-standby holds the arm until its control event (its calibration event retakes the neutral posture).
+The arm never knows where the stick came from. Ticks are paced by the wall clock and never wait on
+I/O: a thread reads the port (and reconnects, with its backoff) while each tick takes whatever
+has arrived (``StreamReader.poll``). ``LiveLoop`` is the loop as a library: ``tick(now, frames,
+key_events)`` runs one control tick and tells every observer its ``Tick`` (``bomi trial`` and
+replays use it; given the same ticks' inputs it does the same, bit for bit).
+
+Safety (the live path is a safety path: input it cannot trust leaves the arm at rest):
+
+- the gate (``bomi.gate``): nothing reaches the chain, no neutral is taken and the arm does not
+  move until every node's orientation filter has settled, judged on its fused angles ("warming
+  up (node k)"); an implausible frame (a sensor all zero or saturated, an angle jump, counters out
+  of step, more frames than the node's rate allows) or a node without frames for 100 ms holds the
+  arm, and control resumes only after the node's signal has been plausible and steady for one
+  settle window (1.6 s). Implausible frames never reach the fusion;
+- no frame at all for ``Watchdog.timeout_s`` (100 ms): the command is zero on every tick, and the
+  last decision is forgotten, so the arm moves again only on decisions made from fresh frames;
+- a backlog (more than ``BACKLOG_FRAMES`` of a node in one tick) is never replayed into the arm:
+  every frame is fused, but only the newest window's frames reach the chain and only the newest
+  decision the stick (the others are counted in ``skipped``);
+- decisions with an unknown class, a NaN or an out-of-range value are dropped before the stick
+  (and counted); a button class (B1, B2) reaches the stick only once it has been decided for the
+  profile's ``button_hold_s`` without a break (``bomi.gate.ButtonEvidence``);
+- the safety key's standby holds the arm until its control event (its calibration event retakes
+  the neutral posture);
+- the loop's own rate and overruns are measured and shown; the film (``--video``) is made in a
+  process of its own and drops film frames, never ticks; a log that cannot be written (disk full)
+  is given up with one warning, and control goes on.
 
 Log (``--log L``, JSON lines, one object per control tick):
-``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``lost``
-(frames lost so far, from the packet counters), ``stale`` (the watchdog held the arm),
-``standby`` (the safety key held the arm), ``calibrating`` (neutral calibration still
-collecting), ``decisions`` (the chain's decisions this tick: label, name, function, confidence,
-rejected, gamma, nu, sample_index = node-1 samples counted from the end of the neutral
-calibration), ``dropped`` (decisions the sanitizer refused: sample_index, reason), ``deflection`` and ``pressed`` (the
-stick sent to the arm), ``mode`` (after the tick), ``linear`` (m/s), ``angular`` (rad/s) and
-``finger`` (the arm's command); ``neutral`` (offsets per node index, degrees) on the tick they
-take effect.
+``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``skipped``
+(frames of a backlog kept from the chain this tick), ``lost`` (samples lost so far, from the
+packet counters), ``stale`` (no frames: the watchdog held the arm), ``standby`` (the safety key
+held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
+(node k)", "node k: accelerometer all zero", ...), ``calibrating`` (neutral calibration still
+collecting), ``loop_hz`` (ticks in the last second), ``overruns`` (control periods missed so far),
+``decisions`` (the chain's decisions this tick: label, name, function, confidence, rejected,
+gamma, nu, sample_index = node-1 samples counted from the end of the neutral calibration),
+``dropped`` (decisions the sanitizer refused: sample_index, reason), ``deflection`` and
+``pressed`` (the stick sent to the arm), ``mode`` (after the tick), ``linear`` (m/s), ``angular``
+(rad/s) and ``finger`` (the arm's command); ``neutral`` (offsets per node index, degrees) on the
+tick they take effect.
 """
 from __future__ import annotations
 
 import functools
 import json
 import math
+import multiprocessing
 import os
+import queue
 import sys
 import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from collections import Counter, deque
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import IO, Protocol
 
@@ -40,15 +67,21 @@ import mujoco
 import numpy as np
 
 from bomi.chain import Decision, OnlineChain
+from bomi.classifier import NEUTRAL_LABEL
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent
-from bomi.serial_source import SerialSource
-from sim.joystick import ArmCommand, JoystickState
+from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
+from bomi.fusion import DT, NodeFusion
+from bomi.gate import ButtonEvidence, Gate, GateConfig
+from bomi.profiles import NEUTRAL_FUNCTION
+from sim.joystick import BUTTONS, ArmCommand, JoystickState
 from tasks.stick import DecisionStick
 
 WATCHDOG_TIMEOUT_S = 0.1
 STATUS_PERIOD_S = 0.5
 VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to end
+BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
+FILM_START_S = 60.0  # how long the film's process may take to start (imports, the scene, the encoder)
+FILM_QUEUE = 4       # film frames waiting for the film's process; more are dropped
 
 
 # ---------------------------------------------------------------------------------- safety
@@ -93,25 +126,23 @@ class SafetySwitch:
     when the key frame before them vouches)."""
 
     standby: bool = False
-    seen: int = 0
 
     def update(self, events: Sequence[SafetyKeyEvent]) -> bool:
-        """Apply the events not seen yet; True if one asks for a new neutral calibration."""
+        """Apply new events; True if one asks for a new neutral calibration."""
         calibrate = False
-        for event in events[self.seen:]:
+        for event in events:
             if event.event == SafetyKey.STANDBY:
                 self.standby = True
             elif event.event == SafetyKey.CONTROL:
                 self.standby = False
             calibrate |= event.event == SafetyKey.CALIBRATION
-        self.seen = len(events)
         return calibrate
 
 
 # ---------------------------------------------------------------------------------- one tick
 @dataclass
 class Tick:
-    """What one control tick read, decided and commanded."""
+    """What one control tick read, decided and commanded (``imu``: the frames it read, in arrival order)."""
 
     tick: int
     t: float
@@ -126,11 +157,17 @@ class Tick:
     mode: str
     command: ArmCommand
     neutral: dict[int, tuple[float, float, float]] | None = None
+    hold: str | None = None
+    skipped: int = 0
+    loop_hz: float = 0.0
+    overruns: int = 0
+    imu: Sequence[ImuFrame] = ()
 
     def record(self) -> dict:
         """The tick as one JSON-ready log object (columns in the module docstring)."""
-        out = {"tick": self.tick, "t": self.t, "frames": self.frames, "lost": self.lost, "stale": self.stale,
-               "standby": self.standby, "calibrating": self.calibrating,
+        out = {"tick": self.tick, "t": self.t, "frames": self.frames, "skipped": self.skipped, "lost": self.lost,
+               "stale": self.stale, "standby": self.standby, "hold": self.hold, "calibrating": self.calibrating,
+               "loop_hz": self.loop_hz, "overruns": self.overruns,
                "decisions": [asdict(d) for d in self.decisions],
                "dropped": [{"sample_index": i, "reason": r} for i, r in self.dropped],
                "deflection": dict(self.state.deflection), "pressed": sorted(self.state.pressed), "mode": self.mode,
@@ -150,6 +187,15 @@ class Arm(Protocol):
 
     @property
     def mode(self): ...
+
+
+class Source(Protocol):
+    """Where frames come from (``bomi.serial_source.StreamReader``): ``poll`` never waits."""
+
+    parser: FrameParser
+    error: BomiError | None   # set once the source has given up
+
+    def poll(self) -> tuple[list[ImuFrame], list[SafetyKeyEvent]]: ...
 
 
 class Display(Protocol):
@@ -202,37 +248,71 @@ class PassiveViewer:
             thread.join(timeout=VIEWER_EXIT_S)
 
 
+def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
+    """The film's process: its own copy of the scene, posed and rendered from the states it is sent.
+    Film frames are due on the sender's clock at the render rate; a slot without a state of its own
+    repeats the previous frame, so the film plays in real time."""
+    from sim.env import ArmSim
+    from sim.render import VideoWriter
+
+    sim = ArmSim(layout=layout)
+    fps = sim.config.render.fps
+    with VideoWriter(path, fps) as writer:
+        ready.set()
+        start, written = None, 0
+        while (item := frames.get()) is not None:
+            t, qpos, caption = item
+            start = t if start is None else start
+            sim.data.qpos[:] = qpos
+            mujoco.mj_kinematics(sim.model, sim.data)
+            frame = sim.render(caption)
+            due = int((t - start) * fps) + 1 - written
+            for _ in range(max(due, 1 if written == 0 else 0)):
+                writer.append(frame)
+            written += max(due, 1 if written == 0 else 0)
+    sim.close()
+
+
 class VideoDisplay:
     """The fixed camera's view filmed to an MP4 that plays in real time, the status line as its
-    caption. Frames are due on the wall clock at the render rate; when rendering falls behind (a
-    busy machine, software OpenGL) a frame is repeated for the slots it missed, and the control
-    loop never waits for more than one render per tick."""
+    caption, by a process of its own: a tick only copies the arm's pose into a short queue when a
+    film frame is due (at the render rate) and drops it when the queue is full, so filming never
+    slows the control loop (``dropped`` counts the film frames lost that way)."""
 
     def __init__(self, arm, path: Path, clock: Callable[[], float] = time.monotonic):
-        from sim.render import VideoWriter  # only a filmed run needs the encoder
-
         self.arm, self.path, self.clock = arm, Path(path), clock
         self.fps = arm.config.render.fps
-        self.writer = VideoWriter(self.path, self.fps)
-        self.start: float | None = None
-        self.frames = 0
+        context = multiprocessing.get_context("spawn")   # no fork of a process holding GL contexts and threads
+        self._frames = context.Queue(FILM_QUEUE)
+        ready = context.Event()
+        self._process = context.Process(target=_film, args=(arm.layout, self.path, self._frames, ready),
+                                        name="bomi film", daemon=True)
+        self._process.start()
+        if not ready.wait(FILM_START_S):
+            self._process.kill()
+            raise BomiError(f"{self.path}: the film's process did not start within {FILM_START_S:g} s")
+        self._next: float | None = None
+        self.frames = self.dropped = 0
 
     def running(self) -> bool:
         return True
 
     def sync(self, status: Callable[[], str]) -> None:
         now = self.clock()
-        self.start = now if self.start is None else self.start
-        due = int((now - self.start) * self.fps) + 1 - self.frames  # frame slots up to now not yet filled
-        if due > 0:
-            fields = status().split(" | ")
-            frame = self.arm.render((" | ".join(fields[:4]), " | ".join(fields[4:])))
-            for _ in range(due):
-                self.writer.append(frame)
-            self.frames += due
+        if self._next is not None and now < self._next:
+            return
+        self._next = now + 1.0 / self.fps if self._next is None else max(self._next + 1.0 / self.fps, now)
+        fields = status().split(" | ")
+        try:
+            self._frames.put_nowait((now, self.arm.data.qpos.copy(), (" | ".join(fields[:5]), " | ".join(fields[5:]))))
+            self.frames += 1
+        except queue.Full:
+            self.dropped += 1
 
     def close(self) -> None:
-        self.writer.close()
+        self._frames.put(None)
+        self._process.join()
+        self._frames.close()
 
 
 @dataclass
@@ -270,7 +350,8 @@ def display_opens() -> bool:
 
 # ---------------------------------------------------------------------------------- status
 def status_text(tick: Tick, parser: FrameParser, decision: Decision | None) -> str:
-    """Rate, lost packets, current class, confidence, mode, commanded speed."""
+    """Loop rate and overruns, stream rate, lost packets, current class, confidence, mode,
+    commanded speed, and what holds the arm (or "ok")."""
     rates = [stats.rate_hz for stats in parser.nodes.values()]
     sent = sum(stats.frames + stats.lost for stats in parser.nodes.values())
     lost = f"lost {parser.total_lost} ({100 * parser.total_lost / sent if sent else 0:.1f} %)"
@@ -284,8 +365,10 @@ def status_text(tick: Tick, parser: FrameParser, decision: Decision | None) -> s
     angular = f"{np.degrees(np.linalg.norm(tick.command.angular)):.0f} deg/s"
     speed = {"translation": linear, "height": f"{linear} {angular}", "wrist": angular}.get(
         tick.mode, f"fingers {tick.command.finger:+.2f}")
-    guard = "STOPPED: no frames" if tick.stale else "STANDBY (safety key)" if tick.standby else "ok"
-    return (f"{tick.t:6.1f} s | {(sum(rates) / len(rates) if rates else 0):5.1f} Hz | {lost} | {what} | "
+    guard = ("STOPPED: no frames" if tick.stale else "STANDBY (safety key)" if tick.standby
+             else f"HELD: {tick.hold}" if tick.hold else "ok")
+    return (f"{tick.t:6.1f} s | loop {tick.loop_hz:4.1f} Hz, {tick.overruns} overruns | "
+            f"stream {(sum(rates) / len(rates) if rates else 0):5.1f} Hz | {lost} | {what} | "
             f"{tick.mode} | {speed} | {guard}")
 
 
@@ -312,6 +395,45 @@ class StatusLine:
             self.out.write("\n")
 
 
+def _warn(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+@dataclass
+class TickLog:
+    """The per-tick JSON-lines log. A write that fails (disk full, EIO) gives one warning and ends
+    the logging; the run goes on (``failed`` says why it stopped)."""
+
+    out: IO[str] | None
+    name: str = "--log"
+    warn: Callable[[str], None] = _warn
+    failed: str | None = None
+
+    def write(self, record: dict) -> None:
+        if self.out is None:
+            return
+        try:
+            self.out.write(json.dumps(record) + "\n")
+        except OSError as exc:
+            self._give_up(exc)
+
+    def _give_up(self, exc: OSError) -> None:
+        self.failed = exc.strerror or str(exc)
+        self.warn(f"bomi: warning: {self.name}: cannot write ({self.failed}); logging stopped, control goes on")
+        out, self.out = self.out, None
+        try:
+            out.close()
+        except OSError:
+            pass   # what it could not write is lost either way; the warning said so
+
+    def close(self) -> None:
+        if self.out is not None:
+            try:
+                self.out.close()
+            except OSError as exc:
+                self._give_up(exc)
+
+
 # ---------------------------------------------------------------------------------- the loop
 @dataclass
 class LiveSummary:
@@ -319,9 +441,13 @@ class LiveSummary:
     frames: int = 0
     decisions: int = 0
     dropped: int = 0
+    skipped: int = 0
     stale_ticks: int = 0
     standby_ticks: int = 0
+    held_ticks: int = 0
     watchdog_trips: int = 0
+    overruns: int = 0
+    holds: Counter = field(default_factory=Counter)   # why the arm was held (gate reasons), in ticks
     neutral: dict[int, tuple[float, float, float]] | None = None
 
     def count(self, tick: Tick) -> None:
@@ -329,88 +455,207 @@ class LiveSummary:
         self.frames += tick.frames
         self.decisions += len(tick.decisions)
         self.dropped += len(tick.dropped)
+        self.skipped += tick.skipped
         self.stale_ticks += tick.stale
         self.standby_ticks += tick.standby
+        self.held_ticks += tick.hold is not None
+        self.overruns = tick.overruns
+        if tick.hold is not None and not tick.stale and not tick.standby:
+            self.holds[tick.hold.split(" (")[0] if tick.hold.startswith("warming") else tick.hold] += 1
 
 
-def admitted_decisions(chain: OnlineChain, frames: Iterable[ImuFrame],
-                       functions: Mapping[int, str]) -> tuple[list[Decision], list[tuple[int, str]]]:
-    """The frames through the chain: the decisions that may reach the arm, and (sample, reason) of the others."""
-    decisions, dropped = [], []
-    for decision in chain.push_frames(frames):
-        reason = refusal(decision, functions)
-        if reason is None:
-            decisions.append(decision)
+@dataclass
+class LoopRate:
+    """The control loop's own rate (ticks over the last second) and the control periods it missed."""
+
+    dt: float
+    overruns: int = 0
+    _ticks: deque = field(default_factory=deque, repr=False)
+
+    def ticked(self, now: float, due: float) -> None:
+        self.overruns += int((now - due) / self.dt)  # periods that passed with no tick
+        self._ticks.append(now)
+        while self._ticks[0] <= now - 1.0:
+            self._ticks.popleft()
+
+    @property
+    def hz(self) -> float:
+        return float(len(self._ticks))
+
+
+Observer = Callable[[Tick], None]
+
+
+class LiveLoop:
+    """The live path as a library: one control tick at a time, observers told every tick.
+
+    ``chain`` (a fresh ``OnlineChain`` of the model and profile), ``arm`` (``sim.env.ArmSim`` or
+    anything with ``step``/``mode``/``dt``), ``neutral`` (offsets per node index; None: taken from
+    the stream once it has settled), ``assist`` (``tasks.assist``: between the decided stick and the
+    arm, not consulted while the arm is held), ``observers`` (called with each ``Tick`` after the arm
+    has stepped: read the arm's state then), ``on_neutral`` (told the offsets once they hold).
+
+    ``tick(now, frames, key_events)``: one control tick at ``now`` (seconds, any clock that the
+    caller keeps) with the IMU frames read since the last tick (arrival order) and the new safety-key
+    events. The loop is deterministic given these: feeding the logged inputs of a run again, tick by
+    tick, reproduces its decisions, commands and the arm's path. ``run`` paces ticks on a clock
+    with a ``Source``. ``rate`` is filled in by ``run`` (or the caller) before each tick.
+    """
+
+    def __init__(self, chain: OnlineChain, arm: Arm, *, neutral: Mapping[int, Sequence[float]] | None = None,
+                 assist: Callable[[JoystickState], JoystickState] | None = None, observers: Sequence[Observer] = (),
+                 on_neutral: Callable[[dict], None] = lambda offsets: None, gate: GateConfig | None = None,
+                 watchdog: Watchdog | None = None):
+        self.chain, self.arm, self.assist, self.on_neutral = chain, arm, assist, on_neutral
+        self.observers = list(observers)
+        profile = chain.profile
+        self.functions = {cls.label: cls.function for cls in profile.classes}
+        self.gate = Gate(chain.nodes, gate or GateConfig())
+        self.fusion = {n.index: NodeFusion(n.calibration) for n in profile.nodes if n.index in chain.nodes}
+        self.watchdog = watchdog or Watchdog()
+        self.stick, self.safety = DecisionStick(), SafetySwitch()
+        self.buttons = ButtonEvidence(max(1, math.ceil(profile.button_hold_s / DT - 1e-9)),
+                                      frozenset(f for f in self.functions.values() if f in BUTTONS))
+        neutral_class = next(cls for cls in profile.classes if cls.label == NEUTRAL_LABEL)
+        self._at_rest = dict(label=neutral_class.label, name=neutral_class.name, function=NEUTRAL_FUNCTION, nu=0.0)
+        self.summary = LiveSummary()
+        self.rate = LoopRate(arm.dt)
+        self.streaming = False        # every node settled once: frames go to the chain from then on
+        self._neutral = None if neutral is None else {int(k): tuple(v) for k, v in neutral.items()}
+        self._recalibrate = False
+
+    def _start_streaming(self) -> None:
+        self.streaming = True
+        if self._neutral is None:
+            self.chain.begin_neutral_calibration()
         else:
-            dropped.append((decision.sample_index, reason))
-    return decisions, dropped
+            self.chain.set_neutral(self._neutral)
+
+    def _frames_to_chain(self, frames: Sequence[ImuFrame]) -> tuple[list[Decision], int]:
+        """Gate and fuse every frame of the model's nodes; the newest window's reach the chain."""
+        nodes = [imu_index(frame.node_id) for frame in frames]
+        counts = Counter(node for node in nodes if node in self.fusion)
+        keep_from = {node: count - self.chain.model.spec.window if count > BACKLOG_FRAMES else 0
+                     for node, count in counts.items()}
+        seen: Counter = Counter()
+        decisions, skipped = [], 0
+        for frame, node in zip(frames, nodes):
+            gate = self.gate.node.get(node)
+            if gate is None:
+                continue
+            position = seen[node]
+            seen[node] += 1
+            if not gate.check_raw(frame.counter, frame.mag, frame.gyro, frame.acc):
+                continue
+            angles = self.fusion[node].update(frame.acc, frame.gyro, frame.mag)
+            gate.fused(angles)
+            if not self.streaming and self.gate.settled:
+                self._start_streaming()
+            if not self.streaming:
+                continue
+            if position < keep_from[node]:
+                skipped += 1
+                continue
+            made = self.chain.push_angles(node, angles, frame.gyro)
+            if made is not None:
+                decisions.append(made)
+        return decisions, skipped
+
+    def tick(self, now: float, frames: Sequence[ImuFrame], key_events: Sequence[SafetyKeyEvent] = ()) -> Tick:
+        """One control tick (see the class docstring); returns it after telling the observers."""
+        chain, summary = self.chain, self.summary
+        nodes = Counter(imu_index(frame.node_id) for frame in frames)
+        self.gate.arrivals(now, nodes)
+        made, skipped = self._frames_to_chain(frames)
+        decisions, dropped = [], []
+        for decision in made:
+            reason = refusal(decision, self.functions)
+            if reason is None:
+                decisions.append(decision)
+            else:
+                dropped.append((decision.sample_index, reason))
+        if frames:
+            self.watchdog.frames_arrived(now)
+        if self.safety.update(key_events):
+            chain.begin_neutral_calibration()
+            summary.neutral = None
+        stale = self.watchdog.expired(now)
+        gate = self.gate.verdict(now)
+        hold = "no frames" if stale else "standby" if self.safety.standby else gate
+        if chain.calibrating and gate is not None:
+            self._recalibrate = True      # the neutral posture is taken from trusted samples only
+        elif self._recalibrate and gate is None:
+            self._recalibrate = False
+            chain.begin_neutral_calibration()
+        acted = decisions[-1:] if skipped else decisions     # a backlog: the newest decision only
+        skipped += len(decisions) - len(acted)
+        state = self._stick(acted, hold is not None)
+        if self.assist is not None and hold is None:
+            state = self.assist(state)
+        command = self.arm.step(state)
+        new_neutral = None
+        if summary.neutral is None and self.streaming and not chain.calibrating:
+            new_neutral = summary.neutral = chain.neutral
+            self.on_neutral(new_neutral)
+        tick = Tick(summary.ticks, now, len(frames), self.gate.lost, stale, self.safety.standby, chain.calibrating,
+                    decisions, dropped, state, self.arm.mode.value, command, new_neutral, hold, skipped,
+                    self.rate.hz, self.rate.overruns, tuple(frames))
+        summary.count(tick)
+        summary.watchdog_trips = self.watchdog.trips
+        for observer in self.observers:
+            observer(tick)
+        return tick
+
+    def _stick(self, decisions: Sequence[Decision], hold: bool) -> JoystickState:
+        """Centred (and the last decision and any button evidence forgotten) while the arm is held;
+        else the decisions, a button only once held long enough, on the stick."""
+        if hold:
+            self.buttons.reset()
+        else:
+            admitted = self.buttons.admit(decision.function for decision in decisions)
+            decisions = [d if ok else replace(d, **self._at_rest) for d, ok in zip(decisions, admitted)]
+        return guarded_stick(self.stick, decisions, hold)
+
+    def run(self, source: Source, *, duration_s: float | None = None, log: TickLog | None = None,
+            status: StatusLine | None = None, display: Display = Headless(),
+            clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> LiveSummary:
+        """Tick every ``arm.dt`` on ``clock`` with what ``source`` has, until ``duration_s`` (kept
+        whatever the source does), the display closes, or (without a duration) the source gives up."""
+        last_decision: Decision | None = None
+        start = clock()
+        for now, due in paced_ticks(self.arm.dt, display, clock, sleep, start, duration_s):
+            if duration_s is None and source.error is not None:
+                break
+            frames, events = source.poll()
+            self.rate.ticked(now, due)
+            tick = self.tick(now - start, frames, events)
+            if log is not None:
+                log.write(tick.record())
+            last_decision = tick.decisions[-1] if tick.decisions else last_decision
+            line = functools.partial(status_text, tick, source.parser, last_decision)
+            display.sync(line)
+            if status is not None:
+                status.show(tick.t, line)
+        return self.summary
 
 
-def run_live(source: SerialSource, chain: OnlineChain, arm: Arm, *, duration_s: float | None = None,
-             neutral: Mapping[int, Sequence[float]] | None = None, log: IO[str] | None = None,
+def run_live(source: Source, chain: OnlineChain, arm: Arm, *, duration_s: float | None = None,
+             neutral: Mapping[int, Sequence[float]] | None = None, log: TickLog | None = None,
              status: StatusLine | None = None, display: Display = Headless(),
              watchdog: Watchdog | None = None, on_neutral: Callable[[dict], None] = lambda offsets: None,
              clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-             assist: Callable[[JoystickState], JoystickState] | None = None,
-             observer: Callable[[Tick], None] | None = None) -> LiveSummary:
-    """Drive ``arm`` from ``source`` until ``duration_s`` (or the display closes).
-
-    ``assist``: the assistance layer between the decided stick and the arm (``tasks.assist``;
-    it may switch the arm's mode); not consulted while the watchdog or the safety key holds the arm.
-    Neutral offsets: ``neutral`` if given, else the first ``profile.neutral_samples`` samples.
-    ``on_neutral`` is told the offsets once they hold. ``log`` gets one JSON line per tick;
-    ``observer`` every tick as it is (a trial runner records and scores it), before the display syncs.
-    """
-    watchdog = watchdog or Watchdog()
-    stick, safety = DecisionStick(), SafetySwitch()
-    functions = {cls.label: cls.function for cls in chain.profile.classes}
-    summary = LiveSummary()
-    if neutral is None:
-        chain.begin_neutral_calibration()
-    else:
-        chain.set_neutral(neutral)
-        summary.neutral = chain.neutral
-        on_neutral(summary.neutral)
-    batches = source.batches()
-    last_decision: Decision | None = None
-    start = clock()
-    for now in paced_ticks(arm.dt, display, clock, sleep, start, duration_s):
-        _, frames = next(batches)
-        decisions, dropped = admitted_decisions(chain, frames, functions)
-        if frames:
-            watchdog.frames_arrived(now)
-        if safety.update(source.parser.safety_events):
-            chain.begin_neutral_calibration()
-            summary.neutral = None
-        stale = watchdog.expired(now)
-        state = guarded_stick(stick, decisions, stale or safety.standby)
-        if assist is not None and not (stale or safety.standby):
-            state = assist(state)
-        command = arm.step(state)
-        new_neutral = None
-        if summary.neutral is None and not chain.calibrating:
-            new_neutral = summary.neutral = chain.neutral
-            on_neutral(new_neutral)
-        tick = Tick(summary.ticks, now - start, len(frames), source.parser.total_lost, stale, safety.standby,
-                    chain.calibrating, decisions, dropped, state, arm.mode.value, command, new_neutral)
-        if log is not None:
-            log.write(json.dumps(tick.record()) + "\n")
-        if observer is not None:
-            observer(tick)
-        last_decision = decisions[-1] if decisions else last_decision
-        line = functools.partial(status_text, tick, source.parser, last_decision)
-        display.sync(line)
-        if status is not None:
-            status.show(tick.t, line)
-        summary.count(tick)
-    summary.watchdog_trips = watchdog.trips
-    return summary
+             assist: Callable[[JoystickState], JoystickState] | None = None, observers: Sequence[Observer] = (),
+             gate: GateConfig | None = None) -> LiveSummary:
+    """Drive ``arm`` from ``source`` until ``duration_s`` (or the display closes): ``LiveLoop(...).run(...)``."""
+    loop = LiveLoop(chain, arm, neutral=neutral, assist=assist, observers=observers, on_neutral=on_neutral,
+                    gate=gate, watchdog=watchdog)
+    return loop.run(source, duration_s=duration_s, log=log, status=status, display=display, clock=clock, sleep=sleep)
 
 
 def paced_ticks(dt: float, display: Display, clock: Callable[[], float], sleep: Callable[[float], None],
-                start: float, duration_s: float | None) -> Iterator[float]:
-    """The times of the control ticks, every ``dt`` on ``clock`` from ``start``, while the display
-    runs and until ``duration_s``; a late tick does not make the next ones hurry."""
+                start: float, duration_s: float | None) -> Iterator[tuple[float, float]]:
+    """(time, time it was due) of the control ticks, every ``dt`` on ``clock`` from ``start``, while
+    the display runs and until ``duration_s``; a late tick does not make the next ones hurry."""
     due = start
     while display.running():
         wait = due - clock()
@@ -419,8 +664,8 @@ def paced_ticks(dt: float, display: Display, clock: Callable[[], float], sleep: 
         now = clock()
         if duration_s is not None and now - start >= duration_s:
             return
+        yield now, due
         due = max(due + dt, now)
-        yield now
 
 
 def guarded_stick(stick: DecisionStick, decisions: Sequence[Decision], hold: bool) -> JoystickState:

@@ -20,7 +20,9 @@ from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.stick import DecisionStick
-from tasks.live import StatusLine, Tick, Watchdog, display_opens, has_display, refusal, run_live, status_text
+from bomi.gate import GateConfig
+from tasks.live import StatusLine, Tick, TickLog, Watchdog, display_opens, has_display, refusal, run_live, status_text
+from tasks.participants.imu_synth import SensorNoise, synthesize_raw
 from tasks.participants.wire import participant_blocks
 from tasks.participants.participant import load_participant
 
@@ -111,12 +113,16 @@ def test_status_text_by_hand():
     parser.feed(encode_imu_frame(ImuFrame(10, 16, 4, (0, 0, 0), (0, 0, 0), (0, 0, 0))), now=0.5)  # 3 lost
     command = ArmCommand(np.array([0.0, -0.12, 0.0]), np.zeros(3), 0.0)
     tick = Tick(30, 0.5, 1, 3, False, False, False, [], [], JoystickState({"F": 0.6}), "translation", command)
+    tick = replace(tick, loop_hz=59.0, overruns=2)
     assert status_text(tick, parser, decision(nu=0.6, confidence=0.875)) == \
-        "   0.5 s |   2.0 Hz | lost 3 (60.0 %) | c1 F conf 0.88 | translation | 12.0 cm/s | ok"
+        "   0.5 s | loop 59.0 Hz, 2 overruns | stream   2.0 Hz | lost 3 (60.0 %) | c1 F conf 0.88 | translation | " \
+        "12.0 cm/s | ok"
     stale = replace(tick, stale=True, calibrating=True, mode="wrist",
                     command=ArmCommand(np.zeros(3), np.array([0.0, 0.0, np.radians(30)]), 0.0))
     assert status_text(stale, parser, None).endswith(
         "| calibrating neutral, hold still | wrist | 30 deg/s | STOPPED: no frames")
+    warming = replace(tick, hold="warming up (node 2)")
+    assert status_text(warming, parser, None).endswith("| no decision yet | translation | 12.0 cm/s | HELD: warming up (node 2)")
 
 
 def test_display_is_looked_for_in_the_environment():
@@ -145,38 +151,57 @@ class FakeClock:
         self.now += seconds
 
 
+def still_frame(counter: int, node: int = 1) -> ImuFrame:
+    """A frame of P1's node sitting still at fusion angles (0, 0, 0), noise-free: from its zero state the
+    filter reads exactly 0, so the gate settles on its first full window."""
+    cal = load_profile("P1").nodes[node - 1].calibration
+    raw = synthesize_raw(np.zeros((1, 3)), cal, np.random.default_rng(0), SensorNoise(0.0, 0.0, 0.0))
+    return ImuFrame(9 + node, 16, counter % 256, tuple(raw.mag[0].tolist()), tuple(raw.gyro[0].tolist()),
+                    tuple(raw.acc[0].tolist()))
+
+
+SETTLE = 4                                   # a short settle window for the scripted loops
+QUICK_GATE = GateConfig(settle_samples=SETTLE)
+
+
 class ScriptedSource:
-    """Per tick a number of frames (content irrelevant: the chain is scripted too) and the bytes of
-    safety-key frames, which go through the parser with its guard."""
+    """Per tick a number of still frames of node 1 (counters in order) and the bytes of safety-key
+    frames, which go through the parser with its guard."""
 
     def __init__(self, frames_per_tick: list[int], key_bytes: dict[int, bytes] | None = None):
         self.parser = FrameParser()
-        self._script = frames_per_tick
+        self.error = None
+        self._script = iter(enumerate(frames_per_tick))
         self._keys = key_bytes or {}
+        self._counter = 0
 
-    def batches(self):
-        frame = ImuFrame(10, 16, 0, (0, 0, 0), (0, 0, 0), (0, 0, 0))
-        for t, n in enumerate(self._script):
-            self.parser.feed(self._keys.get(t, b""))
-            yield t, [frame] * n
-        while True:
-            yield 0, []
+    def poll(self):
+        t, n = next(self._script, (None, 0))
+        seen = len(self.parser.safety_events)
+        self.parser.feed(self._keys.get(t, b""))
+        frames = [still_frame(self._counter + k) for k in range(n)]
+        self._counter += n
+        return frames, self.parser.safety_events[seen:]
 
 
 class ScriptedChain:
-    """Returns the scripted decisions, one per pushed frame."""
+    """Returns the scripted decisions, one per pushed sample of node 1."""
 
     def __init__(self, decisions: list[Decision | None]):
         self.profile = load_profile("P1")
+        self.nodes = (1,)
+        self.model = type("M", (), {"spec": type("S", (), {"window": 8})()})()
         self._decisions = iter(decisions)
         self.calibrating = False
         self.neutral = {1: (0.0, 0.0, 0.0)}
+        self.pushed = 0
 
     def set_neutral(self, offsets) -> None:
         pass
 
-    def push_frames(self, frames) -> list[Decision]:
-        return [d for d in (next(self._decisions) for _ in frames) if d is not None]
+    def push_angles(self, node, angles, gyro) -> Decision | None:
+        self.pushed += 1
+        return next(self._decisions)
 
 
 class StickArm:
@@ -198,16 +223,20 @@ class StickArm:
 
 
 def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_decisions():
-    # ticks 0-29 a frame each, 30-49 silence, 50-59 frames again
-    script = [1] * 30 + [0] * 20 + [1] * 10
+    # ticks 0-2 warm-up (the 4th frame settles the gate and is the first to reach the chain), then
+    # ticks 3-32 a frame each, 33-52 silence, 53-62 frames again
+    script = [1] * (SETTLE - 1) + [1] * 30 + [0] * 20 + [1] * 10
     b = next(cls.label for cls in load_profile("P1").classes if cls.function == "B")
     decisions = ([decision(nu=0.5)] * 10 + [decision(label=b, function="B", nu=float("nan")), decision(label=99)]
                  + [decision(nu=0.5)] * 18 + [None] + [decision(nu=0.75)] * 9)
     clock, arm, log = FakeClock(), StickArm(), io.StringIO()
-    summary = run_live(ScriptedSource(script), ScriptedChain(decisions), arm, duration_s=60 * CONTROL_DT,
-                       neutral={1: (0.0, 0.0, 0.0)}, log=log, clock=clock, sleep=clock.sleep)
+    summary = run_live(ScriptedSource(script), ScriptedChain(decisions), arm, duration_s=63 * CONTROL_DT,
+                       neutral={1: (0.0, 0.0, 0.0)}, log=TickLog(log), clock=clock, sleep=clock.sleep, gate=QUICK_GATE)
     ticks = [json.loads(line) for line in log.getvalue().splitlines()]
-    assert summary.ticks == len(ticks) == 60
+    assert summary.ticks == len(ticks) == 63
+    assert [tick["hold"] for tick in ticks[:SETTLE - 1]] == ["warming up (node 1)"] * (SETTLE - 1)
+    assert [np.linalg.norm(tick["linear"]) for tick in ticks[:SETTLE - 1]] == [0.0] * (SETTLE - 1)
+    ticks = ticks[SETTLE - 1:]
     speed = [np.linalg.norm(tick["linear"]) for tick in ticks]
     # before the silence: F at nu 0.5; the NaN B and the unknown class never reach the arm
     assert speed[:30] == pytest.approx([0.5 * FULL_SPEED] * 30)
@@ -222,7 +251,8 @@ def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_deci
         assert (v == 0) == tick["stale"]
     first_stale = next(tick for tick in ticks if tick["stale"])
     assert 0.1 - 1e-9 <= first_stale["t"] - last_frame_t < 0.1 + CONTROL_DT
-    assert all(state == JoystickState() for state in arm.states[first_stale["tick"]:50])
+    assert all(state == JoystickState() for state in arm.states[first_stale["tick"]:53])
+    assert all(tick["hold"] == "no frames" for tick in ticks if tick["stale"])
     # fresh frames without a decision do not restart the old motion; the next decision does
     assert not ticks[50]["stale"] and speed[50] == 0
     assert speed[51:] == pytest.approx([0.75 * FULL_SPEED] * 9)
@@ -231,34 +261,36 @@ def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_deci
 
 def test_safety_key_standby_holds_the_arm_until_control_and_calibration_restarts_the_neutral():
     # a key that sends one frame per press, its counter counting the ticks
-    keys = {t: encode_safety_key_frame(event, t)
+    w = SETTLE - 1   # warm-up ticks before the script
+    keys = {w + t: encode_safety_key_frame(event, t)
             for t, event in {5: SafetyKey.STANDBY, 10: SafetyKey.CONTROL, 15: SafetyKey.CALIBRATION}.items()}
-    chain = ScriptedChain([decision(nu=0.5)] * 20)
+    chain = ScriptedChain([decision(nu=0.5)] * 21)
     calibrations = []
     chain.begin_neutral_calibration = lambda: calibrations.append(True)
     clock, log = FakeClock(), io.StringIO()
-    summary = run_live(ScriptedSource([1] * 20, keys), chain, StickArm(), duration_s=20 * CONTROL_DT,
-                       neutral={1: (0.0, 0.0, 0.0)}, log=log, clock=clock, sleep=clock.sleep)
-    ticks = [json.loads(line) for line in log.getvalue().splitlines()]
+    summary = run_live(ScriptedSource([1] * (w + 20), keys), chain, StickArm(), duration_s=(w + 20) * CONTROL_DT,
+                       neutral={1: (0.0, 0.0, 0.0)}, log=TickLog(log), clock=clock, sleep=clock.sleep, gate=QUICK_GATE)
+    ticks = [json.loads(line) for line in log.getvalue().splitlines()][w:]
     assert [tick["standby"] for tick in ticks] == [False] * 5 + [True] * 5 + [False] * 10
     speed = [np.linalg.norm(tick["linear"]) for tick in ticks]
     assert speed == pytest.approx([0.1] * 5 + [0.0] * 5 + [0.1] * 10)
     assert calibrations == [True] and summary.standby_ticks == 5
-    assert [tick["tick"] for tick in ticks if "neutral" in tick] == [15]     # the new offsets are announced
+    assert [tick["tick"] - w for tick in ticks if "neutral" in tick] == [0, 15]  # the offsets are announced
 
 
 def test_a_phantom_control_frame_does_not_end_a_standby_and_the_real_key_still_does():
     """A key streaming a frame per tick (event 0 between presses). A phantom CONTROL (id 40, event 3,
     a counter that does not follow the key's) lands in tick 10: the arm stays held; the real CONTROL at
     tick 15 follows the key's frame of tick 14 and ends the standby on its own tick."""
+    w = SETTLE - 1
     events = {5: SafetyKey.STANDBY, 15: SafetyKey.CONTROL}
-    keys = {t: encode_safety_key_frame(events.get(t, SafetyKey.NONE), t) for t in range(20)}
-    keys[10] += encode_safety_key_frame(SafetyKey.CONTROL, 200)
+    keys = {w + t: encode_safety_key_frame(events.get(t, SafetyKey.NONE), t) for t in range(20)}
+    keys[w + 10] += encode_safety_key_frame(SafetyKey.CONTROL, 200)
     clock, log = FakeClock(), io.StringIO()
-    source = ScriptedSource([1] * 20, keys)
-    summary = run_live(source, ScriptedChain([decision(nu=0.5)] * 20), StickArm(), duration_s=20 * CONTROL_DT,
-                       neutral={1: (0.0, 0.0, 0.0)}, log=log, clock=clock, sleep=clock.sleep)
-    ticks = [json.loads(line) for line in log.getvalue().splitlines()]
+    source = ScriptedSource([1] * (w + 20), keys)
+    summary = run_live(source, ScriptedChain([decision(nu=0.5)] * 21), StickArm(), duration_s=(w + 20) * CONTROL_DT,
+                       neutral={1: (0.0, 0.0, 0.0)}, log=TickLog(log), clock=clock, sleep=clock.sleep, gate=QUICK_GATE)
+    ticks = [json.loads(line) for line in log.getvalue().splitlines()][w:]
     assert [tick["standby"] for tick in ticks] == [False] * 5 + [True] * 10 + [False] * 5
     speed = [np.linalg.norm(tick["linear"]) for tick in ticks]
     assert speed == pytest.approx([0.1] * 5 + [0.0] * 10 + [0.1] * 5)
@@ -271,21 +303,22 @@ def test_a_phantom_control_frame_does_not_end_a_standby_and_the_real_key_still_d
 SEED = 0
 
 
-def offline_decisions(model_path, hold_s: float, neutral_s: float, end_s: float) -> list[dict]:
-    """The same participant's raw samples straight into an OnlineChain, neutral from its first samples."""
+def offline_decisions(model_path, hold_s: float, neutral_s: float, end_s: float, neutral: dict) -> list[dict]:
+    """The same participant's raw samples straight into an OnlineChain (its own fusion from the first
+    sample), with the neutral offsets live took: every decision, without its sample index."""
     from bomi.model_io import load_model
     params, profile = load_participant("P1"), load_profile("P1")
     blocks = participant_blocks(params, profile, SEED, calibration_schedule(profile, hold_s=hold_s,
                                                                             neutral_s=neutral_s), end_s)
     chain = OnlineChain(load_model(model_path), profile)
-    chain.begin_neutral_calibration()
+    chain.set_neutral({int(k): v for k, v in neutral.items()})
     out = []
     for block in blocks:
         for rows in zip(*(values.tolist() for values in block.values())):
             for node, row in zip(block, rows):
                 made = chain.push(node, tuple(row[6:9]), tuple(row[3:6]), tuple(row[0:3]))
                 if made is not None:
-                    out.append(asdict(made))
+                    out.append({k: v for k, v in asdict(made).items() if k != "sample_index"})
     return out
 
 
@@ -294,30 +327,38 @@ def read_log(path) -> list[dict]:
 
 
 def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_path, p1_model_file, capsys):
+    """Seed 0 faces 18 deg: nothing is decided until the filter has settled (status: warming up); then the
+    neutral is taken and live decides exactly as the chain fed the same samples offline."""
     emulator = subprocess.Popen(
         [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--loss", "0",
-         "--hold", "2", "--neutral", "2", "--duration", "12", "--seed", str(SEED)],
+         "--hold", "2", "--neutral", "9", "--duration", "20", "--seed", str(SEED)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         path = emulator.stdout.readline().strip()
         assert path.startswith("/dev/pts/")
         log = tmp_path / "live.jsonl"
         assert main(["live", "--port", path, "--profile", "P1", "--model", str(p1_model_file), "--headless",
-                     "--duration", "5", "--log", str(log), "--retries", "0"]) == 0
+                     "--duration", "13", "--log", str(log), "--retries", "0"]) == 0
         emulator.wait(timeout=30)
     finally:
         emulator.kill()
     out = capsys.readouterr()
     assert "live: neutral offsets" in out.err
-    assert " Hz | lost 0 (0.0 %) | " in out.err                      # status lines
+    assert "HELD: warming up (node " in out.err and " Hz | lost 0 (0.0 %) | " in out.err   # status lines
     ticks = read_log(log)
-    assert 0.8 * 300 < len(ticks) <= 301                              # 60 Hz for 5 s (late ticks are skipped)
-    live = [d for tick in ticks for d in tick["decisions"]]
+    assert 0.8 * 13 * 60 < len(ticks) <= 13 * 60 + 1                      # 60 Hz (late ticks are skipped)
+    warm = [tick for tick in ticks if (tick["hold"] or "").startswith("warming up")]
+    assert 1.6 < warm[-1]["t"] < 8.0                                       # settled on the signal, while still
+    neutral_tick = next(tick for tick in ticks if "neutral" in tick)
+    assert neutral_tick["t"] > warm[-1]["t"]
+    assert all(np.linalg.norm(tick["linear"]) == 0 for tick in ticks if tick["t"] <= neutral_tick["t"])
+    live = [{k: v for k, v in d.items() if k != "sample_index"} for tick in ticks for d in tick["decisions"]]
     assert len(live) > 150
-    assert live == offline_decisions(p1_model_file, 2.0, 2.0, 12.0)[:len(live)]
-    # the F cue at 2 s: recognised once the head is up, and the arm is driven by it
-    first_f = next(d for d in live if d["function"] == "F")
-    assert 2.0 < (first_f["sample_index"] + load_profile("P1").neutral_samples) * DT < 4.0  # counted after calibration
+    offline = offline_decisions(p1_model_file, 2.0, 9.0, 20.0, neutral_tick["neutral"])
+    assert any(live == offline[k:k + len(live)] for k in range(len(offline) - len(live) + 1))
+    # the F cue at 9 s: recognised once the head is up, and the arm is driven by it
+    first_f = next(tick for tick in ticks if any(d["function"] == "F" for d in tick["decisions"]))
+    assert 9.0 < first_f["t"] < 11.5
     assert max(np.linalg.norm(tick["linear"]) for tick in ticks) > 0.5 * FULL_SPEED
 
 
@@ -325,10 +366,10 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     params, profile = load_participant("P1"), load_profile("P1")
-    cues = calibration_schedule(profile, hold_s=4.0, neutral_s=2.0)    # F from 2 s (held ~3.2-6.4 s)
+    cues = calibration_schedule(profile, hold_s=4.0, neutral_s=9.0)    # warm-up, neutral; F from 9 s (held ~10.2-13.4 s)
     sink = PtySink(linger_s=1.0)
-    chunks = block_chunks(participant_blocks(params, profile, SEED, cues, 8.0), EmulatorConfig(), EmulatorStats())
-    paused = ((t + 0.5 if t >= 4.5 else t, data) for t, data in chunks)   # 0.5 s of silence at 4.5 s
+    chunks = block_chunks(participant_blocks(params, profile, SEED, cues, 15.0), EmulatorConfig(), EmulatorStats())
+    paused = ((t + 0.5 if t >= 11.5 else t, data) for t, data in chunks)   # 0.5 s of silence at 11.5 s
 
     def emulate():
         sink.wait_for_reader()
@@ -339,7 +380,7 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     thread.start()
     log = tmp_path / "live.jsonl"
     assert main(["live", "--port", sink.description, "--profile", "P1", "--model", str(p1_model_file),
-                 "--duration", "6.5", "--log", str(log), "--retries", "0"]) == 0  # no display: headless
+                 "--duration", "13.5", "--log", str(log), "--retries", "0"]) == 0  # no display: headless
     thread.join(timeout=10)
     ticks = read_log(log)
     arrived = [tick for tick in ticks if tick["frames"]]

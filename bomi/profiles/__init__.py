@@ -27,9 +27,14 @@ NEUTRAL_FUNCTION = "neutral"
 # A classifier setting left to the person's own training recording (bomi.chain.select_settings).
 SELECT = "select"
 DEFAULT_NEUTRAL_SAMPLES = 100  # hardware.md step 6: about 100 samples of the neutral posture
+# Live: a button class (B1, B2) acts only once decided for this long without a break (bomi.gate.ButtonEvidence).
+# A corrupted sample sways the decisions of the windows holding it (8 samples, 128 ms) and then the
+# pitch/roll filter's decay (time constant 12.5 samples, 200 ms): 0.35 s outlasts both, and costs a
+# deliberate press 0.35 s.
+DEFAULT_BUTTON_HOLD_S = 0.35
 
 _TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
-             "post_processing", "joystick", "assist"}
+             "post_processing", "joystick", "assist", "live"}
 _NODE_KEYS = {"index", "node_id", "site", "calibration"}
 _CALIBRATION_KEYS = {"hard_iron", "soft_iron", "mounting"}
 _CLASS_KEYS = {"label", "name", "function", "node"}
@@ -72,6 +77,7 @@ class Profile:
     # the assistances on unless a run says otherwise ([assist] options; names checked where the
     # profile meets the arm, tasks/assist.py)
     assist: tuple[str, ...] = ()
+    button_hold_s: float = DEFAULT_BUTTON_HOLD_S   # [live] button_hold_s
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -131,6 +137,8 @@ def profile_document(profile: Profile) -> dict:
         doc["joystick"] = {"layout": profile.joystick_layout}
     if profile.assist:
         doc["assist"] = {"options": list(profile.assist)}
+    if profile.button_hold_s != DEFAULT_BUTTON_HOLD_S:
+        doc["live"] = {"button_hold_s": profile.button_hold_s}
     doc["nodes"] = [{"index": n.index, "node_id": n.node_id, "site": n.site,
                      "calibration": {"hard_iron": list(n.calibration.hard_iron),
                                      "soft_iron": [list(row) for row in n.calibration.soft_iron],
@@ -171,7 +179,9 @@ def _parse(data: dict, source: str) -> Profile:
                    post=post, select_rejection=select_rejection,
                    source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
                    joystick_layout=typed(joystick, "layout", str, "joystick", None),
-                   assist=_parse_assist(_section(data, "assist", {"options"})))
+                   assist=_parse_assist(_section(data, "assist", {"options"})),
+                   button_hold_s=number(_section(data, "live", {"button_hold_s"}), "button_hold_s", "live", 0.0, 10.0,
+                                        default=DEFAULT_BUTTON_HOLD_S))
 
 
 def _parse_nodes(tables: list) -> tuple[NodeConfig, ...]:

@@ -10,14 +10,14 @@ from bomi.chain import OnlineChain, recording_neutral
 from bomi.files import check_input, check_output
 from bomi.model_io import check_model_for, load_model
 from bomi.recording import read_recording
-from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
+from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamReader
 from sim.env import ArmSim
 from sim.joystick import BUTTONS
 from tasks.assist import ASSIST_HELP, Assistance, assist_option, profile_assist
 from tasks.cli import add_command
 from tasks.cli.options import non_negative_int, positive_int, seconds
-from tasks.live import (Displays, Headless, PassiveViewer, StatusLine, VideoDisplay, display_opens, has_display,
-                        open_log, run_live)
+from tasks.live import (Displays, Headless, PassiveViewer, StatusLine, TickLog, VideoDisplay, display_opens,
+                        has_display, open_log, run_live)
 from tasks.stacking import StackingTask
 from tasks.stick import arm_profile, profile_layout
 
@@ -26,8 +26,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live = add_command(
         subparsers, "live",
         description="Frames -> BoMI chain -> joystick -> simulated JACO at 60 Hz, in MuJoCo's viewer (or "
-                    "headless). Neutral offsets come from the first samples (hold still) unless --neutral-from "
-                    "gives a recording. The arm stops when no frame arrives for 100 ms.")
+                    "headless). Nothing moves until every node's orientation filter has settled (status: warming "
+                    "up, hold still); neutral offsets then come from the next samples (hold still) unless "
+                    "--neutral-from gives a recording. The arm stays at rest when no frame arrives for 100 ms, "
+                    "when a node's signal is implausible (until it has been plausible again for 1.6 s), and "
+                    "during a backlog; a button class acts only once held for the profile's [live] "
+                    "button_hold_s. See tasks/live.py.")
     live.add_argument("--port", required=True, metavar="PORT_OR_URL",
                       help="serial port, pty path or pyserial URL (socket://, loop://)")
     live.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
@@ -82,13 +86,13 @@ def run(args: argparse.Namespace) -> int:
         offsets = recording_neutral(read_recording(args.neutral_from), model.spec.nodes, profile.neutral_samples)
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
     options = args.assist if args.assist is not None else profile_assist(profile)
-    # poll 0: a tick reads all that has arrived and never waits for more
-    source = SerialSource(args.port, baudrate=args.baud, poll_s=0.0, retry=RetryPolicy(attempts=args.retries))
-    source.open()  # a bad port fails before the simulator is built (what arrives meanwhile is read at once)
+    # read on a thread of its own: a tick takes what has arrived and never waits, not even for a reconnection
+    source = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries)))
+    source.source.open()  # a bad port fails before the simulator is built (what arrives meanwhile: a backlog)
     try:
         sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
     except BaseException:
-        source.close()
+        source.stop()
         raise
     assist = None
     if options:  # sees the arm and the scene's cubes and target, as on the table
@@ -98,23 +102,33 @@ def run(args: argparse.Namespace) -> int:
         assist = lambda state: assistance.step(task.view(), state, sim)  # noqa: E731
     status, log, displays = StatusLine(), None, []
     try:
-        with source:
-            log = open_log(args.log) if args.log is not None else None
-            displays.append(_viewer(args.headless, sim))
-            if args.video is not None:
-                displays.append(VideoDisplay(sim, args.video))
-            summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
-                               status=status, display=Displays(displays), on_neutral=_print_neutral, assist=assist)
+        log = TickLog(open_log(args.log), str(args.log)) if args.log is not None else None
+        displays.append(_viewer(args.headless, sim))
+        if args.video is not None:
+            displays.append(VideoDisplay(sim, args.video))
+        source.start()   # after the displays: what arrives while they open is not a backlog
+        summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
+                           status=status, display=Displays(displays), on_neutral=_print_neutral, assist=assist)
     finally:
+        source.stop()
         status.close()
         if log is not None:
             log.close()
         Displays(displays).close()
         sim.close()
     print(f"live: {summary.ticks} ticks, {summary.frames} frames, {summary.decisions} decisions, "
-          f"{summary.dropped} dropped by the sanitizer, watchdog stopped the arm {summary.watchdog_trips} time(s) "
-          f"({summary.stale_ticks} ticks), safety-key standby {summary.standby_ticks} ticks, "
-          f"{sim.automatic_switches} automatic mode switch(es); {source.parser.summary()}")
+          f"{summary.dropped} dropped by the sanitizer, {summary.skipped} skipped as backlog, watchdog stopped "
+          f"the arm {summary.watchdog_trips} time(s) ({summary.stale_ticks} ticks), safety-key standby "
+          f"{summary.standby_ticks} ticks, held by the gate {sum(summary.holds.values())} ticks{_holds(summary.holds)}, "
+          f"{summary.overruns} control period(s) missed, {sim.automatic_switches} automatic mode switch(es); "
+          f"{source.parser.summary()}")
     if args.video is not None:
-        print(f"wrote {args.video}")
+        film = displays[-1]
+        print(f"wrote {args.video} ({film.frames} film frames, {film.dropped} dropped to keep the control rate)")
+    if source.error is not None:
+        raise source.error
     return 0
+
+
+def _holds(holds) -> str:
+    return f" ({', '.join(f'{reason}: {n}' for reason, n in holds.most_common(3))})" if holds else ""

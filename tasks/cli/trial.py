@@ -11,9 +11,10 @@ from pathlib import Path
 from bomi.chain import OnlineChain
 from bomi.errors import BomiError
 from bomi.files import check_input
+from bomi.frames import SAMPLE_PERIOD_S
 from bomi.model_io import check_model_for, load_model, save_model
 from bomi.profiles import save_profile
-from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource
+from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamReader
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS
 from tasks.cli import add_command
@@ -225,26 +226,29 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator):
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, person, node1_id(chain)),
                               "simulated")
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
-            meta["log"]["sample_period"] = 1.0 / 62.5
+            meta["log"]["sample_period"] = SAMPLE_PERIOD_S
             run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say),
                      on_tick=lambda tick: person.heard(tick.decisions), clock=clock, sleep=clock.sleep)
         else:
-            source = SerialSource(args.port, baudrate=args.baud, poll_s=0.0, retry=RetryPolicy(attempts=args.retries),
-                                  parser=TappedParser())
-            source.open()
+            source = StreamReader(SerialSource(args.port, baudrate=args.baud,
+                                               retry=RetryPolicy(attempts=args.retries), parser=TappedParser()))
+            source.source.open()  # a bad port fails before the trials start
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "wall")
             meta["attrs"]["allowance"] = 0
-            status = StatusLine()
+            status, display = StatusLine(), TrialDisplay(_viewer(args.headless, sim), arm, _say)
             try:
-                with source:
-                    run_bomi(session, source, chain, display=TrialDisplay(_viewer(args.headless, sim), arm, _say),
-                             status=status)
-            except BomiError as exc:
-                session.cut_short(f"stream lost: {exc}")
-                _say(f"the stream was lost: trial cut short, the session so far is kept ({exc})")
-                raise
+                source.start()  # after the viewer opens: what arrives meanwhile is no backlog
+                run_bomi(session, source, chain, display=display, status=status)
             finally:
+                source.stop()
                 status.close()
+                display.close()
+            if source.error is not None or not session.arm.finished:
+                why = f"stream lost: {source.error}" if source.error is not None else "the viewer was closed"
+                session.cut_short(why)
+                _say(f"{why}: the session stops here; what it recorded is kept")
+                if source.error is not None:
+                    raise source.error
     finally:
         sim.close()
     return session, meta

@@ -1,8 +1,20 @@
 """A virtual participant on the wire: the raw samples ``bomi emulate --participant`` plays, the
-participant following the cues of ``bomi record``'s calibration protocol (no arm, no live loop)."""
+participant following the cues of ``bomi record``'s calibration protocol (no arm, no live loop).
+
+The stream starts the way a real node's does: the samples are the sensors' from the first one,
+and the receiver's orientation filter starts from its zero state. A person sits facing some
+compass heading, which the magnetometer sees: every node's yaw carries the participant's heading
+(``heading_deg``; by default drawn from the seed, uniform in +-``MAX_HEADING_DEG``), so the
+filter's warm-up transient is as large as a real person's (yaw starts at 0 and decays towards the
+heading with the filter's 1.6 s time constant; P1's fitted angles alone are within 7 deg of zero,
+which hid it). The range stops short of +-180 deg: there the magnetometer heading wraps between
++180 and -180 and the host filter (hardware.md step 5) averages across the wrap, a limitation of
+the documented host, not of a person.
+"""
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -14,14 +26,32 @@ from tasks.participants.imu_synth import Delivery, LinkModel
 from tasks.participants.participant import ParticipantParams, VirtualParticipant
 
 LOSSLESS_LINK = LinkModel(loss_fraction=0.0)  # the emulator applies its own --loss
+MAX_HEADING_DEG = 150.0
+_HEADING_STREAM = 0x4845   # a seed stream of its own for the heading ("HE"): the participant's other draws are unchanged
+
+
+def session_heading(seed: int) -> float:
+    """The compass heading (deg) a participant of ``seed`` sits facing."""
+    return float(np.random.default_rng([_HEADING_STREAM, seed]).uniform(-MAX_HEADING_DEG, MAX_HEADING_DEG))
+
+
+def facing(params: ParticipantParams, heading_deg: float) -> ParticipantParams:
+    """The participant turned to ``heading_deg``: every node's yaw, neutral and class postures alike
+    (class postures are changes from the neutral one), moves by the heading."""
+    posture = params.neutral.posture_deg.copy()
+    posture[:, 2] += heading_deg
+    return replace(params, neutral=replace(params.neutral, posture_deg=posture))
 
 
 def participant_blocks(params: ParticipantParams, profile: Profile, seed: int, cues: Sequence[Cue],
-                       end_s: float, block_s: float = 1.0) -> Iterator[dict[int, np.ndarray]]:
+                       end_s: float, block_s: float = 1.0,
+                       heading_deg: float | None = None) -> Iterator[dict[int, np.ndarray]]:
     """Raw samples (per node index, (m, 9) mag, gyro, acc) of a virtual participant following ``cues``,
     made ``block_s`` at a time up to ``end_s``. At each cue's start the participant takes up its class
-    (full amplitude; after its reaction time), as someone following ``bomi record``'s prompts."""
-    vp = VirtualParticipant(params, profile, seed, link=LOSSLESS_LINK)
+    (full amplitude; after its reaction time), as someone following ``bomi record``'s prompts.
+    ``heading_deg``: where they sit facing (default ``session_heading(seed)``; module docstring)."""
+    heading = session_heading(seed) if heading_deg is None else heading_deg
+    vp = VirtualParticipant(facing(params, heading), profile, seed, link=LOSSLESS_LINK)
     pending = [cue for cue in cues if cue.start_s < end_s]
     t = 0.0
     while t < end_s:

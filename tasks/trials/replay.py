@@ -10,7 +10,6 @@ performed. Those decisions never reach an arm: with them the arm's path would ha
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,62 +18,32 @@ import numpy as np
 from bomi.chain import OnlineChain
 from bomi.classifier import Model
 from bomi.errors import BomiError
-from bomi.frames import ImuFrame
+from bomi.frames import FrameParser, ImuFrame
 from bomi.profiles import Profile
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState
 from tasks import metrics
 from tasks.live import Headless
 from tasks.trials.dataset import SessionData
-from tasks.trials.session import (UNKNOWN, Controller, Session, TappedParser, TickRecorder, TrialArm, TrialDisplay,
-                                  TrialPlan, node1_id, run_bomi, run_joystick)
-
-
-@dataclass
-class LoggedClock:
-    """The logged tick times, one per tick: ``advance`` moves to the next; a sleep changes nothing."""
-
-    times: Sequence[float]
-    k: int = 0
-
-    def __call__(self) -> float:
-        return float(self.times[min(self.k, len(self.times) - 1)])
-
-    def advance(self, *_) -> None:
-        self.k += 1
-
-    def sleep(self, seconds: float) -> None:
-        """Time is the log's."""
-
-
-class ReplaySource:
-    """The logged bytes of each tick, as a live source gives them."""
-
-    def __init__(self, chunks: Sequence[bytes], clock: Callable[[], float]):
-        self.chunks, self.clock, self.parser = chunks, clock, TappedParser()
-
-    def batches(self) -> Iterator[tuple[float, list[ImuFrame]]]:
-        for chunk in self.chunks:
-            now = self.clock()
-            yield now, self.parser.feed(chunk, now)
-        raise BomiError("the replayed session's log ends before the trial does")
+from tasks.trials.session import (UNKNOWN, Controller, Session, SimulatedClock, TickRecorder, TrialArm, TrialDisplay,
+                                  TrialPlan, run_joystick)
 
 
 @dataclass
 class LoggedStick:
-    """The logged stick of each tick (a ``session.StickDevice``)."""
+    """The logged stick of each tick, in order (a ``session.StickDevice``)."""
 
     stick: np.ndarray
     pressed: np.ndarray
-    clock: LoggedClock
+    k: int = 0
 
     def read(self, now: float) -> JoystickState:
-        k = self.clock.k
-        if k >= len(self.stick):
+        if self.k >= len(self.stick):
             raise BomiError("the replayed session's log ends before the trial does")
-        self.clock.advance()
-        return JoystickState({f: float(v) for f, v in zip(FUNCTIONS, self.stick[k]) if v > 0},
-                             frozenset(b for b, p in zip(BUTTONS, self.pressed[k]) if p))
+        stick, pressed = self.stick[self.k], self.pressed[self.k]
+        self.k += 1
+        return JoystickState({f: float(v) for f, v in zip(FUNCTIONS, stick) if v > 0},
+                             frozenset(b for b, p in zip(BUTTONS, pressed) if p))
 
     def close(self) -> None:
         """Nothing to release."""
@@ -90,6 +59,24 @@ class Replayed:
     logged_success: bool
 
 
+def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
+    """The logged bytes of each tick through the live loop's tick (``tasks.live.LiveLoop``, which is
+    deterministic given its inputs) at the logged tick time, until the arm's last trial is over."""
+    from tasks.live import LiveLoop
+
+    loop = LiveLoop(chain, arm, on_neutral=arm.ready)
+    parser, seen = FrameParser(), 0
+    for t, chunk in zip(data.ticks["t"].tolist(), data.tick_bytes()):
+        if arm.finished:
+            return
+        frames = parser.feed(chunk, t)
+        events = parser.safety_events[seen:]
+        seen += len(events)
+        loop.tick(t, frames, events)
+    if not arm.finished:
+        raise BomiError(f"{data.path}: the log ends before the trial does")
+
+
 def session_plan(data: SessionData) -> TrialPlan:
     return TrialPlan(**json.loads(data.attrs["plan"]))
 
@@ -102,19 +89,15 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
     go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
     sim = ArmSim(layout=LAYOUTS[data.attrs["layout"]])
     try:
-        clock = LoggedClock(data.ticks["t"])
         controller = Controller(data.attrs["controller"])
         arm = TrialArm(sim, session_plan(data), ready=controller is Controller.JOYSTICK, last_trial=number)
-        display = TrialDisplay(Headless(), arm)
         if controller is Controller.BOMI:
-            chain = OnlineChain(model, profile)
-            source = ReplaySource(data.tick_bytes(), clock)
-            session = Session(controller, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "replay")
-            run_bomi(session, source, chain, display=display, on_tick=clock.advance, clock=clock, sleep=clock.sleep)
+            _replay_bomi(data, arm, OnlineChain(model, profile))
         else:
             session = Session(controller, arm, TickRecorder(arm), "replay")
-            device = LoggedStick(data.ticks["stick"], data.ticks["pressed"], clock)
-            run_joystick(session, device, display=display, clock=clock, sleep=clock.sleep)
+            clock = SimulatedClock()  # the joystick's ticks depend on nothing but their order
+            run_joystick(session, LoggedStick(data.ticks["stick"], data.ticks["pressed"]),
+                         display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep)
     finally:
         sim.close()
     result = next(r for r in arm.results if r.number == number)

@@ -272,7 +272,8 @@ class TickRecorder:
         """``tasks.live.run_live``'s observer: one live tick."""
         self.record(tick.t, tick.state, tick.command, tick.decisions,
                     {"stale": tick.stale, "standby": tick.standby, "calibrating": tick.calibrating,
-                     "lost": tick.lost, "dropped": len(tick.dropped)})
+                     "lost": tick.lost, "dropped": len(tick.dropped), "skipped": tick.skipped,
+                     "hold": tick.hold or "", "loop_hz": tick.loop_hz, "overruns": tick.overruns})
         if tick.neutral is not None:
             self.neutral = dict(tick.neutral)
 
@@ -407,20 +408,16 @@ class Session:
 
 
 def run_bomi(session: Session, source, chain, *, display, on_tick: Callable[[object], None] | None = None,
-             neutral=None, status=None, clock: Callable[[], float] = time.monotonic,
+             status=None, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep) -> None:
-    """The BoMI's trials through the live loop (``tasks.live.run_live``): ``source`` gives the
-    frames (its parser a ``TappedParser``); ``on_tick`` is told every tick after it is recorded
-    (a stand-in watching the arm answer the tick's decisions)."""
+    """The BoMI's trials through the live loop (``tasks.live.run_live``: gate, chain, safety):
+    ``source`` is a ``tasks.live.Source`` whose parser is a ``TappedParser``; ``on_tick`` is told
+    every tick after it is recorded (a stand-in watching the arm answer the tick's decisions)."""
     from tasks.live import run_live  # the live loop (imports the viewer's machinery)
 
-    def observe(tick) -> None:
-        session.recorder.observe(tick)
-        if on_tick is not None:
-            on_tick(tick)
-
-    run_live(source, chain, session.arm, neutral=neutral, status=status, display=display,
-             on_neutral=session.arm.ready, clock=clock, sleep=sleep, observer=observe)
+    observers = [session.recorder.observe] + ([on_tick] if on_tick is not None else [])
+    run_live(source, chain, session.arm, status=status, display=display, on_neutral=session.arm.ready,
+             clock=clock, sleep=sleep, observers=observers)
 
 
 def run_joystick(session: Session, device: StickDevice, *, display, clock: Callable[[], float] = time.monotonic,
@@ -429,7 +426,7 @@ def run_joystick(session: Session, device: StickDevice, *, display, clock: Calla
     from tasks.live import paced_ticks
 
     arm, start = session.arm, clock()
-    for now in paced_ticks(arm.dt, display, clock, sleep, start, None):
+    for now, _ in paced_ticks(arm.dt, display, clock, sleep, start, None):
         state = device.read(now)
         command = arm.step(state)
         session.recorder.record(now - start, state, command)

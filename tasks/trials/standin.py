@@ -14,7 +14,7 @@ still while the controller gets ready and through the countdown, then does the t
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -116,16 +116,18 @@ class JoystickStandIn(StandIn):
 
 
 class StandInSource:
-    """The stand-in's bytes as a live source gives them (what ``tasks.live.run_live`` reads:
-    ``parser`` and ``batches``), on the session's clock."""
+    """The stand-in's bytes as a live source gives them (a ``tasks.live.Source``), on the session's
+    clock: each poll, the stand-in looks at the arm and sends what has arrived by now."""
+
+    error = None  # a stand-in never goes away
 
     def __init__(self, standin: BomiStandIn, clock: Callable[[], float]):
         self.standin, self.clock, self.parser = standin, clock, TappedParser()
+        self._seen_events = 0
 
-    def batches(self) -> Iterator[tuple[float, list[ImuFrame]]]:
-        while True:
-            now = self.clock()
-            yield now, self.parser.feed(self.standin.bytes_until(now), now)
-
-    def close(self) -> None:
-        """Nothing to release."""
+    def poll(self) -> tuple[list[ImuFrame], list]:
+        now = self.clock()
+        frames = self.parser.feed(self.standin.bytes_until(now), now)
+        events = self.parser.safety_events[self._seen_events:]
+        self._seen_events += len(events)
+        return frames, events

@@ -1,0 +1,234 @@
+"""The live path's gate: whether a node's stream can be trusted to move the arm, sample by sample.
+
+Pure: a node's raw sensor values, packet counters, fused angles and arrival times go in, a reason
+to hold the arm (or None) comes out; no I/O, no clock of its own, nothing from sim/ or tasks/.
+
+A node is trusted once its orientation filter has **settled** and while its samples stay
+**plausible** and **fresh**:
+
+- Settled, judged on the signal: over the last ``settle_samples`` fused samples the mean of
+  the newer half differs from the mean of the older half by less than ``settle_change_deg`` on
+  every angle. Why these numbers: from its zero state the filter's error decays as
+  e(t) = e0 exp(-t / tau); the slowest term is yaw's, tau = DT / MAG_WEIGHT = 100 samples
+  (1.6 s; pitch and roll: 12.5 samples, ``bomi.fusion``). Over a window of W samples ending
+  with error e_end, the half means of such a decay differ by
+  e_end * (2 tau / W) * (exp(W / (2 tau)) - 1)^2 (0.84 e_end for W = tau), so a difference below
+  0.84 * SETTLE_TOLERANCE_DEG says the error left is below the tolerance (0.5 deg, a quarter of
+  the smallest class amplitude the proportional output resolves: 10 % of a 20 deg motion). The
+  sensor noise does not mask it: the fused yaw's noise is the magnetometer's heading noise
+  (~0.3 deg per sample for 25 LSB on a 5,000 LSB field) times its 0.01 weight, averaged over 50
+  samples: ~0.001 deg. A person swaying (P1: 0.2 deg, P4: up to 0.8 deg) can delay the verdict,
+  never hasten it past the decay (a decay and a sway would have to cancel over a whole window).
+  Someone moving while the stream starts is not settled until they hold still: safe.
+- Plausible: no sensor vector all zero (acc and mag cannot read 0, 0, 0 on a node at rest or
+  moving; a gyroscope can), no value at the int16 limits (-32768, 32767: saturation), no fused
+  angle moving more than ``max_rate_deg_s`` between samples (600 deg/s: fast voluntary head turns
+  peak near 400 deg/s), packet counters one to ``max_counter_step`` apart (neither repeated nor
+  jumping), and no more frames than the node's announced period allows (``flood_factor`` x the
+  rate over the last second, plus one window of burst).
+- Fresh: a frame of the node within ``stale_s`` (100 ms) of now.
+
+After an implausible sample (or a silence longer than ``resettle_gap_s``) the node must settle
+again: a full window of plausible samples that passes the settle test, i.e. the signal has been
+plausible and steady for ``settle_samples`` samples (1.6 s) before control resumes. An implausible
+frame is not given to the fusion (``NodeGate.check_raw`` says so before fusing), so a zero or
+saturated frame does not bend the filter.
+
+Buttons (``ButtonEvidence``): a button class acts only after it has been decided on
+``samples`` consecutive decisions with the gate open (the profile's ``button_hold_s``).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bomi.frames import SAMPLE_RATE_HZ, counter_step
+from bomi.fusion import DT, MAG_WEIGHT
+
+INT16_LIMITS = (-32768, 32767)
+SETTLE_TAU_S = DT / MAG_WEIGHT        # the slowest filter time constant (yaw): 1.6 s
+SETTLE_TOLERANCE_DEG = 0.5
+
+
+def half_mean_ratio(window_s: float, tau_s: float) -> float:
+    """Difference of the half-window means of an exponential decay, per unit of its value at the window's end."""
+    x = window_s / (2.0 * tau_s)
+    return (2.0 * tau_s / window_s) * math.expm1(x) ** 2
+
+
+@dataclass(frozen=True)
+class GateConfig:
+    settle_samples: int = round(SETTLE_TAU_S / DT)                  # W = tau: 100 samples
+    settle_change_deg: float = SETTLE_TOLERANCE_DEG * half_mean_ratio(SETTLE_TAU_S, SETTLE_TAU_S)
+    max_rate_deg_s: float = 600.0
+    max_counter_step: int = 16            # as the parser's phantom guard (bomi.frames.MAX_COUNTER_GAP)
+    stale_s: float = 0.1
+    resettle_gap_s: float = 1.0           # a silence this long (a reconnection) means settling again
+    flood_factor: float = 1.5
+    rate_hz: float = SAMPLE_RATE_HZ
+
+    @property
+    def max_jump_deg(self) -> float:
+        return self.max_rate_deg_s * DT
+
+    @property
+    def resume_s(self) -> float:
+        """How long the signal must have been plausible (and steady) before control resumes."""
+        return self.settle_samples * DT
+
+
+def raw_defect(mag: Sequence[int], gyro: Sequence[int], acc: Sequence[int]) -> str | None:
+    """Why a frame's raw values cannot come from a working sensor (None if they can)."""
+    if not any(acc):
+        return "accelerometer all zero"
+    if not any(mag):
+        return "magnetometer all zero"
+    for name, values in (("magnetometer", mag), ("gyroscope", gyro), ("accelerometer", acc)):
+        if any(v in INT16_LIMITS for v in values):
+            return f"{name} saturated"
+    return None
+
+
+def settle_change(angles: np.ndarray) -> float:
+    """Largest |mean of the newer half - mean of the older half| over the columns of (W, 3) angles."""
+    half = len(angles) // 2
+    return float(np.max(np.abs(angles[half:].mean(axis=0) - angles[:half].mean(axis=0))))
+
+
+@dataclass
+class NodeGate:
+    """One node's verdict, sample by sample (see the module docstring)."""
+
+    index: int
+    config: GateConfig = field(default_factory=GateConfig)
+    settled: bool = False
+    defect: str | None = None            # the last implausibility, until the node has settled again
+    lost: int = 0                        # samples lost, from the counters
+    _angles: deque = field(default_factory=deque, repr=False)
+    _last_counter: int | None = field(default=None, repr=False)
+    _last_angles: tuple[float, float, float] | None = field(default=None, repr=False)
+    _last_arrival: float | None = field(default=None, repr=False)
+    _step: int = field(default=1, repr=False)                      # counter step of the last frame
+    _arrivals: deque = field(default_factory=deque, repr=False)   # (time, frames) over the last second
+
+    def _implausible(self, reason: str) -> None:
+        self.defect = f"node {self.index}: {reason}"
+        self.settled = False
+        self._angles.clear()
+        self._last_angles = None
+
+    def arrived(self, now: float, frames: int) -> None:
+        """``frames`` frames of the node arrived at ``now``; too many for its rate is a flood."""
+        if self._last_arrival is not None and now - self._last_arrival >= self.config.resettle_gap_s:
+            self.settled = False
+            self._angles.clear()
+            self._last_angles = None
+        self._last_arrival = now
+        self._arrivals.append((now, frames))
+        while self._arrivals[0][0] <= now - 1.0:
+            self._arrivals.popleft()
+        count = sum(n for _, n in self._arrivals)
+        allowed = self.config.flood_factor * self.config.rate_hz + self.config.settle_samples // 2
+        if count > allowed:
+            self._implausible(f"{count} frames in 1 s, more than its rate allows")
+
+    def check_raw(self, counter: int, mag, gyro, acc) -> bool:
+        """A frame before fusion: False (and the node held) if it must not reach the filter."""
+        step = 1 if self._last_counter is None else counter_step(self._last_counter, counter)
+        self._last_counter = counter
+        defect = raw_defect(mag, gyro, acc)
+        if defect is not None:
+            self._implausible(defect)
+            return False
+        self._step = step
+        if step == 0 or step > self.config.max_counter_step:
+            self._implausible(f"packet counter out of step (a step of {step})")
+        else:
+            self.lost += step - 1
+        return True    # after a counter gap the filter still takes the frame; the node settles again
+
+    def fused(self, angles: Sequence[float]) -> None:
+        """The node's fused (pitch, roll, yaw) for the frame ``check_raw`` let through."""
+        angles = (float(angles[0]), float(angles[1]), float(angles[2]))
+        previous, self._last_angles = self._last_angles, angles
+        if previous is not None:
+            jump = max(abs(a - b) for a, b in zip(angles, previous))
+            if jump > self.config.max_jump_deg * max(self._step, 1):
+                self._implausible(f"angle jump of {jump:.0f} deg in one sample")
+                self._last_angles = angles
+                return
+        window = self._angles
+        window.append(angles)
+        if len(window) > self.config.settle_samples:
+            window.popleft()
+        if not self.settled and len(window) == self.config.settle_samples:
+            if settle_change(np.array(window)) < self.config.settle_change_deg:
+                self.settled = True
+                self.defect = None
+
+    def verdict(self, now: float) -> str | None:
+        """Why the node cannot be trusted at ``now`` (None if it can)."""
+        if self._last_arrival is None or now - self._last_arrival >= self.config.stale_s:
+            return f"no frames from node {self.index}"
+        if not self.settled:
+            return self.defect or f"warming up (node {self.index})"
+        return None
+
+
+@dataclass
+class Gate:
+    """Every node of a model: the arm may move only while all are trusted."""
+
+    nodes: Sequence[int]
+    config: GateConfig = field(default_factory=GateConfig)
+    node: dict[int, NodeGate] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.node = {index: NodeGate(index, self.config) for index in self.nodes}
+
+    @property
+    def settled(self) -> bool:
+        return all(gate.settled for gate in self.node.values())
+
+    @property
+    def lost(self) -> int:
+        return sum(gate.lost for gate in self.node.values())
+
+    def arrivals(self, now: float, counts: Mapping[int, int]) -> None:
+        for index, count in counts.items():
+            if index in self.node and count:
+                self.node[index].arrived(now, count)
+
+    def verdict(self, now: float) -> str | None:
+        """The first reason (node order) to hold the arm at ``now``; None when every node is trusted."""
+        return next((reason for gate in self.node.values() if (reason := gate.verdict(now)) is not None), None)
+
+
+@dataclass
+class ButtonEvidence:
+    """A button class reaches the stick only once decided ``samples`` times in a row (module docstring)."""
+
+    samples: int
+    buttons: frozenset[str]
+    _function: str | None = None
+    _run: int = 0
+
+    def reset(self) -> None:
+        self._function, self._run = None, 0
+
+    def admit(self, functions: Iterable[str]) -> list[bool]:
+        """For each decided function in order: may it reach the stick?"""
+        out = []
+        for function in functions:
+            if function in self.buttons:
+                self._run = self._run + 1 if function == self._function else 1
+                out.append(self._run >= self.samples)
+            else:
+                self._run = 0
+                out.append(True)
+            self._function = function
+        return out
