@@ -115,13 +115,12 @@ def _check_out(out: Path, force: bool) -> None:
 
 
 def _viewer(headless: bool, sim: ArmSim, keys=None):
+    """The viewer (or headless, as `bomi live` decides); with the viewer's keys as the stick, the
+    viewer (``_person_stick`` checked that it opens)."""
     from tasks.cli.live import _viewer as live_viewer
-    if keys is None or headless:
+    if keys is None:
         return live_viewer(headless, sim)
-    from tasks.live import PassiveViewer, display_opens, has_display
-    if not (has_display() and display_opens()):
-        raise BomiError("the keyboard needs the viewer window, and no display opens: plug in a gamepad or "
-                        "give --gamepad")
+    from tasks.live import PassiveViewer
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
@@ -146,9 +145,18 @@ def cmd_trial(args: argparse.Namespace) -> int:
         model = load_model(check_input(args.model, "model"))
         check_model_for(model, profile, args.model)
     operator = load_operator(check_input(args.operator_file, "--operator-file")) if standin is not None else None
-    device = None
+    device = stream = None
     if Controller.JOYSTICK in args.controller and standin is None:
-        device = _person_stick(args.gamepad)
+        device = _person_stick(args.gamepad, args.headless)
+    if bomi and args.port is not None:  # a bad port fails before anything is written
+        stream = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries),
+                                           parser=TappedParser()))
+        try:
+            stream.source.open()
+        except BaseException:
+            if device is not None:
+                device.close()
+            raise
     if bomi and model is None:
         from tasks.episode import calibrated_model
         _say(f"{standin.name} calibrates through its stream (the calibration protocol, then bomi train)")
@@ -160,7 +168,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
         for controller in args.controller:
             plan = TrialPlan(args.trials, args.countdown, args.time_limit, args.seed, first)
             if controller is Controller.BOMI:
-                session, meta = _bomi_session(args, plan, profile, model, standin, operator)
+                session, meta = _bomi_session(args, plan, profile, model, standin, operator, stream)
             else:
                 session, meta = _joystick_session(args, plan, standin, operator, device)
             sessions_written.append((session, meta))
@@ -172,6 +180,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
     finally:
         if device is not None:
             device.close()
+        if stream is not None:
+            stream.stop()
         _write(out, records, sessions_written, profile, model, args)
     if args.predict is not None:
         predictions = _predictions(args)
@@ -206,7 +216,7 @@ def _write(out: Path, records, sessions, profile, model, args) -> None:
         save_profile(out / "profile.toml", profile, overwrite=True)
 
 
-def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator):
+def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source):
     from tasks.live import Headless, StatusLine
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
@@ -230,9 +240,6 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator):
             run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say),
                      on_tick=lambda tick: person.heard(tick.decisions), clock=clock, sleep=clock.sleep)
         else:
-            source = StreamReader(SerialSource(args.port, baudrate=args.baud,
-                                               retry=RetryPolicy(attempts=args.retries), parser=TappedParser()))
-            source.source.open()  # a bad port fails before the trials start
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "wall")
             meta["attrs"]["allowance"] = 0
             status, display = StatusLine(), TrialDisplay(_viewer(args.headless, sim), arm, _say)
@@ -269,8 +276,9 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device):
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
             run_joystick(session, person, display=TrialDisplay(Headless(), arm, _say), clock=clock, sleep=clock.sleep)
         else:
+            from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")
-            keys = getattr(device, "key", None) and device
+            keys = device if isinstance(device, ViewerKeys) else None
             display = TrialDisplay(_viewer(args.headless, sim, keys), arm, _say)
             try:
                 run_joystick(session, device, display=display)
@@ -284,14 +292,20 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device):
     return session, meta
 
 
-def _person_stick(index: int | None):
-    from tasks.trials.devices import Gamepad, ViewerKeys
+def _person_stick(index: int | None, headless: bool):
+    """A person's joystick: gamepad ``index``; by default gamepad 0, else the viewer's keys."""
     import time
+
+    from tasks.live import display_opens, has_display
+    from tasks.trials.devices import Gamepad, ViewerKeys
     if index is not None:
         return Gamepad(index)
     try:
         return Gamepad(0)
-    except BomiError:
+    except BomiError as exc:
+        if headless or not (has_display() and display_opens()):
+            raise BomiError(f"the joystick condition needs a gamepad or the viewer's keys: {exc}, and "
+                            f"{'--headless' if headless else 'no display opens'}") from None
         _say("no gamepad: the joystick is the viewer's keys (arrows F/B/L/R, Q/E twist, 1/2 buttons)")
         return ViewerKeys(time.monotonic)
 
@@ -337,8 +351,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"replay: re-scored with {args.model}: {scored.decisions} decisions, accuracy "
               f"{100 * scored.accuracy:.2f} % over all decisions ({100 * scored.accuracy_excused:.2f} % with "
               f"transitions excused)")
-        print(f"replay: offline only: with {args.model} at the controls the arm's path would have differed, and "
-              f"so would the person's corrections; these decisions never drove an arm")
+        print(f"replay: offline only: these decisions never drove an arm; with {args.model} at the controls the "
+              f"arm's path would have differed (and the person's corrections with it)")
         return 0
     result = replay_trial(data, args.trial, profile, model)
     same = "the same" if result.success == result.logged_success else "NOT the same"
