@@ -130,7 +130,7 @@ def test_rescoring_with_the_logged_model_gives_the_logged_accuracy(bomi_dir, cap
     assert main(["replay", str(bomi_dir), "--trial", "1", "--model", str(bomi_dir / "model.json")]) == 0
     out = capsys.readouterr().out
     logged, again = re.findall(r"(\d+) (?:logged )?decisions, accuracy ([\d.]+) %", out)
-    assert logged == again and "would have differed" in out
+    assert logged == again and "100.00 % of the logged decisions decided alike" in out and "would have differed" in out
 
 
 def test_bad_input_is_one_line(bomi_dir, tmp_path, capsys):

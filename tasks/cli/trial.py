@@ -23,6 +23,7 @@ from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stick import arm_profile, profile_layout
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
+                                  TrialStatusLine,
                                   episode_log, node1_id, run_bomi, run_joystick, trial_record)
 
 FILES = ("trials.jsonl", "bomi.h5", "joystick.h5", "model.json", "profile.toml", "report.md",
@@ -162,27 +163,25 @@ def cmd_trial(args: argparse.Namespace) -> int:
         _say(f"{standin.name} calibrates through its stream (the calibration protocol, then bomi train)")
         model = calibrated_model(standin, profile, args.seed)
     out.mkdir(exist_ok=True)
-    records, logs, first = [], {}, 1
-    sessions_written = []
+    sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
+    first = 1
     try:
         for controller in args.controller:
             plan = TrialPlan(args.trials, args.countdown, args.time_limit, args.seed, first)
             if controller is Controller.BOMI:
-                session, meta = _bomi_session(args, plan, profile, model, standin, operator, stream)
+                _bomi_session(args, plan, profile, model, standin, operator, stream, sessions)
             else:
-                session, meta = _joystick_session(args, plan, standin, operator, device)
-            sessions_written.append((session, meta))
-            for result in session.finished:
-                log = episode_log(session.recorder, result, **meta["log"])
-                logs[result.number] = log
-                records.append(trial_record(log, result.number, standin is not None))
+                _joystick_session(args, plan, standin, operator, device, sessions)
             first += args.trials
+            if sessions and sessions[-1][0].stopped:
+                break  # the person closed the viewer: the session ends here
     finally:
         if device is not None:
             device.close()
         if stream is not None:
             stream.stop()
-        _write(out, records, sessions_written, profile, model, args)
+        records, logs = _score(sessions, standin is not None)
+        _write(out, records, sessions, profile, model)
     if args.predict is not None:
         predictions = _predictions(args)
     else:
@@ -200,7 +199,18 @@ def cmd_trial(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write(out: Path, records, sessions, profile, model, args) -> None:
+def _score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[list[dict], dict]:
+    """Every finished trial's record (trials.jsonl) and episode log (the figures)."""
+    records, logs = [], {}
+    for session, meta in sessions:
+        for result in session.finished:
+            log = episode_log(session.recorder, result, **meta["log"])
+            logs[result.number] = log
+            records.append(trial_record(log, result.number, intent_known))
+    return records, logs
+
+
+def _write(out: Path, records, sessions, profile, model) -> None:
     """Everything recorded so far (also after a lost input)."""
     from tasks.trials.dataset import write_session
     with open(out / "trials.jsonl", "w", encoding="utf-8") as f:
@@ -216,7 +226,7 @@ def _write(out: Path, records, sessions, profile, model, args) -> None:
         save_profile(out / "profile.toml", profile, overwrite=True)
 
 
-def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source):
+def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source, sessions) -> None:
     from tasks.live import Headless, StatusLine
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
@@ -235,14 +245,16 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             source = StandInSource(person, clock)
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, person, node1_id(chain)),
                               "simulated")
+            sessions.append((session, meta))
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
             meta["log"]["sample_period"] = SAMPLE_PERIOD_S
             run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say),
                      on_tick=lambda tick: person.heard(tick.decisions), clock=clock, sleep=clock.sleep)
         else:
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "wall")
+            sessions.append((session, meta))
             meta["attrs"]["allowance"] = 0
-            status, display = StatusLine(), TrialDisplay(_viewer(args.headless, sim), arm, _say)
+            status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, _say)
             try:
                 source.start()  # after the viewer opens: what arrives meanwhile is no backlog
                 run_bomi(session, source, chain, display=display, status=status)
@@ -251,17 +263,17 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                 status.close()
                 display.close()
             if source.error is not None or not session.arm.finished:
-                why = f"stream lost: {source.error}" if source.error is not None else "the viewer was closed"
+                why = "stream lost" if source.error is not None else "the viewer was closed"
                 session.cut_short(why)
-                _say(f"{why}: the session stops here; what it recorded is kept")
+                _say(f"{why}: the session stops here, the running trial fails; what was recorded is written "
+                     f"to {args.out}")
                 if source.error is not None:
                     raise source.error
     finally:
         sim.close()
-    return session, meta
 
 
-def _joystick_session(args, plan: TrialPlan, standin, operator, device):
+def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions) -> None:
     sim = ArmSim(layout=THREE_AXIS)
     arm = TrialArm(sim, plan, ready=True)
     who = standin.name if standin is not None else "person"
@@ -274,22 +286,25 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device):
             clock = SimulatedClock()
             person = JoystickStandIn(arm, operator, args.seed)
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
+            sessions.append((session, meta))
             run_joystick(session, person, display=TrialDisplay(Headless(), arm, _say), clock=clock, sleep=clock.sleep)
         else:
             from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")
+            sessions.append((session, meta))
             keys = device if isinstance(device, ViewerKeys) else None
             display = TrialDisplay(_viewer(args.headless, sim, keys), arm, _say)
             try:
                 run_joystick(session, device, display=display)
-            except BomiError as exc:
-                session.cut_short(f"input lost: {exc}")
+            except BomiError:
+                session.cut_short("input lost")
+                _say(f"the joystick was lost: the session stops here, the running trial fails; what was "
+                     f"recorded is written to {args.out}")
                 raise
             finally:
                 display.close()
     finally:
         sim.close()
-    return session, meta
 
 
 def _person_stick(index: int | None, headless: bool):
@@ -345,12 +360,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
         other = load_model(check_input(args.model, "model"))
         check_model_for(other, profile, args.model)
         scored = rescore_trial(data, args.trial, profile, other)
-        print(f"replay: trial {args.trial}: {scored.logged_decisions} logged decisions, accuracy "
-              f"{100 * scored.logged_accuracy:.2f} % over all decisions ({100 * scored.logged_accuracy_excused:.2f} % "
-              f"with transitions excused)")
-        print(f"replay: re-scored with {args.model}: {scored.decisions} decisions, accuracy "
-              f"{100 * scored.accuracy:.2f} % over all decisions ({100 * scored.accuracy_excused:.2f} % with "
-              f"transitions excused)")
+        print(f"replay: trial {args.trial}: {scored.logged_decisions} logged decisions"
+              + _accuracy_text(scored.logged_accuracy, scored.logged_accuracy_excused))
+        print(f"replay: re-scored with {args.model}: {scored.decisions} decisions"
+              + _accuracy_text(scored.accuracy, scored.accuracy_excused)
+              + f"; {100 * scored.agreement:.2f} % of the logged decisions decided alike")
+        if scored.accuracy is None:
+            print("replay: no accuracy: a person did this trial and nobody logged what they intended")
         print(f"replay: offline only: these decisions never drove an arm; with {args.model} at the controls the "
               f"arm's path would have differed (and the person's corrections with it)")
         return 0
@@ -360,3 +376,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
           f"{'success' if result.success else 'failure'}, {same} outcome as logged")
     print(f"replay: max hand deviation {result.max_deviation_m:.3g} m")
     return 0
+
+
+def _accuracy_text(every: float | None, excused: float | None) -> str:
+    if every is None:
+        return ""
+    return f", accuracy {100 * every:.2f} % over all decisions ({100 * excused:.2f} % with transitions excused)"

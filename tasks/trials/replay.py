@@ -29,6 +29,10 @@ from tasks.trials.session import (UNKNOWN, Controller, Session, SimulatedClock, 
                                   TrialPlan, run_joystick)
 
 
+class LogEnded(Exception):
+    """The log ends before the replayed trial does (a trial cut short by a lost input)."""
+
+
 @dataclass
 class LoggedStick:
     """The logged stick of each tick, in order (a ``session.StickDevice``)."""
@@ -39,7 +43,7 @@ class LoggedStick:
 
     def read(self, now: float) -> JoystickState:
         if self.k >= len(self.stick):
-            raise BomiError("the replayed session's log ends before the trial does")
+            raise LogEnded
         stick, pressed = self.stick[self.k], self.pressed[self.k]
         self.k += 1
         return JoystickState({f: float(v) for f, v in zip(FUNCTIONS, stick) if v > 0},
@@ -73,8 +77,6 @@ def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
         events = parser.safety_events[seen:]
         seen += len(events)
         loop.tick(t, frames, events)
-    if not arm.finished:
-        raise BomiError(f"{data.path}: the log ends before the trial does")
 
 
 def session_plan(data: SessionData) -> TrialPlan:
@@ -96,40 +98,47 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
         else:
             session = Session(controller, arm, TickRecorder(arm), "replay")
             clock = SimulatedClock()  # the joystick's ticks depend on nothing but their order
-            run_joystick(session, LoggedStick(data.ticks["stick"], data.ticks["pressed"]),
-                         display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep)
+            try:
+                run_joystick(session, LoggedStick(data.ticks["stick"], data.ticks["pressed"]),
+                             display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep)
+            except LogEnded:
+                pass  # a trial cut short: replayed up to where its log ends
     finally:
         sim.close()
     result = next(r for r in arm.results if r.number == number)
-    replayed = np.array([r["hand_pos"] for r in arm.rows[result.go_tick:result.end_tick]])
+    stop = result.end_tick if result.end_tick >= 0 else len(arm.rows)  # cut short: the log's end
+    replayed = np.array([r["hand_pos"] for r in arm.rows[result.go_tick:stop]])
     logged = data.ticks["hand_pos"][go:end]
     common = min(len(replayed), len(logged))
     deviation = float(np.max(np.linalg.norm(replayed[:common] - logged[:common], axis=1))) if common else float("nan")
-    return Replayed(number, result.end_tick - result.go_tick, end - go, deviation, result.success,
+    return Replayed(number, stop - result.go_tick, end - go, deviation, result.success,
                     bool(data.trials["success"][row]))
 
 
 @dataclass(frozen=True)
 class Rescored:
+    """A trial's decisions re-made offline with another model. Accuracies are None when nobody knows
+    what was intended (a person); ``agreement``: the share of the logged decisions the other model
+    decided alike, decision by decision (matched by the frame that made them)."""
+
     decisions: int
-    accuracy: float
-    accuracy_excused: float
     logged_decisions: int
-    logged_accuracy: float
-    logged_accuracy_excused: float
+    agreement: float
+    accuracy: float | None = None
+    accuracy_excused: float | None = None
+    logged_accuracy: float | None = None
+    logged_accuracy_excused: float | None = None
 
 
 def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model) -> Rescored:
-    """Trial ``number``'s logged frames through a chain of ``model`` (offline, no arm), its decisions
-    scored against the stand-in's intended classes, beside the logged decisions' score."""
+    """Trial ``number``'s logged frames through a chain of ``model`` (offline, no arm, the logged
+    neutral offsets), its decisions scored against the stand-in's intended classes (when known)
+    beside the logged decisions' score."""
     row = data.trial_row(number)
     if row is None:
         raise BomiError(f"{data.path}: no trial {number} in this session")
     if data.attrs["controller"] != Controller.BOMI.value:
         raise BomiError(f"{data.path}: trial {number} was a joystick trial: there are no decisions to re-score")
-    if np.all(data.frames["intended"] == UNKNOWN):
-        raise BomiError(f"{data.path}: trial {number} was done by a person: nobody logged the intended classes, so "
-                        "decisions cannot be scored")
     neutral = json.loads(data.attrs["neutral"] or "null")
     if neutral is None:
         raise BomiError(f"{data.path}: the session never took its neutral posture: nothing to re-score")
@@ -137,22 +146,30 @@ def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model
     chain = OnlineChain(model, profile)
     chain.set_neutral({int(node): offset for node, offset in neutral.items()})
     f = data.frames
-    decided, intended = [], []
+    made: dict[int, int] = {}  # frame row -> the other model's decision
     for k in range(int(np.searchsorted(f["tick"], end))):
         frame = ImuFrame(int(f["node_id"][k]), int(f["period_ms"][k]), int(f["counter"][k]),
                          tuple(int(v) for v in f["mag"][k]), tuple(int(v) for v in f["gyro"][k]),
                          tuple(int(v) for v in f["acc"][k]))
         decision = chain.push_frame(frame)
         if decision is not None and f["tick"][k] >= go:
-            decided.append(decision.label)
-            intended.append(int(f["intended"][k]))
-    allowance = int(data.attrs["allowance"])
+            made[k] = decision.label
     d = data.decisions
     span = (d["tick"] >= go) & (d["tick"] < end)
-    return Rescored(len(decided), metrics.accuracy_all_decisions(np.array(intended), np.array(decided)),
-                    metrics.accuracy_excused_transitions(np.array(intended), np.array(decided), allowance),
-                    int(span.sum()), metrics.accuracy_all_decisions(d["intended"][span], d["label"][span]),
-                    metrics.accuracy_excused_transitions(d["intended"][span], d["label"][span], allowance))
+    logged_rows, logged_labels = d["frame_row"][span], d["label"][span]
+    alike = [made[r] == label for r, label in zip(logged_rows.tolist(), logged_labels.tolist()) if r in made]
+    agreement = float(np.mean(alike)) if alike else float("nan")
+    rows = np.array(sorted(made), dtype=int)
+    intended = f["intended"][rows] if rows.size else np.zeros(0, int)
+    if rows.size == 0 or np.any(intended == UNKNOWN):
+        return Rescored(len(made), int(span.sum()), agreement)
+    decided = np.array([made[r] for r in rows.tolist()])
+    allowance = int(data.attrs["allowance"])
+    return Rescored(len(made), int(span.sum()), agreement,
+                    metrics.accuracy_all_decisions(intended, decided),
+                    metrics.accuracy_excused_transitions(intended, decided, allowance),
+                    metrics.accuracy_all_decisions(d["intended"][span], logged_labels),
+                    metrics.accuracy_excused_transitions(d["intended"][span], logged_labels, allowance))
 
 
 def trial_controller(out: Path, number: int) -> str:

@@ -385,6 +385,19 @@ class TrialDisplay:
         self.inner.close()
 
 
+class TrialStatusLine:
+    """The live loop's status line on the terminal, the trial's status before it."""
+
+    def __init__(self, arm: TrialArm, line):
+        self.arm, self.line = arm, line  # line: a tasks.live.StatusLine
+
+    def show(self, t: float, text: Callable[[], str]) -> None:
+        self.line.show(t, lambda: f"{self.arm.status()} | {text()}")
+
+    def close(self) -> None:
+        self.line.close()
+
+
 @dataclass
 class Session:
     """One controller's trials: the loop, the arm running the trials and the record of every tick."""
@@ -393,6 +406,7 @@ class Session:
     arm: TrialArm
     recorder: TickRecorder
     clock_kind: str  # "simulated" or "wall"
+    stopped: str | None = None  # why the session stopped before its last trial ended
 
     @property
     def finished(self) -> list[TrialResult]:
@@ -404,7 +418,7 @@ class Session:
         if self.arm.phase is Phase.RUN and self.arm.results and self.arm.results[-1].end_tick < 0:
             result = self.arm.results[-1]
             result.end_tick, result.failure = len(self.recorder.ticks), why
-        self.arm.phase = Phase.DONE
+        self.arm.phase, self.stopped = Phase.DONE, why
 
 
 def run_bomi(session: Session, source, chain, *, display, on_tick: Callable[[object], None] | None = None,
