@@ -155,3 +155,65 @@ def test_bad_input_is_one_line(bomi_dir, tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.startswith("bomi: error: ") and fault in err and err.count("\n") == 1, err
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists() and not (tmp_path / "z").exists()
+
+
+@pytest.fixture
+def virtual_pads(monkeypatch):
+    """SDL's virtual joysticks (the SDL pygame ships): a full gamepad (6 axes, 4 buttons) and a
+    1-axis device that is no gamepad; (sdl, index of each)."""
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    pygame = pytest.importorskip("pygame")
+    import ctypes
+    import glob
+    import os
+    pygame.display.init()
+    pygame.joystick.init()
+    found = glob.glob(os.path.join(os.path.dirname(pygame.__file__), "..", "pygame.libs", "libSDL2-2*"))
+    if not found:
+        pytest.skip("pygame without its own SDL library")
+    sdl = ctypes.CDLL(found[0])
+    sdl.SDL_JoystickFromInstanceID.restype = ctypes.c_void_p
+    sdl.SDL_JoystickSetVirtualAxis.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int16]
+    sdl.SDL_JoystickSetVirtualButton.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_uint8]
+    pad, other = sdl.SDL_JoystickAttachVirtual(1, 6, 4, 0), sdl.SDL_JoystickAttachVirtual(1, 1, 0, 0)
+    yield sdl, pad, other
+    pygame.quit()
+
+
+def test_a_gamepad_drives_the_stick_and_unplugging_it_is_one_line(virtual_pads, tmp_path, capsys):
+    from bomi.errors import BomiError
+    from tasks.trials.devices import DeviceLost, Gamepad
+    sdl, index, other = virtual_pads
+    pad = Gamepad(index)
+    handle = sdl.SDL_JoystickFromInstanceID(pad._pad.get_instance_id())
+    sdl.SDL_JoystickSetVirtualAxis(handle, 0, 16384)   # left stick right, half way
+    sdl.SDL_JoystickSetVirtualAxis(handle, 1, -32768)  # left stick fully up
+    sdl.SDL_JoystickSetVirtualAxis(handle, 2, 3000)    # right stick inside the dead zone
+    sdl.SDL_JoystickSetVirtualButton(handle, 0, 1)
+    first, held = pad.read(0.0), pad.read(0.016)
+    # SDL's axis 16384 is 0.5 (pygame divides by 32768), outside the 0.15 dead zone: (0.5 - 0.15) / 0.85
+    assert first.deflection == pytest.approx({"R": (0.5 - 0.15) / 0.85, "F": 1.0})
+    assert first.pressed == {"B1"} and held.pressed == frozenset()  # a button counts on its way down
+    with pytest.raises(BomiError, match="has 1 axes and 0 buttons"):
+        Gamepad(other)
+    assert main(["trial", "--port", "loop://", "--controller", "joystick", "--gamepad", str(other), "--headless",
+                 "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bomi: error: --gamepad") and "a gamepad for the JACO stick needs" in err
+    assert not (tmp_path / "t").exists()
+    sdl.SDL_JoystickDetachVirtual(index)
+    with pytest.raises(DeviceLost, match="unplugged"):
+        pad.read(0.032)
+
+
+def test_the_viewer_keys_hold_a_function_for_a_moment_and_press_a_button_once():
+    from tasks.trials.devices import KEY_HOLD_S, ViewerKeys
+    now = [10.0]
+    keys = ViewerKeys(lambda: now[0])
+    keys.key(265)  # up arrow: F
+    keys.key(49)   # 1: B1
+    assert keys.read(10.0).deflection == {"F": 1.0} and keys.read(10.0).pressed == frozenset()
+    now[0] = 10.0 + 0.9 * KEY_HOLD_S
+    keys.key(265)  # the key's auto-repeat: held on
+    assert keys.read(10.0 + 1.5 * KEY_HOLD_S).deflection == {"F": 1.0}
+    assert keys.read(10.0 + 2.0 * KEY_HOLD_S).deflection == {}

@@ -49,23 +49,22 @@ class Gamepad:
     _button: str | None = field(default=None, init=False)
 
     def __post_init__(self) -> None:
-        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # the joystick API needs no window
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # events need the video subsystem, not a window
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
         try:
             import pygame
         except ImportError:
             raise BomiError(f"--gamepad: the gamepad needs pygame ({GAMEPAD_HELP})") from None
         self._pygame = pygame
-        pygame.init()
+        pygame.display.init()  # only what the joystick API needs (no audio)
         pygame.joystick.init()
         count = pygame.joystick.get_count()
         if not 0 <= self.index < count:
-            pygame.quit()
             raise BomiError(f"--gamepad {self.index}: no such gamepad ({count} found)")
         pad = pygame.joystick.Joystick(self.index)
         axes, buttons = pad.get_numaxes(), pad.get_numbuttons()
         if axes < len(AXES) or buttons < len(GAMEPAD_BUTTONS):
             name = pad.get_name()
-            pygame.quit()
             raise BomiError(f"--gamepad {self.index}: {name!r} has {axes} axes and {buttons} buttons; a gamepad for "
                             f"the JACO stick needs {len(AXES)} axes and {len(GAMEPAD_BUTTONS)} buttons")
         self._pad, self.name = pad, pad.get_name()
@@ -73,7 +72,7 @@ class Gamepad:
     def read(self, now: float) -> JoystickState:
         pygame = self._pygame
         for event in pygame.event.get():
-            if event.type == pygame.JOYDEVICEREMOVED:
+            if event.type == pygame.JOYDEVICEREMOVED and event.instance_id == self._pad.get_instance_id():
                 raise DeviceLost(f"--gamepad {self.index}: {self.name!r} was unplugged")
         pad = self._pad
         values = {axis: float(pad.get_axis(axis)) for axis, _, _ in AXES}
