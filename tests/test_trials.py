@@ -212,8 +212,25 @@ def test_the_viewer_keys_hold_a_function_for_a_moment_and_press_a_button_once():
     keys = ViewerKeys(lambda: now[0])
     keys.key(265)  # up arrow: F
     keys.key(49)   # 1: B1
-    assert keys.read(10.0).deflection == {"F": 1.0} and keys.read(10.0).pressed == frozenset()
+    first, second = keys.read(10.0), keys.read(10.0)
+    assert first.deflection == second.deflection == {"F": 1.0}
+    assert first.pressed == {"B1"} and second.pressed == frozenset()
     now[0] = 10.0 + 0.9 * KEY_HOLD_S
     keys.key(265)  # the key's auto-repeat: held on
     assert keys.read(10.0 + 1.5 * KEY_HOLD_S).deflection == {"F": 1.0}
     assert keys.read(10.0 + 2.0 * KEY_HOLD_S).deflection == {}
+
+
+def test_the_joystick_stand_in_does_what_the_simulated_episode_of_its_seed_does(joystick_dir):
+    """An independent path to the same trial: `bomi run-task`'s episode (tasks.episode.run_episode)
+    with the trial's seed moves the hand exactly as the trial did; only the clock differs (the trial
+    is timed from the first command, the episode from its start)."""
+    from tasks.cli.task import EpisodeJob, run_job
+    episode = run_job(EpisodeJob("joystick", "P1", 12, 30.0))
+    record = _records(joystick_dir)[0]
+    with h5py.File(joystick_dir / "joystick.h5") as f:
+        go, end, first = (int(f[f"trials/{k}"][0]) for k in ("go_tick", "end_tick", "first_command_tick"))
+        hand, task_t = f["ticks/hand_pos"][go:end], f["ticks/task_t"][()]
+    np.testing.assert_array_equal(hand, episode.hand_pos)
+    assert record["completion_time"] == pytest.approx(episode.completion_time - task_t[first], abs=1e-9)
+    assert record["mode_switches"] == summarize(episode)["mode_switches"]

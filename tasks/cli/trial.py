@@ -128,10 +128,10 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
 def cmd_trial(args: argparse.Namespace) -> int:
     out: Path = args.out
     _check_out(out, args.force)
-    standin = None
-    if args.stand_in is not None:
-        from tasks.participants.participant import check_against_profile, load_participant
-        standin = load_participant(args.stand_in)
+    from tasks.participants.participant import check_against_profile, load_participant
+    standin = load_participant(args.stand_in) if args.stand_in is not None else None
+    if args.predict is not None:
+        load_participant(args.predict)  # a bad name fails before the session
     profile_name = args.profile or (standin.profile if standin is not None else None)
     bomi = Controller.BOMI in args.controller
     if bomi and profile_name is None:
@@ -182,10 +182,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
             stream.stop()
         records, logs = _score(sessions, standin is not None)
         _write(out, records, sessions, profile, model)
-    if args.predict is not None:
-        predictions = _predictions(args)
-    else:
-        predictions = []
+    predictions = _predictions(args) if args.predict is not None else []
     from tasks.trials.report import write_report
     note = (f"Stand-in {standin.name} (seed {args.seed}), simulated clock." if standin is not None
             else f"A person; stream {args.port}.")
@@ -330,14 +327,16 @@ def _controls_label(profile) -> str:
     return profile_controls(profile).label
 
 
-def _predictions(args) -> list[dict]:
+def _predictions(args) -> list[tuple[dict, object]]:
+    """The named virtual participant's simulated episodes (``bomi benchmark``'s), one per trial, on
+    the trials' cube placements: (record, episode log) each."""
     from tasks.cli.task import EpisodeJob, run_job
     from tasks.episode import summarize
     out = []
     for controller in args.controller:
         for k in range(args.trials):
-            job = EpisodeJob(controller.value, args.predict, args.seed + k, args.time_limit)
-            out.append(summarize(run_job(job, progress=True)))
+            log = run_job(EpisodeJob(controller.value, args.predict, args.seed + k, args.time_limit), progress=True)
+            out.append((summarize(log), log))
     return out
 
 

@@ -41,20 +41,26 @@ def trial_table(records: Sequence[dict], predictions: Sequence[dict] = ()) -> st
     return "\n".join(lines)
 
 
-def write_report(out: Path, records: Sequence[dict], logs: dict[int, EpisodeLog], predictions: Sequence[dict] = (),
-                 note: str = "") -> list[Path]:
-    """report.md and one timeline figure per controller (its best trial); returns the files written."""
+def write_report(out: Path, records: Sequence[dict], logs: dict[int, EpisodeLog],
+                 predictions: Sequence[tuple[dict, EpisodeLog]] = (), note: str = "") -> list[Path]:
+    """report.md and one timeline figure per controller (its best trial, above the prediction's best
+    episode of that controller when there is one); returns the files written."""
     written, figures = [], []
     for controller in dict.fromkeys(r["operator"] for r in records):
         best = best_trial([r for r in records if r["operator"] == controller])
         if best is None:
             figures.append(f"No {controller} trial succeeded: no timeline figure.")
             continue
-        path = timeline_figure([logs[best["trial"]]], out / f"timeline_{controller}.png")
+        predicted = {id(r): log for r, log in predictions if r["operator"] == controller}
+        twin = best_trial([r for r, _ in predictions if r["operator"] == controller])
+        shown = [logs[best["trial"]]] + ([predicted[id(twin)]] if twin is not None else [])
+        path = timeline_figure(shown, out / f"timeline_{controller}.png")
         written.append(path)
+        beside = (f", above the prediction's best {controller} episode ({twin['participant']}, seed {twin['seed']}, "
+                  f"{twin['completion_time']:.2f} s)" if twin is not None else "")
         figures.append(f"![{controller}: trial {best['trial']}]({path.name})\n\n{controller}: the best trial, "
-                       f"trial {best['trial']} ({best['completion_time']:.2f} s).")
-    text = "\n\n".join(["# Trial session", note, "## Trials", trial_table(records, predictions),
+                       f"trial {best['trial']} ({best['completion_time']:.2f} s){beside}.")
+    text = "\n\n".join(["# Trial session", note, "## Trials", trial_table(records, [r for r, _ in predictions]),
                         "Time: from the first command to the stack standing still (the task's success), the "
                         "time limit counted from the go. Accuracy: every decision against the class the "
                         "stand-in performed (- for a person: nobody knows what they intended).",

@@ -144,8 +144,6 @@ class TrialArm:
         self._started = (time.perf_counter(), time.process_time())
 
     def step(self, state: JoystickState) -> ArmCommand:
-        if self.phase is Phase.COUNTDOWN and self.ticks >= self._countdown_end:
-            self._go()
         view = self.task.view()
         self.rows.append({"trial": self.trial if self.phase in (Phase.COUNTDOWN, Phase.RUN) else 0,
                           "phase": int(self.phase), "task_t": view.t, "hand_pos": view.hand_pos,
@@ -153,7 +151,10 @@ class TrialArm:
                           "cube_pos": np.array(view.cube_pos), "touching": np.array(view.touching, dtype=bool)})
         self.ticks += 1
         if self.phase is not Phase.RUN:
-            return self.sim.step(JoystickState())
+            command = self.sim.step(JoystickState())
+            if self.phase is Phase.COUNTDOWN and self.ticks >= self._countdown_end:
+                self._go()  # the next tick starts the trial, the task at its start (as a person sees it)
+            return command
         result = self.results[-1]
         if result.first_command_s is None and (any(state.deflection.values()) or state.pressed):
             result.first_command_s, result.first_command_tick = view.t, self.ticks - 1
