@@ -29,8 +29,9 @@ A node is trusted once its orientation filter has **settled** and while its samp
 - Fresh: a frame of the node within ``stale_s`` (100 ms) of now.
 
 After an implausible sample (or a silence longer than ``resettle_gap_s``) the node must settle
-again: a full window of plausible samples that passes the settle test, i.e. the signal has been
-plausible and steady for ``settle_samples`` samples (1.6 s) before control resumes. An implausible
+again: a full window of plausible samples that passes the settle test, and ``resume_s`` (1.6 s)
+of wall time since the last implausible frame arrived (a burst can bring a whole window at
+once), i.e. the signal has been plausible and steady for 1.6 s before control resumes. An implausible
 frame is not given to the fusion (``NodeGate.check_raw`` says so before fusing), so a zero or
 saturated frame does not bend the filter.
 
@@ -107,16 +108,19 @@ class NodeGate:
     config: GateConfig = field(default_factory=GateConfig)
     settled: bool = False
     defect: str | None = None            # the last implausibility, until the node has settled again
+    last_defect: str | None = None       # the one before it settled
     lost: int = 0                        # samples lost, from the counters
     _angles: deque = field(default_factory=deque, repr=False)
     _last_counter: int | None = field(default=None, repr=False)
     _last_angles: tuple[float, float, float] | None = field(default=None, repr=False)
     _last_arrival: float | None = field(default=None, repr=False)
     _step: int = field(default=1, repr=False)                      # counter step of the last frame
+    _defect_at: float | None = field(default=None, repr=False)     # arrival time of the last implausibility
     _arrivals: deque = field(default_factory=deque, repr=False)   # (time, frames) over the last second
 
     def _implausible(self, reason: str) -> None:
         self.defect = f"node {self.index}: {reason}"
+        self._defect_at = self._last_arrival
         self.settled = False
         self._angles.clear()
         self._last_angles = None
@@ -168,7 +172,7 @@ class NodeGate:
         if not self.settled and len(window) == self.config.settle_samples:
             if settle_change(np.array(window)) < self.config.settle_change_deg:
                 self.settled = True
-                self.defect = None
+                self.last_defect, self.defect = self.defect, None
 
     def verdict(self, now: float) -> str | None:
         """Why the node cannot be trusted at ``now`` (None if it can)."""
@@ -176,6 +180,8 @@ class NodeGate:
             return f"no frames from node {self.index}"
         if not self.settled:
             return self.defect or f"warming up (node {self.index})"
+        if self._defect_at is not None and now - self._defect_at < self.config.resume_s:
+            return self.last_defect     # a burst (a backlog) can refill the window at once: wall time counts too
         return None
 
 

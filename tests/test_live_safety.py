@@ -1,0 +1,249 @@
+"""The live path's safety (issue 27 item 1): the gate by hand, the loop on an injected clock, the
+reader when the stream goes away, the log when the disk is full, the film when it falls behind.
+End-to-end numbers: benchmarks/live_safety.py."""
+from __future__ import annotations
+
+import errno
+import io
+import json
+import math
+import os
+import queue
+import time
+
+import numpy as np
+import pytest
+
+from bomi.fusion import DT, NodeFusion
+from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_ratio, raw_defect, settle_change
+from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
+from tasks.live import LiveLoop, TickLog, VideoDisplay
+from tests.test_live import QUICK_GATE, SETTLE, FakeClock, ScriptedChain, StickArm, decision, still_frame
+
+STILL = still_frame(0)
+
+
+# ------------------------------------------------------------------------------------------ gate
+def test_settle_threshold_is_the_tolerance_times_the_decay_ratio():
+    # half means of e_end * exp(-(t - t_end) / tau) over [t_end - tau, t_end], integrated by hand:
+    # newer half: e_end * 2 (e^0.5 - 1), older: e_end * 2 (e - e^0.5); difference 2 (e^0.5 - 1)^2 e_end
+    assert half_mean_ratio(1.6, 1.6) == pytest.approx(2 * (math.exp(0.5) - 1) ** 2)
+    config = GateConfig()
+    assert config.settle_samples == 100 and config.settle_change_deg == pytest.approx(0.5 * 0.8417, abs=1e-4)
+    assert config.max_jump_deg == pytest.approx(9.6)
+
+
+def test_a_decaying_yaw_settles_when_the_error_left_is_half_a_degree():
+    """Yaw 120 deg away decaying with the filter's 100-sample constant: the gate says settled at the
+    sample where 120 exp(-n / 100) drops below 0.5 deg (n = 100 ln 240 = 548), not before."""
+    gate = NodeGate(1)
+    settled_at = None
+    for n in range(1000):
+        gate.fused((0.0, 0.0, 120.0 * math.exp(-n / 100)))
+        if gate.settled and settled_at is None:
+            settled_at = n
+    assert 540 <= settled_at <= 556
+    assert 120.0 * math.exp(-settled_at / 100) < 0.52
+
+
+def test_raw_defects_zero_and_saturated_values():
+    ok = ((100, -200, 4000), (3, -2, 0), (-16000, 50, 300))
+    assert raw_defect(*ok) is None
+    assert raw_defect((1, 2, 3), (0, 0, 0), (0, 0, 0)) == "accelerometer all zero"
+    assert raw_defect((0, 0, 0), (0, 0, 0), (1, 0, 0)) == "magnetometer all zero"
+    assert raw_defect((1, 2, 3), (0, 32767, 0), (1, 0, 0)) == "gyroscope saturated"
+    assert raw_defect((1, -32768, 3), (0, 0, 0), (1, 0, 0)) == "magnetometer saturated"
+    assert raw_defect((1, 2, 3), (0, 0, 0), (32767, 0, 0)) == "accelerometer saturated"
+    assert settle_change(np.array([[0, 0, 0], [0, 0, 0], [1, -3, 0], [1, -3, 0]])) == 3.0
+
+
+def _plausible_samples(gate: NodeGate, n: int, counter: int, now: float) -> int:
+    for k in range(n):
+        assert gate.check_raw(counter + k, STILL.mag, STILL.gyro, STILL.acc)
+        gate.fused((0.0, 0.0, 0.0))
+        gate.arrived(now, 1)
+    return counter + n
+
+
+def test_an_implausible_frame_holds_the_node_until_a_full_window_is_plausible_and_steady():
+    config = GateConfig(settle_samples=10)
+    gate = NodeGate(2, config)
+    counter = _plausible_samples(gate, 10, 0, 0.0)
+    assert gate.verdict(0.0) is None
+    assert not gate.check_raw(counter, STILL.mag, STILL.gyro, (0, 0, 0))          # never reaches the filter
+    assert gate.verdict(0.0) == "node 2: accelerometer all zero"
+    counter = _plausible_samples(gate, 9, counter + 1, 0.0)
+    assert gate.verdict(0.0) == "node 2: accelerometer all zero"                    # 9 of 10: still held
+    counter = _plausible_samples(gate, 1, counter, 0.0)
+    assert gate.verdict(0.0) == "node 2: accelerometer all zero"                    # steady, but not 1.6 s yet
+    _plausible_samples(gate, 1, counter, config.resume_s)
+    assert gate.verdict(config.resume_s) is None
+    assert gate.verdict(config.resume_s + 0.1) == "no frames from node 2"            # 100 ms: missing
+
+
+def test_angle_jumps_counters_out_of_step_and_floods_are_implausible():
+    config = GateConfig(settle_samples=4)
+    gate = NodeGate(1, config)
+    counter = _plausible_samples(gate, 4, 0, 0.0)
+    gate.check_raw(counter, STILL.mag, STILL.gyro, STILL.acc)
+    gate.fused((0.0, 0.0, 9.5))                                                      # 594 deg/s: a person can
+    assert gate.verdict(0.0) is None
+    gate.check_raw(counter + 1, STILL.mag, STILL.gyro, STILL.acc)
+    gate.fused((0.0, 0.0, 19.2))                                                     # 606 deg/s: no one can
+    assert gate.verdict(0.0) == "node 1: angle jump of 10 deg in one sample"
+    gate = NodeGate(1, config)
+    counter = _plausible_samples(gate, 4, 0, 0.0)
+    gate.check_raw(counter + 2, STILL.mag, STILL.gyro, STILL.acc)                    # 2 lost: fine
+    assert gate.lost == 2 and gate.settled
+    gate.check_raw(counter + 2, STILL.mag, STILL.gyro, STILL.acc)                    # repeated
+    assert gate.verdict(0.0) == "node 1: packet counter out of step (a step of 0)"
+    gate = NodeGate(1, config)
+    _plausible_samples(gate, 4, 0, 0.0)
+    gate.arrived(0.5, 100)                                                           # 104 in 1 s > 1.5 x 62.5 + 2
+    assert gate.verdict(0.5) == "node 1: 104 frames in 1 s, more than its rate allows"
+
+
+def test_gate_of_several_nodes_names_the_first_untrusted_one():
+    gate = Gate((1, 2), GateConfig(settle_samples=4))
+    assert gate.verdict(0.0) == "no frames from node 1"
+    _plausible_samples(gate.node[1], 4, 0, 0.0)
+    gate.node[2].arrived(0.0, 1)
+    assert gate.verdict(0.0) == "warming up (node 2)" and not gate.settled
+
+
+def test_button_evidence_needs_consecutive_decisions():
+    evidence = ButtonEvidence(3, frozenset({"B1", "B2"}))
+    assert evidence.admit(["F", "B1", "B1", "B1", "B1", "B2", "F", "B1"]) == \
+        [True, False, False, True, True, False, True, False]
+    evidence.reset()
+    assert evidence.admit(["B1", "B1"]) == [False, False]
+
+
+# ---------------------------------------------------------------------------- the loop, by ticks
+def loop_for(decisions, **kwargs) -> tuple[LiveLoop, StickArm, ScriptedChain]:
+    chain, arm = ScriptedChain(decisions), StickArm()
+    return LiveLoop(chain, arm, neutral={1: (0.0, 0.0, 0.0)}, gate=kwargs.pop("gate", QUICK_GATE), **kwargs), arm, chain
+
+
+def test_nothing_moves_and_nothing_reaches_the_chain_until_the_filter_settles():
+    loop, arm, chain = loop_for([decision(nu=0.5)] * 10)
+    ticks = [loop.tick(k * DT, [still_frame(k)]) for k in range(6)]
+    assert [t.hold for t in ticks[:SETTLE - 1]] == ["warming up (node 1)"] * (SETTLE - 1)
+    assert chain.pushed == 6 - (SETTLE - 1)
+    assert [t.command.linear[1] != 0 for t in ticks] == [False] * (SETTLE - 1) + [True] * (6 - SETTLE + 1)
+
+
+def test_zero_frames_stop_the_arm_on_the_tick_they_arrive_and_control_resumes_after_a_window():
+    seen = []
+    loop, arm, chain = loop_for([decision(nu=0.5)] * 100, observers=[seen.append])
+    k = 0
+    for _ in range(8):
+        loop.tick(k * DT, [still_frame(k)])
+        k += 1
+    assert np.linalg.norm(seen[-1].command.linear) > 0
+    zero = still_frame(k)
+    bad = type(zero)(zero.node_id, zero.period_ms, zero.counter, zero.mag, zero.gyro, (0, 0, 0))
+    tick = loop.tick(k * DT, [bad])
+    k += 1
+    assert tick.hold == "node 1: accelerometer all zero" and not tick.command.linear.any()
+    resumed = []
+    for _ in range(SETTLE + 2):
+        resumed.append(loop.tick(k * DT, [still_frame(k)]))
+        k += 1
+    assert [t.hold is None for t in resumed] == [False] * (SETTLE - 1) + [True] * 3
+    assert len(seen) == 8 + 1 + SETTLE + 2                                            # the observer saw every tick
+
+
+def test_a_backlog_is_not_replayed_only_the_newest_window_reaches_the_chain():
+    b1 = next(cls.label for cls in ScriptedChain([]).profile.classes if cls.function == "B1")
+    backlog_decisions = [decision(label=b1, function="B1", nu=0.0)] * 40 + [decision(nu=0.25)] * 200
+    loop, arm, chain = loop_for([decision(nu=0.5)] * 6 + backlog_decisions)
+    for k in range(6):
+        loop.tick(k * DT, [still_frame(k)])
+    pushed = chain.pushed
+    tick = loop.tick(6 * DT, [still_frame(6 + j) for j in range(100)])               # 1.6 s of frames at once
+    assert chain.pushed - pushed == 8                                                  # the newest window
+    assert tick.skipped == 92 + 7 and not arm.states[-1].pressed                       # no B1 from the backlog
+    assert tick.hold == "node 1: 106 frames in 1 s, more than its rate allows"
+    # held while the burst is within the last second, then for resume_s more
+    later = [loop.tick((7 + j) * DT, [still_frame(106 + j)]) for j in range(int((1 + QUICK_GATE.resume_s) / DT) + 3)]
+    released = next(t.t for t in later if t.hold is None)
+    assert 1.0 + QUICK_GATE.resume_s - 2 * DT <= released - tick.t <= 1.0 + QUICK_GATE.resume_s + 2 * DT
+
+
+def test_a_button_acts_only_after_the_profile_hold():
+    b1 = next(cls.label for cls in ScriptedChain([]).profile.classes if cls.function == "B1")
+    needed = math.ceil(ScriptedChain([]).profile.button_hold_s / DT - 1e-9)
+    blip = [decision(label=b1, function="B1", nu=0.0)] * (needed - 1) + [decision(label=0, function="neutral", nu=0.0)]
+    held = [decision(label=b1, function="B1", nu=0.0)] * (needed + 2)
+    script = [decision(label=0, function="neutral", nu=0.0)] * SETTLE + blip + held
+    loop, arm, chain = loop_for(script)
+    presses = []
+    for k in range(SETTLE - 1 + len(script)):       # the first SETTLE - 1 frames warm the gate up
+        loop.tick(k * DT, [still_frame(k)])
+        presses.append(bool(arm.states[-1].pressed))
+    assert sum(presses) == 1
+    assert presses.index(True) == SETTLE - 1 + SETTLE + len(blip) + needed - 1
+
+
+# ------------------------------------------------------------------------- stream, log, film
+def test_a_lost_stream_never_holds_up_a_poll_and_stop_cuts_the_backoff_short():
+    master, slave = os.openpty()
+    source = SerialSource(os.ttyname(slave), retry=RetryPolicy(attempts=6, first_delay_s=2.0), log=lambda m: None)
+    reader = StreamReader(source).start()
+    os.write(master, b"\x00" * 10)
+    time.sleep(0.1)
+    os.close(master)                                                                    # the emulator goes away
+    os.close(slave)
+    longest = 0.0
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:                                                      # the source reconnects meanwhile
+        start = time.monotonic()
+        assert reader.poll() == ([], [])
+        longest = max(longest, time.monotonic() - start)
+        time.sleep(DT)
+    start = time.monotonic()
+    reader.stop()
+    assert longest < 0.01 and time.monotonic() - start < 0.5
+
+
+class FullDisk(io.StringIO):
+    def write(self, text: str) -> int:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+
+def test_a_full_disk_gives_one_warning_and_control_goes_on():
+    warnings = []
+    log = TickLog(FullDisk(), "live.jsonl", warn=warnings.append)
+    loop, arm, chain = loop_for([decision(nu=0.5)] * 40)
+    clock = FakeClock()
+
+    class Frames:
+        parser, error, k = None, None, 0
+
+        def poll(self):
+            self.k += 1
+            return [still_frame(self.k)], []
+
+    source = Frames()
+    from bomi.frames import FrameParser
+    source.parser = FrameParser()
+    summary = loop.run(source, duration_s=30 * DT, log=log, clock=clock, sleep=clock.sleep)
+    assert summary.ticks >= 28 and warnings == [
+        "bomi: warning: live.jsonl: cannot write (No space left on device); logging stopped, control goes on"]
+    assert log.failed == "No space left on device"
+    assert np.linalg.norm(arm.joystick.update(arm.states[-1]).linear) > 0               # still driving
+
+
+def test_filming_never_waits_a_film_frame_is_dropped_instead():
+    film = VideoDisplay.__new__(VideoDisplay)
+    film.arm = type("A", (), {"data": type("D", (), {"qpos": np.zeros(3)})()})()
+    film.clock, film.fps, film._next, film.frames, film.dropped = time.monotonic, 1000.0, None, 0, 0
+    film._frames = queue.Queue(1)
+    start = time.monotonic()
+    for _ in range(50):
+        film.sync(lambda: "a | b | c | d | e | f")
+        time.sleep(0.002)
+    assert time.monotonic() - start < 0.5
+    assert film.frames == 1 and film.dropped >= 40
+    assert json.dumps(film._frames.get_nowait()[2])   # the caption: two lines of the status
