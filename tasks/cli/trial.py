@@ -233,6 +233,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                     "class_names": tuple(c.function for c in sorted(profile.classes, key=lambda c: c.label)),
                     "neutral": 0, "amplitude": profile.amplitude},
             "attrs": {"profile": profile.name, "participant": who, "layout": sim.layout.name,
+                      "classes": {str(c.label): f"{c.function} ({c.name})" for c in profile.classes},
                       "plan": vars(plan), "seed": args.seed}}
     try:
         if standin is not None:

@@ -17,7 +17,8 @@ import h5py
 import numpy as np
 
 from bomi.errors import BomiError
-from tasks.trials.session import Session
+from sim.joystick import BUTTONS, FUNCTIONS
+from tasks.trials.session import Phase, Session
 
 FORMAT = "bomi-trials"
 VERSION = 1
@@ -116,6 +117,8 @@ def write_session(path: Path, session: Session, attrs: dict) -> None:
         with h5py.File(path, "w-") as f:
             f.attrs.update({"format": FORMAT, "version": VERSION, "written_by": f"bomi-jaco {version('bomi-jaco')}",
                             "controller": session.controller.value, "clock": session.clock_kind,
+                            "stick_columns": json.dumps(FUNCTIONS), "pressed_columns": json.dumps(BUTTONS),
+                            "phases": json.dumps({int(phase): phase.name.lower() for phase in Phase}),
                             "dt": session.arm.dt, "neutral": json.dumps(recorder.neutral and
                                                                       {str(k): v for k, v in recorder.neutral.items()}),
                             **{k: json.dumps(v) if isinstance(v, (dict, list, tuple)) or v is None else v
