@@ -11,15 +11,14 @@ from pathlib import Path
 from bomi.chain import OnlineChain
 from bomi.errors import BomiError
 from bomi.files import check_input
-from bomi.frames import SAMPLE_PERIOD_S
 from bomi.model_io import check_model_for, load_model, save_model
 from bomi.profiles import save_profile
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamReader
 from sim.env import ArmSim
-from sim.joystick import THREE_AXIS
+from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import add_force, non_negative_int, non_negative_seconds, positive_int, seconds
-from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.stick import arm_profile, profile_layout
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
@@ -141,6 +140,10 @@ def cmd_trial(args: argparse.Namespace) -> int:
     profile = arm_profile(profile_name) if profile_name is not None else None
     if standin is not None and profile is not None:
         check_against_profile(standin, profile)
+    if args.model is not None and profile is None:
+        raise BomiError("--model: give the --profile it was trained for")
+    if args.gamepad is not None and standin is not None:
+        raise BomiError("--gamepad: the stand-in drives its own stick; a gamepad is for a person (--port)")
     model = None
     if args.model is not None:
         model = load_model(check_input(args.model, "model"))
@@ -245,7 +248,6 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                               "simulated")
             sessions.append((session, meta))
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
-            meta["log"]["sample_period"] = SAMPLE_PERIOD_S
             run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say),
                      on_tick=lambda tick: person.heard(tick.decisions), clock=clock, sleep=clock.sleep)
         else:
@@ -324,8 +326,10 @@ def _person_stick(index: int | None, headless: bool):
 
 
 def _controls_label(profile) -> str:
-    from tasks.episode import profile_controls
-    return profile_controls(profile).label
+    """The layout and buttons a profile's classes give (``tasks.planner.Controls.label``)."""
+    functions = {cls.function for cls in profile.classes}
+    buttons = tuple(b for b in BUTTONS if b in functions)
+    return Controls(profile_layout(profile), buttons).label if buttons else profile_layout(profile).name
 
 
 def _predictions(args) -> list[tuple[dict, object]]:

@@ -29,7 +29,7 @@ from typing import Protocol
 import numpy as np
 
 from bomi.chain import Decision
-from bomi.frames import FrameParser, ImuFrame, SampleIndex, imu_node_id
+from bomi.frames import SAMPLE_PERIOD_S, FrameParser, ImuFrame, SampleIndex, imu_node_id
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState, Mode
 from tasks.episode import DecisionTrace, EpisodeLog, summarize
@@ -293,7 +293,7 @@ class TickRecorder:
 
 def episode_log(recorder: TickRecorder, result: TrialResult, *, operator: str, participant: str, controls: str,
                 class_names: tuple[str, ...] = (), neutral: int = 0, allowance: int = 0, amplitude: str = "gamma",
-                sample_period: float = 0.016) -> EpisodeLog:
+                sample_period: float = SAMPLE_PERIOD_S) -> EpisodeLog:
     """One trial of a recorded session as the episode log a simulated episode gives."""
     arm = recorder.arm
     span = range(result.go_tick, result.end_tick if result.end_tick >= 0 else len(arm.rows))
