@@ -234,3 +234,18 @@ def test_the_joystick_stand_in_does_what_the_simulated_episode_of_its_seed_does(
     np.testing.assert_array_equal(hand, episode.hand_pos)
     assert record["completion_time"] == pytest.approx(episode.completion_time - task_t[first], abs=1e-9)
     assert record["mode_switches"] == summarize(episode)["mode_switches"]
+
+
+def test_a_controller_never_ready_ends_the_session_without_a_trial():
+    from sim.env import ArmSim
+    from sim.joystick import JoystickState
+    from tasks.trials.session import TrialArm, TrialPlan
+    sim = ArmSim()
+    arm = TrialArm(sim, TrialPlan(ready_within_s=0.5))
+    home = sim.tool_position
+    ticks = 0
+    while not arm.finished and ticks < 100:
+        arm.step(JoystickState({"F": 1.0}))  # whatever the controller says, nothing moves while waiting
+        ticks += 1
+    assert arm.finished and ticks == 31 and "not ready within 0.5 s" in arm.not_ready and arm.results == []
+    assert np.linalg.norm(sim.tool_position - home) < 1e-3

@@ -38,7 +38,8 @@ def _controllers(text: str) -> list[Controller]:
     allowed = [c.value for c in Controller]
     bad = [name for name in names if name not in allowed]
     if bad or not names or len(set(names)) != len(names):
-        raise argparse.ArgumentTypeError(f"a comma-separated list of {', '.join(allowed)} without repeats, got {text!r}")
+        raise argparse.ArgumentTypeError(f"a comma-separated list of {', '.join(allowed)} without repeats, "
+                                         f"got {text!r}")
     return [Controller(name) for name in names]
 
 
@@ -250,6 +251,8 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
             run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say),
                      on_tick=lambda tick: person.heard(tick.decisions), clock=clock, sleep=clock.sleep)
+            if arm.not_ready is not None:
+                raise BomiError(f"{standin.name}: {arm.not_ready}")
         else:
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "wall")
             sessions.append((session, meta))
@@ -262,6 +265,8 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                 source.stop()
                 status.close()
                 display.close()
+            if arm.not_ready is not None:
+                raise BomiError(f"{args.port}: {arm.not_ready}")
             if source.error is not None or not session.arm.finished:
                 why = "stream lost" if source.error is not None else "the viewer was closed"
                 session.cut_short(why)

@@ -29,8 +29,10 @@ def trial_table(records: Sequence[dict], predictions: Sequence[dict] = ()) -> st
     header = "| trial | controller | who | success | time (s) | mode switches | accuracy (all decisions) |"
     lines = [header, "|---" * (header.count("|") - 1) + "|"]
     for r in records:
-        lines.append(f"| {r['trial']} | {r['operator']} | {r['participant']} | {'yes' if r['success'] else 'no: ' + str(r['failure'])} "
-                     f"| {_cell(r['completion_time'])} | {r['mode_switches']} | {_pct(r.get('accuracy_all_decisions'))} |")
+        verdict = "yes" if r["success"] else f"no: {r['failure']}"
+        lines.append(f"| {r['trial']} | {r['operator']} | {r['participant']} | {verdict} | "
+                     f"{_cell(r['completion_time'])} "
+                     f"| {r['mode_switches']} | {_pct(r.get('accuracy_all_decisions'))} |")
     for k, r in enumerate(predictions, start=1):
         lines.append(f"| prediction {k} | {r['operator']} | {r['participant']} (simulated, seed {r['seed']}) "
                      f"| {'yes' if r['success'] else 'no'} | {_cell(r['completion_time'])} | {r['mode_switches']} "

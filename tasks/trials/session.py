@@ -38,6 +38,7 @@ from tasks.stacking import StackingTask, TaskConfig
 DEFAULT_TRIALS = 3
 DEFAULT_COUNTDOWN_S = 3.0
 DEFAULT_TIME_LIMIT_S = 600.0
+READY_WITHIN_S = 120.0
 UNKNOWN = -1  # an intended class nobody knows (a person, not a stand-in)
 
 
@@ -56,14 +57,15 @@ class Phase(enum.IntEnum):
 @dataclass(frozen=True)
 class TrialPlan:
     """How many trials (numbered from ``first``), how long the countdown, the time limit (from the
-    go) and the seed of the cube placement (the k-th trial of a controller uses ``seed + k - 1``:
-    every controller meets the same placements)."""
+    go), how long the controller may take to get ready, and the seed of the cube placement (the k-th
+    trial of a controller uses ``seed + k - 1``: every controller meets the same placements)."""
 
     trials: int = DEFAULT_TRIALS
     countdown_s: float = DEFAULT_COUNTDOWN_S
     time_limit_s: float = DEFAULT_TIME_LIMIT_S
     seed: int = 0
     first: int = 1
+    ready_within_s: float = READY_WITHIN_S  # a controller not ready by then (a signal that never settles) ends it
 
     @property
     def last(self) -> int:
@@ -109,6 +111,7 @@ class TrialArm:
         self._last = plan.last if last_trial is None else last_trial
         self._countdown_end = 0
         self._started = (0.0, 0.0)
+        self.not_ready: str | None = None  # why the session ended before its first trial
         if ready:
             self.ready()
 
@@ -150,6 +153,10 @@ class TrialArm:
                           "arm_qpos": self.sim.arm_qpos, "closure": view.closure, "mode": view.mode.value,
                           "cube_pos": np.array(view.cube_pos), "touching": np.array(view.touching, dtype=bool)})
         self.ticks += 1
+        if self.phase is Phase.WAIT and self.ticks * self.dt > self.plan.ready_within_s:
+            self.phase = Phase.DONE
+            self.not_ready = (f"the controller was not ready within {self.plan.ready_within_s:g} s (the live loop "
+                              f"never took the neutral posture: a node's signal did not settle)")
         if self.phase is not Phase.RUN:
             command = self.sim.step(JoystickState())
             if self.phase is Phase.COUNTDOWN and self.ticks >= self._countdown_end:
