@@ -144,7 +144,7 @@ def test_bad_input_is_one_line(bomi_dir, tmp_path, capsys):
           str(bomi_dir / "model.json"), "--controller", "bomi", "--headless", "--out", str(tmp_path / "y")],
          "cannot open the port"),
         (["trial", "--port", "loop://", "--controller", "joystick", "--gamepad", "3", "--headless",
-          "--out", str(tmp_path / "z")], "--gamepad 3"),
+          "--out", str(tmp_path / "z")], "--gamepad"),
         (["replay", str(bomi_dir), "--trial", "9"], "no trial 9"),
         (["replay", str(tmp_path), "--trial", "1"], "trials.jsonl"),
         (["replay", str(bomi_dir), "--trial", "1", "--model", str(other)], "model trained for profile P4"),
