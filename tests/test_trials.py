@@ -249,3 +249,49 @@ def test_a_controller_never_ready_ends_the_session_without_a_trial():
         ticks += 1
     assert arm.finished and ticks == 31 and "not ready within 0.5 s" in arm.not_ready and arm.results == []
     assert np.linalg.norm(sim.tool_position - home) < 1e-3
+
+
+def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_session(bomi_dir, tmp_path, capsys):
+    """A person's session on a pty (a virtual participant's stream, real time) whose base station goes
+    away 12 s in: the trial running then fails ("stream lost"), the session is written, the command ends
+    with one error line, and the cut-short trial replays to its log's end."""
+    import threading
+
+    from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
+    from bomi.profiles import load_profile
+    from bomi.protocol import calibration_schedule
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import participant_blocks
+    profile = load_profile("P1")
+    cues = calibration_schedule(profile, hold_s=2.0, neutral_s=20.0)  # neutral throughout the 12 s
+    sink = PtySink(linger_s=0.5)
+    chunks = block_chunks(participant_blocks(load_participant("P1"), profile, 3, cues, 12.0), EmulatorConfig(),
+                          EmulatorStats())
+
+    def emulate():
+        sink.wait_for_reader()
+        play(chunks, sink)
+        sink.finish()
+
+    thread = threading.Thread(target=emulate, daemon=True)
+    thread.start()
+    out = tmp_path / "person"
+    code = main(["trial", "--port", sink.description, "--profile", "P1", "--model", str(bomi_dir / "model.json"),
+                 "--controller", "bomi", "--trials", "2", "--countdown", "0.5", "--time-limit", "30", "--retries", "0",
+                 "--headless", "--out", str(out)])
+    thread.join(timeout=10)
+    err = capsys.readouterr().err
+    assert code == 2 and err.strip().splitlines()[-1].startswith("bomi: error: ") and "stream lost" in err
+    records = _records(out)
+    assert len(records) == 1 and records[0]["failure"] == "stream lost" and records[0]["participant"] == "person"
+    assert records[0]["accuracy_all_decisions"] is None  # nobody knows what a person intended
+    with h5py.File(out / "bomi.h5") as f:
+        go, end = int(f["trials/go_tick"][0]), int(f["trials/end_tick"][0])
+        t, stale = f["ticks/t"][()], f["ticks/stale"][()]
+        linear = f["ticks/linear"][()]
+    assert 0 < go < end and f is not None
+    # the last ticks ran without frames: held, no command (the watchdog)
+    assert stale[-1] and np.all(linear[stale] == 0) and t[-1] - t[go] < 12.0
+    capsys.readouterr()
+    assert main(["replay", str(out), "--trial", "1"]) == 0
+    assert _deviation(capsys.readouterr().out) <= 1e-6
