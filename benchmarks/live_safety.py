@@ -13,7 +13,10 @@ session of that seed, as `bomi record --train` would give), then sits facing the
 - corrupt: the calibration protocol (every class, B1/B2 included) played clean and with
   `bomi emulate --corrupt 0.002`, same seed; mode switches of each run (the corrupted run's must all be
   in the clean one: the same mode within 1.5 s);
-- video: `bomi live --video` on the neutral hold: the loop's rate and missed periods.
+- flood: from 6 s into the F hold the samples come as fast as the pty takes them: the loop's rate,
+  what the status says, and the arm (at rest on every tick of the flood, after its first second);
+- video: `bomi live --video` on the neutral hold: the loop's rate (ticks per second after the first 2 s;
+  the bar: >= 59.5 Hz) and missed periods, beside the same run without --video.
 """
 from __future__ import annotations
 
@@ -43,7 +46,6 @@ from tasks.stick import arm_profile, profile_layout
 
 RESULTS = Path(__file__).resolve().parent / "results"
 WARM_S = 14.0        # neutral hold before the first motion: the filter settles, then the neutral is taken
-TICK_S = 1 / 60
 
 
 def cues_neutral_then(label: int, until_s: float, at_s: float = WARM_S) -> list[Cue]:
@@ -72,10 +74,14 @@ def at_rest(record: dict) -> bool:
     return not any(record["linear"]) and not any(record["angular"]) and record["finger"] == 0
 
 
-def run_in_process(name: str, seed: int, model: Path, blocks, duration_s: float) -> list[dict]:
-    """Play ``blocks`` on a pty and run the live loop on it; every tick's record with its frames' raw values."""
+def run_in_process(name: str, seed: int, model: Path, blocks, duration_s: float,
+                   flood_from_s: float | None = None) -> list[dict]:
+    """Play ``blocks`` on a pty and run the live loop on it; every tick's record with its frames' raw values.
+    ``flood_from_s``: from then on the samples are sent as fast as the pty takes them."""
     sink = PtySink(linger_s=1.0)
     chunks = block_chunks(blocks, EmulatorConfig(seed=seed), EmulatorStats())
+    if flood_from_s is not None:
+        chunks = ((min(t, flood_from_s), data) for t, data in chunks)
     thread = threading.Thread(target=lambda: (sink.wait_for_reader(), play(chunks, sink), sink.finish()), daemon=True)
     thread.start()
     records, _ = live_on(sink.description, name, model, duration_s)
@@ -184,6 +190,21 @@ def lost_bar(name: str, seed: int, model: Path, duration_s: float = 26.0) -> dic
             "all_rest_after": all(at_rest(r) for r in ticks[rest:]), "wall_s": wall, "duration_s": duration_s}
 
 
+def flood_bar(name: str, seed: int, model: Path, flood_s: float = WARM_S + 6.0) -> dict:
+    """From ``flood_s`` on (F held) the participant's samples arrive as fast as the pty takes them."""
+    params, profile = load_participant(name), arm_profile(name)
+    blocks = participant_blocks(params, profile, seed, cues_neutral_then(class_of(profile, "F"), 3000.0), 3000.0)
+    records = run_in_process(name, seed, model, blocks, flood_s + 6.0, flood_from_s=flood_s)
+    before = [r for r in records if flood_s - 3 < r["t"] < flood_s]
+    during = [r for r in records if r["t"] > flood_s + 1.0]
+    rate = (len(during) - 1) / (during[-1]["t"] - during[0]["t"])
+    per_node = sum(r["frames"] for r in during) / (during[-1]["t"] - during[0]["t"]) / len(profile.nodes)
+    return {"moving_before": any(not at_rest(r) for r in before), "rate_hz": rate, "frames_hz": per_node,
+            "rest": float(np.mean([at_rest(r) for r in during])),
+            "holds": sorted({r["hold"] for r in during if r["hold"]})[:2],
+            "status_rate_hz": min(r["loop_hz"] for r in during)}
+
+
 def switches(ticks: list[dict]) -> list[tuple[float, str]]:
     return [(b["t"], b["mode"]) for a, b in zip(ticks, ticks[1:]) if a["mode"] != b["mode"]]
 
@@ -205,26 +226,94 @@ def corrupt_bar(name: str, seed: int, model: Path, work: Path, duration_s: float
             "held_clean": runs["0"]["held"], "held_corrupt": runs["0.002"]["held"]}
 
 
-def video_bar(name: str, seed: int, model: Path, work: Path, duration_s: float = 25.0) -> dict:
-    process, port = emulator(name, seed, "--neutral", "30", "--hold", "2")
-    log, video = work / f"video-{name}-{seed}.jsonl", work / f"video-{name}-{seed}.mp4"
-    log.unlink(missing_ok=True)
-    video.unlink(missing_ok=True)
-    wall = live_cli(port, name, model, log, duration_s, "--video", str(video))
-    process.kill()
-    ticks = read_log(log)
+def loop_rate(ticks: list[dict], after_s: float = 2.0) -> tuple[float, int, float]:
+    """Ticks per second after the first ``after_s``, periods missed, lowest 1-s rate."""
     t = np.array([r["t"] for r in ticks])
-    steady = t > 2.0
-    return {"rate_hz": float((steady.sum() - 1) / (t[steady][-1] - t[steady][0])), "overruns": ticks[-1]["overruns"],
-            "min_loop_hz": min(r["loop_hz"] for r in ticks if r["t"] > 2.0), "wall_s": wall,
+    steady = t > after_s
+    return (float((steady.sum() - 1) / (t[steady][-1] - t[steady][0])), ticks[-1]["overruns"],
+            min(r["loop_hz"] for r in ticks if r["t"] > after_s))
+
+
+def video_bar(name: str, seed: int, model: Path, work: Path, duration_s: float = 25.0) -> dict:
+    """The loop's rate with --video, and without it on the same stream (the machine's own share)."""
+    out = {}
+    for filmed in (False, True):
+        process, port = emulator(name, seed, "--neutral", "30", "--hold", "2")
+        log, video = work / f"video-{filmed}-{name}-{seed}.jsonl", work / f"video-{name}-{seed}.mp4"
+        log.unlink(missing_ok=True)
+        video.unlink(missing_ok=True)
+        live_cli(port, name, model, log, duration_s, *(("--video", str(video)) if filmed else ()))
+        process.kill()
+        out[filmed] = loop_rate(read_log(log))
+    return {"rate_hz": out[True][0], "overruns": out[True][1], "min_loop_hz": out[True][2],
+            "plain_rate_hz": out[False][0], "plain_overruns": out[False][1],
             "film_bytes": video.stat().st_size if video.exists() else 0}
+
+
+Row = tuple[str, str, bool]   # bar, measured, met
+
+
+def neutral_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = neutral_bar(name, seed, model)
+    return [("neutral hold: arm at rest after calibration", f"{100 * r['rest']:.1f} % of {r['ticks']} ticks "
+             f"(settled at {r['warm_s']:.1f} s, neutral at {r['neutral_s']:.1f} s)", r["rest"] >= 0.95)]
+
+
+def bad_rows(name: str, seed: int, model: Path) -> list[Row]:
+    rows = []
+    for bad in ("zero", "+32767", "-32768", "gyro saturated"):
+        r = bad_values_bar(name, seed, model, bad)
+        rows.append((f"node 1 {bad}: arm at rest after the first such frame",
+                     f"{1000 * r['rest_after_s']:.0f} ms (moving before: {r['moving_before']}, held to the end: "
+                     f"{r['held_to_end']}, status: {r['hold']})",
+                     r["rest_after_s"] <= 0.1 and r["moving_before"] and r["held_to_end"]))
+    return rows
+
+
+def flood_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = flood_bar(name, seed, model)
+    return [("flood (samples as fast as the pty takes them): not silent, arm at rest",
+             f"{r['frames_hz']:.0f} frames/s per node; loop {r['rate_hz']:.1f} Hz (status and log say "
+             f"{r['status_rate_hz']:.0f} Hz at the lowest), arm at rest {100 * r['rest']:.0f} % of the "
+             f"flood's ticks (moving before: {r['moving_before']}), status: {'; '.join(r['holds'])}",
+             r["rest"] == 1.0 and r["moving_before"])]
+
+
+def lost_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = lost_bar(name, seed, model)
+    return [("emulator killed: ticks go on, rest, --duration kept",
+             f"rest {1000 * r['rest_after_s']:.0f} ms after the last frame (moving: {r['moving_at_loss']}), "
+             f"{r['ticks_after']} ticks after it (largest gap {1000 * r['max_tick_gap_s']:.0f} ms), "
+             f"wall {r['wall_s']:.1f} s for --duration {r['duration_s']:g}",
+             r["rest_after_s"] <= 0.1 and r["moving_at_loss"] and r["all_rest_after"]
+             and r["max_tick_gap_s"] < 0.1 and abs(r["wall_s"] - r["duration_s"]) <= 1.0)]
+
+
+def corrupt_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = corrupt_bar(name, seed, model, model.parent)
+    return [("--corrupt 0.002: mode switches the clean stream does not have",
+             f"{r['extra']} (clean {r['clean']} switches, corrupted {r['corrupt']}; arm held "
+             f"{100 * r['held_clean']:.0f} % / {100 * r['held_corrupt']:.0f} % of ticks)", r["extra"] == 0)]
+
+
+def video_rows(name: str, seed: int, model: Path) -> list[Row]:
+    r = video_bar(name, seed, model, model.parent)
+    return [("live --video: control rate",
+             f"{r['rate_hz']:.2f} Hz, {r['overruns']} periods missed, lowest 1-s rate {r['min_loop_hz']:.0f} Hz "
+             f"(film {r['film_bytes']} bytes; without --video: {r['plain_rate_hz']:.2f} Hz, "
+             f"{r['plain_overruns']} missed)", r["rate_hz"] >= 59.5)]
+
+
+# bar -> (rows, for every participant or the first only)
+BARS = {"neutral": (neutral_rows, True), "bad": (bad_rows, True), "flood": (flood_rows, False),
+        "lost": (lost_rows, False), "corrupt": (corrupt_rows, False), "video": (video_rows, False)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, nargs="+", required=True)
     parser.add_argument("--participants", nargs="+", default=["P1", "P4"])
-    parser.add_argument("--bars", nargs="+", default=["neutral", "lost", "bad", "corrupt", "video"])
+    parser.add_argument("--bars", nargs="+", choices=sorted(BARS), default=list(BARS))
     parser.add_argument("--out", type=Path, default=RESULTS / "live_safety.md")
     parser.add_argument("--jobs", type=int, default=1, help="runs one at a time (real-time runs: 1)")
     args = parser.parse_args()
@@ -236,40 +325,12 @@ def main() -> None:
                 model = model_for(name, seed, work)
                 heading = session_heading(seed)
                 print(f"{name} seed {seed} (heading {heading:.0f} deg)", file=sys.stderr, flush=True)
-                if "neutral" in args.bars:
-                    r = neutral_bar(name, seed, model)
-                    rows.append((name, seed, "neutral hold: arm at rest after calibration", f"{100 * r['rest']:.1f} % of {r['ticks']} ticks "
-                                 f"(settled at {r['warm_s']:.1f} s, neutral at {r['neutral_s']:.1f} s)", r["rest"] >= 0.95))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "bad" in args.bars:
-                    for bad in ("zero", "+32767", "-32768", "gyro saturated"):
-                        r = bad_values_bar(name, seed, model, bad)
-                        rows.append((name, seed, f"node 1 {bad}: arm at rest after the first such frame",
-                                     f"{1000 * r['rest_after_s']:.0f} ms (moving before: {r['moving_before']}, held to the end: "
-                                     f"{r['held_to_end']}, status: {r['hold']})",
-                                     r["rest_after_s"] <= 0.1 and r["moving_before"] and r["held_to_end"]))
-                        print(rows[-1], file=sys.stderr, flush=True)
-                if "lost" in args.bars and name == args.participants[0]:
-                    r = lost_bar(name, seed, model)
-                    rows.append((name, seed, "emulator killed: ticks go on, rest, --duration kept",
-                                 f"rest {1000 * r['rest_after_s']:.0f} ms after the last frame (moving: {r['moving_at_loss']}), "
-                                 f"{r['ticks_after']} ticks after it (largest gap {1000 * r['max_tick_gap_s']:.0f} ms), "
-                                 f"wall {r['wall_s']:.1f} s for --duration {r['duration_s']:g}",
-                                 r["rest_after_s"] <= 0.1 + TICK_S and r["moving_at_loss"] and r["all_rest_after"]
-                                 and r["max_tick_gap_s"] < 0.1 and abs(r["wall_s"] - r["duration_s"]) <= 1.0))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "corrupt" in args.bars and name == args.participants[0]:
-                    r = corrupt_bar(name, seed, model, work)
-                    rows.append((name, seed, "--corrupt 0.002: mode switches the clean stream does not have",
-                                 f"{r['extra']} (clean {r['clean']} switches, corrupted {r['corrupt']}; arm held "
-                                 f"{100 * r['held_clean']:.0f} % / {100 * r['held_corrupt']:.0f} % of ticks)", r["extra"] == 0))
-                    print(rows[-1], file=sys.stderr, flush=True)
-                if "video" in args.bars and name == args.participants[0]:
-                    r = video_bar(name, seed, model, work)
-                    rows.append((name, seed, "live --video: control rate",
-                                 f"{r['rate_hz']:.2f} Hz, {r['overruns']} periods missed, lowest 1-s rate {r['min_loop_hz']:.0f} Hz "
-                                 f"(film {r['film_bytes']} bytes)", r["rate_hz"] >= 59.5 and r["overruns"] <= 3))
-                    print(rows[-1], file=sys.stderr, flush=True)
+                for bar in args.bars:
+                    function, everyone = BARS[bar]
+                    if everyone or name == args.participants[0]:
+                        for row in function(name, seed, model):
+                            rows.append((name, seed, *row))
+                            print(rows[-1], file=sys.stderr, flush=True)
     lines = [f"# Live loop safety (`python benchmarks/live_safety.py --seeds {' '.join(map(str, args.seeds))} "
              f"--participants {' '.join(args.participants)}`)", "",
              f"Machine: {os.cpu_count()} cores, shared. Every run is real time (62.5 Hz frames on a pty, 60 Hz ticks).", "",

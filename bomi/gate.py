@@ -138,7 +138,7 @@ class NodeGate:
         count = sum(n for _, n in self._arrivals)
         allowed = self.config.flood_factor * self.config.rate_hz + self.config.settle_samples // 2
         if count > allowed:
-            self._implausible(f"{count} frames in 1 s, more than its rate allows")
+            self._implausible(f"more frames than its rate allows ({count} in 1 s)")
 
     def check_raw(self, counter: int, mag, gyro, acc) -> bool:
         """A frame before fusion: False (and the node held) if it must not reach the filter."""
@@ -162,7 +162,7 @@ class NodeGate:
         if previous is not None:
             jump = max(abs(a - b) for a, b in zip(angles, previous))
             if jump > self.config.max_jump_deg * max(self._step, 1):
-                self._implausible(f"angle jump of {jump:.0f} deg in one sample")
+                self._implausible(f"angle jump in one sample ({jump:.0f} deg)")
                 self._last_angles = angles
                 return
         window = self._angles

@@ -149,6 +149,9 @@ class SerialSource:
 
 
 READER_EXIT_S = 2.0   # how long stop() waits for the reading thread
+# A poll parses at most this many of the newest bytes (about a second of a full 6-node network): a
+# backlog or a flood is not replayed and cannot make a poll take longer than a control period.
+POLL_BYTES = 32 * 6 * 64
 
 
 class StreamReader:
@@ -166,6 +169,7 @@ class StreamReader:
         self._chunks: deque[tuple[float, bytes]] = deque()
         self._stop = threading.Event()
         self._seen_events = 0
+        self.dropped_bytes = 0
         source.sleep = self._stop.wait   # type: ignore[assignment]  # a backoff that stop() cuts short
         if not source.poll_s:
             source.poll_s = POLL_S        # the thread, not a paced caller, waits between empty reads
@@ -195,8 +199,16 @@ class StreamReader:
     def poll(self) -> tuple[list[ImuFrame], list[SafetyKeyEvent]]:
         """The IMU frames completed since the last poll, and the safety-key events the parser let through."""
         frames: list[ImuFrame] = []
-        while self._chunks:
-            arrival, chunk = self._chunks.popleft()
+        chunks = [self._chunks.popleft() for _ in range(len(self._chunks))]
+        keep = POLL_BYTES
+        for k in range(len(chunks) - 1, -1, -1):      # newest first: what fits in POLL_BYTES
+            arrival, chunk = chunks[k]
+            if len(chunk) >= keep:
+                self.dropped_bytes += len(chunk) - keep + sum(len(c) for _, c in chunks[:k])
+                chunks = [(arrival, chunk[len(chunk) - keep:])] + chunks[k + 1:]
+                break
+            keep -= len(chunk)
+        for arrival, chunk in chunks:
             frames += self.source.parser.feed(chunk, arrival)
         events = self.source.parser.safety_events[self._seen_events:]
         self._seen_events += len(events)

@@ -18,10 +18,12 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   arm, and control resumes only after the node's signal has been plausible and steady for one
   settle window (1.6 s). Implausible frames never reach the fusion;
 - no frame at all for ``Watchdog.timeout_s`` (100 ms): the command is zero on every tick, and the
-  last decision is forgotten, so the arm moves again only on decisions made from fresh frames;
+  last decision is forgotten, so the arm moves again only on decisions made from fresh frames. Both
+  the watchdog and the gate judge a tick at the next tick's time, so the zero command comes on the
+  last tick before 100 ms without frames have passed;
 - a backlog (more than ``BACKLOG_FRAMES`` of a node in one tick) is never replayed into the arm:
-  every frame is fused, but only the newest window's frames reach the chain and only the newest
-  decision the stick (the others are counted in ``skipped``);
+  only the newest window's frames are fused and reach the chain, only the newest decision the
+  stick (the others are counted in ``skipped``); the counters then jump, so the node settles again;
 - decisions with an unknown class, a NaN or an out-of-range value are dropped before the stick
   (and counted); a button class (B1, B2) reaches the stick only once it has been decided for the
   profile's ``button_hold_s`` without a break (``bomi.gate.ButtonEvidence``);
@@ -82,6 +84,7 @@ VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to
 BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
 FILM_START_S = 60.0  # how long the film's process may take to start (imports, the scene, the encoder)
 FILM_QUEUE = 4       # film frames waiting for the film's process; more are dropped
+FILM_NICENESS = 10   # the film's process runs at a lower priority than the control loop
 
 
 # ---------------------------------------------------------------------------------- safety
@@ -255,6 +258,7 @@ def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
     from sim.env import ArmSim
     from sim.render import VideoWriter
 
+    os.nice(FILM_NICENESS)   # on a busy machine the control loop, not the film, gets the processor
     sim = ArmSim(layout=layout)
     fps = sim.config.render.fps
     with VideoWriter(path, fps) as writer:
@@ -266,10 +270,10 @@ def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
             sim.data.qpos[:] = qpos
             mujoco.mj_kinematics(sim.model, sim.data)
             frame = sim.render(caption)
-            due = int((t - start) * fps) + 1 - written
-            for _ in range(max(due, 1 if written == 0 else 0)):
+            due = max(int((t - start) * fps) + 1 - written, 0)   # slots up to t not yet filled
+            for _ in range(due):
                 writer.append(frame)
-            written += max(due, 1 if written == 0 else 0)
+            written += due
     sim.close()
 
 
@@ -447,7 +451,7 @@ class LiveSummary:
     held_ticks: int = 0
     watchdog_trips: int = 0
     overruns: int = 0
-    holds: Counter = field(default_factory=Counter)   # why the arm was held (gate reasons), in ticks
+    holds: Counter = field(default_factory=Counter)   # why the gate held the arm, in ticks
     neutral: dict[int, tuple[float, float, float]] | None = None
 
     def count(self, tick: Tick) -> None:
@@ -461,7 +465,7 @@ class LiveSummary:
         self.held_ticks += tick.hold is not None
         self.overruns = tick.overruns
         if tick.hold is not None and not tick.stale and not tick.standby:
-            self.holds[tick.hold.split(" (")[0] if tick.hold.startswith("warming") else tick.hold] += 1
+            self.holds[tick.hold.split(" (")[0]] += 1     # the reason, without its numbers
 
 
 @dataclass
@@ -532,7 +536,8 @@ class LiveLoop:
             self.chain.set_neutral(self._neutral)
 
     def _frames_to_chain(self, frames: Sequence[ImuFrame]) -> tuple[list[Decision], int]:
-        """Gate and fuse every frame of the model's nodes; the newest window's reach the chain."""
+        """Gate and fuse the frames of the model's nodes and give them to the chain; of a node's backlog
+        (more than BACKLOG_FRAMES this tick) only the newest window's frames (the rest: skipped)."""
         nodes = [imu_index(frame.node_id) for frame in frames]
         counts = Counter(node for node in nodes if node in self.fusion)
         keep_from = {node: count - self.chain.model.spec.window if count > BACKLOG_FRAMES else 0
@@ -543,21 +548,17 @@ class LiveLoop:
             gate = self.gate.node.get(node)
             if gate is None:
                 continue
-            position = seen[node]
             seen[node] += 1
+            if seen[node] <= keep_from[node]:
+                skipped += 1
+                continue
             if not gate.check_raw(frame.counter, frame.mag, frame.gyro, frame.acc):
                 continue
             angles = self.fusion[node].update(frame.acc, frame.gyro, frame.mag)
             gate.fused(angles)
             if not self.streaming and self.gate.settled:
                 self._start_streaming()
-            if not self.streaming:
-                continue
-            if position < keep_from[node]:
-                skipped += 1
-                continue
-            made = self.chain.push_angles(node, angles, frame.gyro)
-            if made is not None:
+            if self.streaming and (made := self.chain.push_angles(node, angles, frame.gyro)) is not None:
                 decisions.append(made)
         return decisions, skipped
 
@@ -579,8 +580,10 @@ class LiveLoop:
         if self.safety.update(key_events):
             chain.begin_neutral_calibration()
             summary.neutral = None
-        stale = self.watchdog.expired(now)
-        gate = self.gate.verdict(now)
+        # judged at the next tick's time: the arm is at rest before 100 ms without frames have passed
+        # (on the last tick before them), not on the first tick after them
+        stale = self.watchdog.expired(now + self.arm.dt)
+        gate = self.gate.verdict(now + self.arm.dt)
         hold = "no frames" if stale else "standby" if self.safety.standby else gate
         if chain.calibrating and gate is not None:
             self._recalibrate = True      # the neutral posture is taken from trusted samples only

@@ -243,14 +243,14 @@ def test_loop_stops_the_arm_within_one_tick_of_silence_and_resumes_on_fresh_deci
     assert [d["reason"] for d in ticks[10]["dropped"] + ticks[11]["dropped"]] == ["nu is nan", "unknown class 99 (F)"]
     assert ticks[10]["deflection"] == ticks[11]["deflection"] == {"F": 0.5}
     assert summary.dropped == 2
-    # silence: moving while the last frame is < 100 ms old, zero from the first tick after that
+    # silence: moving while the next tick's frame age is < 100 ms, zero from the last tick before that
     last_frame_t = ticks[29]["t"]
     for tick, v in zip(ticks[30:50], speed[30:50]):
         age = tick["t"] - last_frame_t
-        assert tick["stale"] == (age >= 0.1 - 1e-9)
+        assert tick["stale"] == (age + CONTROL_DT >= 0.1 - 1e-9)
         assert (v == 0) == tick["stale"]
     first_stale = next(tick for tick in ticks if tick["stale"])
-    assert 0.1 - 1e-9 <= first_stale["t"] - last_frame_t < 0.1 + CONTROL_DT
+    assert 0.1 - CONTROL_DT - 1e-9 <= first_stale["t"] - last_frame_t <= 0.1 + 1e-9
     assert all(state == JoystickState() for state in arm.states[first_stale["tick"]:53])
     assert all(tick["hold"] == "no frames" for tick in ticks if tick["stale"])
     # fresh frames without a decision do not restart the old motion; the next decision does
@@ -390,15 +390,17 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     speed = {tick["tick"]: np.linalg.norm(tick["linear"]) for tick in ticks}
     assert speed[before["tick"]] > 0                                   # moving (F) when the stream stopped
     silent = [tick for tick in ticks if before["t"] < tick["t"] < after["t"]]
+    dt = 1 / 60
     for tick in silent:
         age = tick["t"] - before["t"]
-        if abs(age - 0.1) > 1e-6:
-            assert tick["stale"] == (age > 0.1)
+        if abs(age + dt - 0.1) > 1e-6:
+            assert tick["stale"] == (age + dt > 0.1)
         if tick["stale"]:
             assert speed[tick["tick"]] == 0 and tick["angular"] == [0, 0, 0] and tick["finger"] == 0
-    # the zero command comes on the first control tick past 100 ms of silence
+    # the zero command comes on the last control tick before 100 ms of silence have passed
     first_stale = next(tick for tick in silent if tick["stale"])
-    assert ticks[first_stale["tick"] - 1]["t"] - before["t"] < 0.1 <= first_stale["t"] - before["t"] + 1e-6
+    assert first_stale["t"] - before["t"] <= 0.1 + 1e-6
+    assert ticks[first_stale["tick"] - 1]["t"] - before["t"] + dt < 0.1 + 1e-6
     assert any(speed[tick["tick"]] > 0 for tick in ticks if tick["t"] > after["t"])   # resumes with the stream
     out = capsys.readouterr()
     assert "live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless" in out.err
