@@ -18,6 +18,7 @@ from sim.env import ArmSim
 from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import add_force, non_negative_int, non_negative_seconds, positive_int, seconds
+from tasks.cli.task import _simulated_time, _stage
 from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.stick import arm_profile, profile_layout
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
@@ -164,8 +165,9 @@ def cmd_trial(args: argparse.Namespace) -> int:
             raise
     if bomi and model is None:
         from tasks.episode import calibrated_model
-        _say(f"{standin.name} calibrates through its stream (the calibration protocol, then bomi train)")
-        model = calibrated_model(standin, profile, args.seed)
+        with _stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
+                    f"record does, then bomi train)", progress=True):
+            model = calibrated_model(standin, profile, args.seed)
     out.mkdir(exist_ok=True)
     sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
     first = 1
@@ -249,8 +251,12 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                               "simulated")
             sessions.append((session, meta))
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
-            run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say),
-                     on_tick=lambda tick: person.heard(tick.decisions), clock=clock, sleep=clock.sleep)
+            with _simulated_time(f"{standin.name} bomi session", progress=True) as progress:
+                def on_tick(tick) -> None:
+                    person.heard(tick.decisions)
+                    progress(clock.now)
+                run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say), on_tick=on_tick,
+                         clock=clock, sleep=clock.sleep)
             if arm.not_ready is not None:
                 raise BomiError(f"{standin.name}: {arm.not_ready}")
         else:
@@ -292,7 +298,9 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             person = JoystickStandIn(arm, operator, args.seed)
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
             sessions.append((session, meta))
-            run_joystick(session, person, display=TrialDisplay(Headless(), arm, _say), clock=clock, sleep=clock.sleep)
+            with _simulated_time(f"{standin.name} joystick session", progress=True) as progress:
+                run_joystick(session, person, display=TrialDisplay(Headless(), arm, _say), clock=clock,
+                             sleep=clock.sleep, on_tick=progress)
         else:
             from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")

@@ -443,8 +443,9 @@ def run_bomi(session: Session, source, chain, *, display, on_tick: Callable[[obj
 
 
 def run_joystick(session: Session, device: StickDevice, *, display, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
-    """The joystick's trials: every tick, the device's stick to the arm, paced as the live loop is."""
+                 sleep: Callable[[float], None] = time.sleep, on_tick: Callable[[float], None] | None = None) -> None:
+    """The joystick's trials: every tick, the device's stick to the arm, paced as the live loop is;
+    ``on_tick`` is told the session's time after every tick (a progress bar)."""
     from tasks.live import paced_ticks
 
     arm, start = session.arm, clock()
@@ -452,5 +453,7 @@ def run_joystick(session: Session, device: StickDevice, *, display, clock: Calla
         state = device.read(now)
         command = arm.step(state)
         session.recorder.record(now - start, state, command)
+        if on_tick is not None:
+            on_tick(now - start)
         speed = f"{100 * np.linalg.norm(command.linear):.1f} cm/s"
         display.sync(lambda: f"{now - start:6.1f} s | {arm.mode.value} | {speed}")
