@@ -26,7 +26,8 @@ from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEF
                                   TrialStatusLine,
                                   episode_log, node1_id, run_bomi, run_joystick, trial_record)
 
-FILES = ("trials.jsonl", "bomi.h5", "joystick.h5", "model.json", "profile.toml", "report.md",
+# what a session writes into its directory (--force replaces these, and only these)
+FILES = ("trials.jsonl", "bomi.h5", "joystick.h5", "model.json", "profile.toml", "report.md", "trial_times.png",
          "timeline_bomi.png", "timeline_joystick.png")
 
 
@@ -109,7 +110,7 @@ def _check_out(out: Path, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise BomiError(f"{out}: --out must be a directory, this is a file")
     if out.exists() and not force:
-        raise BomiError(f"{out}: directory exists, not writing into it (--force replaces the session's files)")
+        raise BomiError(f"{out}: directory exists, not writing into it (--force replaces a session's files in it)")
     if not out.parent.is_dir():
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     if not os.access(out.parent, os.W_OK):
@@ -169,6 +170,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
                     f"record does, then bomi train)", progress=True):
             model = calibrated_model(standin, profile, args.seed)
     out.mkdir(exist_ok=True)
+    for name in FILES:  # --force: no file of an earlier session stays beside this one's
+        (out / name).unlink(missing_ok=True)
     sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
     first = 1
     try:
@@ -220,10 +223,7 @@ def _write(out: Path, records, sessions, profile, model) -> None:
         for record in records:
             f.write(json.dumps(record) + "\n")
     for session, meta in sessions:
-        path = out / f"{session.controller.value}.h5"
-        if path.exists():
-            path.unlink()  # --force: this session's file is replaced
-        write_session(path, session, meta["attrs"])
+        write_session(out / f"{session.controller.value}.h5", session, meta["attrs"])
     if model is not None and any(s.controller is Controller.BOMI for s, _ in sessions):
         save_model(out / "model.json", model, overwrite=True)
         save_profile(out / "profile.toml", profile, overwrite=True)
@@ -288,7 +288,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
     sim = ArmSim(layout=THREE_AXIS)
     arm = TrialArm(sim, plan, ready=True)
     who = standin.name if standin is not None else "person"
-    meta = {"log": {"operator": "joystick", "participant": who, "controls": "3-axis stick, B1, B2"},
+    meta = {"log": {"operator": "joystick", "participant": who, "controls": Controls().label},  # the JACO's stick
             "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}}
     try:
         if standin is not None:
@@ -316,6 +316,9 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
                 raise
             finally:
                 display.close()
+            if not arm.finished:
+                session.cut_short("the viewer was closed")
+                _say(f"the viewer was closed: the session stops here; what was recorded is written to {args.out}")
     finally:
         sim.close()
 
