@@ -143,8 +143,9 @@ def test_bad_input_is_one_line(bomi_dir, tmp_path, capsys):
         (["trial", "--port", str(tmp_path / "no-such-port"), "--profile", "P1", "--model",
           str(bomi_dir / "model.json"), "--controller", "bomi", "--headless", "--out", str(tmp_path / "y")],
          "cannot open the port"),
-        (["trial", "--port", "loop://", "--controller", "joystick", "--gamepad", "3", "--headless",
+        (["trial", "--controller", "joystick", "--gamepad", "3", "--headless",
           "--out", str(tmp_path / "z")], "--gamepad"),
+        (["trial", "--profile", "P1", "--controller", "bomi", "--out", str(tmp_path / "w")], "--port"),
         (["replay", str(bomi_dir), "--trial", "9"], "no trial 9"),
         (["replay", str(tmp_path), "--trial", "1"], "trials.jsonl"),
         (["replay", str(bomi_dir), "--trial", "1", "--model", str(other)], "model trained for profile P4"),
@@ -196,7 +197,7 @@ def test_a_gamepad_drives_the_stick_and_unplugging_it_is_one_line(virtual_pads, 
     assert first.pressed == {"B1"} and held.pressed == frozenset()  # a button counts on its way down
     with pytest.raises(BomiError, match="has 1 axes and 0 buttons"):
         Gamepad(other)
-    assert main(["trial", "--port", "loop://", "--controller", "joystick", "--gamepad", str(other), "--headless",
+    assert main(["trial", "--controller", "joystick", "--gamepad", str(other), "--headless",
                  "--out", str(tmp_path / "t")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("bomi: error: --gamepad") and "a gamepad for the JACO stick needs" in err

@@ -55,11 +55,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "runs on the live loop (`bomi live`'s safety); the joystick is a gamepad, or the viewer's keys. "
                     "--stand-in puts a virtual participant at the controls: no person needed, and time then runs "
                     "as fast as the simulation allows (a simulated clock).")
-    who = trial.add_mutually_exclusive_group(required=True)
+    who = trial.add_mutually_exclusive_group()
     who.add_argument("--stand-in", metavar="PARTICIPANT",
                      help="a virtual participant (P1, P4, P5 or a participant TOML file) at the controls")
     who.add_argument("--port", metavar="PORT_OR_URL",
-                     help="a person: the BoMI's base-station stream (serial port, pty path or pyserial URL)")
+                     help="a person (the default without --stand-in): the BoMI's base-station stream (serial "
+                          "port, pty path or pyserial URL)")
     trial.add_argument("--controller", type=_controllers, default=[Controller.BOMI, Controller.JOYSTICK],
                        help="comma-separated controllers, in session order (default bomi,joystick)")
     trial.add_argument("--profile", help="the BoMI's profile (a shipped name or a TOML file; default: the "
@@ -138,6 +139,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
     bomi = Controller.BOMI in args.controller
     if bomi and profile_name is None:
         raise BomiError("--profile: the BoMI needs a profile")
+    if bomi and standin is None and args.port is None:
+        raise BomiError("--port: a person's BoMI needs their base station's port (or --stand-in for a virtual one)")
     if bomi and args.port is not None and args.model is None:
         raise BomiError("--model: a person's BoMI needs a model trained for the profile (bomi record / bomi train)")
     profile = arm_profile(profile_name) if profile_name is not None else None
