@@ -298,7 +298,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             from tasks.live import Headless
             from tasks.trials.standin import JoystickStandIn
             clock = SimulatedClock()
-            person = JoystickStandIn(arm, operator, args.seed)
+            person = JoystickStandIn(arm, operator)
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
             sessions.append((session, meta))
             with _simulated_time(f"{standin.name} joystick session", progress=True) as progress:

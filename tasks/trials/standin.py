@@ -10,7 +10,9 @@ still while the controller gets ready and through the countdown, then does the t
   it sees the arm answer the decisions the live loop acted on (``heard``).
 - Joystick: the person's intent straight to the stick (``tasks.episode.JoystickChannel``).
 
-``seed`` draws the stand-in's body and noise (and the human model's timing when there is one).
+``seed`` draws the BoMI stand-in's body and noise (one body for the session); the scripted user of
+trial k is that of a simulated episode with the trial's cube-placement seed (its human model's
+draws too, when the operator file names one), so a joystick stand-in's trial is that episode.
 """
 from __future__ import annotations
 
@@ -33,8 +35,8 @@ IDLE = {"intended_dir": (0.0, 0.0, 0.0), "pushing": False, "goal": "", "stage": 
 class StandIn:
     """What both stand-ins share: the person looking at the arm at the start of each tick."""
 
-    def __init__(self, arm: TrialArm, channel: OperatorChannel, operator: OperatorParams, seed: int):
-        self.arm, self.channel, self.operator, self.seed = arm, channel, operator, seed
+    def __init__(self, arm: TrialArm, channel: OperatorChannel, operator: OperatorParams):
+        self.arm, self.channel, self.operator = arm, channel, operator
         self._user, self._trial, self._previous = None, 0, None
         self._truth = dict(IDLE)
 
@@ -45,8 +47,9 @@ class StandIn:
         if arm.phase is not Phase.RUN:
             self._user, self._truth = None, dict(IDLE)
             return None
-        if self._user is None or self._trial != arm.trial:  # a new trial: the person starts afresh
-            self._user = operator_user(self.operator, self.channel, arm.plan.task_seed(arm.trial) + self.seed)
+        if self._user is None or self._trial != arm.trial:  # a new trial: the person starts afresh, with
+            # the human model's draws (if any) of a simulated episode of the trial's seed
+            self._user = operator_user(self.operator, self.channel, arm.plan.task_seed(arm.trial))
             self._trial, self._previous = arm.trial, None
         view = arm.task.view()
         intent = self._user.stick_intent(view)
@@ -68,7 +71,7 @@ class BomiStandIn(StandIn):
     def __init__(self, arm: TrialArm, params: ParticipantParams, profile: Profile, chain: OnlineChain,
                  operator: OperatorParams, seed: int):
         participant = VirtualParticipant(params, profile, seed)
-        super().__init__(arm, BomiChannel(participant, chain, profile, calibrate=False), operator, seed)
+        super().__init__(arm, BomiChannel(participant, chain, profile, calibrate=False), operator)
         self.participant = participant
 
     def bytes_until(self, now: float) -> bytes:
@@ -98,8 +101,8 @@ class BomiStandIn(StandIn):
 class JoystickStandIn(StandIn):
     """The scripted user's intent straight to the stick (a ``session.StickDevice``)."""
 
-    def __init__(self, arm: TrialArm, operator: OperatorParams, seed: int):
-        super().__init__(arm, JoystickChannel(), operator, seed)
+    def __init__(self, arm: TrialArm, operator: OperatorParams):
+        super().__init__(arm, JoystickChannel(), operator)
 
     def read(self, now: float) -> JoystickState:
         seen = self.look()
