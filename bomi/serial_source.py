@@ -214,9 +214,11 @@ class StreamReader:
         self._seen_events += len(events)
         return frames, events
 
-    @property
-    def queued_bytes(self) -> int:
-        return sum(len(chunk) for _, chunk in self._chunks)
+    def discard(self) -> int:
+        """Drop what has arrived and not been polled (e.g. while the caller was getting ready); the bytes dropped."""
+        dropped = sum(len(chunk) for chunk in (self._chunks.popleft()[1] for _ in range(len(self._chunks))))
+        self.dropped_bytes += dropped
+        return dropped
 
     def stop(self) -> None:
         self._stop.set()

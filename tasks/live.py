@@ -84,7 +84,7 @@ VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to
 BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
 FILM_START_S = 60.0  # how long the film's process may take to start (imports, the scene, the encoder)
 FILM_QUEUE = 4       # film frames waiting for the film's process; more are dropped
-FILM_NICENESS = 10   # the film's process runs at a lower priority than the control loop
+FILM_NICENESS = 19   # the film's process runs at the lowest priority: the control loop, not the film, gets the processor
 
 
 # ---------------------------------------------------------------------------------- safety
@@ -258,10 +258,11 @@ def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
     from sim.env import ArmSim
     from sim.render import VideoWriter
 
-    os.nice(FILM_NICENESS)   # on a busy machine the control loop, not the film, gets the processor
+    os.nice(FILM_NICENESS)
     sim = ArmSim(layout=layout)
     fps = sim.config.render.fps
     with VideoWriter(path, fps) as writer:
+        sim.render(("", ""))   # the rendering context and fonts made before the loop starts, not during it
         ready.set()
         start, written = None, 0
         while (item := frames.get()) is not None:

@@ -88,7 +88,9 @@ def run(args: argparse.Namespace) -> int:
     options = args.assist if args.assist is not None else profile_assist(profile)
     # read on a thread of its own: a tick takes what has arrived and never waits, not even for a reconnection
     source = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries)))
-    source.source.open()  # a bad port fails before the simulator is built (what arrives meanwhile: a backlog)
+    # a bad port fails before the simulator is built; reading starts at once, so that the sender never
+    # has to wait (and then catch up in a burst) while the scene, the viewer and the film get ready
+    source.start()
     try:
         sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
     except BaseException:
@@ -106,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         displays.append(_viewer(args.headless, sim))
         if args.video is not None:
             displays.append(VideoDisplay(sim, args.video))
-        source.start()   # after the displays: what arrives while they open is not a backlog
+        source.discard()   # what arrived while getting ready is old: never acted upon
         summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
                            status=status, display=Displays(displays), on_neutral=_print_neutral, assist=assist)
     finally:
