@@ -162,7 +162,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
         stream = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries),
                                            parser=TappedParser()))
         try:
-            stream.source.open()
+            stream.start()  # read from now on, so that the sender never waits (what arrives before the loop: dropped)
         except BaseException:
             if device is not None:
                 device.close()
@@ -268,7 +268,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             meta["attrs"]["allowance"] = 0
             status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, _say)
             try:
-                source.start()  # after the viewer opens: what arrives meanwhile is no backlog
+                source.discard()  # what arrived while getting ready is old: never acted upon, nor logged
                 run_bomi(session, source, chain, display=display, status=status)
             finally:
                 source.stop()
