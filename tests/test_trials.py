@@ -253,34 +253,25 @@ def test_a_controller_never_ready_ends_the_session_without_a_trial():
 
 
 def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_session(bomi_dir, tmp_path, capsys):
-    """A person's session on a pty (a virtual participant's stream, real time) whose base station goes
-    away 12 s in: the trial running then fails ("stream lost"), the session is written, the command ends
-    with one error line, and the cut-short trial replays to its log's end."""
-    import threading
-
-    from bomi.emulator import EmulatorConfig, EmulatorStats, PtySink, block_chunks, play
-    from bomi.profiles import load_profile
-    from bomi.protocol import calibration_schedule
-    from tasks.participants.participant import load_participant
-    from tasks.participants.wire import participant_blocks
-    profile = load_profile("P1")
-    cues = calibration_schedule(profile, hold_s=2.0, neutral_s=20.0)  # neutral throughout the 12 s
-    sink = PtySink(linger_s=0.5)
-    chunks = block_chunks(participant_blocks(load_participant("P1"), profile, 3, cues, 12.0), EmulatorConfig(),
-                          EmulatorStats())
-
-    def emulate():
-        sink.wait_for_reader()
-        play(chunks, sink)
-        sink.finish()
-
-    thread = threading.Thread(target=emulate, daemon=True)
-    thread.start()
-    out = tmp_path / "person"
-    code = main(["trial", "--port", sink.description, "--profile", "P1", "--model", str(bomi_dir / "model.json"),
-                 "--controller", "bomi", "--trials", "2", "--countdown", "0.5", "--time-limit", "30", "--retries", "0",
-                 "--headless", "--out", str(out)])
-    thread.join(timeout=10)
+    """A person's session on a pty (`bomi emulate`'s virtual participant, real time, in its own
+    process) whose base station goes away 12 s in: the trial running then fails ("stream lost"), the
+    session is written, the command ends with one error line, and the cut-short trial replays exactly."""
+    import subprocess
+    import sys
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--neutral", "20",
+         "--duration", "12", "--linger", "0.5", "--seed", "3"],  # neutral throughout the 12 s
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        port = emulator.stdout.readline().strip()
+        assert port.startswith("/dev/")
+        out = tmp_path / "person"
+        code = main(["trial", "--port", port, "--profile", "P1", "--model", str(bomi_dir / "model.json"),
+                     "--controller", "bomi", "--trials", "2", "--countdown", "0.5", "--time-limit", "30",
+                     "--retries", "0", "--headless", "--out", str(out)])
+        emulator.wait(timeout=30)
+    finally:
+        emulator.kill()
     err = capsys.readouterr().err
     assert code == 2 and err.strip().splitlines()[-1].startswith("bomi: error: ") and "stream lost" in err
     records = _records(out)
@@ -290,7 +281,7 @@ def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_sessio
         go, end = int(f["trials/go_tick"][0]), int(f["trials/end_tick"][0])
         t, stale = f["ticks/t"][()], f["ticks/stale"][()]
         linear = f["ticks/linear"][()]
-    assert 0 < go < end and f is not None
+    assert 0 < go < end
     # the last ticks ran without frames: held, no command (the watchdog)
     assert stale[-1] and np.all(linear[stale] == 0) and t[-1] - t[go] < 12.0
     capsys.readouterr()
