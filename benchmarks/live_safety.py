@@ -39,8 +39,8 @@ from bomi.model_io import load_model, save_model
 from bomi.protocol import Cue
 from bomi.serial_source import SerialSource, StreamReader
 from sim.env import ArmSim
-from tasks.live import LiveLoop, TickLog
-from tasks.participants.participant import (Session, calibration_session, load_participant, session_recording)
+from tasks.live import LiveLoop
+from tasks.participants.participant import calibration_session, load_participant, session_recording
 from tasks.participants.wire import participant_blocks, session_heading
 from tasks.stick import arm_profile, profile_layout
 
@@ -315,7 +315,6 @@ def main() -> None:
     parser.add_argument("--participants", nargs="+", default=["P1", "P4"])
     parser.add_argument("--bars", nargs="+", choices=sorted(BARS), default=list(BARS))
     parser.add_argument("--out", type=Path, default=RESULTS / "live_safety.md")
-    parser.add_argument("--jobs", type=int, default=1, help="runs one at a time (real-time runs: 1)")
     args = parser.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

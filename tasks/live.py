@@ -19,8 +19,9 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   settle window (1.6 s). Implausible frames never reach the fusion;
 - no frame at all for ``Watchdog.timeout_s`` (100 ms): the command is zero on every tick, and the
   last decision is forgotten, so the arm moves again only on decisions made from fresh frames. Both
-  the watchdog and the gate judge a tick at the next tick's time, so the zero command comes on the
-  last tick before 100 ms without frames have passed;
+  the watchdog and the gate judge a tick 1.5 periods ahead (the next tick's time, plus half a period
+  of scheduling slack), so the zero command comes on the last tick before 100 ms without frames
+  have passed (75-92 ms after the last frame was read);
 - a backlog (more than ``BACKLOG_FRAMES`` of a node in one tick) is never replayed into the arm:
   only the newest window's frames are fused and reach the chain, only the newest decision the
   stick (the others are counted in ``skipped``); the counters then jump, so the node settles again;
@@ -79,6 +80,7 @@ from sim.joystick import BUTTONS, ArmCommand, JoystickState
 from tasks.stick import DecisionStick
 
 WATCHDOG_TIMEOUT_S = 0.1
+LOOKAHEAD_TICKS = 1.5  # the watchdog and the gate judge a tick at its time + this many periods (see LiveLoop.tick)
 STATUS_PERIOD_S = 0.5
 VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to end
 BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
@@ -581,10 +583,11 @@ class LiveLoop:
         if self.safety.update(key_events):
             chain.begin_neutral_calibration()
             summary.neutral = None
-        # judged at the next tick's time: the arm is at rest before 100 ms without frames have passed
-        # (on the last tick before them), not on the first tick after them
-        stale = self.watchdog.expired(now + self.arm.dt)
-        gate = self.gate.verdict(now + self.arm.dt)
+        # judged ahead (the next tick's time, plus half a period of scheduling slack): the arm is at rest
+        # before 100 ms without frames have passed (on the last tick before them), not on the first after
+        ahead = now + LOOKAHEAD_TICKS * self.arm.dt
+        stale = self.watchdog.expired(ahead)
+        gate = self.gate.verdict(ahead)
         hold = "no frames" if stale else "standby" if self.safety.standby else gate
         if chain.calibrating and gate is not None:
             self._recalibrate = True      # the neutral posture is taken from trusted samples only

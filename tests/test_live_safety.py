@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from bomi.fusion import DT, NodeFusion
+from bomi.fusion import DT
 from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_ratio, raw_defect, settle_change
 from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
 from tasks.live import LiveLoop, TickLog, VideoDisplay
