@@ -268,7 +268,10 @@ class BomiChannel:
 
     combine_axes = False
 
-    def __init__(self, participant: VirtualParticipant, chain: OnlineChain, profile: Profile):
+    def __init__(self, participant: VirtualParticipant, chain: OnlineChain, profile: Profile,
+                 calibrate: bool = True):
+        """``calibrate``: warm up and take the neutral posture here, on ``chain``, before the task's
+        clock starts (False: the frames go elsewhere, e.g. a live loop that calibrates itself)."""
         self.participant, self.chain, self.profile = participant, chain, profile
         self.parser = FrameParser()
         self.controls = profile_controls(profile)
@@ -293,6 +296,8 @@ class BomiChannel:
         self._lookahead = 0.95 * participant.params.reaction_s
         self._asked_until = -np.inf
         self.clock_offset = 0.0
+        if not calibrate:
+            return
         self._feed(participant.advance(WARMUP_S), record=False)
         chain.begin_neutral_calibration()
         t = WARMUP_S
@@ -312,7 +317,7 @@ class BomiChannel:
                     self._rows.append((sample, decision.label, decision.gamma, decision.nu))
         return decisions
 
-    def _arrived(self, now: float, t_end: float) -> bytes:
+    def arrived(self, now: float, t_end: float) -> bytes:
         """Frames arriving by ``t_end``; samples are made in chunks as long as the lookahead allows
         (each chunk costs a call of the synthesis: fewer, longer chunks; the same samples, frames and
         arrival times, as a chunk's samples do not depend on where it was cut)."""
@@ -344,6 +349,19 @@ class BomiChannel:
                 mode: Mode = Mode.TRANSLATION) -> JoystickState:
         """``seen``: the hand's velocity as a fraction of full speed, in the arm's ``mode``: what the
         participant watches to judge whether to lean further or less."""
+        self.perform(intent, t, seen, mode)
+        return self.answered(self._feed(self.arrived(self.clock_offset + t, self.clock_offset + t_end)))
+
+    def answered(self, decisions: list[Decision]) -> JoystickState:
+        """The chain's ``decisions`` reach the stick (what the participant then sees the arm answer)."""
+        if decisions:
+            self._decided = decisions[-1].label
+        return self.stick.update(decisions)
+
+    def perform(self, intent: StickIntent, t: float, seen: np.ndarray | None = None,
+                mode: Mode = Mode.TRANSLATION) -> None:
+        """The posture the participant takes up (or the lean they correct) at task time ``t`` for the
+        person's ``intent``, having seen the hand move at ``seen`` in ``mode``."""
         label, amplitude = self.intent_class(intent)
         held, held_amplitude = self.participant.intent
         wanted = float(next(iter(intent.deflection.values()), 0.0))
@@ -360,10 +378,6 @@ class BomiChannel:
                 self._watched.lean = lean
                 self.feel[label].learn(lean, wanted)
         self._learn_from_overshoot(label)
-        decisions = self._feed(self._arrived(self.clock_offset + t, self.clock_offset + t_end))
-        if decisions:
-            self._decided = decisions[-1].label
-        return self.stick.update(decisions)
 
     def caption(self) -> str:
         """The class the participant performs and the class the chain decided last (for the film)."""
@@ -458,9 +472,15 @@ def calibrated_channel(participant: str | ParticipantParams, seed: int, post: Po
     replaces the participant's own one (an edited copy of it)."""
     params = participant if isinstance(participant, ParticipantParams) else load_participant(participant)
     profile = profile or arm_profile(params.profile)
-    session = calibration_session(params, profile, seed, order=calibration_order(params, profile))
-    model = train([session_recording(session, profile)], profile, post=post)
+    model = calibrated_model(params, profile, seed, post)
     return BomiChannel(VirtualParticipant(params, profile, seed), OnlineChain(model, profile), profile)
+
+
+def calibrated_model(params: ParticipantParams, profile: Profile, seed: int, post: PostProcessing | None = None):
+    """The participant performs the calibration protocol; its base-station stream is recorded as
+    ``bomi record`` records it and the LDA trained with the ``bomi train`` code."""
+    session = calibration_session(params, profile, seed, order=calibration_order(params, profile))
+    return train([session_recording(session, profile)], profile, post=post)
 
 
 def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.ndarray:

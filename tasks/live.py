@@ -229,11 +229,12 @@ class PassiveViewer:
     """MuJoCo's interactive viewer, following the simulation, with the status line in its top-left
     corner (closing its window ends the run)."""
 
-    def __init__(self, model, data):
+    def __init__(self, model, data, key_callback: Callable[[int], None] | None = None):
         import mujoco.viewer  # needs a display; imported only when one is there
         before = set(threading.enumerate())
         # the scene fills the window; Tab and Shift+Tab bring MuJoCo's side panels back
-        self._handle = mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False)
+        self._handle = mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False,
+                                                    key_callback=key_callback)
         # the viewer draws from a thread of its own; close() waits for it, so that the process never
         # exits while it is still drawing into a window being destroyed
         self._threads = [thread for thread in threading.enumerate() if thread not in before]

@@ -51,6 +51,8 @@ COMMANDS: dict[str, Command] = {
     "twin": Command("tasks.cli.twin", "fit a virtual participant (a twin) to a person's calibration recording(s)"),
     "synth": Command("tasks.cli.twin", "a virtual participant performs its source recording's protocol: a new "
                                        "recording"),
+    "trial": Command("tasks.cli.trial", "the paper's session: N trials per controller, scored, logged, reported"),
+    "replay": Command("tasks.cli.trial", "re-run a logged trial of `bomi trial` (or re-score it with another model)"),
 }
 COMMAND_MODULES: tuple[str, ...] = tuple(dict.fromkeys(command.module for command in COMMANDS.values()))
 

@@ -1,0 +1,15 @@
+"""Human-in-the-loop trials: `bomi trial` runs the paper's session, `bomi replay` re-runs a logged trial.
+
+Map (data flows down):
+
+- ``session``: the runner. ``TrialArm`` runs N trials on the simulated arm (wait, countdown, the
+  timed trial, next); ``run_bomi`` drives it from the live loop (``tasks.live.run_live``),
+  ``run_joystick`` from an input device; ``TickRecorder`` keeps every tick; ``episode_log`` and
+  ``trial_record`` score each trial with ``tasks.episode.summarize`` (the benchmark's records).
+- ``standin``: a virtual participant at the controls (BoMI: base-station bytes through the live
+  path; joystick: the scripted user's stick), on a simulated clock.
+- ``devices``: a person's joystick: a gamepad (pygame) or the viewer's keys.
+- ``dataset``: the HDF5 file of a session (format ``bomi-trials``, versioned; docs/trials.md).
+- ``replay``: a logged trial re-run through the loop and the arm; its decisions re-scored with another model.
+- ``report``: report.md (the trial table beside the paper's) and the timeline figures.
+"""

@@ -1,0 +1,190 @@
+"""Replaying a logged trial: its session's logged bytes (BoMI) or stick (joystick), tick by tick at
+the logged tick times, through the same loop, chain and simulated arm, up to the end of the trial;
+then the hand's path is set against the logged one. The simulation is deterministic, so the
+deviation is 0 up to floating point.
+
+With another model, the trial's decisions are re-scored offline: the logged frames through a
+chain of that model (the logged neutral offsets), each decision against the class the stand-in
+performed. Those decisions never reach an arm: with them the arm's path would have differed.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bomi.chain import OnlineChain
+from bomi.classifier import Model
+from bomi.errors import BomiError
+from bomi.frames import FrameParser, ImuFrame
+from bomi.profiles import Profile
+from sim.env import ArmSim
+from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState
+from tasks import metrics
+from tasks.live import Headless
+from tasks.trials.dataset import SessionData
+from tasks.trials.session import (UNKNOWN, Controller, Session, SimulatedClock, TickRecorder, TrialArm, TrialDisplay,
+                                  TrialPlan, run_joystick)
+
+
+class LogEnded(Exception):
+    """The log ends before the replayed trial does (a trial cut short by a lost input)."""
+
+
+@dataclass
+class LoggedStick:
+    """The logged stick of each tick, in order (a ``session.StickDevice``)."""
+
+    stick: np.ndarray
+    pressed: np.ndarray
+    k: int = 0
+
+    def read(self, now: float) -> JoystickState:
+        if self.k >= len(self.stick):
+            raise LogEnded
+        stick, pressed = self.stick[self.k], self.pressed[self.k]
+        self.k += 1
+        return JoystickState({f: float(v) for f, v in zip(FUNCTIONS, stick) if v > 0},
+                             frozenset(b for b, p in zip(BUTTONS, pressed) if p))
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+@dataclass(frozen=True)
+class Replayed:
+    number: int
+    ticks: int
+    logged_ticks: int
+    max_deviation_m: float
+    success: bool
+    logged_success: bool
+
+
+def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
+    """The logged bytes of each tick through the live loop's tick (``tasks.live.LiveLoop``, which is
+    deterministic given its inputs) at the logged tick time, until the arm's last trial is over."""
+    from tasks.live import LiveLoop
+
+    loop = LiveLoop(chain, arm, on_neutral=arm.ready)
+    parser, seen = FrameParser(), 0
+    for t, chunk in zip(data.ticks["t"].tolist(), data.tick_bytes()):
+        if arm.finished:
+            return
+        frames = parser.feed(chunk, t)
+        events = parser.safety_events[seen:]
+        seen += len(events)
+        loop.tick(t, frames, events)
+
+
+def session_plan(data: SessionData) -> TrialPlan:
+    return TrialPlan(**json.loads(data.attrs["plan"]))
+
+
+def replay_trial(data: SessionData, number: int, profile: Profile | None, model: Model | None) -> Replayed:
+    """Re-run the session of ``data`` up to the end of trial ``number``; its hand path against the log's."""
+    row = data.trial_row(number)
+    if row is None:
+        raise BomiError(f"{data.path}: no trial {number} in this session")
+    go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
+    sim = ArmSim(layout=LAYOUTS[data.attrs["layout"]])
+    try:
+        controller = Controller(data.attrs["controller"])
+        arm = TrialArm(sim, session_plan(data), ready=controller is Controller.JOYSTICK, last_trial=number)
+        if controller is Controller.BOMI:
+            _replay_bomi(data, arm, OnlineChain(model, profile))
+        else:
+            session = Session(controller, arm, TickRecorder(arm), "replay")
+            clock = SimulatedClock()  # the joystick's ticks depend on nothing but their order
+            try:
+                run_joystick(session, LoggedStick(data.ticks["stick"], data.ticks["pressed"]),
+                             display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep)
+            except LogEnded:
+                pass  # a trial cut short: replayed up to where its log ends
+    finally:
+        sim.close()
+    result = next(r for r in arm.results if r.number == number)
+    stop = result.end_tick if result.end_tick >= 0 else len(arm.rows)  # cut short: the log's end
+    replayed = np.array([r["hand_pos"] for r in arm.rows[result.go_tick:stop]])
+    logged = data.ticks["hand_pos"][go:end]
+    common = min(len(replayed), len(logged))
+    deviation = float(np.max(np.linalg.norm(replayed[:common] - logged[:common], axis=1))) if common else float("nan")
+    return Replayed(number, stop - result.go_tick, end - go, deviation, result.success,
+                    bool(data.trials["success"][row]))
+
+
+@dataclass(frozen=True)
+class Rescored:
+    """A trial's decisions re-made offline with another model. Accuracies are None when nobody knows
+    what was intended (a person); ``agreement``: the share of the logged decisions the other model
+    decided alike, decision by decision (matched by the frame that made them)."""
+
+    decisions: int
+    logged_decisions: int
+    agreement: float
+    accuracy: float | None = None
+    accuracy_excused: float | None = None
+    logged_accuracy: float | None = None
+    logged_accuracy_excused: float | None = None
+
+
+def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model) -> Rescored:
+    """Trial ``number``'s logged frames through a chain of ``model`` (offline, no arm, the logged
+    neutral offsets), its decisions scored against the stand-in's intended classes (when known)
+    beside the logged decisions' score."""
+    row = data.trial_row(number)
+    if row is None:
+        raise BomiError(f"{data.path}: no trial {number} in this session")
+    if data.attrs["controller"] != Controller.BOMI.value:
+        raise BomiError(f"{data.path}: trial {number} was a joystick trial: there are no decisions to re-score")
+    neutral = json.loads(data.attrs["neutral"] or "null")
+    if neutral is None:
+        raise BomiError(f"{data.path}: the session never took its neutral posture: nothing to re-score")
+    go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
+    chain = OnlineChain(model, profile)
+    chain.set_neutral({int(node): offset for node, offset in neutral.items()})
+    f = data.frames
+    made: dict[int, int] = {}  # frame row -> the other model's decision
+    for k in range(int(np.searchsorted(f["tick"], end))):
+        frame = ImuFrame(int(f["node_id"][k]), int(f["period_ms"][k]), int(f["counter"][k]),
+                         tuple(int(v) for v in f["mag"][k]), tuple(int(v) for v in f["gyro"][k]),
+                         tuple(int(v) for v in f["acc"][k]))
+        decision = chain.push_frame(frame)
+        if decision is not None and f["tick"][k] >= go:
+            made[k] = decision.label
+    d = data.decisions
+    span = (d["tick"] >= go) & (d["tick"] < end)
+    logged_rows, logged_labels = d["frame_row"][span], d["label"][span]
+    alike = [made[r] == label for r, label in zip(logged_rows.tolist(), logged_labels.tolist()) if r in made]
+    agreement = float(np.mean(alike)) if alike else float("nan")
+    rows = np.array(sorted(made), dtype=int)
+    intended = f["intended"][rows] if rows.size else np.zeros(0, int)
+    if rows.size == 0 or np.any(intended == UNKNOWN):
+        return Rescored(len(made), int(span.sum()), agreement)
+    decided = np.array([made[r] for r in rows.tolist()])
+    allowance = int(data.attrs["allowance"])
+    return Rescored(len(made), int(span.sum()), agreement,
+                    metrics.accuracy_all_decisions(intended, decided),
+                    metrics.accuracy_excused_transitions(intended, decided, allowance),
+                    metrics.accuracy_all_decisions(d["intended"][span], logged_labels),
+                    metrics.accuracy_excused_transitions(d["intended"][span], logged_labels, allowance))
+
+
+def trial_controller(out: Path, number: int) -> str:
+    """Which controller's session holds trial ``number`` of the session directory ``out``."""
+    path = out / "trials.jsonl"
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot read it ({exc.strerror}); is {out} a `bomi trial` directory?") from None
+    for k, line in enumerate(lines, start=1):
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            raise BomiError(f"{path}: line {k} is not JSON") from None
+        if record.get("trial") == number:
+            return record["operator"]
+    raise BomiError(f"{path}: no trial {number} (there are {len(lines)})")
+
