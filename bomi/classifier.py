@@ -20,6 +20,9 @@ from threadpoolctl import threadpool_limits
 from bomi.features import FeatureSpec
 
 NEUTRAL_LABEL = 0
+# A vote over more decisions than 10 s of them (at the nodes' 62.5 Hz) would answer a motion
+# after it is over: no setting of a usable interface.
+MAX_VOTE_LENGTH = 625
 
 
 @dataclass(frozen=True)
@@ -32,8 +35,8 @@ class PostProcessing:
     def __post_init__(self) -> None:
         if self.rejection_threshold is not None and not 0.0 < self.rejection_threshold < 1.0:
             raise ValueError(f"rejection threshold must be in (0, 1), got {self.rejection_threshold}")
-        if self.vote_length < 1:
-            raise ValueError(f"vote length must be >= 1, got {self.vote_length}")
+        if not 1 <= self.vote_length <= MAX_VOTE_LENGTH:
+            raise ValueError(f"vote length must be in [1, {MAX_VOTE_LENGTH}] decisions (10 s), got {self.vote_length}")
 
 
 AMPLITUDE_KINDS = ("gamma", "along_class")

@@ -51,6 +51,11 @@ non_negative_int = _ranged("non_negative_int", int, _NON_NEGATIVE)
 positive_float = _ranged("positive_float", float, _POSITIVE)
 non_negative_float = _ranged("non_negative_float", float, _NON_NEGATIVE)
 seconds = _ranged("seconds", float, _POSITIVE, _AT_MOST_A_DAY)  # a duration in seconds
+# The shortest episode worth simulating: a second (the scripted user's reaction alone takes 0.3 s);
+# shorter ones (1e-300 s) are typing mistakes, not experiments.
+MIN_TIME_LIMIT_S = 1.0
+time_limit = _ranged("time_limit", float, (lambda v: v >= MIN_TIME_LIMIT_S, f"at least {MIN_TIME_LIMIT_S:g} s"),
+                     _AT_MOST_A_DAY)  # of simulated time per episode
 non_negative_seconds = _ranged("non_negative_seconds", float, _NON_NEGATIVE, _AT_MOST_A_DAY)
 # a posterior threshold
 open_unit_interval = _ranged("open_unit_interval", float, (lambda v: 0 < v < 1, "must be between 0 and 1 (exclusive)"))
