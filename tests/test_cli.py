@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
 import subprocess
 import sys
 
@@ -93,3 +94,57 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
     err = process.stderr.read().decode()
     assert process.wait(timeout=60) == 141
     assert err == ""
+
+
+HEAVY = ("numpy", "sklearn", "scipy", "mujoco", "pinocchio", "matplotlib", "dm_control")
+
+
+def _help_run(command: str, preload: bool) -> tuple[str, list[str]]:
+    """`bomi COMMAND --help` in a fresh interpreter: its text, and the heavy libraries then loaded.
+    ``preload``: every command module imported for real first (the help the placeholders must match)."""
+    code = ("import contextlib, importlib, io, json, sys\n"
+            "from tasks.cli import COMMAND_MODULES, main\n"
+            f"if {preload}:\n    [importlib.import_module(m) for m in COMMAND_MODULES]\n"
+            "out = io.StringIO()\n"
+            "with contextlib.redirect_stdout(out):\n"
+            f"    code = main([{command!r}, '--help'])\n"
+            "heavy = sorted({m.split('.')[0] for m in sys.modules} & set(%r))\n" % (HEAVY,)
+            + "print(json.dumps([code, out.getvalue(), heavy]))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env=os.environ | {"COLUMNS": "100"})
+    code, text, heavy = json.loads(done.stdout.strip().splitlines()[-1])
+    assert code == 0
+    return text, heavy
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_a_commands_help_loads_no_heavy_library_and_says_what_the_real_one_says(command):
+    fast, heavy = _help_run(command, preload=False)
+    assert heavy == [], f"bomi {command} --help loaded {heavy}"
+    real, _ = _help_run(command, preload=True)
+    assert fast == real
+    assert "_Placeholder" not in fast and "placeholder" not in fast.lower()
+
+
+def test_every_command_has_a_description(capsys):
+    for command in COMMANDS:
+        assert main([command, "--help"]) == 0
+        text = capsys.readouterr().out
+        description = text.split("\n\n")[1]
+        assert not description.lstrip().startswith(("positional arguments", "options")), command
+        assert len(description.split()) >= 6, (command, description)
+
+
+def test_a_help_in_this_process_leaves_the_real_libraries_importable(capsys):
+    assert main(["train", "--help"]) == 0
+    import sklearn.discriminant_analysis
+    assert hasattr(sklearn.discriminant_analysis.LinearDiscriminantAnalysis, "fit")
+    assert not any(type(m).__name__ == "_Placeholder" for m in list(sys.modules.values()))
+
+
+def test_sweep_help_shows_the_grid_format_and_how_resuming_works(capsys):
+    assert main(["sweep", "--help"]) == 0
+    text = capsys.readouterr().out
+    for needed in ("participants = [", "seeds = {first = 0, count = 20}", "[vary]", "vote_length = [1, 5, 9]",
+                   "Resuming and extending", "only the episodes", "Ctrl-C"):
+        assert needed in text, needed

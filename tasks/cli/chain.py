@@ -26,6 +26,9 @@ from tasks.cli.options import add_force, check_outputs, open_unit_interval, posi
 from tasks.stick import arm_profile
 
 
+DEFAULT_CONFUSION = "confusion.png"  # evaluate's own output when --png names none
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "train")
     p.add_argument("recordings", nargs="+", metavar="RECORDING", help=".mat or .csv recordings")
@@ -51,8 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vote", type=positive_int, metavar="N",
                    help="majority vote over the last N decisions (default: the model's)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
-    p.add_argument("--png", metavar="OUT", default="confusion.png",
-                   help="confusion matrix figure (default %(default)s)")
+    p.add_argument("--png", metavar="OUT", help=f"confusion matrix figure (default {DEFAULT_CONFUSION}, replaced on "
+                                                "each run; a file you name is replaced only with --force)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     add_force(p)
     p.set_defaults(func=evaluate_command)
@@ -179,8 +182,10 @@ def _training_source(path: str) -> str:
 
 def evaluate_command(args: argparse.Namespace) -> int:
     inputs = [args.train, *args.test]
-    outputs = check_outputs({"--png": (args.png, (".png",)), "--json": (args.json, (".json",))},
-                            inputs=inputs, force=args.force)
+    png_named = args.png is not None
+    outputs = check_outputs({"--png": (args.png if png_named else DEFAULT_CONFUSION, (".png",)),
+                             "--json": (args.json, (".json",))},
+                            inputs=inputs, force=args.force, defaults=() if png_named else ("--png",))
     kind = _training_source(args.train)
     check_input(args.train, kind)
     profile = arm_profile(args.profile) if args.profile else None
@@ -216,7 +221,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
         print(confusion_text(ev, model.classes.tolist()))
         results.append({"test": str(path), "accuracy": ev.accuracy, "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
-    with atomic_output(outputs["--png"], overwrite=args.force) as temp:
+    with atomic_output(outputs["--png"], overwrite=args.force or not png_named) as temp:
         save_confusion_figure(temp, evaluations, model.classes.tolist())
     print(f"confusion matrices: {outputs['--png']}")
     if outputs["--json"]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from pathlib import Path
 
 from bomi.errors import BomiError
@@ -54,7 +54,7 @@ seconds = _ranged("seconds", float, _POSITIVE, _AT_MOST_A_DAY)  # a duration in 
 # The shortest episode worth simulating: a second (the scripted user's reaction alone takes 0.3 s);
 # shorter ones (1e-300 s) are typing mistakes, not experiments.
 MIN_TIME_LIMIT_S = 1.0
-time_limit = _ranged("time_limit", float, (lambda v: v >= MIN_TIME_LIMIT_S, f"at least {MIN_TIME_LIMIT_S:g} s"),
+episode_seconds = _ranged("episode_seconds", float, (lambda v: v >= MIN_TIME_LIMIT_S, f"at least {MIN_TIME_LIMIT_S:g} s"),
                      _AT_MOST_A_DAY)  # of simulated time per episode
 non_negative_seconds = _ranged("non_negative_seconds", float, _NON_NEGATIVE, _AT_MOST_A_DAY)
 # a posterior threshold
@@ -75,11 +75,13 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def check_outputs(outputs: dict[str, tuple[Path | str | None, tuple[str, ...]]], *, inputs: Iterable[Path | str] = (),
-                  force: bool = False) -> dict[str, Path | None]:
+                  force: bool = False, defaults: Collection[str] = ()) -> dict[str, Path | None]:
     """Check every output before any work: option -> (path or None, allowed suffixes).
 
     Refuses an existing file unless ``force``, an input file (even with ``force``), a directory, a
-    missing or read-only directory, a wrong suffix, and two options naming the same file.
+    missing or read-only directory, a wrong suffix, and two options naming the same file. The
+    options in ``defaults`` name the command's own default output (the user named none): an
+    existing regular file there is the previous run's and is replaced, as if with ``force``.
     """
     checked: dict[str, Path | None] = {}
     for option, (path, suffixes) in outputs.items():
@@ -90,7 +92,7 @@ def check_outputs(outputs: dict[str, tuple[Path | str | None, tuple[str, ...]]],
         for source in inputs:
             if _same_file(path, Path(source)) or path.resolve() == Path(source).resolve():
                 raise BomiError(f"{path}: {option} names an input file; not overwriting it")
-        checked[option] = check_output(path, overwrite=force, suffixes=suffixes, what=option)
+        checked[option] = check_output(path, overwrite=force or option in defaults, suffixes=suffixes, what=option)
     paths = [p.resolve() for p in checked.values() if p is not None]
     if len(set(paths)) != len(paths):
         raise BomiError(f"{', '.join(o for o, p in checked.items() if p is not None)}: two outputs name the same file")

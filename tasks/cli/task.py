@@ -21,7 +21,7 @@ from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option,
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from bomi.files import atomic_output, write_text
-from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_int, seconds
+from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_int, episode_seconds
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participants.participant import load_participant
@@ -368,22 +368,27 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
 DEMO_FILES = ("timeline.png", "bomi_episode.mp4", "demo.json")
 
 
+DEMO_OUT = Path("demo_out")  # demo's own directory when --out names none: its files are replaced on each run
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
-    out = Path(args.out)
+    out = Path(args.out or DEMO_OUT)
+    replace = args.force or args.out is None
     if out.exists() and not out.is_dir():
         raise BomiError(f"{out}: --out must be a directory, this is a file")
     if not out.parent.is_dir():
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     out.mkdir(exist_ok=True)
-    figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force).values()
+    figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force,
+                                          defaults=DEMO_FILES if args.out is None else ()).values()
     joystick = run_job(EpisodeJob("joystick", "P1", args.seed, args.time_limit, assist=args.assist), progress=True)
-    with atomic_output(video, overwrite=args.force) as temp:
+    with atomic_output(video, overwrite=replace) as temp:
         bomi = run_job(EpisodeJob("bomi", "P1", args.seed, args.time_limit, assist=args.assist), video=temp,
                        video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
-    with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=args.force) as temp:
+    with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=replace) as temp:
         timeline_figure([joystick, bomi], temp)
-    write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=args.force)
+    write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=replace)
     print(markdown_tables(aggregate(summaries)))
     print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
           f"virtual participant's body and noise. The README's figures are means over 20 seeds "
@@ -426,17 +431,18 @@ def register(subparsers) -> None:
 
     demo = add_command(subparsers, "demo")
     demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
-    demo.add_argument("--time-limit", type=float, default=600.0,
+    demo.add_argument("--time-limit", type=episode_seconds, default=600.0,
                       help="seconds of simulated time per episode (default %(default)s)")
-    demo.add_argument("--out", type=Path, default=Path("demo_out"),
-                      help="directory for timeline.png, bomi_episode.mp4 and demo.json (default %(default)s)")
+    demo.add_argument("--out", type=Path,
+                      help=f"directory for timeline.png, bomi_episode.mp4 and demo.json (default {DEMO_OUT}/, whose "
+                           f"files are replaced on each run; in a directory you name, only with --force)")
     demo.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     add_force(demo)
     demo.set_defaults(func=cmd_demo)
 
 
 def _episode_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--time-limit", type=seconds, default=600.0,
+    parser.add_argument("--time-limit", type=episode_seconds, default=600.0,
                         help="seconds of simulated time before an episode fails (default %(default)s)")
     parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
                         help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
