@@ -148,3 +148,43 @@ def test_sweep_help_shows_the_grid_format_and_how_resuming_works(capsys):
     for needed in ("participants = [", "seeds = {first = 0, count = 20}", "[vary]", "vote_length = [1, 5, 9]",
                    "Resuming and extending", "only the episodes", "Ctrl-C"):
         assert needed in text, needed
+
+
+# ------------------------------------------------------------------------------- reruns
+def test_evaluate_twice_in_one_directory_replaces_its_own_confusion_png_but_not_a_named_one(
+        tmp_path, monkeypatch, capsys, shared_data):
+    """The default output is the command's own (replaced, atomically); a file the user names keeps
+    the --force rule."""
+    from bomi.recording import NodeData, Recording, read_recording, write_recording
+    day1, rows = read_recording(shared_data / "day1_testp.mat"), 4000
+    write_recording(tmp_path / "r.csv", Recording(
+        {i: NodeData(*(getattr(n, s)[:rows] for s in ("acc", "gyro", "mag", "angles"))) for i, n in day1.nodes.items()},
+        day1.labels[:rows], source="r.csv"))
+    monkeypatch.chdir(tmp_path)
+    argv = ["evaluate", "--train", "r.csv", "--test", "r.csv"]
+    assert main(argv) == 0
+    first = (tmp_path / "confusion.png").stat()
+    (tmp_path / "confusion.png").write_bytes(b"\x89PNG stale")
+    assert main(argv) == 0
+    assert (tmp_path / "confusion.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "confusion.png").stat().st_size > 1000 and first.st_size > 1000
+    capsys.readouterr()
+    assert main(argv + ["--png", "confusion.png"]) == 2  # named: not replaced without --force
+    assert "file exists" in capsys.readouterr().err
+    assert main(argv + ["--png", "confusion.png", "--force"]) == 0
+    (tmp_path / "link.png").symlink_to(tmp_path / "r.csv")
+    assert main(argv + ["--png", "link.png", "--force"]) == 2  # never written through a link
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["confusion.png", "link.png", "r.csv"]
+
+
+def test_demo_twice_in_one_directory_replaces_demo_out(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo", "--time-limit", "1"]) == 0
+    (tmp_path / "demo_out" / "demo.json").write_text("stale")
+    assert main(["demo", "--time-limit", "1"]) == 0
+    assert json.loads((tmp_path / "demo_out" / "demo.json").read_text())["episodes"]
+    assert sorted(p.name for p in (tmp_path / "demo_out").iterdir()) == ["bomi_episode.mp4", "demo.json",
+                                                                         "timeline.png"]
+    capsys.readouterr()
+    assert main(["demo", "--time-limit", "1", "--out", "demo_out"]) == 2  # a directory the user names: --force
+    assert "file exists" in capsys.readouterr().err

@@ -7,9 +7,10 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
-from bomi.chain import Evaluation, evaluate, require_for, select_settings, train
+from bomi.chain import Evaluation, evaluate, require_for, select_settings, spec_signals, train
 from bomi.classifier import Model, PostProcessing
 from bomi.dataset import data_dir
 from bomi.derived import derive_profile, describe
@@ -40,6 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--save-profile", metavar="PATH", help="also write the profile the model was trained for as TOML "
                                                           "(e.g. the derived one), for --profile PATH of live/evaluate")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
+    p.add_argument("--allow-missing-classes", action="store_true",
+                   help="train even if the recordings have no samples of some classes of --profile (the model "
+                        "then never outputs them); without it that is an error")
     add_force(p)
     p.set_defaults(func=train_command)
 
@@ -127,11 +131,20 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
 
 
 # -------------------------------------------------------------------------------------- commands
-def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> Model:
-    """Train ``profile``'s model, first checking every recording and choosing (and printing) what the
-    profile leaves to the person's own data."""
+def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+              allow_missing_classes: bool = False) -> Model:
+    """Train ``profile``'s model, first checking every recording (the nodes and signals it reads, that
+    they vary, that every class of the profile has samples unless ``allow_missing_classes``) and
+    choosing (and printing) what the profile leaves to the person's own data."""
     for rec in recordings:
         require_for(rec, spec)
+        require_varying(rec, spec)
+    present = set().union(*(set(rec.require_labels().tolist()) for rec in recordings))
+    missing = [cls for cls in profile.classes if cls.label not in present]
+    if missing and not allow_missing_classes:
+        names = ", ".join(f"c{cls.label} {cls.name}" for cls in missing)
+        raise BomiError(f"{', '.join(str(rec.source) for rec in recordings)}: no samples of class(es) {names} of "
+                        f"profile {profile.name}; record them, or train without them with --allow-missing-classes")
     selection = None
     if profile.shrinkage == SELECT or profile.select_rejection:
         print("choosing the classifier settings on the training recording (cross-validation) ...", flush=True)
@@ -156,7 +169,7 @@ def train_command(args: argparse.Namespace) -> int:
     profile = arm_profile(args.profile) if args.profile else None
     recordings = [read(path, args.verbose) for path in args.recordings]
     profile = profile or _derived(recordings)
-    model = fit_model(recordings, profile, _spec(profile, args.features))
+    model = fit_model(recordings, profile, _spec(profile, args.features), args.allow_missing_classes)
     save_model(out, model, overwrite=args.force)
     rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
     print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), shrinkage {model.shrinkage}, "
@@ -167,6 +180,17 @@ def train_command(args: argparse.Namespace) -> int:
               f"{outputs['--save-profile']} --model {out} ...)")
     print(class_listing(profile, model.classes.tolist()))
     return 0
+
+
+def require_varying(rec: Recording, spec: FeatureSpec) -> None:
+    """One-line BomiError if a node the model reads never changes in ``rec`` (a sensor that sent a
+    constant, or was not connected): nothing can be learnt from it."""
+    for node in spec.nodes:
+        for signal in spec_signals(spec):
+            values = np.asarray(getattr(rec.nodes[node], signal.value), dtype=float)
+            if len(values) and np.all(np.ptp(values, axis=0) == 0):
+                raise BomiError(f"{rec.source}: node {node}'s {signal.value} are constant over the whole recording "
+                                f"(a sensor not sending?); nothing to train on")
 
 
 def _training_source(path: str) -> str:
@@ -205,7 +229,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
         require_for(rec, spec)
         rec.require_labels()
     if model is None:
-        model = fit_model([training], profile, spec)
+        model = fit_model([training], profile, spec, allow_missing_classes=True)  # the matrices show what is missing
     neutral_samples = profile.neutral_samples if profile else DEFAULT_NEUTRAL_SAMPLES
     post = PostProcessing(rejection_threshold=args.reject if args.reject is not None else model.post.rejection_threshold,
                           vote_length=args.vote if args.vote is not None else model.post.vote_length)
