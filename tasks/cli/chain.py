@@ -113,21 +113,28 @@ def confusion_text(evaluation: Evaluation, classes: Sequence[int]) -> str:
     return "\n".join(lines)
 
 
-def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes: Sequence[int]) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from sklearn.metrics import ConfusionMatrixDisplay
+def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes: Sequence[int],
+                          names: Sequence[str]) -> None:
+    from sklearn.metrics import confusion_matrix
 
-    fig, axes = plt.subplots(1, len(evaluations), figsize=(5 * len(evaluations), 4.6), squeeze=False)
-    for ax, ev in zip(axes[0], evaluations):
-        ConfusionMatrixDisplay.from_predictions(ev.truth, ev.predicted, labels=list(classes),
-                                                display_labels=[f"c{c}" for c in classes],
-                                                ax=ax, colorbar=False, values_format="d")
-        ax.set_title(f"{Path(ev.source).name}: {100 * ev.accuracy:.2f} %", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from tasks.cli.figures import confusion_figure
+    confusion_figure(path, [(f"{Path(ev.source).name}: accuracy {100 * ev.accuracy:.2f} % of {len(ev.truth):,} windows",
+                             confusion_matrix(ev.truth, ev.predicted, labels=list(classes))) for ev in evaluations],
+                     names)
+
+
+def class_names(classes: Sequence[int], profile: Profile | None) -> list[str]:
+    """``c<label>`` and, when the profile is known, the class's name (its joystick function for a long one)."""
+    known = {cls.label: cls for cls in profile.classes} if profile else {}
+    names = []
+    for label in classes:
+        cls = known.get(label)
+        if cls is None:
+            names.append(f"c{label}")
+        else:
+            name = cls.name if len(cls.name) <= 18 else cls.name[:17] + "…"
+            names.append(f"c{label} {cls.function}: {name}" if cls.function != "neutral" else f"c{label} {name}")
+    return names
 
 
 # -------------------------------------------------------------------------------------- commands
@@ -246,7 +253,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
         results.append({"test": str(path), "accuracy": ev.accuracy, "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
     with atomic_output(outputs["--png"], overwrite=args.force or not png_named) as temp:
-        save_confusion_figure(temp, evaluations, model.classes.tolist())
+        save_confusion_figure(temp, evaluations, model.classes.tolist(), class_names(model.classes.tolist(), profile))
     print(f"confusion matrices: {outputs['--png']}")
     if outputs["--json"]:
         record = {"train": str(args.train), "features": model.spec.kind, "shrinkage": model.shrinkage,

@@ -1,5 +1,6 @@
-"""Figures over many episodes: completion time per group of episodes (``bomi benchmark``'s script,
-``bomi sweep``) and one per-cell metric against one swept setting (``bomi sweep``)."""
+"""Figures a person reads without the README: completion time per group of episodes (``bomi
+benchmark``'s script, ``bomi sweep``), one per-cell metric against one swept setting (``bomi
+sweep``) and confusion matrices (``bomi evaluate``)."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -89,6 +90,37 @@ def accuracy_allowance_figure(rows: Sequence[dict], path: Path, references: Mapp
     ax.set_title("Accuracy against the excused allowance (dotted: the tables')", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def confusion_figure(path: Path, matrices: Sequence[tuple[str, np.ndarray]], names: Sequence[str]) -> None:
+    """One confusion matrix per (title, counts) pair, rows the true class and columns the output,
+    both labelled with ``names``. Colour and the large number are the share of the row (so a rare
+    class's errors show as plainly as the neutral class's), the small number the count."""
+    k = len(names)
+    side = max(4.5, 0.62 * k + 2.2)
+    fig, axes = plt.subplots(1, len(matrices), figsize=(side * len(matrices), side), squeeze=False)
+    for ax, (title, counts) in zip(axes[0], matrices):
+        totals = counts.sum(axis=1, keepdims=True)
+        shares = np.divide(counts, totals, out=np.zeros(counts.shape), where=totals > 0)
+        ax.imshow(100 * shares, cmap="Blues", vmin=0, vmax=100)
+        for i in range(k):
+            for j in range(k):
+                if counts[i, j]:
+                    dark = shares[i, j] > 0.6
+                    ax.text(j, i - 0.12, f"{100 * shares[i, j]:.0f}%" if shares[i, j] >= 0.005 else "<1%",
+                            ha="center", va="center", fontsize=8, color="white" if dark else "black")
+                    ax.text(j, i + 0.25, f"{counts[i, j]:,}", ha="center", va="center", fontsize=5.5,
+                            color="white" if dark else "0.3")
+        ax.set_xticks(range(k), names, rotation=40, ha="right", fontsize=7)
+        ax.set_yticks(range(k), [f"{name} ({int(n):,})" for name, n in zip(names, totals[:, 0])], fontsize=7)
+        ax.set_xlabel("output of the classifier")
+        ax.set_ylabel("true class (windows)")
+        ax.set_title(title, fontsize=9)
+    fig.suptitle("Confusion matrices: share of each true class's windows per output (row sums 100 %); "
+                 "small numbers: windows", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

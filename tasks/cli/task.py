@@ -393,7 +393,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
           f"virtual participant's body and noise. The README's figures are means over 20 seeds "
           f"(`bomi benchmark`).")
-    _print_written({figure: "timeline: the hand relative to B, the BoMI's decisions, amplitude and nu",
+    _print_written({figure: "timeline: the hand relative to the target, the BoMI's decisions, amplitude and nu",
                     video: f"the BoMI episode filmed at {DEMO_VIDEO_SPEEDUP:g}x speed",
                     record: "metrics of both episodes (JSON)"})
     return 0
