@@ -386,7 +386,37 @@ def test_summary_is_the_benchmark_aggregation_per_cell_with_figures(tmp_path):
         expected, = aggregate(cell)
         assert {k: row[k] for k in expected} == expected and row["episodes"] == 2
     # a joystick row is for anyone with the controls: its participant is "any", its layout P1's
-    assert "| any | joystick | 2.5 | 3-axis, B1+B2 | 0/2 " in table and (out / "summary.md").read_text().count("| any |") == 2
+    full = (out / "summary.md").read_text()
+    assert "| any | joystick | 2.5 | 3-axis, B1+B2 | 0/2 |" in full and full.count("| any |") == 2
+    # the terminal's table: within 100 columns, no interval for 2 episodes
+    assert table.splitlines()[3].split() == ["any", "joystick", "2.5", "0/2", "-", "-", "-", "-", "1.0"]
+    assert max(map(len, table.splitlines())) <= 100
     for figure in ("completion_time.png", "unintended_displacement_mm_vs_time_limit.png"):
         assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert set(FIGURE_METRICS) <= set(rows[0])  # every metric the figure may plot is a summary column
+
+
+def test_the_sweep_figure_has_units_and_a_log_axis_for_thresholds(tmp_path):
+    """A threshold's 0.9, 0.99, 0.999 are evenly spaced (log of 1 - threshold), the axes say what
+    and in which unit; no error bar for fewer than 5 episodes."""
+    from tasks.cli.figures import metric_figure
+    import matplotlib.pyplot as plt
+    captured = {}
+    real_savefig = plt.Figure.savefig
+
+    def keep(fig, path, **kwargs):
+        captured["axes"] = fig.axes[0]
+        return real_savefig(fig, path, **kwargs)
+
+    plt.Figure.savefig = keep
+    try:
+        metric_figure({"P4 bomi": [(0.9, 30.0, None), (0.99, 20.0, None), (0.999, 25.0, None)]},
+                      tmp_path / "f.png", "completion_time_mean", "profile.post_processing.rejection_threshold")
+    finally:
+        plt.Figure.savefig = real_savefig
+    ax = captured["axes"]
+    assert ax.get_xscale() == "log" and ax.get_ylabel() == "completion time, mean of successes (s)"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0.9", "0.99", "0.999"]
+    line = ax.get_lines()[0].get_xdata()
+    assert list(line) == pytest.approx([0.1, 0.01, 0.001])
+    assert "rejection threshold" in ax.get_xlabel() and "log" in ax.get_xlabel()

@@ -41,28 +41,62 @@ def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: P
     plt.close(fig)
 
 
+# What each summary column plotted against a setting is, with its unit
+METRIC_LABELS = {"completion_time_mean": "completion time, mean of successes (s)",
+                 "successes": "successful episodes", "success_rate": "success rate (share of episodes)",
+                 "accuracy_all_decisions": "accuracy over every decision (share)",
+                 "accuracy_excused_transitions": "accuracy, transitions excused (share)",
+                 "scored_share": "share of decisions scored", "relevant_share": "relevant outputs (share)",
+                 "irrelevant_per_min": "irrelevant outputs per minute", "longest_error_run_ms":
+                 "longest misclassified run (ms)", "mode_switches": "mode switches per episode",
+                 "unintended_displacement_mm": "unintended displacement (mm)",
+                 "latency_ms_median": "latency from motion onset, median (ms)", "cube_drops": "cube drops"}
+# Settings whose values crowd towards 1 (0.9, 0.99, 0.999): plotted as 1 - value on a log axis
+TOWARD_ONE = ("rejection_threshold",)
+
+
+def setting_label(setting: str) -> str:
+    """A setting's name as an axis reads it: its last part, where it lives, and its unit."""
+    short = setting.rsplit(".", 1)[-1]
+    units = {"time_limit": " (s of simulated time)", "vote_length": " (decisions, 16 ms each)",
+             "reaction_time": " (s)", "reaction_s": " (s)"}
+    where = f" [{setting.rsplit('.', 1)[0]}]" if "." in setting else ""
+    return f"{short.replace('_', ' ')}{units.get(short, '')}{where}"
+
+
 def metric_figure(series: Mapping[str, Sequence[tuple[object, float | None, tuple[float, float] | None]]],
                   path: Path, metric: str, setting: str) -> None:
     """``metric`` against ``setting``: one line per series (label -> (setting value, value, 95 %
-    interval or None) points); a numeric setting on a numeric axis, any other in the grid's order."""
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    interval or None) points); a numeric setting on a numeric axis (a threshold near 1 as 1 - it on
+    a log axis, ticks showing the threshold), any other in the grid's order."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
     values = [v for points in series.values() for v, _, _ in points]
     numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+    toward_one = numeric and setting.endswith(TOWARD_ONE) and all(0 < v < 1 for v in values)
     order = {v: k for k, v in enumerate(dict.fromkeys(map(str, values)))}
     for label, points in series.items():
         points = [(v, y, ci) for v, y, ci in points if y is not None]
         if not points:
             continue
-        xs = [v if numeric else order[str(v)] for v, _, _ in points]
+        xs = [(1 - v if toward_one else v) if numeric else order[str(v)] for v, _, _ in points]
         ys = [y for _, y, _ in points]
         lows = [y - ci[0] if ci else 0.0 for _, y, ci in points]
         highs = [ci[1] - y if ci else 0.0 for _, y, ci in points]
         ax.errorbar(xs, ys, yerr=[lows, highs], marker="o", capsize=3, label=label)
-    if not numeric:
-        ax.set_xticks(range(len(order)), list(order))
-    ax.set_xlabel(setting)
-    ax.set_ylabel(metric)
-    ax.set_title(f"{metric} per cell against {setting} (bars: 95 % interval)", fontsize=10)
+    if toward_one:
+        ax.set_xscale("log")
+        ticks = sorted(set(values))
+        ax.set_xticks([1 - v for v in ticks], [f"{v:g}" for v in ticks])
+        ax.minorticks_off()
+        ax.invert_xaxis()  # the threshold grows to the right
+        ax.set_xlabel(f"{setting_label(setting)} (log scale of 1 - threshold)")
+    else:
+        if not numeric:
+            ax.set_xticks(range(len(order)), list(order))
+        ax.set_xlabel(setting_label(setting))
+    ax.set_ylabel(METRIC_LABELS.get(metric, metric))
+    ax.set_title(f"{METRIC_LABELS.get(metric, metric)}\nper cell against {setting.rsplit('.', 1)[-1]} "
+                 f"(bars: 95 % interval, none for fewer than 5 episodes)", fontsize=9)
     if len(series) > 1:
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -58,8 +58,9 @@ from tasks.cli import add_command
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args, report
 from tasks.cli.figures import completion_time_figure, metric_figure
 from tasks.cli.options import MAX_SECONDS, MIN_TIME_LIMIT_S
-from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, ROW_COLUMNS, EpisodeJob, aggregate, episode_record,
-                            markdown_table, row_cells)
+from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,
+                            EpisodeJob, aggregate, aligned_table, episode_record, markdown_table, row_cells,
+                            terminal_cells)
 from tasks.episode import OPERATORS, profile_controls
 from tasks.participants.participant import load_participant
 from tasks.planner import load_operator
@@ -473,15 +474,19 @@ def summary_rows(grid: Grid, records: list[dict]) -> list[dict]:
     return rows
 
 
-def summary_table(grid: Grid, rows: list[dict]) -> str:
+def summary_table(grid: Grid, rows: list[dict], terminal: bool = False) -> str:
+    """The summary table: every column (summary.md), or what fits a terminal's 100 columns."""
     short = [name.rsplit(".", 1)[-1] for name in grid.vary]
-    return markdown_table(["participant", "operator", *short, *ROW_COLUMNS],
+    columns, cells_of, table = ((TERMINAL_COLUMNS, terminal_cells, aligned_table) if terminal
+                                else (ROW_COLUMNS, row_cells, markdown_table))
+    return table(["participant", "operator", *short, *columns],
                           [[r["participant"], r["operator"], *(json.dumps(v) if v != "-" else v
-                                                               for v in r["settings"].values()), *row_cells(r)]
+                                                               for v in r["settings"].values()), *cells_of(r)]
                            for r in rows])
 
 
 def write_summary(grid: Grid, records: list[dict], out: Path) -> str:
+    """Write the summaries and figures of ``records``; return the terminal's table."""
     rows = summary_rows(grid, records)
     table = summary_table(grid, rows)
     settings = "; ".join(f"{name} = {json.dumps(list(values))}" for name, values in grid.vary.items()) or "none varied"
@@ -504,7 +509,7 @@ def write_summary(grid: Grid, records: list[dict], out: Path) -> str:
     if grid.setting is not None:
         with atomic_output(out / metric_figure_name(grid), overwrite=True) as temp:
             metric_figure(_series(grid, rows), temp, grid.metric, grid.setting)
-    return table
+    return summary_table(grid, rows, terminal=True)
 
 
 def _series(grid: Grid, rows: list[dict]) -> dict[str, list]:
@@ -516,6 +521,8 @@ def _series(grid: Grid, rows: list[dict]) -> dict[str, list]:
             continue
         others = [f"{k.rsplit('.', 1)[-1]}={v}" for k, v in r["settings"].items() if k != grid.setting]
         interval = r.get(f"{grid.metric.removesuffix('_mean').removesuffix('_rate')}_ci95")
+        counted = r["successes"] if grid.metric.startswith("completion_time") else r["episodes"]
+        interval = interval if counted >= MIN_EPISODES_FOR_INTERVAL else None
         series.setdefault(" ".join([r["participant"], r["operator"], *others]), []).append(
             (value, r[grid.metric], tuple(interval) if interval else None))
     return series
@@ -528,7 +535,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     result = run_sweep(grid, args.out, engine)
     if result.records:
         print(write_summary(grid, result.records, args.out))
-        print(f"wrote {args.out / 'summary.md'}, {args.out / 'summary.json'} and figures in {args.out}")
+        print(f"wrote {args.out / 'summary.md'} (every column), {args.out / 'summary.json'} and figures in {args.out}")
     if result.interrupted:
         report(f"bomi: interrupted: {len(result.records)} of the grid's {result.total} episodes are saved in "
                f"{args.out / RESULTS_FILE} ({result.ran} run now); rerun the same command to run the rest")

@@ -206,7 +206,7 @@ def comparison(rows: list[dict]) -> list[dict]:
                     "paper_time_ratio": paper.TASK["bomi_time_s"] / paper.TASK["joystick_time_s"],
                     **{key: bomi.get(key) for key in
                        ("relevant_share", "accuracy_all_decisions", "accuracy_excused_transitions",
-                        "irrelevant_longest_run_ms")},
+                        "irrelevant_longest_run_ms", "longest_error_run_ms")},
                     "paper_realtime_accuracy": paper.TASK["realtime_accuracy"],
                     "paper_longest_error_run_ms": paper.TASK["longest_error_run_ms"]})
     return out
@@ -232,6 +232,57 @@ ROW_COLUMNS = ("layout", "successes [95 % CI]", "completion time (s) [95 % CI]",
                "drops", "x real time")
 
 
+# An interval over fewer episodes says little: none is printed (the JSON keeps it).
+MIN_EPISODES_FOR_INTERVAL = 5
+
+
+def successes_text(r: dict) -> str:
+    interval = _interval(r["success_ci95"], ".0f", 100) if r["episodes"] >= MIN_EPISODES_FOR_INTERVAL else ""
+    return f"{r['successes']}/{r['episodes']}{interval and interval + ' %'}"
+
+
+def completion_text(r: dict) -> str:
+    interval = _interval(r["completion_time_ci95"]) if r["successes"] >= MIN_EPISODES_FOR_INTERVAL else ""
+    return f"{_fmt(r['completion_time_mean'])}{interval}"
+
+
+# The terminal's table: what fits in 100 columns (the full table, ROW_COLUMNS, goes to the files)
+TERMINAL_COLUMNS = ("successes", "time (s)", "acc. all", "acc. exc.", "err. run (ms)", "switches")
+
+
+def terminal_cells(r: dict) -> list[str]:
+    return [successes_text(r), completion_text(r), _pct(r.get("accuracy_all_decisions")),
+            _pct(r.get("accuracy_excused_transitions")), _fmt(r.get("longest_error_run_ms"), ".0f"),
+            _fmt(r["mode_switches"])]
+
+
+def aligned_table(header: list[str], rows: list[list[str]]) -> str:
+    """A plain table for the terminal: columns as wide as their widest cell, two spaces apart."""
+    widths = [max(len(str(cell)) for cell in column) for column in zip(header, *rows)]
+    return "\n".join("  ".join(str(cell).ljust(width) for cell, width in zip(row, widths)).rstrip()
+                     for row in [header, ["-" * w for w in widths], *rows])
+
+
+def terminal_table(rows: list[dict]) -> str:
+    """The benchmark rows within 100 columns (acc. all: accuracy over every decision; acc. exc.: with
+    the transitions excused; err. run: the longest run of misclassified outputs)."""
+    assist = any(r["assist"] != NONE for r in rows)
+    return aligned_table(["participant", "operator", *(["assist"] if assist else []), *TERMINAL_COLUMNS],
+                         [[r["participant"], r["operator"], *([r["assist"]] if assist else []), *terminal_cells(r)]
+                          for r in rows])
+
+
+def terminal_comparison(rows: list[dict]) -> str:
+    """The comparison with the paper, like for like, within 100 columns."""
+    return aligned_table(
+        ["participant", "assist", "BoMI/joy time", "paper", "acc. all", "acc. exc.", "paper",
+         "err. run (ms)", "paper"],
+        [[c["participant"], c["assist"], _fmt(c["time_ratio"], ".2f"), f"{c['paper_time_ratio']:.2f}",
+          _pct(c["accuracy_all_decisions"]), _pct(c["accuracy_excused_transitions"]),
+          _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
+          f"{c['paper_longest_error_run_ms']:.0f}"] for c in comparison(rows)])
+
+
 def row_cells(r: dict) -> list[str]:
     """A row of ``aggregate`` as the texts of ROW_COLUMNS."""
     excused = "-" if r.get("accuracy_excused_transitions") is None else (
@@ -240,8 +291,7 @@ def row_cells(r: dict) -> list[str]:
     wild = "-" if r.get("irrelevant_per_min") is None else (
         f"{r['irrelevant_per_min']:.2f} ({r['irrelevant_longest_run_ms']:.0f})")
     latency = "-" if r.get("latency_ms_median") is None else f"{r['latency_ms_median']:.0f} / {r['latency_ms_p90']:.0f}"
-    return [r["layout"], f"{r['successes']}/{r['episodes']}{_interval(r['success_ci95'], '.0f', 100)} %",
-            f"{_fmt(r['completion_time_mean'])}{_interval(r['completion_time_ci95'])}",
+    return [r["layout"], successes_text(r), completion_text(r),
             _pct(r.get("accuracy_all_decisions")), excused, _pct(r.get("relevant_share")), wild, latency,
             r["assist"], _fmt(r["mode_switches"]), f"{_fmt(r['automatic_switches'])} ({_fmt(r['wrong_goal_switches'])})",
             str(r["cube_drops"]), _fmt(r["realtime_factor"])]
@@ -326,7 +376,7 @@ def cmd_run_task(args: argparse.Namespace) -> int:
     else:
         log = run_job(job, progress=True)
     summary = summarize(log)
-    print(markdown_tables(aggregate([summary])))
+    print(terminal_table(aggregate([summary])))
     if outputs["--plot"]:
         with atomic_output(outputs["--plot"], overwrite=args.force) as plot:
             timeline_figure([log], plot)
@@ -358,7 +408,11 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
         job_assist(job, arm_profile(load_participant(job.participant).profile))
     records = run_many(jobs, engine_from_args(args))
     rows = aggregate(records)
-    print(markdown_tables(rows))
+    print(terminal_table(rows))
+    if comparison(rows):
+        print("\n" + terminal_comparison(rows))
+    if not outputs["--json"]:
+        print("(every column, the episodes and the comparison in full: --json FILE)")
     if outputs["--json"]:
         write_json(outputs["--json"], {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows),
                                        "episodes": records}, overwrite=args.force)
@@ -389,7 +443,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=replace) as temp:
         timeline_figure([joystick, bomi], temp)
     write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=replace)
-    print(markdown_tables(aggregate(summaries)))
+    print(terminal_table(aggregate(summaries)))
     print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
           f"virtual participant's body and noise. The README's figures are means over 20 seeds "
           f"(`bomi benchmark`).")
