@@ -253,6 +253,9 @@ CASES = [
          "longer than the 255 bytes"),
     Case("evaluate-png-name-300-characters", ["evaluate", "--train", "{d}/m.json", "--test", "{d}/tiny.csv",
                                               "--png", "{d}/" + "c" * 296 + ".png"], "longer than the 255 bytes"),
+    Case("sweep-out-name-300-characters", ["sweep", "{d}/g.toml", "--out", "{d}/" + "s" * 300, "--jobs", "1"],
+         "File name too long", {"g.toml": lambda b: 'participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n'}),
+    Case("demo-out-name-300-characters", ["demo", "--out", "{d}/" + "o" * 300], "File name too long"),
     # 9. options
     Case("emulate-zero-hold", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "0"], "--hold"),
     Case("emulate-nan-duration", ["emulate", "--participant", "P1", "--to", "pty", "--duration", "nan"], "--duration"),

@@ -217,6 +217,10 @@ def _run(argv: list[str]) -> int:
         return 130
     except BrokenPipeError:
         raise
+    except OSError as exc:  # the system refused (a full disk, a name too long, no permission): not a bug
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"bomi: error: {where}{exc.strerror or type(exc).__name__}", file=sys.stderr)
+        return 2
     except Exception as exc:  # a bug: one line, the traceback only when asked for
         if args.debug:
             traceback.print_exc()
