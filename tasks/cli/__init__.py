@@ -176,8 +176,11 @@ def build_parser(modules: Collection[str] = COMMAND_MODULES, *, for_help: bool =
     """The parser with every option of the commands of ``modules``; the other commands are listed only.
     ``for_help``: only to print help (no command will run), built without loading the heavy libraries."""
     if for_help:
-        with _placeholder_libraries():
-            return build_parser(modules)
+        try:
+            with _placeholder_libraries():
+                return build_parser(modules)
+        except Exception:  # a module that computes something from a library at import: the slow, real way
+            pass
     parser = OneLineParser(prog="bomi", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action=_Version, nargs=0, help="show the program's version number and exit")
     parser.add_argument("--debug", action="store_true",

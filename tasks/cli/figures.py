@@ -11,6 +11,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import ticker  # noqa: E402
 
 
 def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: Path, title: str,
@@ -34,7 +35,9 @@ def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: P
         ax.text(len(groups) - 0.5, seconds, f"{label} {seconds:.0f} s", ha="right", va="bottom", fontsize=8)
     ax.set_xticks(range(len(groups)), [label for label, _ in groups], fontsize=7 if len(groups) > 8 else 9)
     ax.set_yscale("log")
-    ax.set_ylabel("completion time (s, log)")
+    ax.yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))  # 20, 50, 100 s, not 2 x 10^1
+    ax.yaxis.set_minor_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
+    ax.set_ylabel("completion time (s, log scale)\nx: where a failed episode stopped")
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

@@ -242,18 +242,19 @@ def successes_text(r: dict) -> str:
 
 
 def completion_text(r: dict) -> str:
-    interval = _interval(r["completion_time_ci95"]) if r["successes"] >= MIN_EPISODES_FOR_INTERVAL else ""
+    ci = r["completion_time_ci95"]
+    # a time is never negative: a Student-t bound below 0 (few, spread successes) is shown as 0
+    interval = _interval([max(0.0, ci[0]), ci[1]]) if ci and r["successes"] >= MIN_EPISODES_FOR_INTERVAL else ""
     return f"{_fmt(r['completion_time_mean'])}{interval}"
 
 
 # The terminal's table: what fits in 100 columns (the full table, ROW_COLUMNS, goes to the files)
-TERMINAL_COLUMNS = ("successes", "time (s)", "acc. all", "acc. exc.", "err. run (ms)", "switches")
+TERMINAL_COLUMNS = ("successes", "time (s)", "acc. all", "acc. exc.", "err. run ms")
 
 
 def terminal_cells(r: dict) -> list[str]:
     return [successes_text(r), completion_text(r), _pct(r.get("accuracy_all_decisions")),
-            _pct(r.get("accuracy_excused_transitions")), _fmt(r.get("longest_error_run_ms"), ".0f"),
-            _fmt(r["mode_switches"])]
+            _pct(r.get("accuracy_excused_transitions")), _fmt(r.get("longest_error_run_ms"), ".0f")]
 
 
 def aligned_table(header: list[str], rows: list[list[str]]) -> str:
@@ -265,7 +266,7 @@ def aligned_table(header: list[str], rows: list[list[str]]) -> str:
 
 def terminal_table(rows: list[dict]) -> str:
     """The benchmark rows within 100 columns (acc. all: accuracy over every decision; acc. exc.: with
-    the transitions excused; err. run: the longest run of misclassified outputs)."""
+    the transitions excused; err. run ms: the longest run of misclassified outputs)."""
     assist = any(r["assist"] != NONE for r in rows)
     return aligned_table(["participant", "operator", *(["assist"] if assist else []), *TERMINAL_COLUMNS],
                          [[r["participant"], r["operator"], *([r["assist"]] if assist else []), *terminal_cells(r)]
@@ -276,7 +277,7 @@ def terminal_comparison(rows: list[dict]) -> str:
     """The comparison with the paper, like for like, within 100 columns."""
     return aligned_table(
         ["participant", "assist", "BoMI/joy time", "paper", "acc. all", "acc. exc.", "paper",
-         "err. run (ms)", "paper"],
+         "err. run ms", "paper"],
         [[c["participant"], c["assist"], _fmt(c["time_ratio"], ".2f"), f"{c['paper_time_ratio']:.2f}",
           _pct(c["accuracy_all_decisions"]), _pct(c["accuracy_excused_transitions"]),
           _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
