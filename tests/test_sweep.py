@@ -420,3 +420,29 @@ def test_the_sweep_figure_has_units_and_a_log_axis_for_thresholds(tmp_path):
     line = ax.get_lines()[0].get_xdata()
     assert list(line) == pytest.approx([0.1, 0.01, 0.001])
     assert "rejection threshold" in ax.get_xlabel() and "log" in ax.get_xlabel()
+
+
+def descendants(pid):
+    found, todo = [], [pid]
+    while todo:
+        for kid in children(todo.pop()):
+            found.append(kid)
+            todo.append(kid)
+    return found
+
+
+def test_sigterm_on_a_ray_sweep_keeps_what_finished_and_shuts_the_local_ray_down(tmp_path):
+    pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
+    grid, out = grid_file(tmp_path, LONG), tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out),
+                                "--engine", "ray", "--jobs", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)
+    assert wait_for(lambda: (out / RESULTS_FILE).exists() and (out / RESULTS_FILE).read_text().count("\n") >= 1, 240)
+    ray_processes = descendants(process.pid)
+    assert ray_processes  # the local Ray's processes are the driver's descendants
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "episodes are saved in" in err and "Traceback" not in err
+    assert wait_for(lambda: not any(alive(p) for p in ray_processes), 30), "a Ray process outlived the sweep"
+    assert 1 <= len(keys_in(out)) < 8

@@ -99,8 +99,14 @@ class RayCluster:
         started_here = not ray.is_initialized()
         if started_here:  # a local Ray's workers at normal priority, as the pool's (Ray's default is nice 15)
             local = {} if self.address else {"num_cpus": self.cpus, "_system_config": {"worker_niceness": 0}}
+            # Ray's start-up replaces the driver's SIGTERM handling with its own (abort); the
+            # caller's (a sweep keeps what finished, then shuts Ray down) is put back
+            handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
             ray.init(address=self.address, include_dashboard=False, log_to_driver=False, logging_level="warning",
                      **local)
+            for sig, handler in handlers.items():
+                if handler is not None:
+                    signal.signal(sig, handler)
         remote = ray.remote(num_cpus=1, max_retries=0)(work)  # the one retry is ours, and reported
         pending = {remote.remote(item): (i, 0) for i, item in enumerate(items)}
         try:
