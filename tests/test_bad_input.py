@@ -255,6 +255,8 @@ CASES = [
                                               "--png", "{d}/" + "c" * 296 + ".png"], "longer than the 255 bytes"),
     Case("sweep-out-name-300-characters", ["sweep", "{d}/g.toml", "--out", "{d}/" + "s" * 300, "--jobs", "1"],
          "File name too long", {"g.toml": lambda b: 'participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n'}),
+    Case("benchmark-1e11-seeds", ["benchmark", "--operators", "joystick", "--seeds", "100000000000"], "--seeds"),
+    Case("run-task-seed-1e15", ["run-task", "--operator", "joystick", "--seed", "1000000000000000"], "--seed"),
     Case("demo-out-name-300-characters", ["demo", "--out", "{d}/" + "o" * 300], "File name too long"),
     # 9. options
     Case("emulate-zero-hold", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "0"], "--hold"),

@@ -57,6 +57,12 @@ MIN_TIME_LIMIT_S = 1.0
 episode_seconds = _ranged("episode_seconds", float, (lambda v: v >= MIN_TIME_LIMIT_S, f"at least {MIN_TIME_LIMIT_S:g} s"),
                      _AT_MOST_A_DAY)  # of simulated time per episode
 non_negative_seconds = _ranged("non_negative_seconds", float, _NON_NEGATIVE, _AT_MOST_A_DAY)
+# Seeds: numpy's and MuJoCo's are 32-bit; no run of this project needs more than ten thousand of them
+# (far beyond what this machine, or a cluster in a week, runs), and more would exhaust memory listing them.
+MAX_SEED = 2**32 - 1
+MAX_SEEDS = 10_000
+seed = _ranged("seed", int, _NON_NEGATIVE, (lambda v: v <= MAX_SEED, f"at most {MAX_SEED}"))
+seed_count = _ranged("seed_count", int, (lambda v: 1 <= v <= MAX_SEEDS, f"must be in [1, {MAX_SEEDS}]"))
 # a posterior threshold
 open_unit_interval = _ranged("open_unit_interval", float, (lambda v: 0 < v < 1, "must be between 0 and 1 (exclusive)"))
 # of dropping a frame, of altering a byte

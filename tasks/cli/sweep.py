@@ -57,7 +57,7 @@ from bomi.files import atomic_output, write_text
 from tasks.cli import add_command
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args, report
 from tasks.cli.figures import completion_time_figure, metric_figure
-from tasks.cli.options import MAX_SECONDS, MIN_TIME_LIMIT_S
+from tasks.cli.options import MAX_SECONDS, MAX_SEED, MAX_SEEDS, MIN_TIME_LIMIT_S
 from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,
                             EpisodeJob, aggregate, aligned_table, episode_record, markdown_table, row_cells,
                             terminal_cells)
@@ -82,8 +82,6 @@ LOCK_FILE = ".sweep.lock"  # flock'ed while a sweep writes the directory; holds 
 SUMMARY_FILES = ("summary.md", "summary.json", "completion_time.png")
 # Sizes a grid may ask for: far beyond any sweep this machine (or a cluster in a week) runs, far
 # below what would exhaust memory listing the episodes.
-MAX_SEED = 2**32 - 1        # numpy's and MuJoCo's seeds are 32-bit
-MAX_SEEDS = 10_000          # per grid
 MAX_VALUES = 100            # per [vary] setting
 MAX_EPISODES = 100_000      # per grid: cells x seeds
 

@@ -21,7 +21,8 @@ from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option,
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from bomi.files import atomic_output, write_text
-from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_int, episode_seconds
+from tasks.cli.options import add_force, check_outputs, episode_seconds, positive_int, seed_count
+from tasks.cli.options import seed as seed_option
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participants.participant import load_participant
@@ -461,7 +462,7 @@ def register(subparsers) -> None:
                           "through the BoMI (calibrated first)")
     run.add_argument("--participant", default="P1",
                      help="virtual participant: P1, P4, P5 or a TOML file (default %(default)s)")
-    run.add_argument("--seed", type=non_negative_int, default=0,
+    run.add_argument("--seed", type=seed_option, default=0,
                      help="task seed: cube placement, the participant's body and noise (default %(default)s)")
     _episode_options(run)
     run.add_argument("--video", type=Path, help="also film the episode to this MP4 (4x speed)")
@@ -475,9 +476,9 @@ def register(subparsers) -> None:
                        help="comma-separated virtual participants, e.g. P1,P4,P5 (default %(default)s)")
     bench.add_argument("--operators", default="joystick,bomi",
                        help=f"comma-separated operators out of {','.join(OPERATORS)} (default %(default)s)")
-    bench.add_argument("--seeds", type=positive_int, default=20, help="how many seeds per participant and operator "
+    bench.add_argument("--seeds", type=seed_count, default=20, help="how many seeds per participant and operator "
                                                              "(default %(default)s)")
-    bench.add_argument("--first-seed", type=non_negative_int, default=0, help="the first seed (default %(default)s)")
+    bench.add_argument("--first-seed", type=seed_option, default=0, help="the first seed (default %(default)s)")
     add_engine_arguments(bench)
     _episode_options(bench)
     bench.add_argument("--json", type=Path, help="also write the table and every episode's metrics (JSON) here")
@@ -485,7 +486,7 @@ def register(subparsers) -> None:
     bench.set_defaults(func=cmd_benchmark)
 
     demo = add_command(subparsers, "demo")
-    demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
+    demo.add_argument("--seed", type=seed_option, default=0, help="task seed of both episodes (default %(default)s)")
     demo.add_argument("--time-limit", type=episode_seconds, default=600.0,
                       help="seconds of simulated time per episode (default %(default)s)")
     demo.add_argument("--out", type=Path,
