@@ -32,7 +32,7 @@ PROJECTED_CORES = (1, 2, 8, 32, 128)
 def timed_sweep(grid: Grid, engine) -> tuple[float, list[dict]]:
     with tempfile.TemporaryDirectory() as out:
         started = time.perf_counter()
-        records = run_sweep(grid, Path(out), engine).records
+        records = run_sweep(grid, Path(out), engine, summarize=False).records
         return time.perf_counter() - started, records
 
 

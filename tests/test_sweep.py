@@ -16,7 +16,7 @@ from bomi.files import TEMP_MARK
 from tasks.cli import main
 from tasks.cli.engine import ProcessPool
 from tasks.cli.sweep import (FIGURE_METRICS, LOCK_FILE, RESULTS_FILE, cells, job_key, load_grid, read_results,
-                             run_sweep, write_summary)
+                             run_sweep)
 from tasks.cli.task import aggregate
 
 SHORT = 2.0  # s of simulated time: a joystick episode that short costs well under a second
@@ -376,8 +376,8 @@ def test_a_grid_that_is_not_a_file_is_refused_without_reading_it(tmp_path, capsy
 def test_summary_is_the_benchmark_aggregation_per_cell_with_figures(tmp_path):
     grid = load_grid(grid_file(tmp_path, JOYSTICK_GRID + '[figure]\nmetric = "unintended_displacement_mm"\n'))
     out = tmp_path / "out"
-    records = run_sweep(grid, out, ProcessPool(2)).records
-    table = write_summary(grid, records, out)
+    result = run_sweep(grid, out, ProcessPool(2))
+    records, table = result.records, result.table
     summary = json.loads((out / "summary.json").read_text())
     rows = summary["rows"]
     assert [r["settings"] for r in rows] == [{"time_limit": SHORT}, {"time_limit": 2.5}]

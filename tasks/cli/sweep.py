@@ -414,11 +414,13 @@ class SweepResult:
     total: int           # episodes in the grid
     ran: int             # of them run now
     interrupted: bool
+    table: str | None    # the terminal's summary table (None: no episode yet, or not asked for)
 
 
-def run_sweep(grid: Grid, out: Path, engine: Engine) -> SweepResult:
+def run_sweep(grid: Grid, out: Path, engine: Engine, summarize: bool = True) -> SweepResult:
     """Run the grid's episodes not yet in ``out``/episodes.jsonl, appending each as it finishes,
-    with ``out`` locked; an interruption (Ctrl-C, SIGTERM) keeps what finished."""
+    then (``summarize``) write the summaries and figures of every record of the grid, all with
+    ``out`` locked; an interruption (Ctrl-C, SIGTERM) keeps what finished and summarises it."""
     cell_list = cells(grid)
     check_cells(grid, cell_list)
     check_directory(out, output_names(grid))
@@ -447,8 +449,10 @@ def run_sweep(grid: Grid, out: Path, engine: Engine) -> SweepResult:
             interrupted = True
         finally:
             file.close()
-    ran = sum(key in done for key in keys) - (len(jobs) - len(todo))
-    return SweepResult([done[key] for key in keys if key in done], len(jobs), ran, interrupted)
+        records = [done[key] for key in keys if key in done]
+        table = write_summary(grid, records, out) if summarize and records else None
+    ran = len(records) - (len(jobs) - len(todo))
+    return SweepResult(records, len(jobs), ran, interrupted, table)
 
 
 # ------------------------------------------------------------------------------------ summary
@@ -531,8 +535,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     grid = load_grid(args.grid)
     engine = engine_from_args(args)
     result = run_sweep(grid, args.out, engine)
-    if result.records:
-        print(write_summary(grid, result.records, args.out))
+    if result.table is not None:
+        print(result.table)
         print(f"wrote {args.out / 'summary.md'} (every column), {args.out / 'summary.json'} and figures in {args.out}")
     if result.interrupted:
         report(f"bomi: interrupted: {len(result.records)} of the grid's {result.total} episodes are saved in "
