@@ -99,30 +99,36 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
 HEAVY = ("numpy", "sklearn", "scipy", "mujoco", "pinocchio", "matplotlib", "dm_control")
 
 
-def _help_run(command: str, preload: bool) -> tuple[str, list[str]]:
-    """`bomi COMMAND --help` in a fresh interpreter: its text, and the heavy libraries then loaded.
-    ``preload``: every command module imported for real first (the help the placeholders must match)."""
+def _helps(commands, preload: bool) -> dict[str, tuple[str, list[str]]]:
+    """`bomi COMMAND --help` for each command in one fresh interpreter: its text, and the heavy
+    libraries loaded by then. ``preload``: every command module imported for real first (the help
+    the placeholders must match)."""
     code = ("import contextlib, importlib, io, json, sys\n"
             "from tasks.cli import COMMAND_MODULES, main\n"
             f"if {preload}:\n    [importlib.import_module(m) for m in COMMAND_MODULES]\n"
-            "out = io.StringIO()\n"
-            "with contextlib.redirect_stdout(out):\n"
-            f"    code = main([{command!r}, '--help'])\n"
-            "heavy = sorted({m.split('.')[0] for m in sys.modules} & set(%r))\n" % (HEAVY,)
-            + "print(json.dumps([code, out.getvalue(), heavy]))")
+            "helps = {}\n"
+            f"for command in {list(commands)!r}:\n"
+            "    out = io.StringIO()\n"
+            "    with contextlib.redirect_stdout(out):\n"
+            "        assert main([command, '--help']) == 0\n"
+            "    heavy = sorted({m.split('.')[0] for m in sys.modules} & set(%r))\n" % (HEAVY,)
+            + "    helps[command] = (out.getvalue(), heavy)\n"
+            "print(json.dumps(helps))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                           env=os.environ | {"COLUMNS": "100"})
-    code, text, heavy = json.loads(done.stdout.strip().splitlines()[-1])
-    assert code == 0
-    return text, heavy
+    return {command: tuple(value) for command, value in json.loads(done.stdout.strip().splitlines()[-1]).items()}
+
+
+@pytest.fixture(scope="module")
+def real_helps():
+    return _helps(COMMANDS, preload=True)
 
 
 @pytest.mark.parametrize("command", COMMANDS)
-def test_a_commands_help_loads_no_heavy_library_and_says_what_the_real_one_says(command):
-    fast, heavy = _help_run(command, preload=False)
+def test_a_commands_help_loads_no_heavy_library_and_says_what_the_real_one_says(command, real_helps):
+    (fast, heavy), = _helps([command], preload=False).values()
     assert heavy == [], f"bomi {command} --help loaded {heavy}"
-    real, _ = _help_run(command, preload=True)
-    assert fast == real
+    assert fast == real_helps[command][0]
     assert "_Placeholder" not in fast and "placeholder" not in fast.lower()
 
 
