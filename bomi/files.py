@@ -105,7 +105,7 @@ def read_config_text(path: str | os.PathLike, what: str) -> str:
     try:
         return path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
-        raise BomiError(f"{path}: the {what} file is not UTF-8 text") from None
+        raise BomiError(f"{path}: not valid TOML (not UTF-8 text)") from None
     except OSError as exc:
         raise BomiError(f"{path}: the {what} file cannot be read ({_one_line(exc)})") from None
 

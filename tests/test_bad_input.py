@@ -423,6 +423,19 @@ def test_an_internal_error_is_one_line_and_debug_shows_the_traceback(tmp_path, c
     assert "Traceback" in err and "ZeroDivisionError" in err
 
 
+def test_a_command_module_that_fails_to_load_is_one_line_too(capsys, monkeypatch):
+    """A broken install (a module half written, a library missing) is one internal-error line."""
+    import tasks.cli as cli
+
+    def broken(name, *args):
+        raise ImportError(f"cannot import {name}")
+
+    monkeypatch.setattr(cli.importlib, "import_module", broken)
+    assert main(["train", "x.csv", "--out", "m.json"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("bomi: internal error: ImportError: cannot import tasks.cli.chain")
+
+
 # ------------------------------------------------------------------------------------- streams
 def serve(payloads: Callable[[socket.socket], None]) -> tuple[str, threading.Thread]:
     server = socket.create_server(("127.0.0.1", 0))

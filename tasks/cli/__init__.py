@@ -206,12 +206,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(argv: list[str]) -> int:
+    args = None
     try:
         args = build_parser(_modules_for(argv), for_help=wants_help(argv)).parse_args(argv)
+        return int(args.func(args) or 0)
     except SystemExit as exc:  # --help, --version, or a usage error already reported in one line
         return exc.code if isinstance(exc.code, int) else 2
-    try:
-        return int(args.func(args) or 0)
     except (BomiError, SimError) as exc:  # bad input: files, options, ports, streams
         print(f"bomi: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
@@ -224,8 +224,8 @@ def _run(argv: list[str]) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"bomi: error: {where}{exc.strerror or type(exc).__name__}", file=sys.stderr)
         return 2
-    except Exception as exc:  # a bug: one line, the traceback only when asked for
-        if args.debug:
+    except Exception as exc:  # a bug (in a command, or in loading one): one line, the traceback when asked for
+        if args.debug if args is not None else "--debug" in argv:
             traceback.print_exc()
         print(f"bomi: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
               f"(a bug; rerun with --debug for the traceback)", file=sys.stderr)
