@@ -194,3 +194,38 @@ def test_demo_twice_in_one_directory_replaces_demo_out(tmp_path, monkeypatch, ca
     capsys.readouterr()
     assert main(["demo", "--time-limit", "1", "--out", "demo_out"]) == 2  # a directory the user names: --force
     assert "file exists" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------- figures
+def _drawn(monkeypatch, draw):
+    """The figure ``draw`` saves (its axes kept for inspection)."""
+    import matplotlib.pyplot as plt
+    kept = {}
+    real = plt.Figure.savefig
+    monkeypatch.setattr(plt.Figure, "savefig", lambda fig, path, **kw: (kept.setdefault("fig", fig), real(fig, path, **kw)))
+    draw()
+    return kept["fig"]
+
+
+def test_a_confusion_matrix_is_coloured_by_the_share_of_its_row_and_names_the_classes(tmp_path, monkeypatch):
+    """Neutral's thousands of windows must not hide a rare class's errors: 271 of 294 c8 windows
+    called neutral read 92 %, as dark as a perfect neutral row's 100 % nearly."""
+    import numpy as np
+    from tasks.cli.figures import confusion_figure
+    counts = np.array([[8232, 0, 0], [7, 1753, 4], [271, 0, 23]])
+    names = ["c0 neutral posture", "c7 B1: right shoulder", "c8 B2: left shoulder"]
+    fig = _drawn(monkeypatch, lambda: confusion_figure(tmp_path / "c.png", [("day3", counts)], names))
+    ax = fig.axes[0]
+    shown = ax.images[0].get_array()
+    np.testing.assert_allclose(shown, 100 * counts / counts.sum(axis=1, keepdims=True))
+    assert [t.get_text() for t in ax.get_xticklabels()] == names
+    assert [t.get_text() for t in ax.get_yticklabels()] == [f"{n} ({c:,})" for n, c in zip(names, counts.sum(axis=1))]
+    texts = [t.get_text() for t in ax.texts]
+    assert "92%" in texts and "271" in texts and "8,232" in texts
+
+
+def test_the_timeline_explains_every_joystick_function_a_shipped_profile_uses():
+    from bomi.profiles import load_profile
+    from tasks.timeline import FUNCTION_WORDS
+    functions = {cls.function for name in ("P1", "P4", "P5") for cls in load_profile(name).classes} - {"neutral"}
+    assert functions <= set(FUNCTION_WORDS)
