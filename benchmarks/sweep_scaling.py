@@ -39,7 +39,7 @@ def timed_sweep(grid: Grid, engine) -> tuple[float, float, list[dict]]:
     with tempfile.TemporaryDirectory() as out:
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         started = time.perf_counter()
-        records = run_sweep(grid, Path(out), engine)
+        records = run_sweep(grid, Path(out), engine, summarize=False).records
         wall = time.perf_counter() - started
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         return wall, after.ru_utime + after.ru_stime - children.ru_utime - children.ru_stime, records

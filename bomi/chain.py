@@ -176,10 +176,12 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
 MIN_CLASS_WINDOWS = 15   # single-label windows a class needs to be learnt (a quarter of a second of holding)
 
 
-def check_training_data(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> None:
+def check_training_data(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+                        allow_missing_classes: bool = False) -> None:
     """One-line BomiError, before any fitting, when the recordings cannot train ``profile``'s model:
-    a label the profile lacks, fewer than three classes, a class of the profile missing or held for
-    fewer than MIN_CLASS_WINDOWS windows, or a signal the features read that never changes."""
+    a label the profile lacks, fewer than three classes, a class of the profile missing (unless
+    ``allow_missing_classes``: the model then never decides it) or held for fewer than
+    MIN_CLASS_WINDOWS windows, or a signal the features read that never changes."""
     known = {cls.label: cls for cls in profile.classes}
     sources = ", ".join(rec.source for rec in recordings)
     counts: dict[int, int] = {}
@@ -200,10 +202,13 @@ def check_training_data(recordings: Sequence[Recording], profile: Profile, spec:
         raise BomiError(f"{sources}: training needs windows of at least three classes held for {spec.window} "
                         f"samples each, found {sorted(counts) or 'none'}")
     for label, cls in sorted(known.items()):
+        if allow_missing_classes and label not in counts:
+            continue
         if counts.get(label, 0) < MIN_CLASS_WINDOWS:
             held = "is missing from" if label not in counts else f"has only {counts[label]} {spec.window}-sample windows in"
             raise BomiError(f"{sources}: class c{label} ({cls.name}) of profile {profile.name} {held} the "
-                            f"recording(s); it needs at least {MIN_CLASS_WINDOWS} (record it, or leave it out of the profile)")
+                            f"recording(s); it needs at least {MIN_CLASS_WINDOWS} (record it, leave it out of the "
+                            f"profile, or train without it with --allow-missing-classes)")
 
 
 def _check_signals_change(rec: Recording, spec: FeatureSpec) -> None:
@@ -222,18 +227,19 @@ def _check_signals_change(rec: Recording, spec: FeatureSpec) -> None:
 
 def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec | None = None,
           shrinkage: float | str | None = ..., post: PostProcessing | None = None,
-          selection: Selection | None = None) -> Model:
+          selection: Selection | None = None, allow_missing_classes: bool = False) -> Model:
     """Fit the classifier on the single-label windows of every recording (each with its own neutral offsets).
 
     ``spec``, ``shrinkage`` and ``post`` default to the profile's; what the profile leaves to
     ``select_settings`` ("select": the shrinkage, then also the smaller copies of the motions, and
     the rejection threshold) comes from ``selection``, or is chosen here on ``recordings``.
+    ``allow_missing_classes``: see ``check_training_data``.
     """
     spec = spec or profile.spec
     shrinkage = profile.shrinkage if shrinkage is ... else shrinkage
     select_rejection = post is None and profile.select_rejection
     post = post or profile.post
-    check_training_data(recordings, profile, spec)
+    check_training_data(recordings, profile, spec, allow_missing_classes)
     if selection is None and (shrinkage == SELECT or select_rejection):
         selection = select_settings(recordings, profile, spec)
     if shrinkage == SELECT:

@@ -32,6 +32,17 @@ from threadpoolctl import threadpool_limits
 from bomi.features import FeatureSpec
 
 NEUTRAL_LABEL = 0
+# Bounds of a usable model, so a file's garbled or hostile values are refused before they move
+# the arm. The paper uses 9 classes (neutral, six directions, two buttons); nobody gives dozens of
+# distinct motions. LDA weights of real features (degrees, deg/s) are far below 1e9; beyond it a
+# score overflows. An angle change (gamma, the norm of pitch, roll and yaw changes of at most 360
+# degrees each) is at most 360 * sqrt(3) degrees.
+MAX_CLASSES = 64
+MAX_ABS_PARAMETER = 1e9
+MAX_ANGLE_CHANGE_DEG = 360.0 * 3 ** 0.5
+# A vote over more decisions than 10 s of them (at the nodes' 62.5 Hz) would answer a motion
+# after it is over: no setting of a usable interface.
+MAX_VOTE_LENGTH = 625
 
 
 @dataclass(frozen=True)
@@ -44,8 +55,8 @@ class PostProcessing:
     def __post_init__(self) -> None:
         if self.rejection_threshold is not None and not 0.0 < self.rejection_threshold < 1.0:
             raise ValueError(f"rejection threshold must be in (0, 1), got {self.rejection_threshold}")
-        if self.vote_length < 1:
-            raise ValueError(f"vote length must be >= 1, got {self.vote_length}")
+        if not 1 <= self.vote_length <= MAX_VOTE_LENGTH:
+            raise ValueError(f"vote length must be in [1, {MAX_VOTE_LENGTH}] decisions (10 s), got {self.vote_length}")
 
 
 AMPLITUDE_KINDS = ("gamma", "along_class")
@@ -139,13 +150,19 @@ def model_defects(model: Model) -> list[str]:
     classes = np.asarray(model.classes)
     if classes.ndim != 1 or classes.dtype.kind not in "iu" or len(set(classes.tolist())) != len(classes):
         return ["classes must be distinct integer labels"]
-    if len(classes) < 3:
-        defects.append(f"needs at least three classes, has {len(classes)}")
+    if not 3 <= len(classes) <= MAX_CLASSES:
+        defects.append(f"needs three to {MAX_CLASSES} classes, has {len(classes)}")
+    shrinkage = model.shrinkage
+    if not (shrinkage is None or shrinkage == "auto" or (isinstance(shrinkage, (int, float))
+                                                          and not isinstance(shrinkage, bool) and 0 <= shrinkage <= 1)):
+        defects.append(f"shrinkage must be a number in [0, 1], \"auto\" or absent, got {shrinkage!r}")
     if model.coef.ndim != 2 or model.coef.shape[0] != len(classes) or model.intercept.shape != (len(classes),):
         defects.append(f"coef/intercept shapes {model.coef.shape}/{model.intercept.shape} do not fit "
                        f"{len(classes)} classes")
     elif not (np.all(np.isfinite(model.coef)) and np.all(np.isfinite(model.intercept))):
         defects.append("non-finite LDA parameters (constant or degenerate training signals?)")
+    elif max(np.abs(model.coef).max(initial=0.0), np.abs(model.intercept).max(initial=0.0)) > MAX_ABS_PARAMETER:
+        defects.append(f"LDA parameters beyond +-{MAX_ABS_PARAMETER:g} (no real signal gives them)")
     for label, r in sorted(model.amplitude.items()):
         where = f"amplitude range of class {label}"
         if label == NEUTRAL_LABEL or label not in set(classes.tolist()):
@@ -157,6 +174,13 @@ def model_defects(model: Model) -> list[str]:
         elif not r.gamma_min < r.gamma_max:
             defects.append(f"{where}: min {r.gamma_min} is not below max {r.gamma_max} (no spread in the "
                            "class's training samples)")
+        elif not (r.gamma_max <= MAX_ANGLE_CHANGE_DEG
+                  and r.gamma_min >= (0.0 if r.direction is None else -MAX_ANGLE_CHANGE_DEG)):
+            # gamma is a size (>= 0); along a direction a class's least sample may lie behind (P1's
+            # day-1 c4: -2.3 degrees), but no angle change is larger than MAX_ANGLE_CHANGE_DEG
+            low = "0" if r.direction is None else f"-{MAX_ANGLE_CHANGE_DEG:.0f}"
+            defects.append(f"{where}: [{r.gamma_min:g}, {r.gamma_max:g}] degrees is not an angle change "
+                           f"(expected {low} <= min < max <= {MAX_ANGLE_CHANGE_DEG:.0f})")
         elif r.direction is not None and not (len(r.direction) == 3 and np.all(np.isfinite(r.direction))
                                             and abs(np.linalg.norm(r.direction) - 1.0) < 1e-6):
             defects.append(f"{where}: direction must be a finite unit 3-vector")

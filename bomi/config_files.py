@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from bomi.errors import BomiError
+from bomi.files import read_config_text
 
 T = TypeVar("T")
 
@@ -26,20 +27,48 @@ def load_toml(path_or_name: str | Path, shipped_dir: Path, kind: str, parse: Cal
     shipped = shipped_dir / f"{path_or_name}.toml"
     if not path.suffix and shipped.is_file():
         path = shipped
-    if not path.is_file():
+    if not path.exists():
         names = ", ".join(sorted(p.stem for p in shipped_dir.glob("*.toml")))
         raise BomiError(f"{path}: no such {kind} file (shipped: {names})")
     source = str(path) if not overrides else f"{path} with {', '.join(f'{k} = {v!r}' for k, v in overrides.items())}"
+    document = parse_toml(path, kind)
     try:
-        data = with_overrides(tomllib.loads(path.read_text(encoding="utf-8")), overrides or {})
+        data = with_overrides(document, overrides or {})
         check_numbers(data)
         return parse(data, source)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
-    except OSError as exc:
-        raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
     except ValueError as exc:
         raise BomiError(f"{source}: {exc}") from None
+
+
+# Tables and arrays nested deeper than this are no configuration of this project (the deepest
+# shipped one is 3: a table of arrays of tables); deeper would exhaust Python's recursion.
+MAX_TOML_DEPTH = 16
+
+
+def parse_toml(path: Path, kind: str) -> dict:
+    """The TOML document of the configuration file ``path`` (a regular file of at most
+    MAX_CONFIG_BYTES, nested at most MAX_TOML_DEPTH deep); every fault a one-line BomiError."""
+    text = read_config_text(path, kind)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise BomiError(f"{path}: not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)") from None
+    if _depth(data) > MAX_TOML_DEPTH:
+        raise BomiError(f"{path}: not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)")
+    return data
+
+
+def _depth(value: Any) -> int:
+    """How deep tables and arrays nest in ``value`` (iterative: the depth is not known yet)."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        value, depth = stack.pop()
+        if isinstance(value, (dict, list)):
+            deepest = max(deepest, depth + 1)
+            stack.extend((child, depth + 1) for child in (value.values() if isinstance(value, dict) else value))
+    return deepest
 
 
 # No setting of this project is near a million in size (the largest shipped one is the video width,

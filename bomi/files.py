@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import os
 import secrets
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,6 +26,25 @@ def _one_line(exc: OSError) -> str:
     return exc.strerror or type(exc).__name__
 
 
+def name_max(directory: Path) -> int:
+    """The longest file name ``directory``'s file system accepts (NAME_MAX, 255 almost everywhere)."""
+    try:
+        return os.pathconf(directory, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
+def _lstat(path: Path, what: str) -> os.stat_result | None:
+    """``path``'s own status (a symlink is not followed), None if there is nothing; any other OS
+    error (a name too long, a directory that cannot be searched) is a one-line BomiError."""
+    try:
+        return os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except OSError as exc:
+        raise BomiError(f"{path}: {what}: {_one_line(exc)}") from None
+
+
 def check_output(path: str | os.PathLike, *, overwrite: bool = False, suffixes: tuple[str, ...] = (),
                  what: str = "output", forceable: bool = True) -> Path:
     """``path`` as a Path if a new file can be written there; else BomiError saying why (one line).
@@ -35,34 +55,68 @@ def check_output(path: str | os.PathLike, *, overwrite: bool = False, suffixes: 
     parent = path.parent
     if not parent.is_dir():
         raise BomiError(f"{path}: directory {parent} does not exist")
-    if path.is_dir():
+    if len(os.fsencode(path.name)) > name_max(parent):
+        raise BomiError(f"{path}: {what}: file name longer than the {name_max(parent)} bytes the file system allows")
+    status = _lstat(path, what)
+    if status is not None and stat.S_ISDIR(status.st_mode):
         raise BomiError(f"{path}: is a directory, expected a file name")
-    if path.exists() or path.is_symlink():
+    if status is not None:
         if not overwrite:
             raise BomiError(f"{path}: file exists, not overwriting it" + (" (use --force to replace it)" if forceable else ""))
-        if not path.is_file():
-            raise BomiError(f"{path}: exists and is not a regular file")
+        if not stat.S_ISREG(status.st_mode):
+            raise BomiError(f"{path}: exists and is not a regular file (a symlink, FIFO or device is not replaced)")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise BomiError(f"{path}: directory {parent} is not writable")
     return path
 
 
-def check_input(path: str | os.PathLike, what: str) -> Path:
-    """``path`` as a Path if it is a readable file; else BomiError saying why (one line)."""
+# The largest input file read whole: far above any real one (P1's five-day recording is 0.1 GB a
+# day), far below what would exhaust the memory of the machine reading it.
+MAX_INPUT_BYTES = 4 << 30
+# A configuration file (profile, participant, operator, grid, simulation) is a page of settings.
+MAX_CONFIG_BYTES = 1 << 20
+
+
+def check_input(path: str | os.PathLike, what: str, max_bytes: int = MAX_INPUT_BYTES) -> Path:
+    """``path`` as a Path if it is a readable regular file of at most ``max_bytes``; else BomiError
+    saying why (one line). A FIFO, a device or a directory is refused before it is opened (reading
+    one would hang, or never end)."""
     path = Path(path)
-    if path.is_dir():
+    try:
+        status = os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        raise BomiError(f"{path}: no such {what} file") from None
+    except OSError as exc:
+        raise BomiError(f"{path}: the {what} file cannot be read ({_one_line(exc)})") from None
+    if stat.S_ISDIR(status.st_mode):
         raise BomiError(f"{path}: is a directory, expected a {what} file")
-    if not path.is_file():
-        raise BomiError(f"{path}: no such {what} file")
+    if not stat.S_ISREG(status.st_mode):
+        raise BomiError(f"{path}: is not a regular file (a FIFO, socket or device), expected a {what} file")
+    if status.st_size > max_bytes:
+        raise BomiError(f"{path}: {status.st_size} bytes, more than the {max_bytes} a {what} file may have")
     if not os.access(path, os.R_OK):
         raise BomiError(f"{path}: the {what} file is not readable (permission denied)")
     return path
 
 
+def read_config_text(path: str | os.PathLike, what: str) -> str:
+    """The text of a configuration file (UTF-8, at most MAX_CONFIG_BYTES); one-line BomiError otherwise."""
+    path = check_input(path, what, MAX_CONFIG_BYTES)
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise BomiError(f"{path}: not valid TOML (not UTF-8 text)") from None
+    except OSError as exc:
+        raise BomiError(f"{path}: the {what} file cannot be read ({_one_line(exc)})") from None
+
+
 def temp_sibling(path: Path) -> Path:
     """A new, empty temporary file beside ``path`` with the same suffix (created here, umask applies)."""
+    # the stem cut so the temporary name fits where the final one does (NAME_MAX)
+    room = name_max(path.parent) - len(os.fsencode(f"{TEMP_PREFIX}{TEMP_MARK}{'0' * 8}{path.suffix}"))
+    stem = os.fsencode(path.stem)[:max(room, 1)].decode(errors="ignore")
     for _ in range(100):
-        temp = path.with_name(f"{TEMP_PREFIX}{path.stem}{TEMP_MARK}{secrets.token_hex(4)}{path.suffix}")
+        temp = path.with_name(f"{TEMP_PREFIX}{stem}{TEMP_MARK}{secrets.token_hex(4)}{path.suffix}")
         try:
             with open(temp, "xb"):
                 return temp

@@ -135,6 +135,8 @@ def load_config(path: Path | str | None = None) -> SimConfig:
         raise SimError(f"{path}: cannot read config: {exc.strerror}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SimError(f"{path}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise SimError(f"{path}: not a simulation config (nested too deeply)") from None
     hints = typing.get_type_hints(SimConfig)
     sections = {}
     for field in dataclasses.fields(SimConfig):

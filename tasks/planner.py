@@ -100,6 +100,10 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
     model = typed(human, "model", str, "[human]")
     if not model:
         raise ValueError(f'[human]: model must name a human-model file, or be "{NO_HUMAN_MODEL}"')
+    # what the person has seen the hand do at full deflection: the JACO moves at most 0.2 m/s and
+    # turns its wrist at most about 0.6 rad/s, so a person's belief beyond 1 m/s or 2 pi rad/s (or of 0) is a typo
+    if not 0 < values["full_speed"] <= 1 or not 0 < values["full_turn_speed"] <= 2 * math.pi:
+        raise ValueError("[deflection] needs 0 < full_speed <= 1 (m/s) and 0 < full_turn_speed <= 6.28 (rad/s)")
     if not 0 < values["fine"] <= values["coarse"] <= 1 or not 0 < values["turn"] <= 1:
         raise ValueError("[deflection] needs 0 < fine <= coarse <= 1 and 0 < turn <= 1")
     if not 0 < values["open_closure"] < 1:

@@ -1,5 +1,5 @@
 """The timeline figure, like the paper's: for each episode where the hand is relative to the target
-B (with the task's phases shaded and the joystick mode as a coloured band), then for a BoMI
+(the cube the other is stacked on; with the task's phases shaded and the joystick mode as a coloured band), then for a BoMI
 episode the classifier output per decision (wrong outputs inside the excused transition apart
 from misclassified ones), the amplitude the profile uses and nu(t). Legends sit right of the
 panels, never over the data."""
@@ -23,8 +23,13 @@ if TYPE_CHECKING:
     from tasks.episode import EpisodeLog
 
 # The world axes as the joystick moves the hand along them (docs/sim.md): what "hand - B" is per line.
-AXES = (("x", "x (L: +, R: -)", "tab:blue"), ("y", "y (B: +, F: -)", "tab:orange"),
-        ("z", "z, height (up: +)", "tab:green"))
+AXES = (("x", "x: left +, right -", "tab:blue"), ("y", "y: back +, forward -", "tab:orange"),
+        ("z", "z: up +, down -", "tab:green"))
+# What each class (a joystick function, docs/sim.md) does, for the class axis: in translation mode
+# F/B/R/L move the hand forward/back/right/left and Rr/Lr (the stick twisted) up/down; in the
+# wrist mode they turn the hand; B1/B2 are the buttons that change the mode.
+FUNCTION_WORDS = {"F": "forward", "B": "back", "R": "right", "L": "left", "Rr": "twist right: up",
+                  "Lr": "twist left: down", "B1": "button 1: next mode", "B2": "button 2: previous mode"}
 MODE_COLOURS = {"translation": "#4c72b0", "height": "#8172b2", "wrist": "#dd8452", "fingers": "#55a868"}
 AMPLITUDE_LABELS = {"gamma": "gamma: angle change\nfrom neutral (deg)",
                     "along_class": "amplitude along\nthe class (deg)"}
@@ -76,15 +81,19 @@ def _shade_phases(ax, log: "EpisodeLog") -> list[tuple[float, float, str]]:
     return spans
 
 
+PHASE_POINTS = 8  # the phase labels' font size
+
+
 def _label_phases(ax, spans: list[tuple[float, float, str]]) -> None:
-    """Each phase's name above the panel, where it fits (a phase too short for its name keeps only
-    its shading)."""
+    """Each phase's name inside the top of the panel, where it fits (a phase too short for its name
+    keeps only its shading)."""
     (left, right), width_px = ax.get_xlim(), ax.get_window_extent().width
-    char_px = 0.62 * 6 * ax.figure.dpi / 72  # a character of the 6-pt label
+    char_px = 0.62 * PHASE_POINTS * ax.figure.dpi / 72  # a character of the label
     for t0, t1, phase in spans:
         if (t1 - t0) / (right - left) * width_px >= (len(phase) + 1) * char_px:
-            ax.text((t0 + t1) / 2, 1.0, phase, transform=ax.get_xaxis_transform(), ha="center", va="bottom",
-                    fontsize=6, color="0.35", clip_on=False)
+            ax.text((t0 + t1) / 2, 0.97, phase, transform=ax.get_xaxis_transform(), ha="center", va="top",
+                    fontsize=PHASE_POINTS, color="0.2", clip_on=False,
+                    bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.7})
 
 
 def _mode_band(ax, log: "EpisodeLog") -> list[Patch]:
@@ -112,15 +121,17 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
         for i, (_, label, colour) in enumerate(AXES):
             ax.plot(log.t, rel[:, i], color=colour, lw=1, label=label)
         ax.axhline(0, color="0.6", lw=0.5)
-        ax.margins(y=0.14)  # room for the mode band below the lines
+        ax.margins(y=0.22)  # room for the mode band below the lines and the phase names above
         switches = metrics.count_changes(log.mode)
         verdict = f"done in {log.completion_time:.1f} s" if log.success else f"failed: {log.failure}"
         ax.set_title(f"{log.operator} operator, {log.participant}, seed {log.seed}: {verdict}, {switches} mode "
-                     f"switches. Lines: hand position minus the target B, per world axis", fontsize=9, pad=12)
-        ax.set_ylabel("hand - B (cm)")
+                     f"switches. Lines: the hand's position minus the target's (the cube to stack on), per axis",
+                     fontsize=9)
+        ax.set_ylabel("hand - target (cm)")
         modes = _mode_band(ax, log)
         handles, _ = ax.get_legend_handles_labels()
-        ax.legend(handles=handles + modes + [Patch(color="0.92", label="task phase (shaded\nevery other)")],
+        ax.legend(handles=handles + modes + [Patch(color="0.92", label="task phase (named at the\ntop, shaded "
+                                                                        "every other):\nreach / carry cube k")],
                   **LEGEND)
     if bomi_log is not None:
         _decision_panels(axes[len(logs):], bomi_log)
@@ -156,9 +167,11 @@ def _decision_panels(axes, log: "EpisodeLog") -> None:
                      linewidths=0.7, label=f"other class, excused:\nwithin {1000 * log.allowance * log.sample_period:.0f}"
                                        " ms of an\nintent change")
     ax_class.scatter(d.t[errors], d.decided[errors], s=8, color="red", label="misclassified")
-    ax_class.set_yticks(range(len(log.class_names)), log.class_names, fontsize=7)
+    ax_class.set_yticks(range(len(log.class_names)),
+                        [f"{name} ({FUNCTION_WORDS[name]})" if name in FUNCTION_WORDS else name
+                         for name in log.class_names], fontsize=7)
     ax_class.set_ylim(-0.6, len(log.class_names) - 0.4)
-    ax_class.set_ylabel("class")
+    ax_class.set_ylabel("class: the joystick\nfunction it drives", fontsize=8)
     ax_class.legend(**LEGEND)
     ax_amplitude.plot(d.t, d.gamma, color="tab:purple", lw=0.8)
     ax_amplitude.axhline(0, color="0.6", lw=0.5)

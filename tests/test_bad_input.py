@@ -82,6 +82,24 @@ def nested_json(depth: int = 100_000) -> str:
     return "[" * depth + "]" * depth
 
 
+def constant_mat(base) -> bytes:
+    """The tiny recording as a .mat in which every sensor sends one constant value (labels kept)."""
+    import io
+    import scipy.io
+    rows = [line.split(",") for line in tiny_text(base).splitlines()]
+    header, values = rows[0], np.array(rows[1:], dtype=float)
+    columns = {name: (values[:, j:j + 1] if name == "Etiquette" else np.ones((len(values), 1)))
+               for j, name in enumerate(header) if name != "Time"}
+    buffer = io.BytesIO()
+    scipy.io.savemat(buffer, columns)
+    return buffer.getvalue()
+
+
+def many_classes(count: int) -> str:
+    return shipped_text("bomi/profiles/P1.toml") + "".join(
+        f'\n[[classes]]\nlabel = {9 + k}\nname = "extra {k}"\nfunction = "F"\nnode = 1\n' for k in range(count))
+
+
 def shipped_text(relative: str) -> str:
     return (Path(__file__).resolve().parent.parent / relative).read_text()
 
@@ -190,7 +208,8 @@ CASES = [
          {"m.npz": lambda b: b["m.json"]}),
     Case("recording-is-a-directory", ["train", "{d}/rec.csv", "--out", "{d}/new.json"], "is a directory",
          directories=("rec.csv",)),
-    Case("window-longer-than-the-recording", ["train", "{d}/short.csv", "--profile", "P1", "--out", "{d}/new.json"],
+    Case("window-longer-than-the-recording", ["train", "{d}/short.csv", "--profile", "P1", "--allow-missing-classes",
+                                              "--out", "{d}/new.json"],
          "shorter than one",
          {"short.csv": lambda b: "\n".join(tiny_text(b).splitlines()[:5]) + "\n"}),
     Case("profile-value-beyond-any-setting", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
@@ -199,6 +218,47 @@ CASES = [
     Case("operator-infinite-speed", ["run-task", "--operator", "joystick", "--operator-file", "{d}/o.toml"],
          "deflection.full_speed", {"o.toml": lambda b: shipped_text("tasks/operator.toml").replace(
              "full_speed = 0.20", "full_speed = inf")}),
+    # 10. nonsense that used to be accepted (issue 29): physical quantities and sizes out of range
+    Case("model-coefficient-1e308", ["evaluate", "--train", "{d}/bad.json", "--test", "{d}/tiny.csv"], "LDA parameters",
+         {"bad.json": lambda b: model_json(b, lambda m: m["coef"][0].__setitem__(0, 1e308))}),
+    Case("model-vote-length-1e12", ["evaluate", "--train", "{d}/bad.json", "--test", "{d}/tiny.csv"], "vote length",
+         {"bad.json": lambda b: model_json(b, lambda m: m["post_processing"].update(vote_length=10**12))}),
+    Case("model-shrinkage-NaN", ["evaluate", "--train", "{d}/bad.json", "--test", "{d}/tiny.csv"], "shrinkage",
+         {"bad.json": lambda b: model_json(b, lambda m: m.update(shrinkage="NaN"))}),
+    Case("model-gamma-min-minus-50", ["evaluate", "--train", "{d}/bad.json", "--test", "{d}/tiny.csv"],
+         "amplitude range of class 2",  # gamma, the size of an angle change, is never negative
+         {"bad.json": lambda b: model_json(b, lambda m: (m["amplitude"]["2"].pop("direction", None),
+                                                          m["amplitude"]["2"].update(gamma_min=-50.0)))}),
+    Case("model-along-class-min-beyond-any-angle", ["live", "--port", P1_PORT, "--profile", "P1", "--model",
+                                                    "{d}/bad.json"], "amplitude range of class 2",
+         {"bad.json": lambda b: model_json(b, lambda m: m["amplitude"]["2"].update(gamma_min=-1000.0))}),
+    Case("profile-20000-classes", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"], "p.toml",
+         {"p.toml": lambda b: many_classes(20_000)}),
+    Case("profile-70-classes", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
+         "need three to 64 classes", {"p.toml": lambda b: many_classes(61)}),
+    Case("profile-neutral-samples-1e6", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
+         "neutral: samples", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
+             "samples = 100 ", "samples = 1000000 ")}),
+    Case("profile-nested-3000-deep", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
+         "nested deeper", {"p.toml": lambda b: "a = " + "[" * 3000 + "]" * 3000 + "\n"}),
+    Case("operator-full-speed-0", ["run-task", "--operator", "joystick", "--operator-file", "{d}/o.toml"],
+         "full_speed", {"o.toml": lambda b: shipped_text("tasks/operator.toml").replace(
+             "full_speed = 0.20", "full_speed = 0")}),
+    Case("run-task-time-limit-1e-300", ["run-task", "--operator", "joystick", "--time-limit", "1e-300"], "--time-limit"),
+    Case("demo-time-limit-nan", ["demo", "--time-limit", "nan", "--out", "{d}/demo"], "--time-limit"),
+    Case("train-recording-lacks-profile-classes", ["train", "{d}/tiny.csv", "--profile", "P1", "--out", "{d}/n.json"],
+         "no samples of class(es) c1 "),
+    Case("train-mat-with-constant-sensors", ["train", "{d}/flat.mat", "--profile", "P1", "--allow-missing-classes",
+                                             "--out", "{d}/n.json"], "are constant", {"flat.mat": constant_mat}),
+    Case("train-out-name-300-characters", ["train", "{d}/tiny.csv", "--out", "{d}/" + "m" * 295 + ".json"],
+         "longer than the 255 bytes"),
+    Case("evaluate-png-name-300-characters", ["evaluate", "--train", "{d}/m.json", "--test", "{d}/tiny.csv",
+                                              "--png", "{d}/" + "c" * 296 + ".png"], "longer than the 255 bytes"),
+    Case("sweep-out-name-300-characters", ["sweep", "{d}/g.toml", "--out", "{d}/" + "s" * 300, "--jobs", "1"],
+         "File name too long", {"g.toml": lambda b: 'participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n'}),
+    Case("benchmark-1e11-seeds", ["benchmark", "--operators", "joystick", "--seeds", "100000000000"], "--seeds"),
+    Case("run-task-seed-1e15", ["run-task", "--operator", "joystick", "--seed", "1000000000000000"], "--seed"),
+    Case("demo-out-name-300-characters", ["demo", "--out", "{d}/" + "o" * 300], "File name too long"),
     # 9. options
     Case("emulate-zero-hold", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "0"], "--hold"),
     Case("emulate-nan-duration", ["emulate", "--participant", "P1", "--to", "pty", "--duration", "nan"], "--duration"),
@@ -262,6 +322,69 @@ def test_the_installed_command_line_process_too(case, base, tmp_path):
     assert_clean_error(done.returncode, done.stderr, case.names, before, tmp_path)
 
 
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+@pytest.mark.parametrize("command", ["train", "evaluate-model", "profile", "operator"])
+def test_a_fifo_or_device_where_a_file_is_meant_is_refused_without_reading_it(base, tmp_path, capsys, kind, command):
+    """No hang on a FIFO nobody writes, no endless read of /dev/zero: refused by its type, at once."""
+    (tmp_path / "tiny.csv").write_bytes(base["tiny.csv"])
+    (tmp_path / "m.json").write_bytes(base["m.json"])
+    suffix = {"train": ".csv", "evaluate-model": ".json", "profile": ".toml", "operator": ".toml"}[command]
+    if kind == "fifo":
+        bad = tmp_path / f"bad{suffix}"
+        os.mkfifo(bad)
+    else:
+        bad = tmp_path / f"zero{suffix}"
+        bad.symlink_to("/dev/zero")  # a name with the right suffix, that is a device
+    argv = {"train": ["train", str(bad), "--out", str(tmp_path / "n.json")],
+            "evaluate-model": ["evaluate", "--train", str(bad), "--test", str(tmp_path / "tiny.csv")],
+            "profile": ["train", str(tmp_path / "tiny.csv"), "--profile", str(bad), "--out", str(tmp_path / "n.json")],
+            "operator": ["run-task", "--operator", "joystick", "--operator-file", str(bad)]}[command]
+    before = snapshot(tmp_path)
+    start = time.monotonic()
+    code = main(argv)
+    line = assert_clean_error(code, capsys.readouterr().err, str(bad), before, tmp_path)
+    assert "is not a regular file" in line and time.monotonic() - start < 10
+
+
+def test_an_out_name_of_245_characters_is_written(base, tmp_path, capsys):
+    """The temporary sibling is cut to fit NAME_MAX: a long name the file system accepts works."""
+    (tmp_path / "tiny.csv").write_bytes(base["tiny.csv"])
+    out = tmp_path / ("f" * 241 + ".csv")
+    assert len(out.name) == 245
+    assert main(["fuse", str(tmp_path / "tiny.csv"), "--out", str(out)]) == 0
+    assert len(read_recording(out)) == TINY_ROWS
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([out.name, "tiny.csv"])
+
+
+def test_a_full_disk_while_writing_is_one_line_and_leaves_nothing(base, tmp_path):
+    """The file system refuses more bytes mid-write (a full disk; here a file-size limit, EFBIG):
+    one error line, no partial output, no temporary file."""
+    import resource
+    import signal
+
+    def small_files():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (len(base["tiny.csv"]), len(base["tiny.csv"])))
+
+    (tmp_path / "tiny.csv").write_bytes(base["tiny.csv"])
+    before = snapshot(tmp_path)
+    done = subprocess.run([sys.executable, "-m", "tasks.cli", "fuse", str(tmp_path / "tiny.csv"), "--out",
+                           str(tmp_path / "o.csv")], capture_output=True, text=True, timeout=120, preexec_fn=small_files)
+    line = assert_clean_error(done.returncode, done.stderr, "o.csv", before, tmp_path)
+    assert "cannot be written (File too large)" in line
+
+
+def test_an_unwritable_directory_is_one_line(base, tmp_path, capsys):
+    if os.geteuid() == 0:
+        pytest.skip("root writes anywhere")
+    (tmp_path / "tiny.csv").write_bytes(base["tiny.csv"])
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    assert main(["fuse", str(tmp_path / "tiny.csv"), "--out", str(locked / "o.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not writable" in err
+
+
 # ------------------------------------------------------------------------------------- outputs
 def test_outputs_get_normal_permissions_and_force_replaces(base, tmp_path, capsys):
     (tmp_path / "tiny.csv").write_bytes(base["tiny.csv"])
@@ -299,6 +422,19 @@ def test_an_internal_error_is_one_line_and_debug_shows_the_traceback(tmp_path, c
     assert main(["--debug", *argv]) == 1
     err = capsys.readouterr().err
     assert "Traceback" in err and "ZeroDivisionError" in err
+
+
+def test_a_command_module_that_fails_to_load_is_one_line_too(capsys, monkeypatch):
+    """A broken install (a module half written, a library missing) is one internal-error line."""
+    import tasks.cli as cli
+
+    def broken(name, *args):
+        raise ImportError(f"cannot import {name}")
+
+    monkeypatch.setattr(cli.importlib, "import_module", broken)
+    assert main(["train", "x.csv", "--out", "m.json"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("bomi: internal error: ImportError: cannot import tasks.cli.chain")
 
 
 # ------------------------------------------------------------------------------------- streams

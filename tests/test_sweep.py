@@ -1,12 +1,22 @@
 """`bomi sweep`: the grid file, its cells and keys, resuming an interrupted sweep, the summary."""
+import fcntl
 import hashlib
 import json
+import os
+import resource
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
+from bomi.files import TEMP_MARK
 from tasks.cli import main
 from tasks.cli.engine import ProcessPool
-from tasks.cli.sweep import FIGURE_METRICS, RESULTS_FILE, cells, job_key, load_grid, read_results, run_sweep, write_summary
+from tasks.cli.sweep import (FIGURE_METRICS, LOCK_FILE, RESULTS_FILE, cells, job_key, load_grid, read_results,
+                             run_sweep)
 from tasks.cli.task import aggregate
 
 SHORT = 2.0  # s of simulated time: a joystick episode that short costs well under a second
@@ -36,7 +46,7 @@ time_limit = [{SHORT}, 2.5]
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [1, 1]\n', "none twice"),
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nvote = [1, 3]\n', "vote: not a setting"),
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nvote_length = 3\n', "non-empty list"),
-    ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nvote_length = [0]\n', "positive numbers"),
+    ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nvote_length = [0]\n', "whole numbers in [1, 625]"),
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nprofile.post_processing.vote_length = [3]\n',
      "set with vote_length"),
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nvote_length = [3]\n[figure]\nsetting = "x"\n',
@@ -105,21 +115,22 @@ class Interrupting:
                 raise KeyboardInterrupt
 
 
-def test_an_interrupted_sweep_resumes_without_rerunning_finished_episodes(tmp_path):
+def test_an_interrupted_sweep_resumes_without_rerunning_finished_episodes(tmp_path, capsys):
     grid = load_grid(grid_file(tmp_path, JOYSTICK_GRID))
     out = tmp_path / "out"
     first = Interrupting(after=2)
-    with pytest.raises(KeyboardInterrupt):
-        run_sweep(grid, out, first)
+    result = run_sweep(grid, out, first)
+    assert result.interrupted and (result.total, result.ran, len(result.records)) == (4, 2, 2)
     path = out / RESULTS_FILE
     kept = path.read_text().splitlines()
     assert len(first.asked) == 4 and len(kept) == 2
     with path.open("a") as handle:  # killed in the middle of writing a third record
         handle.write('{"key": "abc", "settings": {"seed"')
-    assert set(read_results(path)) == {json.loads(line)["key"] for line in kept}
+    assert set(read_results(path).records) == {json.loads(line)["key"] for line in kept}
 
     second = Interrupting()
-    records = run_sweep(grid, out, second)
+    records = run_sweep(grid, out, second).records
+    assert "set aside an unfinished last line (34 bytes" in capsys.readouterr().err
     finished = {json.loads(line)["key"] for line in kept}
     assert len(second.asked) == 2 and not finished & {job_key(job) for job in second.asked}
     lines = path.read_text().splitlines()
@@ -128,14 +139,245 @@ def test_an_interrupted_sweep_resumes_without_rerunning_finished_episodes(tmp_pa
     assert [r["sim_time"] for r in records] == pytest.approx([SHORT, SHORT, 2.5, 2.5], abs=0.02)
 
     third = Interrupting()
-    assert run_sweep(grid, out, third) == records and third.asked == []
+    assert run_sweep(grid, out, third).records == records and third.asked == []
+
+
+def test_a_complete_last_record_without_its_line_end_is_kept_and_said(tmp_path, capsys):
+    grid = load_grid(grid_file(tmp_path, JOYSTICK_GRID))
+    out = tmp_path / "out"
+    run_sweep(grid, out, Interrupting(after=2))
+    path = out / RESULTS_FILE
+    whole = path.read_bytes()
+    path.write_bytes(whole[:-1])  # the last record's newline lost (an editor, a copy)
+    again = Interrupting()
+    records = run_sweep(grid, out, again).records
+    assert "its last record had no line end; kept it (2 records)" in capsys.readouterr().err
+    assert len(again.asked) == 2 and len(records) == 4
+    assert path.read_bytes().startswith(whole) and len(path.read_text().splitlines()) == 4
+
+
+# ------------------------------------------------------------------------------- as a user runs it
+def sweep(grid, out, *extra, check=None, **kwargs):
+    """`bomi sweep` in its own process (what a user runs)."""
+    done = subprocess.run([sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out), "--jobs", "1",
+                           *extra], capture_output=True, text=True, timeout=300, **kwargs)
+    if check is not None:
+        assert done.returncode == check, done.stderr
+    return done
+
+
+def keys_in(out):
+    return [json.loads(line)["key"] for line in (out / RESULTS_FILE).read_text().splitlines()]
+
+
+ONE_SECOND = """
+participants = ["P1"]
+operators = ["joystick"]
+seeds = {first = 0, count = %d}
+[vary]
+time_limit = [1.0]
+"""
+
+
+def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp_path):
+    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
+    sweep(grid, out, check=0)
+    first = keys_in(out)
+    (out / "summary.md").write_text("stale")
+    done = sweep(grid, out, check=0)
+    assert keys_in(out) == first and "file exists" not in done.stderr
+    assert "2 episodes" in (out / "summary.md").read_text()
+    assert not [p for p in out.iterdir() if TEMP_MARK in p.name]
+
+
+def test_more_seeds_run_only_the_new_episodes_and_the_summaries_agree(tmp_path):
+    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
+    sweep(grid, out, check=0)
+    first = keys_in(out)
+    grid.write_text(ONE_SECOND % 3)  # the grid file's own advice: add seeds and rerun the same command
+    sweep(grid, out, check=0)
+    keys = keys_in(out)
+    assert keys[:2] == first and len(keys) == len(set(keys)) == 3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["seeds"] == [0, 1, 2] and summary["rows"][0]["episodes"] == 3
+    assert "| 0/3 " in (out / "summary.md").read_text()
+
+
+def test_a_second_sweep_on_the_same_directory_says_one_line_and_runs_nothing(tmp_path):
+    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
+    out.mkdir()
+    with open(out / LOCK_FILE, "w") as held:  # as a running sweep holds it
+        fcntl.flock(held, fcntl.LOCK_EX)
+        held.write("12345\n")
+        held.flush()
+        done = sweep(grid, out, check=2)
+    assert done.stderr.strip().splitlines() == [done.stderr.strip()]
+    assert "another bomi sweep (pid 12345) is writing this directory" in done.stderr
+    assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]
+
+
+def test_two_sweeps_started_together_run_each_episode_once(tmp_path):
+    grid, out = grid_file(tmp_path, ONE_SECOND % 3), tmp_path / "out"
+    command = [sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out), "--jobs", "1"]
+    both = [subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    codes = sorted(p.wait(timeout=300) for p in both)
+    errors = [p.stderr.read() for p in both]
+    assert codes in ([0, 0], [0, 2]), errors
+    keys = keys_in(out)
+    assert len(keys) == len(set(keys)) == 3
+
+
+@pytest.mark.parametrize("planted", ["summary.md", RESULTS_FILE, "completion_time.png", LOCK_FILE])
+def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, planted):
+    grid, out = grid_file(tmp_path, ONE_SECOND % 1), tmp_path / "out"
+    sweep(grid, out, check=0)
+    victim = tmp_path / "precious.txt"
+    victim.write_text("keep me")
+    (out / planted).unlink()
+    (out / planted).symlink_to(victim)
+    before = {p.name: p.read_bytes() for p in out.iterdir() if not p.is_symlink()}
+    done = sweep(grid, out, check=2)
+    assert done.stderr.strip().startswith("bomi: error:") and "\n" not in done.stderr.strip()
+    assert planted in done.stderr and "symbolic link" in done.stderr
+    assert victim.read_text() == "keep me" and (out / planted).is_symlink()
+    assert {p.name: p.read_bytes() for p in out.iterdir() if not p.is_symlink()} == before
+
+
+def children(pid):
+    """The pids of ``pid``'s child processes (Linux /proc)."""
+    kids = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        kids += [int(k) for k in (task / "children").read_text().split()]
+    return kids
+
+
+def alive(pid):
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] not in "ZX"
+    except FileNotFoundError:
+        return False
+
+
+def wait_for(condition, seconds):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return condition()
+
+
+LONG = """
+participants = ["P1"]
+operators = ["joystick"]
+seeds = {first = 0, count = 8}
+[vary]
+time_limit = [30.0]
+"""
+
+
+def start_long_sweep(tmp_path):
+    grid, out = grid_file(tmp_path, LONG), tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out),
+                                "--jobs", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)  # its own process group, as a shell job
+    assert wait_for(lambda: (out / RESULTS_FILE).exists() and (out / RESULTS_FILE).read_text().count("\n") >= 1, 120)
+    workers = children(process.pid)
+    assert len(workers) >= 2
+    return process, out, workers
+
+
+def test_ctrl_c_keeps_every_finished_episode_and_stops_the_workers(tmp_path):
+    process, out, workers = start_long_sweep(tmp_path)
+    os.killpg(process.pid, signal.SIGINT)  # what Ctrl-C at a terminal does: the whole job gets it
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err
+    saved = keys_in(out)
+    assert 1 <= len(saved) < 8 and f"{len(saved)} of the grid's 8 episodes are saved" in err
+    assert (out / RESULTS_FILE).read_text().endswith("\n")
+    assert json.loads((out / "summary.json").read_text())["rows"][0]["episodes"] == len(saved)
+    assert wait_for(lambda: not any(alive(w) for w in workers), 10)
+
+
+@pytest.mark.parametrize("how", [signal.SIGTERM, signal.SIGKILL])
+def test_no_worker_outlives_the_driver_whatever_ends_it(tmp_path, how):
+    process, out, workers = start_long_sweep(tmp_path)
+    process.send_signal(how)
+    process.communicate(timeout=60)
+    assert wait_for(lambda: not any(alive(w) for w in workers), 10), "a pool worker outlived its driver"
+    lines = (out / RESULTS_FILE).read_text()
+    assert lines.endswith("\n") and all(json.loads(line)["key"] for line in lines.splitlines())
+
+
+def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path):
+    grid, out = grid_file(tmp_path, ONE_SECOND % 4), tmp_path / "out"
+    line = None
+
+    def small_files():  # in the child: files may not grow beyond 1.5 records (as a disk that fills up)
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    sweep(grid_file(tmp_path, ONE_SECOND % 1, "one.toml"), tmp_path / "probe", check=0)
+    line = len((tmp_path / "probe" / RESULTS_FILE).read_bytes())
+    limit = int(1.5 * line)
+    done = sweep(grid, out, preexec_fn=small_files)
+    assert done.returncode == 2, done.stderr
+    errors = [x for x in done.stderr.splitlines() if x.startswith("bomi: ")]
+    assert len(errors) == 1 and "episodes.jsonl: cannot append an episode (" in errors[0] \
+        and "the 1 episodes before it are saved, rerun to go on" \
+        in errors[0], done.stderr
+    assert "Traceback" not in done.stderr
+    assert len(keys_in(out)) == 1 and (out / RESULTS_FILE).read_text().endswith("\n")
+    sweep(grid, out, check=0)  # room again: the rest runs
+    assert len(keys_in(out)) == 4
+
+
+@pytest.mark.parametrize("text, fault", [
+    ('participants = ["P1"]\noperators = ["joystick"]\nseeds = {first = 0, count = 1000000000000000}\n',
+     "count must be in [1, 10000]"),
+    ('participants = ["P1"]\noperators = ["joystick"]\nseeds = [1000000000000000]\n', "each in [0, 4294967295]"),
+    ('participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n[vary]\ntime_limit = ['
+     + ", ".join(str(1.0 + k) for k in range(101)) + "]\n", "at most 100 values"),
+    ('participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n[vary]\ntime_limit = ['
+     + ", ".join(str(1.0 + k) for k in range(1_000_000)) + "]\n", "bytes, more than the 1048576 a grid file may have"),
+    ('participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n[vary]\ntime_limit = [1e-300]\n',
+     "numbers in [1, 86400] s"),
+    ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nvote_length = [1000000000000]\n',
+     "whole numbers in [1, 625] decisions"),
+    ('participants = ["P1"]\noperators = ["joystick"]\nseeds = {first = 0, count = 10000}\n[vary]\n'
+     'time_limit = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0]\n', "more than the 100000"),
+    ("a = " + "[" * 3000 + "]" * 3000 + "\n", "nested deeper than 16 levels"),
+], ids=["seed-count-1e15", "seed-1e15", "101-values", "1e6-values", "time-limit-1e-300", "vote-1e12",
+        "1.1e5-episodes", "nested-3000-deep"])
+def test_a_grid_beyond_any_sweep_is_refused_at_once(tmp_path, capsys, text, fault):
+    grid, out = grid_file(tmp_path, text), tmp_path / "out"
+    start = time.monotonic()
+    assert main(["sweep", str(grid), "--out", str(out), "--jobs", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("bomi: error:") and fault in err and "\n" not in err, err
+    assert time.monotonic() - start < 5 and not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "directory"])
+def test_a_grid_that_is_not_a_file_is_refused_without_reading_it(tmp_path, capsys, kind):
+    grid = tmp_path / "grid.toml"
+    if kind == "fifo":
+        os.mkfifo(grid)
+    elif kind == "directory":
+        grid.mkdir()
+    else:
+        grid = Path("/dev/zero")
+    assert main(["sweep", str(grid), "--out", str(tmp_path / "out"), "--jobs", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"bomi: error: {grid}: is ") and "\n" not in err
 
 
 def test_summary_is_the_benchmark_aggregation_per_cell_with_figures(tmp_path):
     grid = load_grid(grid_file(tmp_path, JOYSTICK_GRID + '[figure]\nmetric = "unintended_displacement_mm"\n'))
     out = tmp_path / "out"
-    records = run_sweep(grid, out, ProcessPool(2))
-    table = write_summary(grid, records, out)
+    result = run_sweep(grid, out, ProcessPool(2))
+    records, table = result.records, result.table
     summary = json.loads((out / "summary.json").read_text())
     rows = summary["rows"]
     assert [r["settings"] for r in rows] == [{"time_limit": SHORT}, {"time_limit": 2.5}]
@@ -144,7 +386,63 @@ def test_summary_is_the_benchmark_aggregation_per_cell_with_figures(tmp_path):
         expected, = aggregate(cell)
         assert {k: row[k] for k in expected} == expected and row["episodes"] == 2
     # a joystick row is for anyone with the controls: its participant is "any", its layout P1's
-    assert "| any | joystick | 2.5 | 3-axis, B1+B2 | 0/2 " in table and (out / "summary.md").read_text().count("| any |") == 2
+    full = (out / "summary.md").read_text()
+    assert "| any | joystick | 2.5 | 3-axis, B1+B2 | 0/2 |" in full and full.count("| any |") == 2
+    # the terminal's table: within 100 columns, no interval for 2 episodes
+    assert table.splitlines()[3].split() == ["any", "joystick", "2.5", "0/2", "-", "-", "-", "-"]
+    assert max(map(len, table.splitlines())) <= 100
     for figure in ("completion_time.png", "unintended_displacement_mm_vs_time_limit.png"):
         assert (out / figure).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert set(FIGURE_METRICS) <= set(rows[0])  # every metric the figure may plot is a summary column
+
+
+def test_the_sweep_figure_has_units_and_a_log_axis_for_thresholds(tmp_path):
+    """A threshold's 0.9, 0.99, 0.999 are evenly spaced (log of 1 - threshold), the axes say what
+    and in which unit; no error bar for fewer than 5 episodes."""
+    from tasks.cli.figures import metric_figure
+    import matplotlib.pyplot as plt
+    captured = {}
+    real_savefig = plt.Figure.savefig
+
+    def keep(fig, path, **kwargs):
+        captured["axes"] = fig.axes[0]
+        return real_savefig(fig, path, **kwargs)
+
+    plt.Figure.savefig = keep
+    try:
+        metric_figure({"P4 bomi": [(0.9, 30.0, None), (0.99, 20.0, None), (0.999, 25.0, None)]},
+                      tmp_path / "f.png", "completion_time_mean", "profile.post_processing.rejection_threshold")
+    finally:
+        plt.Figure.savefig = real_savefig
+    ax = captured["axes"]
+    assert ax.get_xscale() == "log" and ax.get_ylabel() == "completion time, mean of successes (s)"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0.9", "0.99", "0.999"]
+    line = ax.get_lines()[0].get_xdata()
+    assert list(line) == pytest.approx([0.1, 0.01, 0.001])
+    assert "rejection threshold" in ax.get_xlabel() and "log" in ax.get_xlabel()
+
+
+def descendants(pid):
+    found, todo = [], [pid]
+    while todo:
+        for kid in children(todo.pop()):
+            found.append(kid)
+            todo.append(kid)
+    return found
+
+
+def test_sigterm_on_a_ray_sweep_keeps_what_finished_and_shuts_the_local_ray_down(tmp_path):
+    pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
+    grid, out = grid_file(tmp_path, LONG), tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out),
+                                "--engine", "ray", "--jobs", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, start_new_session=True)
+    assert wait_for(lambda: (out / RESULTS_FILE).exists() and (out / RESULTS_FILE).read_text().count("\n") >= 1, 240)
+    ray_processes = descendants(process.pid)
+    assert ray_processes  # the local Ray's processes are the driver's descendants
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "episodes are saved in" in err and "Traceback" not in err
+    assert wait_for(lambda: not any(alive(p) for p in ray_processes), 30), "a Ray process outlived the sweep"
+    assert 1 <= len(keys_in(out)) < 8

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bomi.classifier import AMPLITUDE_KINDS, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
+from bomi.classifier import AMPLITUDE_KINDS, MAX_CLASSES, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
 from bomi.config_files import check_table, load_toml, number, typed
 from bomi.files import write_text
 from bomi.features import FEATURE_KINDS, FeatureSpec
@@ -32,6 +32,8 @@ DEFAULT_NEUTRAL_SAMPLES = 100  # hardware.md step 6: about 100 samples of the ne
 # pitch/roll filter's decay (time constant 12.5 samples, 200 ms): 0.35 s outlasts both, and costs a
 # deliberate press 0.35 s.
 DEFAULT_BUTTON_HOLD_S = 0.35
+# The neutral posture is held for seconds, not for hours: more than a minute of samples is a typo.
+MAX_NEUTRAL_SAMPLES = 3750
 
 _TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
              "post_processing", "joystick", "assist", "live"}
@@ -200,8 +202,9 @@ def _parse_classes(tables: list, node_indices: set[int]) -> tuple[ClassConfig, .
     labels = [cls.label for cls in classes]
     if len(set(labels)) != len(labels):
         raise ValueError("classes: duplicate label")
-    if len(classes) < 3:
-        raise ValueError("classes: need at least three classes (neutral and two motions)")
+    if not 3 <= len(classes) <= MAX_CLASSES:
+        raise ValueError(f"classes: need three to {MAX_CLASSES} classes (neutral and at least two motions), "
+                         f"got {len(classes)}")
     neutral = [cls for cls in classes if cls.function == NEUTRAL_FUNCTION]
     if len(neutral) != 1 or neutral[0].label != NEUTRAL_LABEL:
         raise ValueError(f"classes: exactly one class, label {NEUTRAL_LABEL}, must have function \"neutral\"")
@@ -237,8 +240,8 @@ def _parse_amplitude_scales(classifier: dict) -> tuple[float, ...]:
 
 def _parse_neutral_samples(neutral: dict) -> int:
     samples = typed(neutral, "samples", int, "neutral", DEFAULT_NEUTRAL_SAMPLES)
-    if samples < 1:
-        raise ValueError("neutral: samples must be >= 1")
+    if not 1 <= samples <= MAX_NEUTRAL_SAMPLES:
+        raise ValueError(f"neutral: samples must be in [1, {MAX_NEUTRAL_SAMPLES}] (a minute at 62.5 Hz), got {samples}")
     return samples
 
 

@@ -26,6 +26,9 @@ from tasks.cli.options import add_force, check_outputs, open_unit_interval, posi
 from tasks.stick import arm_profile
 
 
+DEFAULT_CONFUSION = "confusion.png"  # evaluate's own output when --png names none
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "train")
     p.add_argument("recordings", nargs="+", metavar="RECORDING", help=".mat or .csv recordings")
@@ -37,6 +40,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--save-profile", metavar="PATH", help="also write the profile the model was trained for as TOML "
                                                           "(e.g. the derived one), for --profile PATH of live/evaluate")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
+    p.add_argument("--allow-missing-classes", action="store_true",
+                   help="train even if the recordings have no samples of some classes of --profile (the model "
+                        "then never outputs them); without it that is an error")
     add_force(p)
     p.set_defaults(func=train_command)
 
@@ -51,8 +57,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--vote", type=positive_int, metavar="N",
                    help="majority vote over the last N decisions (default: the model's)")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON")
-    p.add_argument("--png", metavar="OUT", default="confusion.png",
-                   help="confusion matrix figure (default %(default)s)")
+    p.add_argument("--png", metavar="OUT", help=f"confusion matrix figure (default {DEFAULT_CONFUSION}, replaced on "
+                                                "each run; a file you name is replaced only with --force)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
     add_force(p)
     p.set_defaults(func=evaluate_command)
@@ -106,34 +112,43 @@ def confusion_text(evaluation: Evaluation, classes: Sequence[int]) -> str:
     return "\n".join(lines)
 
 
-def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes: Sequence[int]) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from sklearn.metrics import ConfusionMatrixDisplay
+def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes: Sequence[int],
+                          names: Sequence[str]) -> None:
+    from sklearn.metrics import confusion_matrix
 
-    fig, axes = plt.subplots(1, len(evaluations), figsize=(5 * len(evaluations), 4.6), squeeze=False)
-    for ax, ev in zip(axes[0], evaluations):
-        ConfusionMatrixDisplay.from_predictions(ev.truth, ev.predicted, labels=list(classes),
-                                                display_labels=[f"c{c}" for c in classes],
-                                                ax=ax, colorbar=False, values_format="d")
-        ax.set_title(f"{Path(ev.source).name}: {100 * ev.accuracy:.2f} %", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from tasks.cli.figures import confusion_figure
+    confusion_figure(path, [(f"{Path(ev.source).name}: accuracy {100 * ev.accuracy:.2f} % of {len(ev.truth):,} windows",
+                             confusion_matrix(ev.truth, ev.predicted, labels=list(classes))) for ev in evaluations],
+                     names)
+
+
+def class_names(classes: Sequence[int], profile: Profile | None) -> list[str]:
+    """``c<label>`` and, when the profile is known, the class's name (its joystick function for a long one)."""
+    known = {cls.label: cls for cls in profile.classes} if profile else {}
+    names = []
+    for label in classes:
+        cls = known.get(label)
+        if cls is None:
+            names.append(f"c{label}")
+        else:
+            name = cls.name if len(cls.name) <= 18 else cls.name[:17] + "…"
+            names.append(f"c{label} {cls.function}: {name}" if cls.function != "neutral" else f"c{label} {name}")
+    return names
 
 
 # -------------------------------------------------------------------------------------- commands
-def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> Model:
-    """Train ``profile``'s model, first checking every recording and choosing (and printing) what the
-    profile leaves to the person's own data."""
-    check_training_data(recordings, profile, spec)
+def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+              allow_missing_classes: bool = False) -> Model:
+    """Train ``profile``'s model, first checking every recording (``check_training_data``: a class of
+    the profile without windows is an error unless ``allow_missing_classes``) and choosing (and
+    printing) what the profile leaves to the person's own data."""
+    check_training_data(recordings, profile, spec, allow_missing_classes)
     selection = None
     if profile.shrinkage == SELECT or profile.select_rejection:
         print("choosing the classifier settings on the training recording (cross-validation) ...", flush=True)
         selection = select_settings(recordings, profile, spec)
         print(selection.explain())
-    return train(recordings, profile, spec, selection=selection)
+    return train(recordings, profile, spec, selection=selection, allow_missing_classes=allow_missing_classes)
 
 
 def settings_text(model: Model) -> str:
@@ -159,7 +174,7 @@ def train_command(args: argparse.Namespace) -> int:
     profile = arm_profile(args.profile) if args.profile else None
     recordings = [read(path, args.verbose) for path in args.recordings]
     profile = profile or _derived(recordings)
-    model = fit_model(recordings, profile, _spec(profile, args.features))
+    model = fit_model(recordings, profile, _spec(profile, args.features), args.allow_missing_classes)
     save_model(out, model, overwrite=args.force)
     estimate = "" if model.cv_accuracy is None else f" (CV estimate {100 * model.cv_accuracy:.2f} %)"
     print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), {settings_text(model)}{estimate}: "
@@ -185,8 +200,10 @@ def _training_source(path: str) -> str:
 
 def evaluate_command(args: argparse.Namespace) -> int:
     inputs = [args.train, *args.test]
-    outputs = check_outputs({"--png": (args.png, (".png",)), "--json": (args.json, (".json",))},
-                            inputs=inputs, force=args.force)
+    png_named = args.png is not None
+    outputs = check_outputs({"--png": (args.png if png_named else DEFAULT_CONFUSION, (".png",)),
+                             "--json": (args.json, (".json",))},
+                            inputs=inputs, force=args.force, defaults=() if png_named else ("--png",))
     kind = _training_source(args.train)
     check_input(args.train, kind)
     profile = arm_profile(args.profile) if args.profile else None
@@ -227,8 +244,8 @@ def evaluate_command(args: argparse.Namespace) -> int:
         results.append({"test": str(path), "accuracy": ev.accuracy, "cv_estimate": model.cv_accuracy,
                         "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
-    with atomic_output(outputs["--png"], overwrite=args.force) as temp:
-        save_confusion_figure(temp, evaluations, model.classes.tolist())
+    with atomic_output(outputs["--png"], overwrite=args.force or not png_named) as temp:
+        save_confusion_figure(temp, evaluations, model.classes.tolist(), class_names(model.classes.tolist(), profile))
     print(f"confusion matrices: {outputs['--png']}")
     if outputs["--json"]:
         record = {"train": str(args.train), "features": model.spec.kind, "shrinkage": model.shrinkage,

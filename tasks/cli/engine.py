@@ -8,7 +8,9 @@ depends only on its settings and seed), so the engine, the worker and the order 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import os
+import signal
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -43,26 +45,45 @@ class EpisodeFailed(RuntimeError):
     """An item's work raised (or its worker died) and, on Ray, did so again when retried."""
 
 
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _worker_init(driver: int) -> None:
+    """In each pool worker: Ctrl-C is the driver's to handle (it stops the workers), and the worker
+    is killed by the kernel when the driver dies, however it dies (kill -9 included)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != driver:  # the driver died before the line above took effect
+        os._exit(1)
+
+
 class ProcessPool:
-    """``workers`` processes on this machine (concurrent.futures)."""
+    """``workers`` processes on this machine (concurrent.futures); they die with the driver."""
 
     def __init__(self, workers: int):
         self.workers = workers
 
     def run(self, work: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
-        with ProcessPoolExecutor(max_workers=self.workers) as pool:
-            futures = {pool.submit(work, item): i for i, item in enumerate(items)}
-            try:
-                for future in as_completed(futures):
-                    i = futures[future]
-                    try:
-                        result = future.result()
-                    except Exception as exc:
-                        raise EpisodeFailed(f"{items[i]}: {type(exc).__name__}: {exc}") from exc
-                    yield i, result
-            finally:  # interrupted or failed: do not start what is still queued
-                for future in futures:
-                    future.cancel()
+        pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_worker_init, initargs=(os.getpid(),))
+        futures = {pool.submit(work, item): i for i, item in enumerate(items)}
+        finished = False
+        try:
+            for future in as_completed(futures):
+                i = futures[future]
+                try:
+                    result = future.result()
+                except Exception as exc:
+                    raise EpisodeFailed(f"{items[i]}: {type(exc).__name__}: {exc}") from exc
+                yield i, result
+            finished = True
+        finally:  # interrupted or failed: nothing queued starts, nothing running goes on
+            for future in futures:
+                future.cancel()
+            if not finished:
+                for process in list((getattr(pool, "_processes", None) or {}).values()):
+                    process.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 class RayCluster:
@@ -78,8 +99,14 @@ class RayCluster:
         started_here = not ray.is_initialized()
         if started_here:  # a local Ray's workers at normal priority, as the pool's (Ray's default is nice 15)
             local = {} if self.address else {"num_cpus": self.cpus, "_system_config": {"worker_niceness": 0}}
+            # Ray's start-up replaces the driver's SIGTERM handling with its own (abort); the
+            # caller's (a sweep keeps what finished, then shuts Ray down) is put back
+            handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
             ray.init(address=self.address, include_dashboard=False, log_to_driver=False, logging_level="warning",
                      **local)
+            for sig, handler in handlers.items():
+                if handler is not None:
+                    signal.signal(sig, handler)
         remote = ray.remote(num_cpus=1, max_retries=0)(work)  # the one retry is ours, and reported
         pending = {remote.remote(item): (i, 0) for i, item in enumerate(items)}
         try:

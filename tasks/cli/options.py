@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from pathlib import Path
 
 from bomi.errors import BomiError
@@ -51,7 +51,18 @@ non_negative_int = _ranged("non_negative_int", int, _NON_NEGATIVE)
 positive_float = _ranged("positive_float", float, _POSITIVE)
 non_negative_float = _ranged("non_negative_float", float, _NON_NEGATIVE)
 seconds = _ranged("seconds", float, _POSITIVE, _AT_MOST_A_DAY)  # a duration in seconds
+# The shortest episode worth simulating: a second (the scripted user's reaction alone takes 0.3 s);
+# shorter ones (1e-300 s) are typing mistakes, not experiments.
+MIN_TIME_LIMIT_S = 1.0
+episode_seconds = _ranged("episode_seconds", float, (lambda v: v >= MIN_TIME_LIMIT_S, f"at least {MIN_TIME_LIMIT_S:g} s"),
+                     _AT_MOST_A_DAY)  # of simulated time per episode
 non_negative_seconds = _ranged("non_negative_seconds", float, _NON_NEGATIVE, _AT_MOST_A_DAY)
+# Seeds: numpy's and MuJoCo's are 32-bit; no run of this project needs more than ten thousand of them
+# (far beyond what this machine, or a cluster in a week, runs), and more would exhaust memory listing them.
+MAX_SEED = 2**32 - 1
+MAX_SEEDS = 10_000
+seed = _ranged("seed", int, _NON_NEGATIVE, (lambda v: v <= MAX_SEED, f"at most {MAX_SEED}"))
+seed_count = _ranged("seed_count", int, (lambda v: 1 <= v <= MAX_SEEDS, f"must be in [1, {MAX_SEEDS}]"))
 # a posterior threshold
 open_unit_interval = _ranged("open_unit_interval", float, (lambda v: 0 < v < 1, "must be between 0 and 1 (exclusive)"))
 # of dropping a frame, of altering a byte
@@ -70,11 +81,13 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def check_outputs(outputs: dict[str, tuple[Path | str | None, tuple[str, ...]]], *, inputs: Iterable[Path | str] = (),
-                  force: bool = False) -> dict[str, Path | None]:
+                  force: bool = False, defaults: Collection[str] = ()) -> dict[str, Path | None]:
     """Check every output before any work: option -> (path or None, allowed suffixes).
 
     Refuses an existing file unless ``force``, an input file (even with ``force``), a directory, a
-    missing or read-only directory, a wrong suffix, and two options naming the same file.
+    missing or read-only directory, a wrong suffix, and two options naming the same file. The
+    options in ``defaults`` name the command's own default output (the user named none): an
+    existing regular file there is the previous run's and is replaced, as if with ``force``.
     """
     checked: dict[str, Path | None] = {}
     for option, (path, suffixes) in outputs.items():
@@ -85,7 +98,7 @@ def check_outputs(outputs: dict[str, tuple[Path | str | None, tuple[str, ...]]],
         for source in inputs:
             if _same_file(path, Path(source)) or path.resolve() == Path(source).resolve():
                 raise BomiError(f"{path}: {option} names an input file; not overwriting it")
-        checked[option] = check_output(path, overwrite=force, suffixes=suffixes, what=option)
+        checked[option] = check_output(path, overwrite=force or option in defaults, suffixes=suffixes, what=option)
     paths = [p.resolve() for p in checked.values() if p is not None]
     if len(set(paths)) != len(paths):
         raise BomiError(f"{', '.join(o for o, p in checked.items() if p is not None)}: two outputs name the same file")

@@ -1,15 +1,15 @@
 """`bomi sweep GRID.toml --out DIR`: every combination of the settings a grid file lists, over seeds.
 
-A grid (TOML; benchmarks/grids/ has one):
+The grid file (TOML; benchmarks/grids/p4_vote_rejection.toml is a commented example):
 
-    participants = ["P4"]                    # shipped names or participant files (a twin from `bomi twin`),
-                                             # a relative file relative to the grid file
+    participants = ["P4"]                    # shipped names (P1, P4, P5) or participant files (a twin
+                                             # from `bomi twin`), a relative file relative to the grid file
     operators = ["bomi"]                     # joystick and/or bomi
-    seeds = {first = 0, count = 20}          # or a list: seeds = [0, 1, 2]
+    seeds = {first = 0, count = 20}          # or a list: seeds = [0, 1, 2]   (task seeds 0-999: development)
 
     [vary]                                   # each a list of values; every combination is a cell
-    vote_length = [1, 5, 9]                  # the BoMI's majority vote (the commands' --vote)
-    time_limit = [600.0]                     # s of simulated time
+    vote_length = [1, 5, 9]                  # the BoMI's majority vote, in decisions (the commands' --vote)
+    time_limit = [600.0]                     # s of simulated time per episode
     profile.post_processing.rejection_threshold = [0.9, 0.99]   # any key of the participant's profile,
     participant.reaction_s = [0.5]           # of the participant file,
     operator.timing.reaction_time = [0.3]    # or of the scripted user's operator.toml
@@ -18,36 +18,50 @@ A grid (TOML; benchmarks/grids/ has one):
     metric = "completion_time_mean"          # a column of the summary rows
     setting = "vote_length"                  # one of [vary] (default: the first)
 
-Each (participant, operator, combination) is a cell of ``len(seeds)`` episodes.  The joystick
-channel reads no profile, participant or vote setting: its episodes drop them, so its cells
-differ only in what it reads (and are not run again for every BoMI setting).
+Each (participant, operator, combination) is a cell of len(seeds) episodes. The joystick reads no
+profile, participant or vote setting: its cells drop them (and are not run again per BoMI setting).
 
-Every finished episode is appended at once to DIR/episodes.jsonl as one JSON line: its ``key`` (a
-hash of its settings), its ``settings`` and its metrics.  A sweep run again (after an interruption,
-or with more seeds or values) skips every episode whose key is already there.  At the end:
-DIR/summary.md and .json (one row per cell, the columns and aggregation of ``bomi benchmark``),
-DIR/completion_time.png and DIR/<metric>_vs_<setting>.png.
+Resuming and extending: every finished episode is appended at once to DIR/episodes.jsonl (one
+JSON line: a key hashing its settings, the settings, the metrics). Run the same command again --
+after Ctrl-C, a crash, or with more seeds or values added to the grid -- and only the episodes
+whose key is not in the file run; DIR/summary.md and .json, DIR/completion_time.png and
+DIR/<metric>_vs_<setting>.png are then regenerated from every record of the grid (they are the
+sweep's own files, replaced without --force). Ctrl-C (or SIGTERM, SIGHUP) keeps every finished
+episode and stops the workers; a second sweep on the same DIR while one runs stops with one line.
+A file in DIR that the sweep would write but that is a symbolic link or not a regular file is
+refused, never written through.
 """
 from __future__ import annotations
 
 import argparse
+import errno
+import fcntl
 import hashlib
 import itertools
 import json
-import tomllib
+import math
+import os
+import signal
+import stat
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
-from bomi.config_files import check_table
+from bomi.classifier import MAX_VOTE_LENGTH
+from bomi.config_files import check_table, parse_toml
 from bomi.errors import BomiError
+from bomi.files import atomic_output, write_text
 from tasks.cli import add_command
-from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
+from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args, report
 from tasks.cli.figures import completion_time_figure, metric_figure
-from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, ROW_COLUMNS, EpisodeJob, aggregate, episode_record,
-                            markdown_table, row_cells, write_json)
+from tasks.cli.options import MAX_SECONDS, MAX_SEED, MAX_SEEDS, MIN_TIME_LIMIT_S
+from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,
+                            EpisodeJob, aggregate, aligned_table, episode_record, markdown_table, row_cells,
+                            terminal_cells)
 from tasks.episode import OPERATORS, profile_controls
 from tasks.participants.participant import load_participant
 from tasks.planner import load_operator
@@ -56,6 +70,7 @@ from tasks.stick import arm_profile
 RESULTS_FILE = "episodes.jsonl"
 # EpisodeJob fields a grid may vary, beside the EDITABLE_FILES' keys
 JOB_SETTINGS = {"time_limit": (int, float), "vote_length": int}
+JOB_RANGES = {"time_limit": (MIN_TIME_LIMIT_S, MAX_SECONDS, " s"), "vote_length": (1, MAX_VOTE_LENGTH, " decisions")}
 # what the joystick channel never reads
 NOT_READ_BY_JOYSTICK = ("vote_length", "profile.", "participant.")
 # summary-row columns the figure may plot (tests/test_sweep.py checks they are aggregate's)
@@ -64,6 +79,12 @@ FIGURE_METRICS = ("completion_time_mean", "successes", "success_rate", "accuracy
                   "longest_error_run_ms", "mode_switches", "unintended_displacement_mm", "latency_ms_median",
                   "cube_drops")
 _TOP_KEYS = {"participants", "operators", "seeds", "vary", "figure"}
+LOCK_FILE = ".sweep.lock"  # flock'ed while a sweep writes the directory; holds its pid
+SUMMARY_FILES = ("summary.md", "summary.json", "completion_time.png")
+# Sizes a grid may ask for: far beyond any sweep this machine (or a cluster in a week) runs, far
+# below what would exhaust memory listing the episodes.
+MAX_VALUES = 100            # per [vary] setting
+MAX_EPISODES = 100_000      # per grid: cells x seeds
 
 
 @dataclass(frozen=True)
@@ -97,14 +118,7 @@ class Cell:
 # ------------------------------------------------------------------------------------ the grid
 def load_grid(path: Path) -> Grid:
     """Read and check a grid file; every fault is a one-line BomiError naming the file."""
-    try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise BomiError(f"{path}: no such grid file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
-    except OSError as exc:
-        raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
+    data = parse_toml(Path(path), "grid")
     try:
         grid = _parse_grid(data, str(path))
     except ValueError as exc:
@@ -128,13 +142,19 @@ def _seeds(value: Any) -> tuple[int, ...]:
         if set(value) != {"first", "count"} or not all(isinstance(value[k], int) and not isinstance(value[k], bool)
                                                        for k in value):
             raise ValueError("'seeds' as a table needs integers 'first' and 'count' (and nothing else)")
-        seeds = tuple(range(value["first"], value["first"] + value["count"]))
+        first, count = value["first"], value["count"]
+        if not 1 <= count <= MAX_SEEDS or not 0 <= first <= MAX_SEED - count + 1:
+            raise ValueError(f"'seeds': count must be in [1, {MAX_SEEDS}] and every seed in [0, {MAX_SEED}], "
+                             f"got first = {first}, count = {count}")
+        seeds = tuple(range(first, first + count))
     elif isinstance(value, list) and all(isinstance(s, int) and not isinstance(s, bool) for s in value):
+        if len(value) > MAX_SEEDS:
+            raise ValueError(f"'seeds': at most {MAX_SEEDS} seeds, got {len(value)}")
         seeds = tuple(value)
     else:
         raise ValueError("'seeds' must be a list of integers or {first = N, count = K}")
-    if not seeds or min(seeds) < 0 or len(set(seeds)) != len(seeds):
-        raise ValueError("'seeds' must be at least one seed, none negative, none twice")
+    if not seeds or min(seeds) < 0 or max(seeds) > MAX_SEED or len(set(seeds)) != len(seeds):
+        raise ValueError(f"'seeds' must be at least one seed, each in [0, {MAX_SEED}], none twice")
     return seeds
 
 
@@ -156,10 +176,14 @@ def _check_setting(name: str, values: Any) -> tuple:
         raise ValueError(f"[vary] {name}: the majority vote is set with vote_length")
     if not isinstance(values, list) or not values:
         raise ValueError(f"[vary] {name}: must be a non-empty list of values")
-    if name in JOB_SETTINGS and not all(isinstance(v, JOB_SETTINGS[name]) and not isinstance(v, bool) and v > 0
-                                        for v in values):
-        raise ValueError(f"[vary] {name}: values must be positive numbers"
-                         + (" (whole)" if JOB_SETTINGS[name] is int else ""))
+    if len(values) > MAX_VALUES:
+        raise ValueError(f"[vary] {name}: at most {MAX_VALUES} values, got {len(values)}")
+    if name in JOB_SETTINGS:
+        low, high, unit = JOB_RANGES[name]
+        if not all(isinstance(v, JOB_SETTINGS[name]) and not isinstance(v, bool) and low <= v <= high
+                   for v in values):
+            raise ValueError(f"[vary] {name}: values must be {'whole ' if JOB_SETTINGS[name] is int else ''}"
+                             f"numbers in [{low:g}, {high:g}]{unit}")
     if len({json.dumps(v) for v in values}) != len(values):
         raise ValueError(f"[vary] {name}: a value is listed twice")
     return tuple(values)
@@ -184,7 +208,12 @@ def _parse_grid(data: dict, source: str) -> Grid:
     setting = figure.get("setting", next(iter(vary), None))
     if setting is not None and setting not in vary:
         raise ValueError(f"[figure] setting: {setting!r} is not one of [vary] ({', '.join(vary) or 'none'})")
-    return Grid(_names(data, "participants"), operators, _seeds(data["seeds"]), vary, metric, setting, source)
+    grid = Grid(_names(data, "participants"), operators, _seeds(data["seeds"]), vary, metric, setting, source)
+    episodes = len(grid.participants) * len(grid.operators) * math.prod(map(len, vary.values())) * len(grid.seeds)
+    if episodes > MAX_EPISODES:
+        raise ValueError(f"{episodes} episodes (participants x operators x [vary] combinations x seeds), "
+                         f"more than the {MAX_EPISODES} a grid may ask for")
+    return grid
 
 
 def cells(grid: Grid) -> list[Cell]:
@@ -230,60 +259,204 @@ def job_key(job: EpisodeJob) -> str:
     return hashlib.sha256(canonical.encode()).hexdigest()[:20]
 
 
-# ------------------------------------------------------------------------------------ results file
-def read_results(path: Path) -> dict[str, dict]:
-    """The records already in the results file, by key.  A last line cut short by an interruption
-    is dropped (and truncated away before anything is appended); any other bad line is an error."""
-    if not path.exists():
-        return {}
+# ------------------------------------------------------------------------------------ the directory
+def output_names(grid: Grid) -> tuple[str, ...]:
+    """Every file a sweep of ``grid`` writes in its directory."""
+    return (LOCK_FILE, RESULTS_FILE, *SUMMARY_FILES, *([metric_figure_name(grid)] if grid.setting else []))
+
+
+def metric_figure_name(grid: Grid) -> str:
+    return f"{grid.metric}_vs_{grid.setting.rsplit('.', 1)[-1]}.png"
+
+
+def check_directory(out: Path, names: tuple[str, ...]) -> None:
+    """``out`` is (or can be made) a directory whose files ``names`` are absent or regular files:
+    a symbolic link, FIFO or device planted there is refused, never followed."""
+    if out.exists() and not out.is_dir():
+        raise BomiError(f"--out {out}: not a directory")
+    if not out.exists():
+        if not out.parent.is_dir():
+            raise BomiError(f"--out {out}: directory {out.parent} does not exist")
+        return
+    for name in names:
+        path = out / name
+        try:
+            status = os.lstat(path)
+        except FileNotFoundError:
+            continue
+        except OSError as exc:
+            raise BomiError(f"{path}: cannot be checked ({exc.strerror})") from None
+        if not stat.S_ISREG(status.st_mode):
+            kind = "a symbolic link" if stat.S_ISLNK(status.st_mode) else "not a regular file"
+            raise BomiError(f"{path}: is {kind}; a sweep writes only its own regular files in --out, never through "
+                            f"a link (move it away)")
+
+
+@contextmanager
+def locked(out: Path) -> Iterator[None]:
+    """Hold ``out``'s lock file while the body runs; BomiError at once if another sweep holds it."""
+    path = out / LOCK_FILE
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise BomiError(f"{path}: cannot be read ({exc})") from None
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot open the sweep's lock file ({exc.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            raise BomiError(f"--out {out}: another bomi sweep (pid {holder}) is writing this directory; rerun "
+                            f"when it has finished (only what it did not run will run)") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def signals_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP end the sweep as Ctrl-C does (finished episodes kept, workers stopped)
+    rather than killing the driver outright."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+# ------------------------------------------------------------------------------------ results file
+@dataclass
+class Results:
+    """What a results file holds: its complete records by key, its size, and how many bytes at
+    its end are an unfinished last line (an interrupted write)."""
+    records: dict[str, dict]
+    size: int
+    torn: int
+    unterminated: bool  # the last record is complete but has no line end
+
+
+def read_results(path: Path) -> Results:
+    """The records in the results file (not following a symbolic link); a last line without its
+    line end is kept when it is a whole record and set aside when it is not; any other bad line is
+    an error."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except FileNotFoundError:
+        return Results({}, 0, 0, False)
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
+    with os.fdopen(fd, "rb") as handle:
+        data = handle.read()
     records: dict[str, dict] = {}
-    lines = text.split("\n")
+    lines = data.split(b"\n")
+    torn = 0
     for number, line in enumerate(lines, 1):
         if not line.strip():
             continue
         try:
             record = json.loads(line)
+            if not isinstance(record.get("settings"), dict):
+                raise TypeError
             records[record["key"]] = record
-        except (json.JSONDecodeError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, AttributeError):
             if number == len(lines):  # the unfinished last line of an interrupted write
+                torn = len(line)
                 continue
-            raise BomiError(f"{path}: line {number} is not an episode record; move the file away to start afresh") from None
-    return records
+            raise BomiError(f"{path}: line {number} is not an episode record; move the file away to start "
+                            f"afresh") from None
+    return Results(records, len(data), torn, bool(data) and not torn and not data.endswith(b"\n"))
 
 
-def _drop_unfinished_line(path: Path) -> None:
-    if path.exists():
-        data = path.read_bytes()
-        if data and not data.endswith(b"\n"):
-            with path.open("r+b") as handle:
-                handle.truncate(data.rfind(b"\n") + 1)
+class ResultsFile:
+    """The results file opened for appending (never through a symbolic link), one whole line per
+    record: a write that fails (a full disk) is cut back to the last whole line."""
+
+    def __init__(self, path: Path, results: Results):
+        self.path, self.saved = path, len(results.records)
+        try:
+            self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        except OSError as exc:
+            raise BomiError(f"{path}: cannot be written ({exc.strerror})") from None
+        if os.fstat(self.fd).st_size != results.size:
+            os.close(self.fd)
+            raise BomiError(f"{path}: changed while it was being read; rerun")
+        if results.torn:
+            os.ftruncate(self.fd, results.size - results.torn)
+            report(f"bomi: {path}: set aside an unfinished last line ({results.torn} bytes, an interrupted write); "
+                   f"kept its {len(results.records)} complete records")
+        elif results.unterminated:
+            self._write(b"\n")
+            report(f"bomi: {path}: its last record had no line end; kept it ({len(results.records)} records)")
+
+    def _write(self, data: bytes) -> None:
+        size = os.fstat(self.fd).st_size
+        try:
+            if os.write(self.fd, data) != len(data):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        except OSError as exc:
+            with suppress(OSError):
+                os.ftruncate(self.fd, size)
+            raise BomiError(f"{self.path}: cannot append an episode ({exc.strerror}); the {self.saved} episodes "
+                            f"before it are saved, rerun to go on") from None
+
+    def append(self, record: dict) -> None:
+        self._write((json.dumps(record) + "\n").encode())
+        self.saved += 1
+
+    def close(self) -> None:
+        os.close(self.fd)
 
 
-def run_sweep(grid: Grid, out: Path, engine: Engine) -> list[dict]:
-    """Run the grid's episodes not yet in ``out``/episodes.jsonl, appending each as it finishes;
-    return the records of every episode of the grid."""
+@dataclass
+class SweepResult:
+    records: list[dict]  # of the grid's episodes that have run, in the grid's order
+    total: int           # episodes in the grid
+    ran: int             # of them run now
+    interrupted: bool
+    table: str | None    # the terminal's summary table (None: no episode yet, or not asked for)
+
+
+def run_sweep(grid: Grid, out: Path, engine: Engine, summarize: bool = True) -> SweepResult:
+    """Run the grid's episodes not yet in ``out``/episodes.jsonl, appending each as it finishes,
+    then (``summarize``) write the summaries and figures of every record of the grid, all with
+    ``out`` locked; an interruption (Ctrl-C, SIGTERM) keeps what finished and summarises it."""
     cell_list = cells(grid)
     check_cells(grid, cell_list)
-    out.mkdir(exist_ok=True)
-    path = out / RESULTS_FILE
-    done = read_results(path)
+    check_directory(out, output_names(grid))
+    try:
+        out.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise BomiError(f"--out {out}: cannot be made ({exc.strerror})") from None
     jobs = [cell.job(seed) for cell in cell_list for seed in grid.seeds]
     keys = [job_key(job) for job in jobs]
-    todo = [job for job, key in zip(jobs, keys) if key not in done]
-    _drop_unfinished_line(path)
-    with path.open("a", encoding="utf-8") as results, \
-            tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="episodes", unit="ep") as bar:
-        for i, record in engine.run(episode_record, todo):
-            key = job_key(todo[i])
-            done[key] = {"key": key, "settings": job_settings(todo[i]), **record}
-            results.write(json.dumps(done[key]) + "\n")
-            results.flush()
-            bar.update(1)
-    return [done[key] for key in keys]
+    with locked(out), signals_interrupt():
+        check_directory(out, output_names(grid))  # again, now that no other sweep can change it
+        path = out / RESULTS_FILE
+        results = read_results(path)
+        done = results.records
+        todo = [job for job, key in zip(jobs, keys) if key not in done]
+        interrupted = False
+        file = ResultsFile(path, results)
+        try:
+            with tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="episodes", unit="ep") as bar:
+                for i, record in engine.run(episode_record, todo):
+                    key = job_key(todo[i])
+                    done[key] = {"key": key, "settings": job_settings(todo[i]), **record}
+                    file.append(done[key])
+                    bar.update(1)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            file.close()
+        records = [done[key] for key in keys if key in done]
+        table = write_summary(grid, records, out) if summarize and records else None
+    ran = len(records) - (len(jobs) - len(todo))
+    return SweepResult(records, len(jobs), ran, interrupted, table)
 
 
 # ------------------------------------------------------------------------------------ summary
@@ -307,15 +480,19 @@ def summary_rows(grid: Grid, records: list[dict]) -> list[dict]:
     return rows
 
 
-def summary_table(grid: Grid, rows: list[dict]) -> str:
+def summary_table(grid: Grid, rows: list[dict], terminal: bool = False) -> str:
+    """The summary table: every column (summary.md), or what fits a terminal's 100 columns."""
     short = [name.rsplit(".", 1)[-1] for name in grid.vary]
-    return markdown_table(["participant", "operator", *short, *ROW_COLUMNS],
+    columns, cells_of, table = ((TERMINAL_COLUMNS, terminal_cells, aligned_table) if terminal
+                                else (ROW_COLUMNS, row_cells, markdown_table))
+    return table(["participant", "operator", *short, *columns],
                           [[r["participant"], r["operator"], *(json.dumps(v) if v != "-" else v
-                                                               for v in r["settings"].values()), *row_cells(r)]
+                                                               for v in r["settings"].values()), *cells_of(r)]
                            for r in rows])
 
 
 def write_summary(grid: Grid, records: list[dict], out: Path) -> str:
+    """Write the summaries and figures of ``records``; return the terminal's table."""
     rows = summary_rows(grid, records)
     table = summary_table(grid, rows)
     settings = "; ".join(f"{name} = {json.dumps(list(values))}" for name, values in grid.vary.items()) or "none varied"
@@ -323,18 +500,22 @@ def write_summary(grid: Grid, records: list[dict], out: Path) -> str:
         range(grid.seeds[0], grid.seeds[0] + len(grid.seeds))) else f"seeds {list(grid.seeds)}"
     text = "\n".join([f"# Sweep {grid.source}", "", f"{len(records)} episodes: {', '.join(grid.participants)} x "
                       f"{', '.join(grid.operators)} x {seeds}; {settings}.", "", table, ""])
-    (out / "summary.md").write_text(text, encoding="utf-8")
-    write_json(out / "summary.json", {"grid": grid.source, "seeds": list(grid.seeds),
-                                      "vary": {k: list(v) for k, v in grid.vary.items()}, "rows": rows})
-    completion_time_figure([("\n".join([episodes[0]["participant"], episodes[0]["operator"],
-                                         *(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in swept.items() if v != "-")]),
-                             episodes) for swept, episodes in by_cell(grid, records)],
-                           out / "completion_time.png",
-                           f"{grid.source}: every episode per cell (line: mean of successes; x: failed)")
+    # the sweep's own files, regenerated from its records: replaced (atomically) on every run
+    write_text(out / "summary.md", text, overwrite=True)
+    write_text(out / "summary.json", json.dumps({"grid": grid.source, "seeds": list(grid.seeds),
+                                                 "vary": {k: list(v) for k, v in grid.vary.items()},
+                                                 "rows": rows}, indent=2) + "\n", overwrite=True)
+    with atomic_output(out / "completion_time.png", overwrite=True) as temp:
+        completion_time_figure([("\n".join([episodes[0]["participant"], episodes[0]["operator"],
+                                             *(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in swept.items()
+                                               if v != "-")]), episodes)
+                                 for swept, episodes in by_cell(grid, records)],
+                               temp, f"sweep {Path(grid.source).name}: every episode per cell\n"
+                                     f"(dot: a success, line: their mean; x: a failed episode)")
     if grid.setting is not None:
-        metric_figure(_series(grid, rows), out / f"{grid.metric}_vs_{grid.setting.rsplit('.', 1)[-1]}.png",
-                      grid.metric, grid.setting)
-    return table
+        with atomic_output(out / metric_figure_name(grid), overwrite=True) as temp:
+            metric_figure(_series(grid, rows), temp, grid.metric, grid.setting)
+    return summary_table(grid, rows, terminal=True)
 
 
 def _series(grid: Grid, rows: list[dict]) -> dict[str, list]:
@@ -346,6 +527,8 @@ def _series(grid: Grid, rows: list[dict]) -> dict[str, list]:
             continue
         others = [f"{k.rsplit('.', 1)[-1]}={v}" for k, v in r["settings"].items() if k != grid.setting]
         interval = r.get(f"{grid.metric.removesuffix('_mean').removesuffix('_rate')}_ci95")
+        counted = r["successes"] if grid.metric.startswith("completion_time") else r["episodes"]
+        interval = interval if counted >= MIN_EPISODES_FOR_INTERVAL else None
         series.setdefault(" ".join([r["participant"], r["operator"], *others]), []).append(
             (value, r[grid.metric], tuple(interval) if interval else None))
     return series
@@ -355,19 +538,22 @@ def _series(grid: Grid, rows: list[dict]) -> dict[str, list]:
 def cmd_sweep(args: argparse.Namespace) -> int:
     grid = load_grid(args.grid)
     engine = engine_from_args(args)
-    if not args.out.parent.is_dir():
-        raise BomiError(f"--out {args.out}: directory {args.out.parent} does not exist")
-    if args.out.exists() and not args.out.is_dir():
-        raise BomiError(f"--out {args.out}: not a directory")
-    records = run_sweep(grid, args.out, engine)
-    print(write_summary(grid, records, args.out))
-    print(f"wrote {args.out / 'summary.md'}, {args.out / 'summary.json'} and figures in {args.out}")
+    result = run_sweep(grid, args.out, engine)
+    if result.table is not None:
+        print(result.table)
+        print(f"wrote {args.out / 'summary.md'} (every column), {args.out / 'summary.json'} and figures in {args.out}")
+    if result.interrupted:
+        report(f"bomi: interrupted: {len(result.records)} of the grid's {result.total} episodes are saved in "
+               f"{args.out / RESULTS_FILE} ({result.ran} run now); rerun the same command to run the rest")
+        return 130
     return 0
 
 
 def register(subparsers) -> None:
-    sweep = add_command(subparsers, "sweep")
-    sweep.add_argument("grid", type=Path, help="the grid file (TOML)")
-    sweep.add_argument("--out", type=Path, required=True, help="directory for episodes.jsonl, the summary and figures")
+    sweep = add_command(subparsers, "sweep", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sweep.add_argument("grid", type=Path, help="the grid file (TOML; format above)")
+    sweep.add_argument("--out", type=Path, required=True,
+                       help="directory for episodes.jsonl, the summary and figures (made if missing; "
+                            "an existing one is resumed or extended)")
     add_engine_arguments(sweep)
     sweep.set_defaults(func=cmd_sweep)

@@ -21,7 +21,8 @@ from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option,
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from bomi.files import atomic_output, write_text
-from tasks.cli.options import add_force, check_outputs, non_negative_int, positive_int, seconds
+from tasks.cli.options import add_force, check_outputs, episode_seconds, positive_int, seed_count
+from tasks.cli.options import seed as seed_option
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participants.participant import load_participant
@@ -206,7 +207,7 @@ def comparison(rows: list[dict]) -> list[dict]:
                     "paper_time_ratio": paper.TASK["bomi_time_s"] / paper.TASK["joystick_time_s"],
                     **{key: bomi.get(key) for key in
                        ("relevant_share", "accuracy_all_decisions", "accuracy_excused_transitions",
-                        "irrelevant_longest_run_ms")},
+                        "irrelevant_longest_run_ms", "longest_error_run_ms")},
                     "paper_realtime_accuracy": paper.TASK["realtime_accuracy"],
                     "paper_longest_error_run_ms": paper.TASK["longest_error_run_ms"]})
     return out
@@ -232,6 +233,58 @@ ROW_COLUMNS = ("layout", "successes [95 % CI]", "completion time (s) [95 % CI]",
                "drops", "x real time")
 
 
+# An interval over fewer episodes says little: none is printed (the JSON keeps it).
+MIN_EPISODES_FOR_INTERVAL = 5
+
+
+def successes_text(r: dict) -> str:
+    interval = _interval(r["success_ci95"], ".0f", 100) if r["episodes"] >= MIN_EPISODES_FOR_INTERVAL else ""
+    return f"{r['successes']}/{r['episodes']}{interval and interval + ' %'}"
+
+
+def completion_text(r: dict) -> str:
+    ci = r["completion_time_ci95"]
+    # a time is never negative: a Student-t bound below 0 (few, spread successes) is shown as 0
+    interval = _interval([max(0.0, ci[0]), ci[1]]) if ci and r["successes"] >= MIN_EPISODES_FOR_INTERVAL else ""
+    return f"{_fmt(r['completion_time_mean'])}{interval}"
+
+
+# The terminal's table: what fits in 100 columns (the full table, ROW_COLUMNS, goes to the files)
+TERMINAL_COLUMNS = ("successes", "time (s)", "acc. all", "acc. exc.", "err. run ms")
+
+
+def terminal_cells(r: dict) -> list[str]:
+    return [successes_text(r), completion_text(r), _pct(r.get("accuracy_all_decisions")),
+            _pct(r.get("accuracy_excused_transitions")), _fmt(r.get("longest_error_run_ms"), ".0f")]
+
+
+def aligned_table(header: list[str], rows: list[list[str]]) -> str:
+    """A plain table for the terminal: columns as wide as their widest cell, two spaces apart."""
+    widths = [max(len(str(cell)) for cell in column) for column in zip(header, *rows)]
+    return "\n".join("  ".join(str(cell).ljust(width) for cell, width in zip(row, widths)).rstrip()
+                     for row in [header, ["-" * w for w in widths], *rows])
+
+
+def terminal_table(rows: list[dict]) -> str:
+    """The benchmark rows within 100 columns (acc. all: accuracy over every decision; acc. exc.: with
+    the transitions excused; err. run ms: the longest run of misclassified outputs)."""
+    assist = any(r["assist"] != NONE for r in rows)
+    return aligned_table(["participant", "operator", *(["assist"] if assist else []), *TERMINAL_COLUMNS],
+                         [[r["participant"], r["operator"], *([r["assist"]] if assist else []), *terminal_cells(r)]
+                          for r in rows])
+
+
+def terminal_comparison(rows: list[dict]) -> str:
+    """The comparison with the paper, like for like, within 100 columns."""
+    return aligned_table(
+        ["participant", "assist", "BoMI/joy time", "paper", "acc. all", "acc. exc.", "paper",
+         "err. run ms", "paper"],
+        [[c["participant"], c["assist"], _fmt(c["time_ratio"], ".2f"), f"{c['paper_time_ratio']:.2f}",
+          _pct(c["accuracy_all_decisions"]), _pct(c["accuracy_excused_transitions"]),
+          _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
+          f"{c['paper_longest_error_run_ms']:.0f}"] for c in comparison(rows)])
+
+
 def row_cells(r: dict) -> list[str]:
     """A row of ``aggregate`` as the texts of ROW_COLUMNS."""
     excused = "-" if r.get("accuracy_excused_transitions") is None else (
@@ -240,8 +293,7 @@ def row_cells(r: dict) -> list[str]:
     wild = "-" if r.get("irrelevant_per_min") is None else (
         f"{r['irrelevant_per_min']:.2f} ({r['irrelevant_longest_run_ms']:.0f})")
     latency = "-" if r.get("latency_ms_median") is None else f"{r['latency_ms_median']:.0f} / {r['latency_ms_p90']:.0f}"
-    return [r["layout"], f"{r['successes']}/{r['episodes']}{_interval(r['success_ci95'], '.0f', 100)} %",
-            f"{_fmt(r['completion_time_mean'])}{_interval(r['completion_time_ci95'])}",
+    return [r["layout"], successes_text(r), completion_text(r),
             _pct(r.get("accuracy_all_decisions")), excused, _pct(r.get("relevant_share")), wild, latency,
             r["assist"], _fmt(r["mode_switches"]), f"{_fmt(r['automatic_switches'])} ({_fmt(r['wrong_goal_switches'])})",
             str(r["cube_drops"]), _fmt(r["realtime_factor"])]
@@ -327,7 +379,7 @@ def cmd_run_task(args: argparse.Namespace) -> int:
     else:
         log = run_job(job, progress=True)
     summary = summarize(log)
-    print(markdown_tables(aggregate([summary])))
+    print(terminal_table(aggregate([summary])))
     if outputs["--plot"]:
         with atomic_output(outputs["--plot"], overwrite=args.force) as plot:
             timeline_figure([log], plot)
@@ -360,7 +412,11 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
         participant_controls(job.participant)
     records = run_many(jobs, engine_from_args(args))
     rows = aggregate(records)
-    print(markdown_tables(rows))
+    print(terminal_table(rows))
+    if comparison(rows):
+        print("\n" + terminal_comparison(rows))
+    if not outputs["--json"]:
+        print("(every column, the episodes and the comparison in full: --json FILE)")
     if outputs["--json"]:
         write_json(outputs["--json"], {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows),
                                        "episodes": records}, overwrite=args.force)
@@ -370,29 +426,34 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
 DEMO_FILES = ("timeline.png", "bomi_episode.mp4", "demo.json")
 
 
+DEMO_OUT = Path("demo_out")  # demo's own directory when --out names none: its files are replaced on each run
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
-    out = Path(args.out)
+    out = Path(args.out or DEMO_OUT)
+    replace = args.force or args.out is None
     if out.exists() and not out.is_dir():
         raise BomiError(f"{out}: --out must be a directory, this is a file")
     if not out.parent.is_dir():
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     out.mkdir(exist_ok=True)
-    figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force).values()
+    figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force,
+                                          defaults=DEMO_FILES if args.out is None else ()).values()
     participant_controls(args.participant)  # a bad participant or profile fails before simulating
     joystick = run_job(EpisodeJob("joystick", args.participant, args.seed, args.time_limit, assist=args.assist),
                        progress=True)
-    with atomic_output(video, overwrite=args.force) as temp:
+    with atomic_output(video, overwrite=replace) as temp:
         bomi = run_job(EpisodeJob("bomi", args.participant, args.seed, args.time_limit, assist=args.assist), video=temp,
                        video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
     summaries = [summarize(joystick), summarize(bomi)]
-    with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=args.force) as temp:
+    with _stage("timeline figure", progress=True), atomic_output(figure, overwrite=replace) as temp:
         timeline_figure([joystick, bomi], temp)
-    write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=args.force)
-    print(markdown_tables(aggregate(summaries)))
+    write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=replace)
+    print(terminal_table(aggregate(summaries)))
     print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
           f"virtual participant's body and noise. The README's figures are means over 20 seeds "
           f"(`bomi benchmark`).")
-    _print_written({figure: "timeline: the hand relative to B, the BoMI's decisions, amplitude and nu",
+    _print_written({figure: "timeline: the hand relative to the target, the BoMI's decisions, amplitude and nu",
                     video: f"the BoMI episode filmed at {DEMO_VIDEO_SPEEDUP:g}x speed",
                     record: "metrics of both episodes (JSON)"})
     return 0
@@ -405,7 +466,7 @@ def register(subparsers) -> None:
                           "through the BoMI (calibrated first)")
     run.add_argument("--participant", default="P1",
                      help="virtual participant: P1, P4, P5 or a TOML file (default %(default)s)")
-    run.add_argument("--seed", type=non_negative_int, default=0,
+    run.add_argument("--seed", type=seed_option, default=0,
                      help="task seed: cube placement, the participant's body and noise (default %(default)s)")
     _episode_options(run)
     run.add_argument("--video", type=Path, help="also film the episode to this MP4 (4x speed)")
@@ -420,9 +481,9 @@ def register(subparsers) -> None:
                             "`bomi twin`), e.g. P1,P4,P5 (default %(default)s)")
     bench.add_argument("--operators", default="joystick,bomi",
                        help=f"comma-separated operators out of {','.join(OPERATORS)} (default %(default)s)")
-    bench.add_argument("--seeds", type=positive_int, default=20, help="how many seeds per participant and operator "
+    bench.add_argument("--seeds", type=seed_count, default=20, help="how many seeds per participant and operator "
                                                              "(default %(default)s)")
-    bench.add_argument("--first-seed", type=non_negative_int, default=0, help="the first seed (default %(default)s)")
+    bench.add_argument("--first-seed", type=seed_option, default=0, help="the first seed (default %(default)s)")
     add_engine_arguments(bench)
     _episode_options(bench)
     bench.add_argument("--json", type=Path, help="also write the table and every episode's metrics (JSON) here")
@@ -430,21 +491,22 @@ def register(subparsers) -> None:
     bench.set_defaults(func=cmd_benchmark)
 
     demo = add_command(subparsers, "demo")
-    demo.add_argument("--seed", type=non_negative_int, default=0, help="task seed of both episodes (default %(default)s)")
+    demo.add_argument("--seed", type=seed_option, default=0, help="task seed of both episodes (default %(default)s)")
     demo.add_argument("--participant", default="P1",
                       help="virtual participant: P1, P4, P5 or a TOML file (a twin from `bomi twin`; "
                            "default %(default)s)")
-    demo.add_argument("--time-limit", type=float, default=600.0,
+    demo.add_argument("--time-limit", type=episode_seconds, default=600.0,
                       help="seconds of simulated time per episode (default %(default)s)")
-    demo.add_argument("--out", type=Path, default=Path("demo_out"),
-                      help="directory for timeline.png, bomi_episode.mp4 and demo.json (default %(default)s)")
+    demo.add_argument("--out", type=Path,
+                      help=f"directory for timeline.png, bomi_episode.mp4 and demo.json (default {DEMO_OUT}/, whose "
+                           f"files are replaced on each run; in a directory you name, only with --force)")
     demo.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     add_force(demo)
     demo.set_defaults(func=cmd_demo)
 
 
 def _episode_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--time-limit", type=seconds, default=600.0,
+    parser.add_argument("--time-limit", type=episode_seconds, default=600.0,
                         help="seconds of simulated time before an episode fails (default %(default)s)")
     parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
                         help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
