@@ -140,7 +140,6 @@ def encode_imu_frame(frame: ImuFrame) -> bytes:
 _FRAME_RECORD = np.dtype([("start", "u1"), ("node_id", "u1"), ("period_ms", "u1"), ("counter", "u1"), ("unused", "u1"),
                           ("mag", ">i2", 3), ("gyro", ">i2", 3), ("acc", ">i2", 3), ("unused_tail", "u1", 8),
                           ("end", "u1")])
-assert _FRAME_RECORD.itemsize == _FRAME.size == FRAME_SIZE
 
 
 def encode_imu_frames(node_id: int, counters: np.ndarray, mag: np.ndarray, gyro: np.ndarray, acc: np.ndarray,

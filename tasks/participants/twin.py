@@ -24,6 +24,7 @@ performs. ``P1.toml`` is this fitter on the five published days:
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,13 +69,13 @@ max_zero = 0.9             # the learnt zero lean never exceeds this: the least 
 """
 
 
+@functools.cache
 def _min_jerk_time(share: float) -> float:
     """The share of a minimum-jerk move's duration after which it has covered ``share`` of its way."""
     return float(scipy.optimize.brentq(lambda s: minimum_jerk(np.array([s]))[0] - share, 0.0, 1.0))
 
 
 TIMING_SHARES = (0.1, 0.9)     # a move is timed where it has covered 10 % and 90 % of its way
-_T10, _T90 = (_min_jerk_time(s) for s in TIMING_SHARES)
 
 
 @dataclass(frozen=True)
@@ -180,8 +181,9 @@ def timing_from(transitions: Sequence[Transition]) -> tuple[float, float] | None
         return None
     t10 = float(np.median([t.t10 for t in timed]))
     t90 = float(np.median([t.t90 for t in timed]))
-    onset = (t90 - t10) / (_T90 - _T10)
-    return onset, max(t10 - _T10 * onset, 0.0)
+    share10, share90 = (_min_jerk_time(share) for share in TIMING_SHARES)
+    onset = (t90 - t10) / (share90 - share10)
+    return onset, max(t10 - share10 * onset, 0.0)
 
 
 # ------------------------------------------------------------------------------------ a pass
