@@ -102,10 +102,11 @@ class PipelineParameters:
 
     def linear(self) -> tuple[np.ndarray, np.ndarray]:
         """The whole pipeline as one discriminant on the raw features: (coef (K, F), intercept (K,))."""
-        projection = self.pca_components / self.scaler_scale[None, :]
-        coef = self.lda_coef @ projection
-        intercept = self.lda_intercept - self.lda_coef @ (projection @ self.scaler_mean
-                                                          + self.pca_components @ self.pca_mean)
+        with np.errstate(over="ignore", invalid="ignore"):  # a damaged file's overflow: model_defects names it
+            projection = self.pca_components / self.scaler_scale[None, :]
+            coef = self.lda_coef @ projection
+            intercept = self.lda_intercept - self.lda_coef @ (projection @ self.scaler_mean
+                                                              + self.pca_components @ self.pca_mean)
         return coef, intercept
 
 
