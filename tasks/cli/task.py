@@ -322,14 +322,15 @@ def markdown_tables(rows: list[dict]) -> str:
                             [[r["participant"], r["operator"], *row_cells(r)] for r in rows])]
     lines += ["", "| participant | layout | assist | BoMI / joystick time (same layout and assist) | paper "
               "| relevant outputs | accuracy, all decisions | accuracy, transitions excused | paper real-time accuracy "
-              "| longest irrelevant run (ms) | paper longest error run (ms) |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| longest misclassified run (ms) | paper longest error run (ms) | longest irrelevant run (ms) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in comparison(rows):
         lines.append(f"| {c['participant']} | {c['layout']} | {c['assist']} | {_fmt(c['time_ratio'], '.2f')} "
                      f"| {c['paper_time_ratio']:.2f} "
                      f"| {_pct(c['relevant_share'])} | {_pct(c['accuracy_all_decisions'])} "
                      f"| {_pct(c['accuracy_excused_transitions'])} | {_pct(c['paper_realtime_accuracy'])} "
-                     f"| {_fmt(c['irrelevant_longest_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} |")
+                     f"| {_fmt(c['longest_error_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} "
+                     f"| {_fmt(c['irrelevant_longest_run_ms'], '.0f')} |")
     return "\n".join(lines)
 
 
