@@ -19,8 +19,11 @@ from tasks.cli import main
 from bomi.emulator import READER_SETTLE_S, EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, RowAssembler, encode_imu_frame
+from bomi.fusion import NodeFusion
+from bomi.gate import NodeGate
 from bomi.recording import NodeData, Recording, read_recording, write_recording
 from bomi.serial_source import RetryPolicy, SerialSource
+from tasks.stick import arm_profile
 
 FAST_RETRY = RetryPolicy(attempts=2, first_delay_s=0.01, max_delay_s=0.01)
 
@@ -344,6 +347,23 @@ def posture_recording(labels: list[int], samples_each: int, seed: int = 0) -> Re
     return Recording({1: node}, series)
 
 
+def held_neutral_then(body: Recording, profile_path) -> tuple[Recording, int]:
+    """``body`` after a held neutral just long enough for `bomi record`'s gate to open on it (what a person
+    does while record waits: hold still), and that length: the neutral's fused samples fed offline to the
+    gate `bomi record` uses, up to and including the one on which it says settled (about 9 s here: the
+    filter's yaw starts at 0 and decays towards this node's heading, 124 deg)."""
+    lead = posture_recording([0], 1500, seed=1)  # 24 s, more than enough
+    fusion = NodeFusion(arm_profile(str(profile_path)).nodes[0].calibration)
+    gate, node = NodeGate(1), lead.nodes[1]
+    for n in range(1, len(lead) + 1):
+        gate.fused(fusion.update(node.acc[n - 1], node.gyro[n - 1], node.mag[n - 1]))
+        if gate.settled:
+            break
+    joined = NodeData(*(np.vstack([getattr(node, name)[:n], getattr(body.nodes[1], name)])
+                        for name in ("acc", "gyro", "mag", "angles")))
+    return Recording({1: joined}, np.r_[lead.labels[:n], body.labels]), n
+
+
 def test_calibration_schedule_of_p1():
     from bomi.profiles import load_profile
     from bomi.protocol import calibration_schedule
@@ -366,7 +386,8 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
     profile = tmp_path / "t.toml"
     profile.write_text(TEST_PROFILE)
     rec_path = tmp_path / "stream.csv"
-    write_recording(rec_path, posture_recording([0, 1, 0, 2, 0, 0, 0, 0], 25))
+    stream, lead_in = held_neutral_then(posture_recording([0, 1, 0, 2, 0, 0, 0, 0], 25), profile)
+    write_recording(rec_path, stream)
     path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
     out, model = tmp_path / "calibration.csv", tmp_path / "model.json"
     assert main(["record", "--profile", str(profile), "--port", path, "--out", str(out), "--repetitions", "1",
@@ -377,7 +398,9 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
     starts = np.r_[0, np.flatnonzero(np.diff(labels)) + 1]
     assert labels[starts].tolist() == [0, 1, 0, 2, 0]
     assert all(abs(n - 25) <= 4 for n in np.diff(np.r_[starts, len(labels)]))  # 0.4 s at 62.5 Hz
-    first = int(np.flatnonzero((streamed.nodes[1].acc == recorded.nodes[1].acc[0]).all(axis=1))[0])
+    raw = np.hstack([streamed.nodes[1].acc, streamed.nodes[1].gyro])
+    first = int(np.flatnonzero((raw == np.r_[recorded.nodes[1].acc[0], recorded.nodes[1].gyro[0]]).all(axis=1))[0])
+    assert lead_in <= first <= lead_in + 8  # the protocol starts once the gate has opened, not before, nor long after
     np.testing.assert_array_equal(recorded.nodes[1].acc, streamed.nodes[1].acc[first:first + len(labels)])
     assert load_model(model).classes.tolist() == [0, 1, 2]
     assert (f"{model}: model of profile T; 3 classes:\n  c0 neutral: neutral posture\n  c1 F: tilt left\n"
@@ -420,7 +443,7 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     profile = tmp_path / "t.toml"
     profile.write_text(TEST_PROFILE)
     rec_path = tmp_path / "stream.csv"
-    write_recording(rec_path, posture_recording([0, 1, 0, 2, 0] * 4, 30))
+    write_recording(rec_path, held_neutral_then(posture_recording([0, 1, 0, 2, 0] * 4, 30), profile)[0])
     path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
     out = tmp_path / "calibration.csv"
     recorder = subprocess.Popen([sys.executable, "-m", "tasks.cli", "record", "--profile", str(profile), "--port", path,
@@ -431,7 +454,7 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # Interrupt on the recorder's own progress: its prompt for the third segment means two are
     # written, and 0.25 s later it is in the middle of that 0.5 s segment, 5 s before the end.
-    watchdog = threading.Timer(20, recorder.kill)
+    watchdog = threading.Timer(40, recorder.kill)  # the gate's wait (about 9 s), then 0.5 s segments
     watchdog.start()
     try:
         errors, prompts = [], 0
