@@ -472,3 +472,136 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     labels = read_recording(out).labels
     runs = np.diff(np.r_[0, np.flatnonzero(np.diff(labels)) + 1, len(labels)])
     assert 2 <= len(runs) < 13 and all(abs(n - 31) <= 4 for n in runs)  # 0.5 s segments, none cut short
+
+
+def test_record_from_a_virtual_participant_starts_after_the_filters_settle(tmp_path, capsys):
+    """P1 at seed 3 sits facing -112 deg, in neutral throughout (`bomi emulate --participant`, its own
+    process, real time): the receiver's filters start at yaw 0 and need ~9 s to reach the heading. The
+    recording starts after that: its first yaw is within the gate's tolerance of the yaw 5 s later (plus
+    P1's own sway over those 5 s: 1 deg in all), where the stream's first second is ~85 deg off."""
+    from bomi.fusion import DT
+    from bomi.gate import SETTLE_TOLERANCE_DEG
+    from bomi.profiles import load_profile
+    from bomi.protocol import calibration_schedule
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import participant_blocks
+
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--seed", "3",
+         "--neutral", "30", "--hold", "0.5", "--duration", "25", "--linger", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = emulator.stdout.readline().strip()
+        assert path.startswith("/dev/")
+        out = tmp_path / "p1.csv"
+        code = main(["record", "--profile", "P1", "--port", path, "--out", str(out), "--repetitions", "1",
+                     "--hold", "0.5", "--neutral", "0.5", "--retries", "0"])  # 8.5 s of protocol
+    finally:
+        emulator.kill()
+    err = capsys.readouterr().err
+    assert code == 0, err
+    recorded = read_recording(out)
+    later = round(5.0 / DT)
+    for node in recorded.nodes.values():
+        assert abs(node.angles[0, 2] - node.angles[later, 2]) < 2 * SETTLE_TOLERANCE_DEG
+    assert "hold still: warming up (node 1)" in err and "record: every node settled after " in err
+    # the same stream fused from its first sample, as the recorder's filters were: without the wait the
+    # recording would have started ~85 deg away from where it settles
+    profile = load_profile("P1")
+    blocks = list(participant_blocks(load_participant("P1"), profile, 3,
+                                     calibration_schedule(profile, hold_s=0.5, neutral_s=30), 25.0))
+    first_row = np.r_[recorded.nodes[1].mag[0], recorded.nodes[1].gyro[0], recorded.nodes[1].acc[0]]
+    for node in profile.nodes:
+        raw = np.vstack([block[node.index] for block in blocks])
+        fusion = NodeFusion(node.calibration)
+        yaw = np.array([fusion.update(row[6:9], row[3:6], row[0:3])[2] for row in raw.tolist()])
+        if node.index == 1:
+            start = int(np.flatnonzero((raw == first_row).all(axis=1))[0])
+        assert abs(yaw[start] - recorded.nodes[node.index].angles[0, 2]) < 1e-6   # every frame went to the filter
+        assert abs(yaw[:round(1 / DT)].mean() - yaw[start + later]) > 50             # the warm-up, not recorded
+    assert start * DT > 5.0
+
+
+def _tilting(seconds: float) -> Recording:
+    """One node lying flat, then tilting on at 5 deg/s (it never holds still), the magnetometer still:
+    held still it settles in about 4 s (its heading is near the filter's initial 0). Not a back-and-forth
+    motion: the gate's half-window test passes such a motion when a window is symmetric about a turn."""
+    t = np.arange(round(seconds * 62.5)) / 62.5
+    tilt = np.radians(5.0 * t)
+    acc = np.column_stack([16000 * np.sin(tilt), np.zeros_like(t), 16000 * np.cos(tilt)]).round()
+    n = len(t)
+    return Recording({1: NodeData(acc, np.zeros((n, 3)), np.tile([3000.0, 0.0, 2000.0], (n, 1)), np.zeros((n, 3)))},
+                     np.zeros(n, dtype=int))
+
+
+@pytest.mark.parametrize("stream, wait_s, reason", [
+    ("tilting", 6.0, r"still warming up: its angles changed by \d+\.\d\d deg between the halves of the last 1\.6 s"),
+    ("zero accelerometer", 2.0, r"accelerometer all zero")])
+def test_record_of_a_node_that_never_settles_is_one_error_line_and_no_file(tmp_path, capsys, monkeypatch,
+                                                                             stream, wait_s, reason):
+    from tasks.cli import stream as stream_cli
+
+    profile = tmp_path / "t.toml"
+    profile.write_text(TEST_PROFILE)
+    rec = _tilting(wait_s + 3.0)
+    if stream == "tilting":  # the same node held still is trusted within the wait: the motion is what holds it
+        still = NodeData(np.tile([0.0, 0.0, 16000.0], (len(rec), 1)), rec.nodes[1].gyro, rec.nodes[1].mag)
+        fusion, gate = NodeFusion(arm_profile(str(profile)).nodes[0].calibration), NodeGate(1)
+        for k in range(round(wait_s * 62.5)):
+            gate.fused(fusion.update(still.acc[k], still.gyro[k], still.mag[k]))
+        assert gate.settled
+    else:
+        rec.nodes[1].acc[:] = 0
+    rec_path = tmp_path / "stream.csv"
+    write_recording(rec_path, rec)
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
+    monkeypatch.setattr(stream_cli, "SETTLE_WAIT_S", wait_s)
+    out = tmp_path / "calibration.csv"
+    started = time.monotonic()
+    code = main(["record", "--profile", str(profile), "--port", path, "--out", str(out), "--retries", "0"])
+    took = time.monotonic() - started
+    thread.join(10)
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and not out.exists()
+    assert [line for line in err if line.startswith("bomi: error: ")] == err[-1:]
+    assert re.fullmatch(rf"bomi: error: {path}: node 1 did not settle in {wait_s:g} s \({reason}[^)]*\); "
+                        "nothing recorded", err[-1]), err[-1]
+    assert wait_s < took < wait_s + 1.5
+
+
+def test_emulate_settle_first_keeps_the_participant_in_step_with_records_prompts(tmp_path, capsys):
+    """`bomi emulate --participant P1 --settle-first` holds still until a receiver's gate would open, then
+    performs the protocol; `bomi record` starts its prompts when its gate opens: the label record gives
+    each row is the cue the participant was following at that sample on >= 90 % of the rows (the rest:
+    a few samples of the emulator's estimate against the recorder's batches at each of the 17 changes).
+    Without the lead-in the participant would be 9 s (3.5 segments) ahead of the prompts."""
+    from bomi.fusion import DT
+    from bomi.profiles import load_profile
+    from bomi.protocol import calibration_schedule
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import delayed, participant_blocks, settled_after
+
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--seed", "3",
+         "--settle-first", "--neutral", "1", "--hold", "1.5", "--linger", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = emulator.stdout.readline().strip()
+        assert path.startswith("/dev/")
+        out = tmp_path / "p1.csv"
+        code = main(["record", "--profile", "P1", "--port", path, "--out", str(out), "--repetitions", "1",
+                     "--hold", "1.5", "--neutral", "1", "--retries", "0"])  # 21 s of protocol
+    finally:
+        emulator.kill()
+    assert code == 0, capsys.readouterr().err
+    recorded = read_recording(out)
+    params, profile = load_participant("P1"), load_profile("P1")
+    lead_s = settled_after(params, profile, 3)
+    cues = delayed(calibration_schedule(profile, hold_s=1.5, neutral_s=1), lead_s)
+    raw = np.vstack([block[1] for block in participant_blocks(params, profile, 3, cues, lead_s + 25.0)])
+    index = {tuple(row): k for k, row in enumerate(raw.tolist())}
+    node = recorded.nodes[1]
+    rows = [index[tuple(row)] for row in np.hstack([node.mag, node.gyro, node.acc]).tolist()]
+    followed = np.array([next(cue.label for cue in cues if cue.start_s <= k * DT < cue.end_s) for k in rows])
+    assert np.mean(followed == recorded.labels) >= 0.9
+    assert rows[0] * DT >= lead_s

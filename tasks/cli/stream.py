@@ -41,8 +41,9 @@ SETTLE_WAIT_S = 60.0
 ROWS_PER_FLUSH = 62  # capture: about one second of samples
 COUNTDOWN_S = 3.0
 # emulate --participant: after the protocol's last cue the participant stays in that (neutral)
-# posture this long, so that `bomi record`, whose schedule starts when the first frames reach it,
-# still completes its last segment before the stream ends.
+# posture this long, so that `bomi record`, whose schedule starts a little after the participant's
+# (--settle-first: when its gate opens, a few samples after the emulator's estimate), still completes
+# its last segment before the stream ends.
 PROTOCOL_TAIL_S = 5.0
 
 TimedFrame = tuple[float, ImuFrame]
@@ -75,6 +76,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          help="--participant: seconds each motion is held (default %(default)s)")
     emulate.add_argument("--neutral", type=seconds, default=5.0,
                          help="--participant: seconds of neutral posture between motions (default %(default)s)")
+    emulate.add_argument("--settle-first", action="store_true",
+                         help="--participant: hold still first, until a receiver's orientation filters have "
+                              "settled (judged on this stream by the gate of `bomi record`), then the protocol: "
+                              "what a person does while `bomi record` says 'hold still'. Use it with record")
     emulate.add_argument("--linger", type=non_negative_seconds, default=5.0,
                          help="pty: after the end, wait up to this many seconds for the reader to close "
                               "(default %(default)s)")
@@ -151,6 +156,8 @@ def _note(message: str) -> None:
 
 # ------------------------------------------------------------------------------------ emulate
 def run_emulate(args: argparse.Namespace) -> int:
+    if args.settle_first and args.participant is None:
+        raise BomiError("--settle-first: only with --participant (a recording is played as it is)")
     config = EmulatorConfig(rate_hz=args.rate, loss=args.loss, corrupt=args.corrupt, seed=args.seed)
     what, nodes, samples, blocks = (_recording_blocks if args.participant is None else _participant_blocks)(args)
     sink = open_sink(args.to, args.linger, args.baud)
@@ -181,14 +188,21 @@ def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
 
 def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     """The participant performs the calibration protocol; samples are made while they are played."""
-    from tasks.participants.wire import participant_blocks  # here, not at load: capture and record need no participant
+    # here, not at load: capture and record need no participant
+    from tasks.participants.wire import delayed, participant_blocks, settled_after
     from tasks.participants.participant import load_participant
     params = load_participant(args.participant)
     profile = arm_profile(params.profile)
     cues = calibration_schedule(profile, hold_s=args.hold, neutral_s=args.neutral)
+    what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol"
+    if args.settle_first:
+        # the receiver's filter decays per sample it gets: with --loss it needs 1 / (1 - loss) as long
+        lead_s = settled_after(params, profile, args.seed) / (1.0 - args.loss)
+        cues = delayed(cues, lead_s)
+        what += f" after {lead_s:.1f} s holding still"
     protocol_s = cues[-1].end_s + PROTOCOL_TAIL_S
     end_s = protocol_s if args.duration is None else min(args.duration, protocol_s)
-    what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol, {end_s:g} s"
+    what += f", {end_s:g} s"
     return (what, len(profile.nodes), int(end_s / DT) + 1,
             participant_blocks(params, profile, args.seed, cues, end_s))
 
