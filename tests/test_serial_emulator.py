@@ -474,6 +474,23 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     assert 2 <= len(runs) < 13 and all(abs(n - 31) <= 4 for n in runs)  # 0.5 s segments, none cut short
 
 
+def record_from_p1(tmp_path, capsys, emulate: list[str], record: list[str]) -> tuple[int, str, Recording | None]:
+    """`bomi record --profile P1 --repetitions 1 RECORD` from `bomi emulate --participant P1 --seed 3
+    EMULATE` (its own process, a pty, real time): exit code, stderr, the recording."""
+    emulator = subprocess.Popen([sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty",
+                                 "--seed", "3", "--linger", "0.5", *emulate],
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        path = emulator.stdout.readline().strip()
+        assert path.startswith("/dev/")
+        out = tmp_path / "p1.csv"
+        code = main(["record", "--profile", "P1", "--port", path, "--out", str(out), "--repetitions", "1",
+                     "--retries", "0", *record])
+    finally:
+        emulator.kill()
+    return code, capsys.readouterr().err, read_recording(out) if out.exists() else None
+
+
 def test_record_from_a_virtual_participant_starts_after_the_filters_settle(tmp_path, capsys):
     """P1 at seed 3 sits facing -112 deg, in neutral throughout (`bomi emulate --participant`, its own
     process, real time): the receiver's filters start at yaw 0 and need ~9 s to reach the heading. The
@@ -486,21 +503,10 @@ def test_record_from_a_virtual_participant_starts_after_the_filters_settle(tmp_p
     from tasks.participants.participant import load_participant
     from tasks.participants.wire import participant_blocks
 
-    emulator = subprocess.Popen(
-        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--seed", "3",
-         "--neutral", "30", "--hold", "0.5", "--duration", "25", "--linger", "0.5"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        path = emulator.stdout.readline().strip()
-        assert path.startswith("/dev/")
-        out = tmp_path / "p1.csv"
-        code = main(["record", "--profile", "P1", "--port", path, "--out", str(out), "--repetitions", "1",
-                     "--hold", "0.5", "--neutral", "0.5", "--retries", "0"])  # 8.5 s of protocol
-    finally:
-        emulator.kill()
-    err = capsys.readouterr().err
+    # P1 in neutral for 30 s; 8.5 s of protocol
+    code, err, recorded = record_from_p1(tmp_path, capsys, ["--neutral", "30", "--hold", "0.5", "--duration", "25"],
+                                         ["--hold", "0.5", "--neutral", "0.5"])
     assert code == 0, err
-    recorded = read_recording(out)
     later = round(5.0 / DT)
     for node in recorded.nodes.values():
         assert abs(node.angles[0, 2] - node.angles[later, 2]) < 2 * SETTLE_TOLERANCE_DEG
@@ -581,20 +587,9 @@ def test_emulate_settle_first_keeps_the_participant_in_step_with_records_prompts
     from tasks.participants.participant import load_participant
     from tasks.participants.wire import delayed, participant_blocks, settled_after
 
-    emulator = subprocess.Popen(
-        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--seed", "3",
-         "--settle-first", "--neutral", "1", "--hold", "1.5", "--linger", "0.5"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        path = emulator.stdout.readline().strip()
-        assert path.startswith("/dev/")
-        out = tmp_path / "p1.csv"
-        code = main(["record", "--profile", "P1", "--port", path, "--out", str(out), "--repetitions", "1",
-                     "--hold", "1.5", "--neutral", "1", "--retries", "0"])  # 21 s of protocol
-    finally:
-        emulator.kill()
-    assert code == 0, capsys.readouterr().err
-    recorded = read_recording(out)
+    segments = ["--neutral", "1", "--hold", "1.5"]   # 21 s of protocol
+    code, err, recorded = record_from_p1(tmp_path, capsys, ["--settle-first", *segments], segments)
+    assert code == 0, err
     params, profile = load_participant("P1"), load_profile("P1")
     lead_s = settled_after(params, profile, 3)
     cues = delayed(calibration_schedule(profile, hold_s=1.5, neutral_s=1), lead_s)
@@ -605,3 +600,31 @@ def test_emulate_settle_first_keeps_the_participant_in_step_with_records_prompts
     followed = np.array([next(cue.label for cue in cues if cue.start_s <= k * DT < cue.end_s) for k in rows])
     assert np.mean(followed == recorded.labels) >= 0.9
     assert rows[0] * DT >= lead_s
+
+
+def test_ctrl_c_while_record_waits_for_the_gate_writes_nothing(tmp_path):
+    profile = tmp_path / "t.toml"
+    profile.write_text(TEST_PROFILE)
+    rec = _tilting(8.0)
+    rec.nodes[1].acc[:] = 0                                  # never plausible: record keeps waiting
+    rec_path = tmp_path / "stream.csv"
+    write_recording(rec_path, rec)
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
+    out = tmp_path / "calibration.csv"
+    recorder = subprocess.Popen([sys.executable, "-m", "tasks.cli", "record", "--profile", str(profile), "--port", path,
+                                 "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as in the test above
+    watchdog = threading.Timer(20, recorder.kill)
+    watchdog.start()
+    try:
+        waiting = "hold still: node 1: accelerometer all zero"
+        while (line := recorder.stderr.readline()) and not line.startswith(waiting):
+            pass
+        recorder.send_signal(signal.SIGINT)
+        rest = recorder.communicate(timeout=10)[1]
+    finally:
+        watchdog.cancel()
+        recorder.kill()
+    thread.join(10)
+    assert line.startswith(waiting)
+    assert recorder.returncode == 130 and rest.endswith("bomi: interrupted\n") and not out.exists()
