@@ -123,7 +123,8 @@ def summarize(log: EpisodeLog) -> dict:
         return out
     errors = metrics.misclassified(d.intended, d.decided, log.allowance)
     wild = metrics.irrelevant(d.intended, d.decided, log.neutral)
-    latency_ms = metrics.decision_latencies(d.intended, d.decided, log.neutral) * 1000.0 * log.sample_period
+    onsets = metrics.onset_latencies(d.intended, d.decided, log.neutral)
+    latency_ms = np.array([n for n in onsets if n is not None], dtype=float) * 1000.0 * log.sample_period
     curve = np.round(np.array(ALLOWANCE_CURVE_S) / log.sample_period).astype(int)
     out.update({
         "decisions": int(len(d.t)),
@@ -144,6 +145,8 @@ def summarize(log: EpisodeLog) -> dict:
         "irrelevant_per_min": metrics.per_minute(len(metrics.runs(wild)), len(d.t), log.sample_period),
         "irrelevant_longest_run_ms": metrics.longest_error_run_ms(wild, log.sample_period),
         "latency_onsets_ms": latency_ms.tolist(),
+        "onsets": len(onsets),
+        "onsets_unrecognised": sum(n is None for n in onsets),  # the intent ended before the chain output it
         "latency_ms_median": float(np.median(latency_ms)) if latency_ms.size else None,
         "latency_ms_p90": float(np.percentile(latency_ms, 90)) if latency_ms.size else None,
         "latency_ms_max": float(latency_ms.max()) if latency_ms.size else None,

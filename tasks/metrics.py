@@ -102,11 +102,11 @@ def per_minute(count: int, decisions: int, sample_period_s: float) -> float:
     return count / minutes if minutes > 0 else float("nan")
 
 
-def decision_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) -> np.ndarray:
-    """Samples from each motion onset (intended change to an active class) to the first decision
-    of that class; onsets whose intent ended before the chain output it are left out."""
+def onset_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) -> list[int | None]:
+    """For each motion onset (intended change to an active class): samples to the first decision of
+    that class, or None when the intent ended before the chain output it (never recognised)."""
     intended, decided = np.asarray(intended), np.asarray(decided)
-    latencies = []
+    outcomes: list[int | None] = []
     for onset in np.flatnonzero(np.r_[True, intended[1:] != intended[:-1]]):
         label = intended[onset]
         if label == neutral:
@@ -115,9 +115,13 @@ def decision_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) 
         while end < len(intended) and intended[end] == label:
             end += 1
         hits = np.flatnonzero(decided[onset:end] == label)
-        if hits.size:
-            latencies.append(int(hits[0]))
-    return np.asarray(latencies, dtype=int)
+        outcomes.append(int(hits[0]) if hits.size else None)
+    return outcomes
+
+
+def decision_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) -> np.ndarray:
+    """``onset_latencies`` of the onsets the chain recognised, in samples."""
+    return np.asarray([n for n in onset_latencies(intended, decided, neutral) if n is not None], dtype=int)
 
 
 def unintended_displacement_mm(hand_pos: np.ndarray, intended_dir: np.ndarray) -> float:

@@ -41,6 +41,13 @@ def test_latency_counts_samples_from_onset_to_first_correct_decision():
     assert metrics.decision_latencies(np.array([0, 3, 3, 0]), np.array([0, 0, 0, 0]), 0).size == 0
 
 
+def test_every_onset_is_counted_with_its_latency_or_as_never_recognised():
+    intended = np.array([0, 3, 3, 3, 0, 5, 5, 2, 2, 2, 2])
+    decided = np.array([0, 0, 0, 3, 3, 0, 0, 0, 0, 4, 2])
+    # onsets: c3 at 1 (output at 3: 2 samples), c5 at 5 (never), c2 at 7 (output at 10: 3 samples)
+    assert metrics.onset_latencies(intended, decided, neutral=0) == [2, None, 3]
+
+
 def test_unintended_displacement():
     hand = np.array([[0, 0, 0], [0.010, 0.003, 0], [0.010, 0.003, 0.004], [0.005, 0.003, 0.004]])
     wanted = np.array([[1, 0, 0], [1, 0, 0], [1, 0, 0]])

@@ -135,7 +135,16 @@ ASSIST_KEYS = ("automatic_switches", "wrong_goal_switches", "refused_switches", 
 # the decision metrics of a row (None for an operator without a classifier)
 DECISION_KEYS = ("accuracy_all_decisions", "accuracy_excused_transitions", "scored_share", "excused_allowance_ms",
                  "relevant_share", "irrelevant_per_min", "irrelevant_longest_run_ms", "longest_error_run_ms",
-                 "latency_ms_median", "latency_ms_p90", "accuracy_vs_allowance")
+                 "latency_ms_median", "latency_ms_p90", "onsets_unrecognised_share", "accuracy_vs_allowance")
+
+
+def _unrecognised_share(records: list[dict]) -> float | None:
+    """Pooled share of motion onsets the chain never output before the intent ended (None for
+    records written before this was counted)."""
+    if any("onsets" not in r for r in records):
+        return None
+    onsets = sum(r["onsets"] for r in records)
+    return sum(r["onsets_unrecognised"] for r in records) / onsets if onsets else None
 
 
 def aggregate(records: list[dict]) -> list[dict]:
@@ -184,6 +193,7 @@ def aggregate(records: list[dict]) -> list[dict]:
                 "longest_error_run_ms": max(r["longest_error_run_ms"] for r in decided),
                 "latency_ms_median": float(np.median(latency)) if latency else None,
                 "latency_ms_p90": float(np.percentile(latency, 90)) if latency else None,
+                "onsets_unrecognised_share": _unrecognised_share(decided),
                 "accuracy_vs_allowance": {"allowance_s": decided[0]["accuracy_vs_allowance"]["allowance_s"],
                                           "accuracy": np.nanmean(np.array(curves, dtype=float), axis=0).tolist()},
             })
@@ -229,8 +239,8 @@ def _interval(ci, spec: str = ".1f", scale: float = 1.0) -> str:
 # in brackets: Wilson for successes, Student-t for the mean completion time
 ROW_COLUMNS = ("layout", "successes [95 % CI]", "completion time (s) [95 % CI]", "accuracy, all decisions",
                "accuracy, transitions excused (scored share)", "relevant outputs", "irrelevant / min (longest, ms)",
-               "latency from onset median / p90 (ms)", "assist", "user mode switches", "automatic (wrong-goal) switches",
-               "drops", "x real time")
+               "latency from onset median / p90 (ms) (onsets never recognised)", "assist", "user mode switches",
+               "automatic (wrong-goal) switches", "drops", "x real time")
 
 
 # An interval over fewer episodes says little: none is printed (the JSON keeps it).
@@ -293,6 +303,8 @@ def row_cells(r: dict) -> list[str]:
     wild = "-" if r.get("irrelevant_per_min") is None else (
         f"{r['irrelevant_per_min']:.2f} ({r['irrelevant_longest_run_ms']:.0f})")
     latency = "-" if r.get("latency_ms_median") is None else f"{r['latency_ms_median']:.0f} / {r['latency_ms_p90']:.0f}"
+    if r.get("onsets_unrecognised_share") is not None:
+        latency += f" ({_pct(r['onsets_unrecognised_share'])} never)"
     return [r["layout"], successes_text(r), completion_text(r),
             _pct(r.get("accuracy_all_decisions")), excused, _pct(r.get("relevant_share")), wild, latency,
             r["assist"], _fmt(r["mode_switches"]), f"{_fmt(r['automatic_switches'])} ({_fmt(r['wrong_goal_switches'])})",
