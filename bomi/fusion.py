@@ -165,7 +165,7 @@ class FusedRows:
 
     def samples(self, row: dict[int, ImuFrame]) -> dict[int, NodeSample]:
         """The row's raw values and fused angles, keyed by node index."""
-        return {imu_index(node_id): NodeSample(frame.acc, frame.gyro, frame.mag, self._angles(node_id, frame))
+        return {imu_index(node_id): NodeSample(frame.acc, frame.gyro, frame.mag, self.angles(frame))
                 for node_id, frame in row.items()}
 
     def columns(self, rows: list[dict[int, ImuFrame]]) -> dict[int, NodeData]:
@@ -174,12 +174,15 @@ class FusedRows:
         out = {}
         for node_id in self._fusion:
             frames = [row[node_id] for row in rows]
-            angles = [self._angles(node_id, frame) for frame in frames]
+            angles = [self.angles(frame) for frame in frames]
             out[imu_index(node_id)] = NodeData(*(_rows_of(getattr(f, name) for f in frames) for name in ("acc", "gyro", "mag")),
                                                angles=_rows_of(angles))
         return out
 
-    def _angles(self, node_id: int, frame: ImuFrame) -> Vector3:
+    def angles(self, frame: ImuFrame) -> Vector3:
+        """The frame's fused angles; fused once, when first asked (a row may hold a node's frame over
+        a loss, and `bomi record` fuses frames one by one before they make rows)."""
+        node_id = frame.node_id
         last = self._last.get(node_id)
         if last is None or last[0] is not frame:  # a held frame is not fused twice
             last = self._last[node_id] = (frame, self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag))

@@ -174,6 +174,13 @@ class NodeGate:
                 self.settled = True
                 self.last_defect, self.defect = self.defect, None
 
+    @property
+    def change(self) -> float | None:
+        """The settle test's value (``settle_change``) over the last window; None until a window is full."""
+        if len(self._angles) < self.config.settle_samples:
+            return None
+        return settle_change(np.array(self._angles))
+
     def verdict(self, now: float) -> str | None:
         """Why the node cannot be trusted at ``now`` (None if it can)."""
         if self._last_arrival is None or now - self._last_arrival >= self.config.stale_s:

@@ -263,6 +263,8 @@ CASES = [
     Case("emulate-zero-hold", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "0"], "--hold"),
     Case("emulate-nan-duration", ["emulate", "--participant", "P1", "--to", "pty", "--duration", "nan"], "--duration"),
     Case("emulate-hold-1e308", ["emulate", "--participant", "P1", "--to", "pty", "--hold", "1e308"], "--hold"),
+    Case("emulate-settle-first-of-a-recording", ["emulate", "--recording", "{d}/tiny.csv", "--to", "pty",
+                                                 "--settle-first"], "--settle-first"),
     Case("sim-check-seconds-1e308", ["sim-check", "--seconds", "1e308"], "--seconds"),
     Case("record-zero-repetitions", ["record", "--profile", "P1", "--port", P1_PORT, "--out", "{d}/r.csv",
                                      "--repetitions", "0"], "--repetitions"),

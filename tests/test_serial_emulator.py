@@ -19,8 +19,11 @@ from tasks.cli import main
 from bomi.emulator import READER_SETTLE_S, EmulatorConfig, EmulatorStats, frame_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, RowAssembler, encode_imu_frame
+from bomi.fusion import NodeFusion
+from bomi.gate import NodeGate
 from bomi.recording import NodeData, Recording, read_recording, write_recording
 from bomi.serial_source import RetryPolicy, SerialSource
+from tasks.stick import arm_profile
 
 FAST_RETRY = RetryPolicy(attempts=2, first_delay_s=0.01, max_delay_s=0.01)
 
@@ -344,6 +347,23 @@ def posture_recording(labels: list[int], samples_each: int, seed: int = 0) -> Re
     return Recording({1: node}, series)
 
 
+def held_neutral_then(body: Recording, profile_path) -> tuple[Recording, int]:
+    """``body`` after a held neutral just long enough for `bomi record`'s gate to open on it (what a person
+    does while record waits: hold still), and that length: the neutral's fused samples fed offline to the
+    gate `bomi record` uses, up to and including the one on which it says settled (about 9 s here: the
+    filter's yaw starts at 0 and decays towards this node's heading, 124 deg)."""
+    lead = posture_recording([0], 1500, seed=1)  # 24 s, more than enough
+    fusion = NodeFusion(arm_profile(str(profile_path)).nodes[0].calibration)
+    gate, node = NodeGate(1), lead.nodes[1]
+    for n in range(1, len(lead) + 1):
+        gate.fused(fusion.update(node.acc[n - 1], node.gyro[n - 1], node.mag[n - 1]))
+        if gate.settled:
+            break
+    joined = NodeData(*(np.vstack([getattr(node, name)[:n], getattr(body.nodes[1], name)])
+                        for name in ("acc", "gyro", "mag", "angles")))
+    return Recording({1: joined}, np.r_[lead.labels[:n], body.labels]), n
+
+
 def test_calibration_schedule_of_p1():
     from bomi.profiles import load_profile
     from bomi.protocol import calibration_schedule
@@ -366,7 +386,8 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
     profile = tmp_path / "t.toml"
     profile.write_text(TEST_PROFILE)
     rec_path = tmp_path / "stream.csv"
-    write_recording(rec_path, posture_recording([0, 1, 0, 2, 0, 0, 0, 0], 25))
+    stream, lead_in = held_neutral_then(posture_recording([0, 1, 0, 2, 0, 0, 0, 0], 25), profile)
+    write_recording(rec_path, stream)
     path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
     out, model = tmp_path / "calibration.csv", tmp_path / "model.json"
     assert main(["record", "--profile", str(profile), "--port", path, "--out", str(out), "--repetitions", "1",
@@ -377,7 +398,9 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
     starts = np.r_[0, np.flatnonzero(np.diff(labels)) + 1]
     assert labels[starts].tolist() == [0, 1, 0, 2, 0]
     assert all(abs(n - 25) <= 4 for n in np.diff(np.r_[starts, len(labels)]))  # 0.4 s at 62.5 Hz
-    first = int(np.flatnonzero((streamed.nodes[1].acc == recorded.nodes[1].acc[0]).all(axis=1))[0])
+    raw = np.hstack([streamed.nodes[1].acc, streamed.nodes[1].gyro])
+    first = int(np.flatnonzero((raw == np.r_[recorded.nodes[1].acc[0], recorded.nodes[1].gyro[0]]).all(axis=1))[0])
+    assert lead_in <= first <= lead_in + 8  # the protocol starts once the gate has opened, not before, nor long after
     np.testing.assert_array_equal(recorded.nodes[1].acc, streamed.nodes[1].acc[first:first + len(labels)])
     assert load_model(model).classes.tolist() == [0, 1, 2]
     assert (f"{model}: model of profile T; 3 classes:\n  c0 neutral: neutral posture\n  c1 F: tilt left\n"
@@ -420,7 +443,7 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     profile = tmp_path / "t.toml"
     profile.write_text(TEST_PROFILE)
     rec_path = tmp_path / "stream.csv"
-    write_recording(rec_path, posture_recording([0, 1, 0, 2, 0] * 4, 30))
+    write_recording(rec_path, held_neutral_then(posture_recording([0, 1, 0, 2, 0] * 4, 30), profile)[0])
     path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
     out = tmp_path / "calibration.csv"
     recorder = subprocess.Popen([sys.executable, "-m", "tasks.cli", "record", "--profile", str(profile), "--port", path,
@@ -431,7 +454,7 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
                                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # Interrupt on the recorder's own progress: its prompt for the third segment means two are
     # written, and 0.25 s later it is in the middle of that 0.5 s segment, 5 s before the end.
-    watchdog = threading.Timer(20, recorder.kill)
+    watchdog = threading.Timer(40, recorder.kill)  # the gate's wait (about 9 s), then 0.5 s segments
     watchdog.start()
     try:
         errors, prompts = [], 0
@@ -449,3 +472,159 @@ def test_interrupted_record_keeps_only_completed_segments(tmp_path):
     labels = read_recording(out).labels
     runs = np.diff(np.r_[0, np.flatnonzero(np.diff(labels)) + 1, len(labels)])
     assert 2 <= len(runs) < 13 and all(abs(n - 31) <= 4 for n in runs)  # 0.5 s segments, none cut short
+
+
+def record_from_p1(tmp_path, capsys, emulate: list[str], record: list[str]) -> tuple[int, str, Recording | None]:
+    """`bomi record --profile P1 --repetitions 1 RECORD` from `bomi emulate --participant P1 --seed 3
+    EMULATE` (its own process, a pty, real time): exit code, stderr, the recording."""
+    emulator = subprocess.Popen([sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty",
+                                 "--seed", "3", "--linger", "0.5", *emulate],
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        path = emulator.stdout.readline().strip()
+        assert path.startswith("/dev/")
+        out = tmp_path / "p1.csv"
+        code = main(["record", "--profile", "P1", "--port", path, "--out", str(out), "--repetitions", "1",
+                     "--retries", "0", *record])
+    finally:
+        emulator.kill()
+    return code, capsys.readouterr().err, read_recording(out) if out.exists() else None
+
+
+def test_record_from_a_virtual_participant_starts_after_the_filters_settle(tmp_path, capsys):
+    """P1 at seed 3 sits facing -112 deg, in neutral throughout (`bomi emulate --participant`, its own
+    process, real time): the receiver's filters start at yaw 0 and need ~9 s to reach the heading. The
+    recording starts after that: its first yaw is within the gate's tolerance of the yaw 5 s later (plus
+    P1's own sway over those 5 s: 1 deg in all), where the stream's first second is ~85 deg off."""
+    from bomi.fusion import DT
+    from bomi.gate import SETTLE_TOLERANCE_DEG
+    from bomi.profiles import load_profile
+    from bomi.protocol import calibration_schedule
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import participant_blocks
+
+    # P1 in neutral for 30 s; 8.5 s of protocol
+    code, err, recorded = record_from_p1(tmp_path, capsys, ["--neutral", "30", "--hold", "0.5", "--duration", "25"],
+                                         ["--hold", "0.5", "--neutral", "0.5"])
+    assert code == 0, err
+    later = round(5.0 / DT)
+    for node in recorded.nodes.values():
+        assert abs(node.angles[0, 2] - node.angles[later, 2]) < 2 * SETTLE_TOLERANCE_DEG
+    assert "hold still: warming up (node 1)" in err and "record: every node settled after " in err
+    # the same stream fused from its first sample, as the recorder's filters were: without the wait the
+    # recording would have started ~85 deg away from where it settles
+    profile = load_profile("P1")
+    blocks = list(participant_blocks(load_participant("P1"), profile, 3,
+                                     calibration_schedule(profile, hold_s=0.5, neutral_s=30), 25.0))
+    first_row = np.r_[recorded.nodes[1].mag[0], recorded.nodes[1].gyro[0], recorded.nodes[1].acc[0]]
+    for node in profile.nodes:
+        raw = np.vstack([block[node.index] for block in blocks])
+        fusion = NodeFusion(node.calibration)
+        yaw = np.array([fusion.update(row[6:9], row[3:6], row[0:3])[2] for row in raw.tolist()])
+        if node.index == 1:
+            start = int(np.flatnonzero((raw == first_row).all(axis=1))[0])
+        assert abs(yaw[start] - recorded.nodes[node.index].angles[0, 2]) < 1e-6   # every frame went to the filter
+        assert abs(yaw[:round(1 / DT)].mean() - yaw[start + later]) > 50             # the warm-up, not recorded
+    assert start * DT > 5.0
+
+
+def _tilting(seconds: float) -> Recording:
+    """One node lying flat, then tilting on at 5 deg/s (it never holds still), the magnetometer still:
+    held still it settles in about 4 s (its heading is near the filter's initial 0). Not a back-and-forth
+    motion: the gate's half-window test passes such a motion when a window is symmetric about a turn."""
+    t = np.arange(round(seconds * 62.5)) / 62.5
+    tilt = np.radians(5.0 * t)
+    acc = np.column_stack([16000 * np.sin(tilt), np.zeros_like(t), 16000 * np.cos(tilt)]).round()
+    n = len(t)
+    return Recording({1: NodeData(acc, np.zeros((n, 3)), np.tile([3000.0, 0.0, 2000.0], (n, 1)), np.zeros((n, 3)))},
+                     np.zeros(n, dtype=int))
+
+
+@pytest.mark.parametrize("stream, wait_s, reason", [
+    ("tilting", 6.0, r"still warming up: its angles changed by \d+\.\d\d deg between the halves of the last 1\.6 s"),
+    ("zero accelerometer", 2.0, r"accelerometer all zero")])
+def test_record_of_a_node_that_never_settles_is_one_error_line_and_no_file(tmp_path, capsys, monkeypatch,
+                                                                             stream, wait_s, reason):
+    from tasks.cli import stream as stream_cli
+
+    profile = tmp_path / "t.toml"
+    profile.write_text(TEST_PROFILE)
+    rec = _tilting(wait_s + 3.0)
+    if stream == "tilting":  # the same node held still is trusted within the wait: the motion is what holds it
+        still = NodeData(np.tile([0.0, 0.0, 16000.0], (len(rec), 1)), rec.nodes[1].gyro, rec.nodes[1].mag)
+        fusion, gate = NodeFusion(arm_profile(str(profile)).nodes[0].calibration), NodeGate(1)
+        for k in range(round(wait_s * 62.5)):
+            gate.fused(fusion.update(still.acc[k], still.gyro[k], still.mag[k]))
+        assert gate.settled
+    else:
+        rec.nodes[1].acc[:] = 0
+    rec_path = tmp_path / "stream.csv"
+    write_recording(rec_path, rec)
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
+    monkeypatch.setattr(stream_cli, "SETTLE_WAIT_S", wait_s)
+    out = tmp_path / "calibration.csv"
+    started = time.monotonic()
+    code = main(["record", "--profile", str(profile), "--port", path, "--out", str(out), "--retries", "0"])
+    took = time.monotonic() - started
+    thread.join(10)
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and not out.exists()
+    assert [line for line in err if line.startswith("bomi: error: ")] == err[-1:]
+    assert re.fullmatch(rf"bomi: error: {path}: node 1 did not settle in {wait_s:g} s \({reason}[^)]*\); "
+                        "nothing recorded", err[-1]), err[-1]
+    assert wait_s < took < wait_s + 1.5
+
+
+def test_emulate_settle_first_keeps_the_participant_in_step_with_records_prompts(tmp_path, capsys):
+    """`bomi emulate --participant P1 --settle-first` holds still until a receiver's gate would open, then
+    performs the protocol; `bomi record` starts its prompts when its gate opens: the label record gives
+    each row is the cue the participant was following at that sample on >= 90 % of the rows (the rest:
+    a few samples of the emulator's estimate against the recorder's batches at each of the 17 changes).
+    Without the lead-in the participant would be 9 s (3.5 segments) ahead of the prompts."""
+    from bomi.fusion import DT
+    from bomi.profiles import load_profile
+    from bomi.protocol import calibration_schedule
+    from tasks.participants.participant import load_participant
+    from tasks.participants.wire import delayed, participant_blocks, settled_after
+
+    segments = ["--neutral", "1", "--hold", "1.5"]   # 21 s of protocol
+    code, err, recorded = record_from_p1(tmp_path, capsys, ["--settle-first", *segments], segments)
+    assert code == 0, err
+    params, profile = load_participant("P1"), load_profile("P1")
+    lead_s = settled_after(params, profile, 3)
+    cues = delayed(calibration_schedule(profile, hold_s=1.5, neutral_s=1), lead_s)
+    raw = np.vstack([block[1] for block in participant_blocks(params, profile, 3, cues, lead_s + 25.0)])
+    index = {tuple(row): k for k, row in enumerate(raw.tolist())}
+    node = recorded.nodes[1]
+    rows = [index[tuple(row)] for row in np.hstack([node.mag, node.gyro, node.acc]).tolist()]
+    followed = np.array([next(cue.label for cue in cues if cue.start_s <= k * DT < cue.end_s) for k in rows])
+    assert np.mean(followed == recorded.labels) >= 0.9
+    assert rows[0] * DT >= lead_s
+
+
+def test_ctrl_c_while_record_waits_for_the_gate_writes_nothing(tmp_path):
+    profile = tmp_path / "t.toml"
+    profile.write_text(TEST_PROFILE)
+    rec = _tilting(8.0)
+    rec.nodes[1].acc[:] = 0                                  # never plausible: record keeps waiting
+    rec_path = tmp_path / "stream.csv"
+    write_recording(rec_path, rec)
+    path, thread, _ = _emulate_to_pty(rec_path, EmulatorConfig())
+    out = tmp_path / "calibration.csv"
+    recorder = subprocess.Popen([sys.executable, "-m", "tasks.cli", "record", "--profile", str(profile), "--port", path,
+                                 "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as in the test above
+    watchdog = threading.Timer(20, recorder.kill)
+    watchdog.start()
+    try:
+        waiting = "hold still: node 1: accelerometer all zero"
+        while (line := recorder.stderr.readline()) and not line.startswith(waiting):
+            pass
+        recorder.send_signal(signal.SIGINT)
+        rest = recorder.communicate(timeout=10)[1]
+    finally:
+        watchdog.cancel()
+        recorder.kill()
+    thread.join(10)
+    assert line.startswith(waiting)
+    assert recorder.returncode == 130 and rest.endswith("bomi: interrupted\n") and not out.exists()

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import sys
+from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
 from bomi.fusion import DT, FusedRows, NodeCalibration
 from bomi.files import check_output
+from bomi.gate import Gate, NodeGate
 from bomi.model_io import SUFFIXES, save_model
 from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
@@ -27,13 +29,21 @@ from tasks.stick import arm_profile
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
 NODE_DETECTION_S = 0.5
-# How long record waits for every node of the profile before giving up.
+# How long record waits for frames of every node of the profile before giving up.
 NODE_WAIT_S = 5.0
+# How long record waits for every node's orientation filter to settle (bomi.gate) before giving up.
+# From its zero state the filter's heading error decays with tau = 1.6 s: even 180 deg is below the
+# gate's 0.5 deg after 1.6 s x ln(360) = 9.4 s, and the gate sees it one window (1.6 s) later, so a
+# person holding still is recorded about 11 s after the stream starts. 60 s leaves five times that to
+# sit still (adjust the headset, stop talking); a node not settled by then has a fault that waiting does
+# not cure (a sensor reading zeros or saturated, a person who cannot hold still, motion nearby).
+SETTLE_WAIT_S = 60.0
 ROWS_PER_FLUSH = 62  # capture: about one second of samples
 COUNTDOWN_S = 3.0
 # emulate --participant: after the protocol's last cue the participant stays in that (neutral)
-# posture this long, so that `bomi record`, whose schedule starts when the first frames reach it,
-# still completes its last segment before the stream ends.
+# posture this long, so that `bomi record`, whose schedule starts a little after the participant's
+# (--settle-first: when its gate opens, a few samples after the emulator's estimate), still completes
+# its last segment before the stream ends.
 PROTOCOL_TAIL_S = 5.0
 
 TimedFrame = tuple[float, ImuFrame]
@@ -66,6 +76,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          help="--participant: seconds each motion is held (default %(default)s)")
     emulate.add_argument("--neutral", type=seconds, default=5.0,
                          help="--participant: seconds of neutral posture between motions (default %(default)s)")
+    emulate.add_argument("--settle-first", action="store_true",
+                         help="--participant: hold still first, until a receiver's orientation filters have "
+                              "settled (judged on this stream by the gate of `bomi record`), then the protocol: "
+                              "what a person does while `bomi record` says 'hold still'. Use it with record")
     emulate.add_argument("--linger", type=non_negative_seconds, default=5.0,
                          help="pty: after the end, wait up to this many seconds for the reader to close "
                               "(default %(default)s)")
@@ -75,7 +89,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     capture = add_command(
         subparsers, "capture",
-        description="Record raw frames per node (and their fused angles) into a recording CSV.")
+        description="Record raw frames per node (and their fused angles) into a recording CSV, as the stream "
+                    "carries them from the first frame: no prompts, and unlike `bomi record` no wait for the "
+                    "orientation filters to settle (the first ~10 s of angles are the filter's warm-up).")
     _add_stream_arguments(capture)
     capture.add_argument("--duration", required=True, type=seconds, help="seconds to record")
     capture.add_argument("--nodes", type=_node_list, help="IMU node indices, e.g. 1,2,3 (default: those on the stream)")
@@ -86,7 +102,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     record = add_command(
         subparsers, "record",
         description="The paper's calibration protocol: neutral, then each class held --hold s with --neutral s "
-                    "of neutral between, the whole sequence --repetitions times; --session does 3 sequences.")
+                    "of neutral between, the whole sequence --repetitions times; --session does 3 sequences. "
+                    f"It starts once every node's orientation filter has settled (hold still; about 10 s, at "
+                    f"most {SETTLE_WAIT_S:g} s) and its samples are plausible, as `bomi live` does.")
     _add_stream_arguments(record)
     record.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
     record.add_argument("--session", action="store_true", help="a Session of 3 sequences instead of one Sequence")
@@ -138,6 +156,8 @@ def _note(message: str) -> None:
 
 # ------------------------------------------------------------------------------------ emulate
 def run_emulate(args: argparse.Namespace) -> int:
+    if args.settle_first and args.participant is None:
+        raise BomiError("--settle-first: only with --participant (a recording is played as it is)")
     config = EmulatorConfig(rate_hz=args.rate, loss=args.loss, corrupt=args.corrupt, seed=args.seed)
     what, nodes, samples, blocks = (_recording_blocks if args.participant is None else _participant_blocks)(args)
     sink = open_sink(args.to, args.linger, args.baud)
@@ -168,14 +188,21 @@ def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
 
 def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     """The participant performs the calibration protocol; samples are made while they are played."""
-    from tasks.participants.wire import participant_blocks  # here, not at load: capture and record need no participant
+    # here, not at load: capture and record need no participant
+    from tasks.participants.wire import delayed, participant_blocks, settled_after
     from tasks.participants.participant import load_participant
     params = load_participant(args.participant)
     profile = arm_profile(params.profile)
     cues = calibration_schedule(profile, hold_s=args.hold, neutral_s=args.neutral)
+    what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol"
+    if args.settle_first:
+        # the receiver's filter decays per sample it gets: with --loss it needs 1 / (1 - loss) as long
+        lead_s = settled_after(params, profile, args.seed) / (1.0 - args.loss)
+        cues = delayed(cues, lead_s)
+        what += f" after {lead_s:.1f} s holding still"
     protocol_s = cues[-1].end_s + PROTOCOL_TAIL_S
     end_s = protocol_s if args.duration is None else min(args.duration, protocol_s)
-    what = f"virtual participant {params.name} (seed {args.seed}), calibration protocol, {end_s:g} s"
+    what += f", {end_s:g} s"
     return (what, len(profile.nodes), int(end_s / DT) + 1,
             participant_blocks(params, profile, args.seed, cues, end_s))
 
@@ -278,12 +305,59 @@ def sample_times(arrival: float, count: int, previous: float) -> list[float]:
     return [max(previous, arrival - (count - 1 - i) * DT) for i in range(count)]
 
 
+def _unsettled(gate: NodeGate, now: float) -> str:
+    """Why a node is not trusted yet, for the person at the keyboard: the gate's reason, and for a filter
+    still warming up how far its last window is from the settle test."""
+    reason = (gate.verdict(now) or "").removeprefix(f"node {gate.index}: ")
+    change = gate.change
+    if not gate.settled and gate.defect is None and change is not None:
+        reason = (f"still warming up: its angles changed by {change:.2f} deg between the halves of the last "
+                  f"{gate.config.resume_s:g} s, settled is below {gate.config.settle_change_deg:.2f}")
+    return reason
+
+
+def _wait_until_settled(batches: Iterator[tuple[float, list[ImuFrame]]], gate: Gate, rows: FusedRows,
+                        assembler: RowAssembler, source: SerialSource, progress: tqdm, timeout_s: float) -> float:
+    """Fuse the profile's nodes' frames one by one through ``gate`` (``bomi.gate``: an implausible frame is
+    not fused, as in `bomi live`) until every node is settled, plausible and fresh; return that time.
+    Nothing read here is recorded: the filters' warm-up never reaches the protocol. BomiError (one line,
+    nothing written) if a node sends nothing within NODE_WAIT_S or is not trusted within ``timeout_s``."""
+    shown = None
+    try:
+        while True:
+            elapsed, frames = next(batches)    # the stream's batches end only by StreamLost
+            nodes = [imu_index(frame.node_id) for frame in frames]
+            gate.arrivals(elapsed, Counter(nodes))
+            for frame, node in zip(frames, nodes):
+                node_gate = gate.node.get(node)
+                if node_gate is not None and node_gate.check_raw(frame.counter, frame.mag, frame.gyro, frame.acc):
+                    node_gate.fused(rows.angles(frame))
+                    assembler.push(frame)
+            reason = gate.verdict(elapsed)
+            if reason is None:
+                return elapsed
+            if reason != shown:
+                tqdm.write(f"hold still: {reason}", file=sys.stderr)
+                shown = reason
+            progress.set_description_str(f"hold still: {reason}", refresh=False)
+            progress.set_postfix_str(_quality(source.parser), refresh=False)
+            if elapsed > NODE_WAIT_S and not set(assembler.node_ids) <= set(source.parser.nodes):
+                raise BomiError(f"{source.url}: no frames from every node id {list(assembler.node_ids)} within "
+                                f"{NODE_WAIT_S:g} s (frames came from {sorted(source.parser.nodes) or 'none'}); "
+                                "nothing recorded")
+            if elapsed > timeout_s:
+                index, node_gate = next((i, g) for i, g in gate.node.items() if g.verdict(elapsed) is not None)
+                raise BomiError(f"{source.url}: node {index} did not settle in {timeout_s:g} s "
+                                f"({_unsettled(node_gate, elapsed)}); nothing recorded")
+    except StreamLost as exc:
+        raise BomiError(f"{exc}; nothing recorded") from None
+
+
 def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowAssembler, source: SerialSource,
                 progress: tqdm) -> Iterator[tuple[float, dict[int, ImuFrame]]]:
-    """(sample time, complete row), see :func:`sample_times`; BomiError if no complete row comes within
-    NODE_WAIT_S. The rows of the first batch are all timed at its arrival: what waited in the port's
-    buffer before the recording started belongs to its first prompt, and the recording's clock never
-    runs ahead of the one the prompts are shown by."""
+    """(sample time, complete row), see :func:`sample_times`. The rows of the first batch are all timed at
+    its arrival: the protocol's first prompt is shown then, and the recording's clock never runs ahead of
+    the one the prompts are shown by."""
     started, last = False, -np.inf
     for elapsed, frames in batches:
         complete = [row for row in map(assembler.push, frames) if row is not None]
@@ -291,9 +365,6 @@ def _timed_rows(batches: Iterator[tuple[float, list[ImuFrame]]], assembler: RowA
         for t, row in zip(times, complete):
             started, last = True, t
             yield t, row
-        if not started and elapsed > NODE_WAIT_S:
-            raise BomiError(f"{source.url}: no frames from every node id {list(assembler.node_ids)} within "
-                            f"{NODE_WAIT_S:g} s (frames came from {sorted(source.parser.nodes) or 'none'})")
         progress.set_postfix_str(_quality(source.parser), refresh=False)
 
 
@@ -331,10 +402,14 @@ def run_record(args: argparse.Namespace) -> int:
     rows = FusedRows({node.index: node.calibration for node in profile.nodes})
     source = SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries))
     _note(f"record: {profile.name}: {(len(segments) - 1) // 2} motions, {segments[-1].end_s:.0f} s; "
-          "waiting for every node of the profile")
+          "waiting for every node of the profile to settle: hold still")
     with source, tqdm(total=round(segments[-1].end_s), unit="s", disable=None, file=sys.stderr,
                       bar_format="{desc} |{bar}| {postfix}") as progress:
-        timed_rows = _timed_rows(source.batches(), RowAssembler(rows.node_ids), source, progress)
+        batches, assembler = source.batches(), RowAssembler(rows.node_ids)
+        settled = _wait_until_settled(batches, Gate(profile.node_indices), rows, assembler, source, progress,
+                                      SETTLE_WAIT_S)
+        tqdm.write(f"record: every node settled after {settled:.1f} s; the protocol starts", file=sys.stderr)
+        timed_rows = _timed_rows(batches, assembler, source, progress)
         start, first_row = next(timed_rows)
         with RecordingWriter(args.out, profile.node_indices) as writer:
             try:

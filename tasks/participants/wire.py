@@ -20,6 +20,8 @@ import numpy as np
 
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.frames import FrameParser
+from bomi.fusion import DT, NodeFusion
+from bomi.gate import Gate
 from bomi.profiles import Profile
 from bomi.protocol import Cue
 from tasks.participants.imu_synth import Delivery, LinkModel
@@ -63,6 +65,33 @@ def participant_blocks(params: ParticipantParams, profile: Profile, seed: int, c
             vp.set_intent(cue.label, 0.0 if cue.label == NEUTRAL_LABEL else 1.0, cue.start_s)
         parts += [vp.deliveries(t), vp.flush()]
         yield raw_block(parts)
+
+
+def settled_after(params: ParticipantParams, profile: Profile, seed: int, limit_s: float = 60.0) -> float:
+    """Seconds of held neutral after which a receiver's gate (``bomi.gate``, as in `bomi record` and
+    `bomi live`) trusts every node of this participant's stream: each node fused from its first sample,
+    as the receiver's filter is. What a person told to hold still does before the protocol starts.
+    ``limit_s`` if the gate never opens within it."""
+    gate = Gate(profile.node_indices)
+    fusion = {node.index: NodeFusion(node.calibration) for node in profile.nodes}
+    neutral = [Cue(NEUTRAL_LABEL, "neutral", 0.0, limit_s)]
+    n = 0
+    for block in participant_blocks(params, profile, seed, neutral, limit_s):
+        for k in range(len(block[profile.node_indices[0]])):
+            n += 1
+            for index, node_gate in gate.node.items():
+                mag, gyro, acc = block[index][k, 0:3], block[index][k, 3:6], block[index][k, 6:9]
+                if node_gate.check_raw(n % 256, mag, gyro, acc):
+                    node_gate.fused(fusion[index].update(acc, gyro, mag))
+            if gate.settled:
+                return n * DT
+    return limit_s
+
+
+def delayed(cues: Sequence[Cue], lead_s: float) -> list[Cue]:
+    """``cues`` with the first (neutral) one ``lead_s`` longer and the others ``lead_s`` later."""
+    return [replace(cue, start_s=cue.start_s + lead_s if k else cue.start_s, end_s=cue.end_s + lead_s)
+            for k, cue in enumerate(cues)]
 
 
 def raw_block(deliveries: Sequence[Delivery]) -> dict[int, np.ndarray]:
