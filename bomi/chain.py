@@ -598,11 +598,26 @@ class Selection:
         return f"settings chosen on the training recording: {self.describe()} ({self.reason})"
 
 
+def choose_candidate(candidates: Sequence[Candidate], scores: dict[str, float]) -> Candidate:
+    """PLAIN, then the best shrinkage alone if it scores REQUIRED_GAIN above it, then the copies with
+    the shrinkage so chosen if they score REQUIRED_GAIN above that. One extra at a time: a shrinkage
+    that did not earn its place alone does not come in with the copies (a joint gain of the two can
+    fit the training pass alone: confirmation 10200, two people lost 8-10 points on pass 2 that way)."""
+    chosen = PLAIN
+    shrunk = max((c for c in candidates if not c.amplitude_scales), key=lambda c: scores[str(c)])  # first on a tie
+    if scores[str(shrunk)] >= scores[str(PLAIN)] + REQUIRED_GAIN:
+        chosen = shrunk
+    copied = next((c for c in candidates if c.amplitude_scales and c.shrinkage == chosen.shrinkage), None)
+    if copied is not None and scores[str(copied)] >= scores[str(chosen)] + REQUIRED_GAIN:
+        chosen = copied
+    return chosen
+
+
 def select_settings(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec) -> Selection:
     """The plain setting (no shrinkage, no copies, no rejection), to which an extra is added only when
     the cross-validation (``cross_validate``) scores it at least REQUIRED_GAIN above what is chosen
     so far, one extra at a time: first a shrinkage of SHRINKAGE_GRID; then the profile's smaller
-    copies of the motions (with any shrinkage); then a rejection threshold of THRESHOLD_GRID (a
+    copies of the motions (with the shrinkage chosen); then a rejection threshold of THRESHOLD_GRID (a
     rejected window counts as decided neutral). Without enough data for the CV: plain."""
     # The turned copies (direction_spread) stand for how a motion's direction changes from one day to
     # another, which a cross-validation within the recording cannot see (it is chosen across days):
@@ -615,11 +630,7 @@ def select_settings(recordings: Sequence[Recording], profile: Profile, spec: Fea
         return Selection(None, (), None, None, None, {}, f"{exc}: plain settings")
     scores = {str(c): r.accuracy for c, r in zip(candidates, results)}
     plain = scores[str(PLAIN)]
-    chosen = PLAIN
-    for stage in ([c for c in candidates if not c.amplitude_scales], candidates):
-        best = max(stage, key=lambda c: scores[str(c)])   # the first on a tie
-        if scores[str(best)] >= scores[str(chosen)] + REQUIRED_GAIN:
-            chosen = best
+    chosen = choose_candidate(candidates, scores)
     result = results[candidates.index(chosen)]
     threshold, accuracy = None, result.accuracy
     if profile.select_rejection:

@@ -9,7 +9,7 @@ import pytest
 import scipy.io
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
-from bomi.chain import (MIN_CLASS_WINDOWS, N_FOLDS, REQUIRED_GAIN, MotionCopies, evaluate, hold_folds, prepare,
+from bomi.chain import (MIN_CLASS_WINDOWS, Candidate, choose_candidate, N_FOLDS, REQUIRED_GAIN, MotionCopies, evaluate, hold_folds, prepare,
                         select_settings, train, training_windows)
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
@@ -304,3 +304,21 @@ def test_bad_training_input_is_one_line_naming_the_class(tmp_path, capsys):
     # a single class
     single = Recording({1: good.nodes[1]}, np.zeros_like(good.labels), source="x")
     assert "training needs windows of at least three classes" in refused(tmp_path, capsys, single, profile_path)
+
+
+def test_the_copies_come_only_on_top_of_a_shrinkage_that_earned_its_place_alone():
+    copies = (0.75, 0.5)
+    candidates = [Candidate(s, c) for c in ((), copies) for s in (None, 0.001, 0.1)]
+
+    def choice(plain, small, large, copies_plain, copies_small, copies_large):
+        values = (plain, small, large, copies_plain, copies_small, copies_large)
+        return choose_candidate(candidates, {str(c): v for c, v in zip(candidates, values)})
+
+    # shrinkage 0.1 alone +0.7 points, copies alone +1.5, together +2.3: no extra earned its place alone
+    assert choice(0.961, 0.961, 0.968, 0.976, 0.976, 0.984) == Candidate()
+    # shrinkage 0.1 alone +5.8 points, then the copies on top +2.6: both, one after the other
+    assert choice(0.745, 0.743, 0.804, 0.780, 0.776, 0.830) == Candidate(0.1, copies)
+    # the copies without shrinkage gain 2.5 points; a shrinkage's 1.0 does not count
+    assert choice(0.950, 0.960, 0.955, 0.975, 0.990, 0.990) == Candidate(None, copies)
+    # shrinkage 0.1 chosen (+3 points); the copies add 1.9 on top of it: not enough
+    assert choice(0.900, 0.900, 0.930, 0.900, 0.900, 0.949) == Candidate(0.1, ())
