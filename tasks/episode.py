@@ -124,7 +124,7 @@ def summarize(log: EpisodeLog) -> dict:
     errors = metrics.misclassified(d.intended, d.decided, log.allowance)
     wild = metrics.irrelevant(d.intended, d.decided, log.neutral)
     onsets = metrics.onset_latencies(d.intended, d.decided, log.neutral)
-    latency_ms = np.array([n for n in onsets if n is not None], dtype=float) * 1000.0 * log.sample_period
+    latency_ms = metrics.recognised(onsets) * 1000.0 * log.sample_period
     curve = np.round(np.array(ALLOWANCE_CURVE_S) / log.sample_period).astype(int)
     out.update({
         "decisions": int(len(d.t)),

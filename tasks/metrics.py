@@ -119,9 +119,14 @@ def onset_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) -> 
     return outcomes
 
 
+def recognised(onsets: list[int | None]) -> np.ndarray:
+    """The latencies (samples) of the onsets of ``onset_latencies`` that the chain recognised."""
+    return np.asarray([n for n in onsets if n is not None], dtype=int)
+
+
 def decision_latencies(intended: np.ndarray, decided: np.ndarray, neutral: int) -> np.ndarray:
     """``onset_latencies`` of the onsets the chain recognised, in samples."""
-    return np.asarray([n for n in onset_latencies(intended, decided, neutral) if n is not None], dtype=int)
+    return recognised(onset_latencies(intended, decided, neutral))
 
 
 def unintended_displacement_mm(hand_pos: np.ndarray, intended_dir: np.ndarray) -> float:
