@@ -3,7 +3,8 @@
     python benchmarks/new_people.py [--first-seed 0] [--people 100] [--no-p1] [--name NAME] [--jobs 1]
 
 Members: synthetic people drawn by ``tasks.participants.population`` (seeds first-seed ..
-first-seed + people - 1; development used seeds 0-43, confirmation 10100-10129), each trained on
+first-seed + people - 1; development used seeds 0-43, 100-139 and 200-339, confirmations
+10100-10129, 10200-10229 and 10300-10329), each trained on
 pass 1 and tested on pass 2,
 and P1's five real days (each ordered day pair, 20 members). Every member goes through what
 ``bomi train`` / ``bomi evaluate`` do without ``--profile``: the profile derived from the training
@@ -29,7 +30,7 @@ import numpy as np  # noqa: E402
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from bomi.chain import REQUIRED_GAIN, evaluate, prepare, select_settings, train  # noqa: E402
+from bomi.chain import CONSISTENCY, REQUIRED_GAIN, evaluate, prepare, select_settings, train  # noqa: E402
 from bomi.dataset import data_dir  # noqa: E402
 from bomi.derived import derive_profile  # noqa: E402
 from bomi.recording import Recording  # noqa: E402
@@ -85,7 +86,8 @@ def summary(rows: list[dict]) -> dict:
 
 def markdown(record: dict) -> str:
     lines = [f"Command: `{record['command']}`", "",
-             f"An extra must gain {100 * record['required_gain']:g} point(s) in the CV to replace the plain setting.", "",
+             f"An extra must gain {100 * record['required_gain']:g} point(s) in the CV and {record['consistency']:g} "
+             "standard errors over the held-out holds to replace what is chosen before it.", "",
              "| members | n | policy mean | plain LDA mean | policy worst | plain worst | worst policy - plain (who) "
              "| share below plain | share > 0.5 point below | median abs(CV - test) | extras chosen |",
              "|" + "---|" * 11]
@@ -148,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = rows + p1
     groups["all"] = rows
     record = {"command": "python benchmarks/new_people.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-              "required_gain": REQUIRED_GAIN, "summary": {k: summary(v) for k, v in groups.items() if v}, "rows": rows}
+              "required_gain": REQUIRED_GAIN, "consistency": CONSISTENCY, "summary": {k: summary(v) for k, v in groups.items() if v}, "rows": rows}
     out.with_suffix(".json").write_text(json.dumps(record, indent=1) + "\n")
     out.with_suffix(".md").write_text(markdown(record))
     figure(rows, out.with_suffix(".png"))

@@ -9,7 +9,8 @@ import pytest
 import scipy.io
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
-from bomi.chain import (MIN_CLASS_WINDOWS, Candidate, choose_candidate, N_FOLDS, REQUIRED_GAIN, MotionCopies, evaluate, hold_folds, prepare,
+from bomi.chain import (CONSISTENCY, MIN_CLASS_WINDOWS, Candidate, HoldScores, choose_candidate, choose_threshold, N_FOLDS,
+                        REQUIRED_GAIN, MotionCopies, cross_validate, earns_place, evaluate, hold_folds, prepare,
                         select_settings, train, training_windows)
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
@@ -312,7 +313,7 @@ def test_the_copies_come_only_on_top_of_a_shrinkage_that_earned_its_place_alone(
 
     def choice(plain, small, large, copies_plain, copies_small, copies_large):
         values = (plain, small, large, copies_plain, copies_small, copies_large)
-        return choose_candidate(candidates, {str(c): v for c, v in zip(candidates, values)})
+        return choose_candidate(candidates, {str(c): steady(v) for c, v in zip(candidates, values)})
 
     # shrinkage 0.1 alone +0.7 points, copies alone +1.5, together +2.3: no extra earned its place alone
     assert choice(0.961, 0.961, 0.968, 0.976, 0.976, 0.984) == Candidate()
@@ -322,3 +323,54 @@ def test_the_copies_come_only_on_top_of_a_shrinkage_that_earned_its_place_alone(
     assert choice(0.950, 0.960, 0.955, 0.975, 0.990, 0.990) == Candidate(None, copies)
     # shrinkage 0.1 chosen (+3 points); the copies add 1.9 on top of it: not enough
     assert choice(0.900, 0.900, 0.930, 0.900, 0.900, 0.949) == Candidate(0.1, ())
+
+
+def steady(accuracy: float, holds: int = 30, windows: int = 1000) -> HoldScores:
+    """A CV scoring ``accuracy`` on every one of ``holds`` holds: any gain between two is consistent."""
+    return HoldScores(np.full(holds, accuracy * windows), np.full(holds, float(windows)))
+
+
+def test_the_gain_and_its_standard_error_over_the_holds_match_a_naive_computation():
+    rng = np.random.default_rng(3)
+    windows = rng.integers(20, 200, size=12).astype(float)
+    base = HoldScores(np.floor(windows * rng.uniform(0.5, 1.0, 12)), windows)
+    extra = HoldScores(np.minimum(windows, base.correct + rng.integers(0, 30, 12)), windows)
+    gain, se = extra.gain_over(base)
+    # naive: the pooled gain, then the variance of a ratio of sums over 12 sampled holds, term by term
+    pooled = (sum(extra.correct) - sum(base.correct)) / sum(windows)
+    variance = sum((extra.correct[h] - base.correct[h] - pooled * windows[h]) ** 2 for h in range(12))
+    assert gain == pytest.approx(pooled)
+    assert se == pytest.approx(np.sqrt(12 / 11 * variance) / sum(windows))
+    assert extra.accuracy - base.accuracy == pytest.approx(gain)
+
+
+def test_an_extra_whose_cv_gain_comes_from_a_few_holds_is_refused_and_a_steady_one_kept():
+    base = steady(0.90, holds=20, windows=100)
+    # +3 points over plain, all of it on one hold of 20 (a glitch plain misread, say): refused
+    lumpy = HoldScores(base.correct + np.r_[60.0, np.zeros(19)], base.windows)
+    gain, se = lumpy.gain_over(base)
+    assert gain == pytest.approx(0.03) and gain < CONSISTENCY * se
+    assert not earns_place(lumpy, base)
+    # the same +3 points spread over the holds (4 points on half of them, 2 on the others): kept
+    even = HoldScores(base.correct + np.tile([4.0, 2.0], 10), base.windows)
+    assert even.gain_over(base)[0] == pytest.approx(0.03) and earns_place(even, base)
+    # consistent but small: +1 point on every hold is below REQUIRED_GAIN
+    assert REQUIRED_GAIN > 0.01 and not earns_place(HoldScores(base.correct + 1.0, base.windows), base)
+    candidates = [Candidate(), Candidate(0.1)]
+    assert choose_candidate(candidates, {"plain": base, "shrinkage 0.1": lumpy}) == Candidate()
+    assert choose_candidate(candidates, {"plain": base, "shrinkage 0.1": even}) == Candidate(0.1)
+    # rejection is judged by the same rule: the best threshold's lumpy gain is refused, a steady one kept
+    assert choose_threshold(base, {0.9: even, 0.99: lumpy}) == 0.9
+    assert choose_threshold(base, {0.9: base, 0.99: lumpy}) is None
+
+
+def test_the_cross_validation_counts_every_held_out_window_in_one_hold_of_its_own_class():
+    rec = noise_recording(1)
+    profile = derive_profile([rec])
+    result, = cross_validate([rec], profile, profile.spec, [Candidate()])
+    scores = result.hold_scores()
+    assert scores.windows.sum() == len(result.truth) and scores.correct.sum() == result.correct().sum()
+    for hold in np.unique(result.holds):
+        assert len(np.unique(result.truth[result.holds == hold])) == 1   # a hold holds one class
+    # 30 segments of which 15 neutral; a class with enough holds keeps them whole: at most one id per segment
+    assert len(scores.windows) <= 30
