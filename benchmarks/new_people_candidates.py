@@ -66,18 +66,17 @@ def person(seed: int) -> dict:
 
 
 def paired(record: dict, key: str, base: str = str(PLAIN)) -> dict:
-    """The CV gain of ``key`` over ``base``: pooled, and per held-out hold (mean, standard error, wins)."""
-    n = np.array(record["hold_windows"], dtype=float)
-    a = np.array(record["candidates"][key]["hold_correct"]) / n
-    b = np.array(record["candidates"][base]["hold_correct"]) / n
-    d = a - b
-    pooled = (np.sum(record["candidates"][key]["hold_correct"]) - np.sum(record["candidates"][base]["hold_correct"])) / n.sum()
-    return {"gain": float(pooled), "hold_mean": float(d.mean()), "hold_se": float(d.std(ddof=1) / np.sqrt(len(d))),
-            "wins": float(np.mean(d > 0)), "losses": float(np.mean(d < 0)),
+    """The CV gain of ``key`` over ``base`` and its standard error over the held-out holds (as the
+    rule sees them: ``HoldScores.gain_over``), the share of holds it wins and loses, its pass-2 gain."""
+    windows = np.array(record["hold_windows"], dtype=float)
+    a, b = (HoldScores(np.array(record["candidates"][k]["hold_correct"], dtype=float), windows) for k in (key, base))
+    gain, se = a.gain_over(b)
+    return {"gain": gain, "se": se, "wins": float(np.mean(a.correct > b.correct)),
+            "losses": float(np.mean(a.correct < b.correct)),
             "test_gain": record["candidates"][key]["test"] - record["candidates"][base]["test"]}
 
 
-def replay(person: dict) -> str:
+def replay(person: dict, consistency: float = CONSISTENCY) -> str:
     """The key of what the shipped rule chooses from ``person``'s recorded per-hold CV counts."""
     windows = np.array(person["hold_windows"], dtype=float)
     scores = {key: HoldScores(np.array(row["hold_correct"], dtype=float), windows)
@@ -85,17 +84,17 @@ def replay(person: dict) -> str:
     copies = next((k for k in scores if k.startswith("copies at ") and "rejection" not in k), "copies at ")
     scales = tuple(float(s) for s in copies.removeprefix("copies at ").split(", ") if s)
     candidates = [Candidate(s, c) for c in ((), scales) for s in SHRINKAGE_GRID if str(Candidate(s, c)) in scores]
-    chosen = choose_candidate(candidates, scores)
-    threshold = choose_threshold(scores[str(chosen)], {t: scores[_key(chosen, t)] for t in THRESHOLD_GRID})
+    chosen = choose_candidate(candidates, scores, consistency)
+    threshold = choose_threshold(scores[str(chosen)], {t: scores[_key(chosen, t)] for t in THRESHOLD_GRID}, consistency)
     return _key(chosen, threshold)
 
 
-def replay_summary(people: list[dict]) -> str:
-    """The shipped rule replayed on recorded people: its pass-2 accuracy against plain's."""
-    keys = [replay(p) for p in people]
+def replay_summary(people: list[dict], consistency: float = CONSISTENCY) -> str:
+    """The rule replayed on recorded people: its pass-2 accuracy against plain's."""
+    keys = [replay(p, consistency) for p in people]
     diff = np.array([p["candidates"][k]["test"] - p["candidates"][str(PLAIN)]["test"] for p, k in zip(people, keys)])
-    lines = [f"Rule: an extra must gain {100 * REQUIRED_GAIN:g} point(s) of CV and {CONSISTENCY:g} standard errors over "
-             f"the held-out holds. {len(people)} people: pass-2 mean policy - plain {100 * diff.mean():+.3f} points, "
+    lines = [f"Rule: an extra must gain {100 * REQUIRED_GAIN:g} point(s) of CV; the simplest option within {consistency:g} standard "
+             f"errors of the best (over the held-out holds). {len(people)} people: pass-2 mean policy - plain {100 * diff.mean():+.3f} points, "
              f"worst {100 * diff.min():+.2f} (person {people[int(diff.argmin())]['seed']}), share more than 0.5 point "
              f"below plain {100 * np.mean(diff < -0.005):.1f} %, extras chosen {100 * np.mean([k != str(PLAIN) for k in keys]):.0f} %",
              "", "| person | chosen | pass-2 gain over plain |", "|---|---|---|"]
@@ -107,7 +106,7 @@ def markdown(record: dict) -> str:
     lines = [f"Command: `{record['command']}`", "",
              "Per candidate (over people): how often its pooled CV gain over plain is >= 2 points, and of those "
              "how often it then loses > 0.5 point to plain on pass 2; the mean CV gain and pass-2 gain when "
-             "it wins the CV by 2 points; how many of those had a per-hold gain > 2 standard errors.", "",
+             "it wins the CV by 2 points; how many of those had a gain of more than 2 standard errors over the held-out holds.", "",
              "| candidate | CV gain >= 2 | of which pass 2 < plain - 0.5 | mean CV gain | mean pass-2 gain | "
              "of the >= 2: hold t > 2 | of those, pass 2 < plain - 0.5 |", "|" + "---|" * 7]
     keys = list(record["people"][0]["candidates"])
@@ -115,21 +114,21 @@ def markdown(record: dict) -> str:
         stats = [paired(p, key) for p in record["people"]]
         big = [s for s in stats if s["gain"] >= 0.02]
         lost = [s for s in big if s["test_gain"] < -0.005]
-        steady = [s for s in big if s["hold_se"] > 0 and s["hold_mean"] > 2 * s["hold_se"]]
+        steady = [s for s in big if s["gain"] > 2 * s["se"]]
         lines.append(f"| {key} | {len(big)} | {len(lost)} | "
                      f"{100 * np.mean([s['gain'] for s in big]) if big else float('nan'):.2f} | "
                      f"{100 * np.mean([s['test_gain'] for s in big]) if big else float('nan'):.2f} | {len(steady)} | "
                      f"{sum(s['test_gain'] < -0.005 for s in steady)} |")
     lines += ["", "Every (person, candidate) whose pooled CV gain over plain is >= 2 points:", "",
-              "| person | candidate | CV gain | hold mean gain | hold SE | t | holds won | holds lost | pass-2 gain |",
-              "|" + "---|" * 9]
+              "| person | candidate | CV gain | its SE over the holds | t | holds won | holds lost | pass-2 gain |",
+              "|" + "---|" * 8]
     for p in record["people"]:
         for key in keys[1:]:
             s = paired(p, key)
             if s["gain"] >= 0.02:
-                t = s["hold_mean"] / s["hold_se"] if s["hold_se"] > 0 else float("inf")
-                lines.append(f"| {p['seed']} | {key} | {100 * s['gain']:+.2f} | {100 * s['hold_mean']:+.2f} | "
-                             f"{100 * s['hold_se']:.2f} | {t:.2f} | {100 * s['wins']:.0f} % | {100 * s['losses']:.0f} % | "
+                t = s["gain"] / s["se"] if s["se"] > 0 else float("inf")
+                lines.append(f"| {p['seed']} | {key} | {100 * s['gain']:+.2f} | {100 * s['se']:.2f} | {t:.2f} | "
+                             f"{100 * s['wins']:.0f} % | {100 * s['losses']:.0f} % | "
                              f"{100 * s['test_gain']:+.2f} |")
     return "\n".join(lines) + "\n"
 
@@ -140,10 +139,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--people", type=int, default=100)
     parser.add_argument("--name", default="dev")
     parser.add_argument("--jobs", type=int, default=1)
-    parser.add_argument("--replay", type=Path, nargs="+", help="replay the shipped rule on these json files instead")
+    parser.add_argument("--replay", type=Path, nargs="+", help="replay the rule on these json files instead")
+    parser.add_argument("--consistency", type=float, default=CONSISTENCY,
+                        help="with --replay: standard errors of the rule (default: the shipped one; 0: the rule before)")
     args = parser.parse_args(argv)
     if args.replay:
-        print(replay_summary([p for path in args.replay for p in json.loads(path.read_text())["people"]]), end="")
+        people = [p for path in args.replay for p in json.loads(path.read_text())["people"]]
+        print(replay_summary(people, args.consistency), end="")
         return 0
     if args.people < 1 or args.jobs < 1 or args.first_seed < 0:
         print("new_people_candidates: error: --people >= 1, --jobs >= 1, --first-seed >= 0", file=sys.stderr)

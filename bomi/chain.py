@@ -620,13 +620,14 @@ REQUIRED_GAIN = 0.02
 CONSISTENCY = 2.0
 
 
-def choose_option(options: Sequence[HoldScores]) -> int:
+def choose_option(options: Sequence[HoldScores], consistency: float = CONSISTENCY) -> int:
     """Index of the option (simplest first, each scored on the same held-out holds) the rule above
-    takes: the simplest within CONSISTENCY standard errors of the best (the first best on a tie),
-    unless it gains less than REQUIRED_GAIN over the first option, which is then kept."""
+    takes: the simplest within ``consistency`` standard errors of the best (the first best on a tie),
+    unless it gains less than REQUIRED_GAIN over the first option, which is then kept. (0: the best,
+    the rule before the standard errors; other values only to replay it, benchmarks/new_people_candidates.py.)"""
     best = max(range(len(options)), key=lambda i: options[i].accuracy)
     chosen = next(i for i, option in enumerate(options)
-                  if i == best or options[best].gain_over(option)[0] <= CONSISTENCY * options[best].gain_over(option)[1])
+                  if i == best or options[best].gain_over(option)[0] <= consistency * options[best].gain_over(option)[1])
     return chosen if options[chosen].gain_over(options[0])[0] >= REQUIRED_GAIN else 0
 
 
@@ -656,25 +657,27 @@ class Selection:
         return f"settings chosen on the training recording: {self.describe()} ({self.reason})"
 
 
-def choose_candidate(candidates: Sequence[Candidate], scores: Mapping[str, HoldScores]) -> Candidate:
+def choose_candidate(candidates: Sequence[Candidate], scores: Mapping[str, HoldScores],
+                     consistency: float = CONSISTENCY) -> Candidate:
     """``choose_option`` twice, one extra at a time: among PLAIN and the shrinkages alone (in the order
     of SHRINKAGE_GRID: none, growing, then Ledoit-Wolf's, estimated from the data), then between what
     is so chosen and the same with the smaller copies. A shrinkage that did not earn its place alone
     does not come in with the copies (a joint gain of the two can fit the training pass alone:
     confirmation 10200, two people lost 8-10 points on pass 2 that way)."""
     alone = [c for c in candidates if not c.amplitude_scales]
-    chosen = alone[choose_option([scores[str(c)] for c in alone])]
+    chosen = alone[choose_option([scores[str(c)] for c in alone], consistency)]
     copied = next((c for c in candidates if c.amplitude_scales and c.shrinkage == chosen.shrinkage), None)
-    if copied is not None and choose_option([scores[str(chosen)], scores[str(copied)]]):
+    if copied is not None and choose_option([scores[str(chosen)], scores[str(copied)]], consistency):
         chosen = copied
     return chosen
 
 
-def choose_threshold(base: HoldScores, rejecting: Mapping[float, HoldScores]) -> float | None:
+def choose_threshold(base: HoldScores, rejecting: Mapping[float, HoldScores],
+                     consistency: float = CONSISTENCY) -> float | None:
     """``choose_option`` among no rejection (``base``) and the thresholds of ``rejecting`` (threshold ->
     the chosen setting's CV rejecting below it), the lowest (rejecting least) first: the threshold, or None."""
     thresholds = sorted(rejecting)
-    chosen = choose_option([base] + [rejecting[t] for t in thresholds])
+    chosen = choose_option([base] + [rejecting[t] for t in thresholds], consistency)
     return thresholds[chosen - 1] if chosen else None
 
 

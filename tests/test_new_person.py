@@ -10,7 +10,7 @@ import scipy.io
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
 from bomi.chain import (CONSISTENCY, MIN_CLASS_WINDOWS, Candidate, HoldScores, choose_candidate, choose_threshold, N_FOLDS,
-                        REQUIRED_GAIN, MotionCopies, cross_validate, earns_place, evaluate, hold_folds, prepare,
+                        REQUIRED_GAIN, MotionCopies, choose_option, cross_validate, evaluate, hold_folds, prepare,
                         select_settings, train, training_windows)
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
@@ -350,16 +350,19 @@ def test_an_extra_whose_cv_gain_comes_from_a_few_holds_is_refused_and_a_steady_o
     lumpy = HoldScores(base.correct + np.r_[60.0, np.zeros(19)], base.windows)
     gain, se = lumpy.gain_over(base)
     assert gain == pytest.approx(0.03) and gain < CONSISTENCY * se
-    assert not earns_place(lumpy, base)
+    assert choose_option([base, lumpy]) == 0
     # the same +3 points spread over the holds (4 points on half of them, 2 on the others): kept
     even = HoldScores(base.correct + np.tile([4.0, 2.0], 10), base.windows)
-    assert even.gain_over(base)[0] == pytest.approx(0.03) and earns_place(even, base)
+    assert even.gain_over(base)[0] == pytest.approx(0.03) and choose_option([base, even]) == 1
     # consistent but small: +1 point on every hold is below REQUIRED_GAIN
-    assert REQUIRED_GAIN > 0.01 and not earns_place(HoldScores(base.correct + 1.0, base.windows), base)
+    assert REQUIRED_GAIN > 0.01 and choose_option([base, HoldScores(base.correct + 1.0, base.windows)]) == 0
+    # the best (+3.5) is the steady +3 plus a lumpy half point: the simpler steady option is taken
+    best = HoldScores(even.correct + np.r_[10.0, np.zeros(19)], base.windows)
+    assert best.accuracy > even.accuracy and choose_option([base, even, best]) == 1
     candidates = [Candidate(), Candidate(0.1)]
     assert choose_candidate(candidates, {"plain": base, "shrinkage 0.1": lumpy}) == Candidate()
     assert choose_candidate(candidates, {"plain": base, "shrinkage 0.1": even}) == Candidate(0.1)
-    # rejection is judged by the same rule: the best threshold's lumpy gain is refused, a steady one kept
+    # rejection is judged by the same rule: a steady gain at 0.9 is kept, a lumpy one alone refused
     assert choose_threshold(base, {0.9: even, 0.99: lumpy}) == 0.9
     assert choose_threshold(base, {0.9: base, 0.99: lumpy}) is None
 
