@@ -64,6 +64,12 @@ def person_member(seed: int) -> dict:
     return {"seed": seed, **member(f"person {seed}", training, test)}
 
 
+def over_seeds(function, seeds: range, jobs: int) -> list:
+    """``function(seed)`` for every person seed, in ``jobs`` processes, with a progress bar."""
+    with Pool(jobs) as pool:
+        return list(tqdm(pool.imap(function, seeds), total=len(seeds), desc="people", unit="person"))
+
+
 def p1_members(directory: Path) -> list[dict]:
     days = read_days(directory)
     return [{"seed": None, **member(f"P1 day {a}->{b}", days[a], days[b])}
@@ -140,9 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.people < 0 or args.jobs < 1 or args.first_seed < 0:
         print("new_people: error: --people >= 0, --jobs >= 1, --first-seed >= 0", file=sys.stderr)
         return 2
-    seeds = range(args.first_seed, args.first_seed + args.people)
-    with Pool(args.jobs) as pool:
-        rows = list(tqdm(pool.imap(person_member, seeds), total=len(seeds), desc="people", unit="person"))
+    rows = over_seeds(person_member, range(args.first_seed, args.first_seed + args.people), args.jobs)
     groups = {"synthetic people": rows}
     if not args.no_p1:
         p1 = p1_members(args.data or data_dir())

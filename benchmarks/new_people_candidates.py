@@ -20,17 +20,16 @@ import argparse
 import json
 import sys
 from dataclasses import replace
-from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from bomi.chain import (CONSISTENCY, PLAIN, REQUIRED_GAIN, SHRINKAGE_GRID, THRESHOLD_GRID, Candidate, HoldScores,
                         Selection, choose_candidate, choose_threshold, cross_validate, prepare,
                         settings_candidates, train)
 from bomi.classifier import posteriors, reject
 from bomi.derived import derive_profile
+from new_people import over_seeds   # the benchmark beside this one (run as a script from benchmarks/)
 from tasks.participants.population import draw_person, pass_recordings
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -150,9 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.people < 1 or args.jobs < 1 or args.first_seed < 0:
         print("new_people_candidates: error: --people >= 1, --jobs >= 1, --first-seed >= 0", file=sys.stderr)
         return 2
-    seeds = range(args.first_seed, args.first_seed + args.people)
-    with Pool(args.jobs) as pool:
-        people = list(tqdm(pool.imap(person, seeds), total=len(seeds), desc="people", unit="person"))
+    people = over_seeds(person, range(args.first_seed, args.first_seed + args.people), args.jobs)
     record = {"command": "python benchmarks/new_people_candidates.py " + " ".join(argv if argv is not None else sys.argv[1:]),
               "people": people}
     out = RESULTS / f"new_people_candidates_{args.name}"
