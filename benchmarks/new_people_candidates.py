@@ -92,10 +92,13 @@ def replay_summary(people: list[dict], consistency: float = CONSISTENCY) -> str:
     """The rule replayed on recorded people: its pass-2 accuracy against plain's."""
     keys = [replay(p, consistency) for p in people]
     diff = np.array([p["candidates"][k]["test"] - p["candidates"][str(PLAIN)]["test"] for p, k in zip(people, keys)])
+    gap = [abs(np.sum(p["candidates"][k]["hold_correct"]) / np.sum(p["hold_windows"]) - p["candidates"][k]["test"])
+           for p, k in zip(people, keys)]
     lines = [f"Rule: an extra must gain {100 * REQUIRED_GAIN:g} point(s) of CV; the simplest option within {consistency:g} standard "
              f"errors of the best (over the held-out holds). {len(people)} people: pass-2 mean policy - plain {100 * diff.mean():+.3f} points, "
              f"worst {100 * diff.min():+.2f} (person {people[int(diff.argmin())]['seed']}), share more than 0.5 point "
-             f"below plain {100 * np.mean(diff < -0.005):.1f} %, extras chosen {100 * np.mean([k != str(PLAIN) for k in keys]):.0f} %",
+             f"below plain {100 * np.mean(diff < -0.005):.1f} %, extras chosen {100 * np.mean([k != str(PLAIN) for k in keys]):.0f} %, "
+             f"median abs(CV - pass 2) {100 * np.median(gap):.2f} points",
              "", "| person | chosen | pass-2 gain over plain |", "|---|---|---|"]
     lines += [f"| {p['seed']} | {k} | {100 * d:+.2f} |" for p, k, d in zip(people, keys, diff) if k != str(PLAIN)]
     return "\n".join(lines) + "\n"
