@@ -210,6 +210,10 @@ def markdown(record: dict) -> str:
              "MuJoCo's timers (wall clock over the ticks no other process interrupted, "
              f"{first['episode']['timed_ticks_kept']:.0%} of the episode's and {first['rest']['timed_ticks_kept']:.0%} "
              "of the rest's for the shipped scene; median over rounds). See the script's docstring.", "",
+             "Every row but the first two changes one thing of the shipped scene (on top of multiccd off and the "
+             "finger exclusions). The replay sets the recorded state before each tick, so its limit (x real time) "
+             "reads a little below `side_by_side.py`'s uninterrupted run. Solver iterations: Newton's and noslip's "
+             "(5 per island), summed over the islands, at the end of each tick.", "",
              "## Cost per variant (CPU us per control tick)", "",
              "| variant | adopted | at rest (the limit) | limit x real time | episode | episode / rest | "
              "episode vs before | contacts (episode) | rows | solver iterations (episode / rest) |",
