@@ -242,6 +242,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="replays per variant and kind")
     parser.add_argument("--rest-ticks", type=int, default=600, help="control ticks at rest to replay")
     args = parser.parse_args()
+    for name in ("rounds", "rest_ticks"):
+        if getattr(args, name) < 1:
+            parser.exit(2, f"bomi: error: --{name.replace('_', '-')}: must be at least 1, got {getattr(args, name)}\n")
+    if not 0 <= args.seed <= 999:
+        parser.exit(2, f"bomi: error: --seed: a development task seed is 0-999, got {args.seed}\n")
     episode, success = record_episode(args.seed)
     kinds = {"rest": record_rest(args.rest_ticks), "episode": episode}
     variants = []

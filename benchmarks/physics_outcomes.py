@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -29,17 +30,26 @@ RESULTS = Path(__file__).resolve().parent / "results"
 COUNTS = ("cube_drops", "mode_switches", "unintended_displacement_mm")
 
 
+def fail(message: str) -> None:
+    print(f"bomi: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def episodes(path: Path) -> dict[str, dict[int, dict]]:
     """Per operator, the episodes by seed."""
-    out: dict[str, dict[int, dict]] = {}
-    for episode in json.loads(path.read_text())["episodes"]:
-        out.setdefault(episode["operator"], {})[episode["seed"]] = episode
+    try:
+        records = json.loads(path.read_text())["episodes"]
+        out: dict[str, dict[int, dict]] = {}
+        for episode in records:
+            out.setdefault(episode["operator"], {})[episode["seed"]] = episode
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        fail(f"{path}: not a `bomi benchmark --json` file ({type(exc).__name__}: {exc})")
     return out
 
 
 def compare(before: dict[int, dict], after: dict[int, dict]) -> dict:
     if sorted(before) != sorted(after):
-        raise SystemExit("bomi: error: --before and --after hold different task seeds")
+        fail("--before and --after hold different task seeds")
     seeds = sorted(before)
     ok_b = [before[s]["success"] for s in seeds]
     ok_a = [after[s]["success"] for s in seeds]
@@ -108,7 +118,7 @@ def main() -> None:
     args = parser.parse_args()
     for path in args.before + args.after:
         if not path.is_file():
-            raise SystemExit(f"bomi: error: {path}: no such file")
+            fail(f"{path}: no such file")
     before, after = {}, {}
     for paths, into in ((args.before, before), (args.after, after)):
         for path in paths:
@@ -116,6 +126,8 @@ def main() -> None:
     record = {"name": args.out, "note": args.note,
               "command": " ".join([f"--before {p}" for p in args.before] + [f"--after {p}" for p in args.after]),
               "operators": {op: compare(before[op], after[op]) for op in before if op in after}}
+    if not record["operators"]:
+        fail("--before and --after share no operator")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f"{args.out}.json").write_text(json.dumps(record, indent=1))
     (RESULTS / f"{args.out}.md").write_text(markdown(record))
