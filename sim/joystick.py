@@ -29,6 +29,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 
@@ -95,6 +96,16 @@ class Layout:
             raise ValueError(f"layout {self.name}: every mode of the cycle needs one effect table")
         if any(set(table) - set(FUNCTIONS) for table in self.effects.values()):
             raise ValueError(f"layout {self.name}: effects for unknown functions; expected {FUNCTIONS}")
+        # ``axes`` and ``find`` are asked several times per control tick: answered from tables made once
+        axes = {(mode, kind): MappingProxyType({fn: effect.axis for fn, effect in self.effects[mode].items()
+                                                if effect.kind is kind})
+                for mode in self.modes for kind in Kind}
+        found: dict[tuple[Kind, tuple[float, float, float] | float], tuple[Mode, str]] = {}
+        for mode in self.modes:
+            for fn, effect in self.effects[mode].items():
+                found.setdefault((effect.kind, effect.axis), (mode, fn))  # the first in the cycle's order
+        object.__setattr__(self, "_axes", axes)
+        object.__setattr__(self, "_found", found)
 
     @property
     def functions(self) -> tuple[str, ...]:
@@ -110,18 +121,17 @@ class Layout:
         forward = self.modes.index(wanted) - self.modes.index(current)
         return (forward * BUTTON_STEP[button]) % len(self.modes)
 
-    def axes(self, mode: Mode, kind: Kind) -> dict[str, tuple[float, float, float] | float]:
-        """Function -> axis of the functions that have an effect of ``kind`` in ``mode``."""
-        return {fn: effect.axis for fn, effect in self.effects[mode].items() if effect.kind is kind}
+    def axes(self, mode: Mode, kind: Kind) -> Mapping[str, tuple[float, float, float] | float]:
+        """Function -> axis of the functions that have an effect of ``kind`` in ``mode`` (read-only)."""
+        return self._axes[mode, kind]
 
     def find(self, kind: Kind, axis: tuple[float, float, float] | float) -> tuple[Mode, str]:
         """The first mode of the cycle, and the function, whose effect is ``kind`` along ``axis`` (a
         unit axis as the tables give it, or +1/-1 for the fingers)."""
-        for mode in self.modes:
-            for fn, effect in self.effects[mode].items():
-                if effect.kind is kind and effect.axis == axis:
-                    return mode, fn
-        raise ValueError(f"layout {self.name} has no function that does {kind.value} along {axis}")
+        try:
+            return self._found[kind, axis]
+        except KeyError:
+            raise ValueError(f"layout {self.name} has no function that does {kind.value} along {axis}") from None
 
 
 def _effects(kind: Kind, axes: Mapping[str, tuple[float, float, float] | float], functions: Iterable[str]
