@@ -32,7 +32,7 @@ from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
-                           StickIntent, load_operator)
+                           StickIntent, load_operator, norm)
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
@@ -488,9 +488,9 @@ def calibrated_model(params: ParticipantParams, profile: Profile, seed: int, pos
 
 def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.ndarray:
     """Unit hand direction the person wants this tick (zero unless moving the hand in ``mode`` of ``layout``)."""
-    direction = combine(dict(intent.deflection), layout.axes(mode, Kind.LINEAR))
-    norm = np.linalg.norm(direction)
-    return direction / norm if norm > 0 else direction
+    direction = combine(intent.deflection, layout.axes(mode, Kind.LINEAR))
+    length = norm(direction)
+    return direction / length if length > 0 else direction
 
 
 def operator_user(params: OperatorParams, channel: OperatorChannel, seed: int) -> ScriptedUser | HumanOperator:
