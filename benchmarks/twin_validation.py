@@ -194,8 +194,13 @@ class Swap(Enum):
     """A group of the twin's parameters replaced by the person's truth (the ablation of --ablation)."""
 
     DRIFT = "drift between passes"            # day_gain_log_std, day_std_deg: a prior for one pass
-    NOISE = "repetition, sway, tremor"        # rep_std_deg, sway_std_deg, tremor_std_deg, tremor spectrum
+    REPETITION = "repetition spread"          # rep_std_deg (classes and neutral)
+    SWAY_TREMOR = "sway, tremor"              # sway_std_deg, tremor_std_deg, the tremor spectrum
     TIMING = "onset, reaction, spasms"        # priors for a holds-only pass; the twin has no spasms
+
+
+SWAP_KEYS = {Swap.DRIFT: ("day_gain_log_std", "day_std_deg"), Swap.REPETITION: ("rep_std_deg",),
+             Swap.SWAY_TREMOR: ("sway_std_deg", "tremor_std_deg")}
 
 
 def with_truth(twin: ParticipantParams, true: ParticipantParams, swap: Swap) -> ParticipantParams:
@@ -203,13 +208,13 @@ def with_truth(twin: ParticipantParams, true: ParticipantParams, swap: Swap) -> 
     measured through the assumed mountings, as the fusion sees them)."""
     if swap is Swap.TIMING:
         return replace(twin, onset_s=true.onset_s, reaction_s=true.reaction_s, spasm=true.spasm)
-    keys = (("day_gain_log_std", "day_std_deg") if swap is Swap.DRIFT
-            else ("rep_std_deg", "sway_std_deg", "tremor_std_deg"))
+    keys = SWAP_KEYS[swap]
     classes = {c: replace(m, **{k: getattr(true.classes[c], k) for k in keys}) for c, m in twin.classes.items()}
     if swap is Swap.DRIFT:
         return replace(twin, classes=classes)
     neutral = replace(twin.neutral, **{k: getattr(true.neutral, k) for k in keys})
-    return replace(twin, classes=classes, neutral=neutral, tremor_spectrum=true.tremor_spectrum)
+    spectrum = true.tremor_spectrum if swap is Swap.SWAY_TREMOR else twin.tremor_spectrum
+    return replace(twin, classes=classes, neutral=neutral, tremor_spectrum=spectrum)
 
 
 def ablation(person, twin: ParticipantParams, seeds: Sequence[tuple[int, int]]) -> dict[str, float]:
@@ -401,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pairs", type=int, default=DEFAULT_PAIRS,
                         help=f"pairs of synthetic sessions per prediction (default {DEFAULT_PAIRS}, at least 2)")
     parser.add_argument("--ablation", action="store_true",
-                        help="population: also predict with each group of parameters true (4 more predictions)")
+                        help="population: also predict with each group of parameters true (5 more predictions)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     args = parser.parse_args(argv)
     for option, value, least in (("--pairs", args.pairs, 2), ("--jobs", args.jobs, 1)):
