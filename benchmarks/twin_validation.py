@@ -30,6 +30,7 @@ import itertools
 import json
 import sys
 import tempfile
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import Enum
@@ -279,7 +280,9 @@ def population_markdown(rows: list[dict]) -> str:
     lines += [f"| {r['person']} | {r['nodes']} | {r['motions']} | {r['predicted_pct']:.2f} | {r['predicted_se']:.2f} | "
               f"{r['real_pct']:.2f} | {r['gap_points']:+.2f} |" for r in rows]
     lines += ["", f"Mean absolute gap {np.mean(np.abs(gaps)):.2f} points (mean gap {np.mean(gaps):+.2f}); within "
-              f"{BAR_POINTS:g} points for {int(np.sum(np.abs(gaps) <= BAR_POINTS))} of {len(rows)} people.", ""]
+              f"{BAR_POINTS:g} points for {int(np.sum(np.abs(gaps) <= BAR_POINTS))} of {len(rows)} people; "
+              f"median standard error of a prediction {np.median([r['predicted_se'] for r in rows]):.2f} points "
+              f"({rows[0]['pairs']} session pairs).", ""]
     if rows[0]["ablation"]:
         lines += ablation_markdown(rows)
     return "\n".join(lines)
@@ -325,7 +328,8 @@ def population_figure(rows: list[dict], path: Path) -> None:
     ax.fill_between([lo, 100.5], [lo - BAR_POINTS, 100.5 - BAR_POINTS], [lo + BAR_POINTS, 100.5 + BAR_POINTS],
                     color="C2", alpha=0.15, label=f"within {BAR_POINTS:g} points")
     ax.plot([lo, 100.5], [lo, 100.5], "k--", lw=0.8)
-    ax.scatter(real, pred)
+    ax.errorbar(real, pred, yerr=[r["predicted_se"] for r in rows], fmt="o", ms=4, capsize=2,
+                label="twin (+- standard error)")
     for r in rows:
         ax.annotate(str(r["person"]), (r["real_pct"], r["predicted_pct"]), fontsize=6)
     ax.set_xlim(lo, 100.5)
@@ -363,7 +367,8 @@ def markdown(rows: list[dict], command: str) -> str:
               for r in rows]
     lines += ["", f"Mean absolute gap {np.mean(np.abs(gaps)):.2f} points (mean gap {np.mean(gaps):+.2f}); "
               f"within {BAR_POINTS:g} points on {within} of {len(rows)} pairs (bar: at least {BAR_PAIRS}) -> "
-              f"{'met' if within >= BAR_PAIRS else 'missed'}.", ""]
+              f"{'met' if within >= BAR_PAIRS else 'missed'}. Median standard error of a prediction "
+              f"{np.median([r['predicted_se'] for r in rows]):.2f} points ({rows[0]['pairs']} session pairs).", ""]
     return "\n".join(lines)
 
 
@@ -375,7 +380,8 @@ def figure(rows: list[dict], path: Path) -> None:
     ax.fill_between([lo, 100.5], [lo - BAR_POINTS, 100.5 - BAR_POINTS], [lo + BAR_POINTS, 100.5 + BAR_POINTS],
                     color="C2", alpha=0.15, label=f"within {BAR_POINTS:g} points")
     ax.plot([lo, 100.5], [lo, 100.5], "k--", lw=0.8)
-    ax.scatter(real, pred, color="C0")
+    ax.errorbar(real, pred, yerr=[r["predicted_se"] for r in rows], fmt="o", ms=4, capsize=2, color="C0",
+                label="twin (+- standard error)")
     for r in rows:
         ax.annotate(f"{r['train_day']}>{r['test_day']}", (r["real_pct"], r["predicted_pct"]), fontsize=6)
     ax.set_xlim(lo, 100.5)
@@ -384,8 +390,8 @@ def figure(rows: list[dict], path: Path) -> None:
     ax.set_ylabel("twin of day k: session-to-session accuracy (%)")
     ax.legend(loc="upper left", fontsize=8)
     labels = [f"{r['train_day']}>{r['test_day']}" for r in rows]
-    bx.bar(labels, [r["gap_points"] for r in rows], color=["C0" if abs(r["gap_points"]) <= BAR_POINTS else "C3"
-                                                           for r in rows])
+    bx.bar(labels, [r["gap_points"] for r in rows], yerr=[r["predicted_se"] for r in rows], capsize=2,
+           color=["C0" if abs(r["gap_points"]) <= BAR_POINTS else "C3" for r in rows])
     bx.axhspan(-BAR_POINTS, BAR_POINTS, color="C2", alpha=0.15)
     bx.set_ylabel("predicted - real (points)")
     bx.tick_params(axis="x", labelrotation=90, labelsize=7)
@@ -413,6 +419,7 @@ def main(argv: list[str] | None = None) -> int:
         if value < least:
             print(f"twin_validation: error: {option} must be at least {least}, got {value}", file=sys.stderr)
             return 2
+    started = time.perf_counter()
     directory = args.data or data_dir()
     if not args.skip_days:
         try:
@@ -439,6 +446,8 @@ def main(argv: list[str] | None = None) -> int:
         population_figure(people, RESULTS / f"{name}_population.png")
         text += "\n" + population_markdown(people)
         name += "_population" if args.skip_days else ""
+    record["wall_time_s"] = round(time.perf_counter() - started, 1)
+    text += f"\nWall time {record['wall_time_s']:.0f} s (--jobs {args.jobs}).\n"
     (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1) + "\n")
     (RESULTS / f"{name}.md").write_text(text)
     print(text)

@@ -7,7 +7,8 @@ each measured where the recordings show it and taken from a documented prior oth
 
 - the posture of each class (median held level minus the neutral around it), its spread from
   repetition to repetition within a pass, its slow sway and tremor in holds (level per node and
-  angle; the tremor's spectrum from the first node);
+  angle, the sway corrected for what a hold's median takes of it; the tremor's spectrum from the
+  first node);
 - the onset (duration of a move) and reaction time (cue to movement), from the transitions of
   continuous recordings (cue-labelled, every row kept: what `bomi record` writes). Post-processed
   recordings keep only the holds, stitched (the published 5-day set): no transition to measure;
