@@ -34,8 +34,8 @@ import scipy.signal
 from bomi.config_files import check_table, load_toml, number
 from bomi.errors import BomiError
 from bomi.classifier import NEUTRAL_LABEL
-from bomi.fusion import DT, WARMUP_S, FusedRows
-from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, SampleIndex
+from bomi.fusion import DT, WARMUP_S, NodeFusion
+from bomi.frames import SAMPLE_RATE_HZ, parse_stream, row_positions, sample_indices
 from bomi.profiles import Profile
 from bomi.protocol import protocol_order
 from bomi.recording import NodeData, Recording
@@ -627,29 +627,27 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
 def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recording, np.ndarray]:
     """Parse base-station bytes into fused rows exactly as ``bomi record`` does; also each row's sample index.
 
-    Rows come from ``bomi.frames.RowAssembler`` (frames paired by arrival, a lost frame's node
-    repeats its previous sample) and ``FusedRows`` (each frame fused once by ``NodeFusion``). The
-    sample index of a row (to label it) is that of its newest frame, from the unwrapped packet counters.
+    The whole stream at once, by the batch forms of the live steps: the frames a ``FrameParser``
+    delivers (``parse_stream``), rows as ``RowAssembler`` pairs them by arrival, a lost frame's
+    node repeating its previous sample (``row_positions``), each frame in a row fused once, in
+    order, by the node's ``NodeFusion`` (``update_many``: the frames before a node's first row are
+    never fused, as ``FusedRows`` never sees them). The sample index of a row (to label it) is that
+    of its newest frame, from the unwrapped packet counters (``sample_indices``).
     """
     ids = tuple(node.node_id for node in profile.nodes)
-    assembler = RowAssembler(ids)
-    fused = FusedRows({node.index: node.calibration for node in profile.nodes})
-    sample_index = SampleIndex()
-    index_of: dict[tuple[int, int], int] = {}        # (node id, counter) -> sample index of that frame
-    rows: list[dict[int, ImuFrame]] = []
-    row_index: list[int] = []
-    for frame in FrameParser().feed(stream):
-        if frame.node_id not in ids:
-            continue
-        index_of[(frame.node_id, frame.counter)] = sample_index(frame)
-        row = assembler.push(frame)
-        if row is not None:
-            rows.append(row)
-            row_index.append(max(index_of[(f.node_id, f.counter)] for f in row.values()))
-    if not rows:
+    frames = parse_stream(stream)
+    frames = frames[np.isin(frames["node_id"], ids)]
+    rows = row_positions(frames["node_id"].tolist(), ids)
+    if not len(rows):
         raise BomiError(f"{source}: no complete row of nodes {list(profile.node_indices)} in the stream")
-    nodes = fused.columns(rows)
-    indices = np.array(row_index)
+    nodes = {}
+    for k, node in enumerate(profile.nodes):
+        used, row_frame = np.unique(rows[:, k], return_inverse=True)   # each frame once, in arrival order
+        mine = frames[used]
+        acc, gyro, mag = (mine[name].astype(float) for name in ("acc", "gyro", "mag"))
+        angles = NodeFusion(node.calibration).update_many(acc, gyro, mag)
+        nodes[node.index] = NodeData(acc[row_frame], gyro[row_frame], mag[row_frame], angles[row_frame])
+    indices = sample_indices(frames["node_id"], frames["counter"])[rows].max(axis=1)
     return Recording(nodes=nodes, labels=None, time=indices * DT, source=source), indices
 
 
