@@ -52,9 +52,9 @@ def node_states(rec: Recording, nodes: Sequence[int], neutral: np.ndarray) -> np
                       for k, i in enumerate(nodes)])
 
 
-def window_features(states: np.ndarray, spec: FeatureSpec) -> np.ndarray:
-    """Features of every window (time order) of the node-state sequence."""
-    return batch_window_features(states[:, spec.components], spec.kind, spec.window, spec.stride)
+def window_features(states: np.ndarray, spec: FeatureSpec, select: np.ndarray | None = None) -> np.ndarray:
+    """Features of every window (time order) of the node-state sequence (``select``: of the windows it keeps)."""
+    return batch_window_features(states[:, spec.components], spec.kind, spec.window, spec.stride, select)
 
 
 @dataclass
@@ -159,7 +159,7 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
     for scale in copies.scales:
         states = prepared.states.copy()
         states[motion_samples] *= scale
-        parts.append((window_features(states, spec)[motion_windows], prepared.labels[motion_windows],
+        parts.append((window_features(states, spec, motion_windows), prepared.labels[motion_windows],
                       prepared.ends[motion_windows], False))
     for label, node in copies.spread_nodes.items():
         samples, windows = rec.labels == label, pure & (prepared.labels == label)
@@ -167,7 +167,7 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
             continue
         for states in _spread_states(prepared.states, samples, spec.nodes.index(node),
                                      np.radians(copies.spread_degrees)):
-            parts.append((window_features(states, spec)[windows], prepared.labels[windows], prepared.ends[windows], False))
+            parts.append((window_features(states, spec, windows), prepared.labels[windows], prepared.ends[windows], False))
     windows = TrainingWindows(*(np.concatenate([part[k] for part in parts]) for k in range(3)),
                               np.concatenate([np.full(len(part[1]), part[3]) for part in parts]))
     return windows, prepared

@@ -64,18 +64,26 @@ def features(kind: str, windows: np.ndarray) -> np.ndarray:
     raise ValueError(f"unknown feature vector {kind!r}")
 
 
-def window_features(samples: np.ndarray, kind: str, length: int = 8, stride: int = 1) -> np.ndarray:
-    """``features`` of every window ``sliding_windows`` cuts from (n, C) samples, without cutting them:
-    FV3's half-window statistics are computed once per run of ``length // 2`` consecutive samples,
-    from shifted views of the samples (``_half_stats``, as ``fv3``: elementwise work on contiguous
-    rows, several times less than a reduction over strided windows), and each window takes its two
-    halves'."""
+def window_features(samples: np.ndarray, kind: str, length: int = 8, stride: int = 1,
+                    select: np.ndarray | None = None) -> np.ndarray:
+    """``features`` of every window ``sliding_windows`` cuts from (n, C) samples (``select``: of the
+    windows this boolean mask keeps), without cutting them: FV3's half-window statistics come from
+    shifted views of the samples, once per run of ``length // 2`` consecutive samples (``_half_stats``,
+    as ``fv3``: elementwise work on contiguous rows, several times less than a reduction over strided
+    windows), and each window takes its two halves'; with ``select``, only the runs of the kept
+    windows (the same operations on the same samples: the same bits)."""
     if kind != "FV3":
-        return features(kind, sliding_windows(samples, length, stride))
+        out = features(kind, sliding_windows(samples, length, stride))
+        return out if select is None else out[select]
     if length % 2:
         raise ValueError(f"FV3 needs an even window length (two equal sub-windows), got {length}")
     half = length // 2
     starts = window_ends(len(samples), length, stride) - (length - 1)
+    if select is not None:
+        starts = starts[select]
+        halves = np.concatenate([starts, starts + half])
+        stats = _half_stats([samples[halves + j] for j in range(half)])
+        return np.hstack([stats[:len(starts)], stats[len(starts):]])
     runs = max(len(samples) - half + 1, 0)
     stats = _half_stats([samples[j:j + runs] for j in range(half)])
     return np.hstack([stats[starts], stats[starts + half]])
