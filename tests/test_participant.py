@@ -165,6 +165,27 @@ def test_stream_does_not_depend_on_how_time_is_sliced(name):
 
 
 @pytest.mark.parametrize("name", ["P1", "P4"])
+def test_passing_time_then_one_pass_is_making_the_samples_at_each_cue(name):
+    """pass_time (a protocol synthesised in one pass) against deliveries at every cue (the naive
+    reference): the same intents' timing, the same frames and arrivals, the angles to filter round-off."""
+    params, profile = load_participant(name), load_profile(name)
+    one, many = VirtualParticipant(params, profile, seed=7), VirtualParticipant(params, profile, seed=7)
+    cues = [(1.0, 3 if name == "P1" else 2, 1.0), (2.5, 0, 0.0), (2.6, 1, 0.6), (4.0, 0, 0.0)]
+    parts = []
+    for t, label, amplitude in cues:
+        one.pass_time(t)
+        parts.append(many.deliveries(t))
+        one.set_intent(label, amplitude, t)
+        many.set_intent(label, amplitude, t)
+    parts.append(many.deliveries(6.0))
+    whole = one.deliveries(6.0)
+    assert whole.stream() == b"".join(p.stream() for p in parts)
+    assert np.array_equal(whole.arrival_s, np.concatenate([p.arrival_s for p in parts]))
+    assert [m.t0 for m in one._moves] == [m.t0 for m in many._moves]
+    np.testing.assert_allclose(one.truth().angles, many.truth().angles, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["P1", "P4"])
 def test_calibration_and_task_share_the_person_but_not_the_noise(name):
     """Same seed: the task participant is the person who calibrated (same day's postures), but sway,
     tremor, spasms, sensor noise and frame loss are drawn afresh, so the streams differ from the start."""

@@ -382,6 +382,7 @@ class VirtualParticipant:
         self._spasm_sizes = np.empty((0, n_spasm_nodes, 3))
         self._spasm_until = 0.0                 # spasm onsets are drawn up to this time
         self._generated = 0                     # samples generated so far (sample k at time k * DT)
+        self._passed = 0                        # samples whose time has passed (``pass_time``), made or not
         self._last_angles: np.ndarray | None = None     # (nodes, 3) angles of the last sample
         self._last_arrival: dict[int, float] = {}
         self._pending = _merge()
@@ -408,8 +409,14 @@ class VirtualParticipant:
 
     @property
     def time_s(self) -> float:
-        """Sim time up to which samples have been generated."""
-        return self._generated * DT
+        """Sim time up to which samples are made (or passed: ``pass_time``)."""
+        return max(self._generated, self._passed) * DT
+
+    def pass_time(self, t_end: float) -> None:
+        """Let sim time pass to ``t_end`` without making its samples yet: an intent set from now on
+        acts after them, exactly as if ``deliveries(t_end)`` had been called, and the next call that
+        makes samples makes them all in one pass (a whole protocol: one synthesis, not one per cue)."""
+        self._passed = max(self._passed, _samples_until(t_end))
 
     @property
     def intent(self) -> tuple[int, float]:
@@ -484,7 +491,7 @@ class VirtualParticipant:
 
     # -- output
     def _generate(self, t_end: float) -> None:
-        n_total = int(np.floor(t_end / DT + 1e-9)) + 1
+        n_total = max(_samples_until(t_end), self._passed)
         n = n_total - self._generated
         if n <= 0:
             return
@@ -529,6 +536,11 @@ class VirtualParticipant:
             return Truth(np.empty(0), np.empty(0, int), np.empty(0), np.empty((0, self.params.n_nodes, 3)))
         t, label, amp, angles = (np.concatenate(parts) for parts in zip(*self._truth))
         return Truth(t, label, amp, angles)
+
+
+def _samples_until(t_end: float) -> int:
+    """How many samples (sample k at time k * DT) are taken by sim time ``t_end``."""
+    return int(np.floor(t_end / DT + 1e-9)) + 1
 
 
 def _merge(*parts: Delivery) -> Delivery:
@@ -602,15 +614,13 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
         vp.set_intent(first, first_amp, 0.0)
     holds: list[tuple[float, float, int]] = [(warmup_s, warmup_s + first_s, first)]
     t = warmup_s + first_s
-    parts = []
     for cue_label, cue_amp, duration in rest:
-        parts.append(vp.deliveries(t))
+        vp.pass_time(t)
         vp.set_intent(cue_label, cue_amp, t)
         cues.append((t, cue_label))
         holds.append((t + settle, t + settle + duration, cue_label))
         t += settle + duration
-    parts += [vp.deliveries(t), vp.flush()]
-    delivery = _merge(*parts)
+    delivery = _merge(vp.deliveries(t), vp.flush())   # the whole session synthesised in one pass
     truth = vp.truth()
     keep = np.arange(len(truth.time_s)) <= int(np.floor(t / DT + 1e-9))   # the samples up to t, as generated
     truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
