@@ -67,11 +67,10 @@ def features(kind: str, windows: np.ndarray) -> np.ndarray:
 def window_features(samples: np.ndarray, kind: str, length: int = 8, stride: int = 1,
                     select: np.ndarray | None = None) -> np.ndarray:
     """``features`` of every window ``sliding_windows`` cuts from (n, C) samples (``select``: of the
-    windows this boolean mask keeps), without cutting them: FV3's half-window statistics come from
-    shifted views of the samples, once per run of ``length // 2`` consecutive samples (``_half_stats``,
-    as ``fv3``: elementwise work on contiguous rows, several times less than a reduction over strided
-    windows), and each window takes its two halves'; with ``select``, only the runs of the kept
-    windows (the same operations on the same samples: the same bits)."""
+    windows this boolean mask keeps), without cutting them: FV3's half-window statistics are computed
+    once per run of ``length // 2`` consecutive samples, and each window takes its two halves'
+    (``_half_stats``, as ``fv3``: several times less work); with ``select``, only the runs of the
+    kept windows (the same reductions of the same samples: the same bits)."""
     if kind != "FV3":
         out = features(kind, sliding_windows(samples, length, stride))
         return out if select is None else out[select]
@@ -79,14 +78,13 @@ def window_features(samples: np.ndarray, kind: str, length: int = 8, stride: int
         raise ValueError(f"FV3 needs an even window length (two equal sub-windows), got {length}")
     half = length // 2
     starts = window_ends(len(samples), length, stride) - (length - 1)
-    if select is not None:
-        starts = starts[select]
-        halves = np.concatenate([starts, starts + half])
-        stats = _half_stats([samples[halves + j] for j in range(half)])
-        return np.hstack([stats[:len(starts)], stats[len(starts):]])
-    runs = max(len(samples) - half + 1, 0)
-    stats = _half_stats([samples[j:j + runs] for j in range(half)])
-    return np.hstack([stats[starts], stats[starts + half]])
+    if select is None:
+        stats = _half_stats(sliding_windows(samples, half))
+        return np.hstack([stats[starts], stats[starts + half]])
+    starts = starts[select]
+    runs = sliding_windows(samples, half)
+    stats = _half_stats(runs[np.concatenate([starts, starts + half])])
+    return np.hstack([stats[:len(starts)], stats[len(starts):]])
 
 
 def fv3(windows: np.ndarray) -> np.ndarray:
@@ -97,22 +95,17 @@ def fv3(windows: np.ndarray) -> np.ndarray:
     m, length, channels = windows.shape
     if length % 2:
         raise ValueError(f"FV3 needs an even window length (two equal sub-windows), got {length}")
-    runs = windows.reshape(2 * m, length // 2, channels)
-    return _half_stats([runs[:, j] for j in range(length // 2)]).reshape(m, 8 * channels)
+    return _half_stats(windows.reshape(2 * m, length // 2, channels)).reshape(m, 8 * channels)
 
 
-def _half_stats(parts: list[np.ndarray]) -> np.ndarray:
-    """h arrays (k, C), the j-th holding the j-th sample of each of k runs of h consecutive samples
-    -> (k, 4 C): min, max, mean and absolute sum over each run.  One implementation for the stream
-    (a window's two halves) and the batch (every run of a recording, as shifted views): the same
-    elementwise operations in the same order (sums left to right), so both agree bit for bit
-    (tests/test_features.py)."""
-    low, high, total, size = parts[0], parts[0], parts[0], len(parts)
-    magnitude = np.abs(parts[0])
-    for part in parts[1:]:
-        low, high = np.minimum(low, part), np.maximum(high, part)
-        total, magnitude = total + part, magnitude + np.abs(part)
-    return np.concatenate((low, high, total / size, magnitude), axis=1)
+def _half_stats(runs: np.ndarray) -> np.ndarray:
+    """(k, h, C) runs of h consecutive samples -> (k, 4 C): min, max, mean and absolute sum over each
+    run.  One implementation for the stream (a window's two halves) and the batch (every run of a
+    recording): the same reductions, so both agree bit for bit (tests/test_features.py).  ufunc
+    reductions rather than ndarray methods: this runs once per sample in the stream."""
+    size = runs.shape[1]
+    return np.concatenate((np.minimum.reduce(runs, axis=1), np.maximum.reduce(runs, axis=1),
+                           np.add.reduce(runs, axis=1) / size, np.add.reduce(np.abs(runs), axis=1)), axis=1)
 
 
 @dataclass(frozen=True)
