@@ -1,8 +1,9 @@
 """Per-node orientation fusion exactly as ../shared/docs/hardware.md section 3 describes it.
 
 Magnetometer hard/soft-iron correction, mounting rotation, complementary filters on pitch and roll,
-a 10 Hz low-pass on both, tilt-compensated complementary yaw. ``NodeFusion.update`` is the one
-implementation; the batch ``fuse`` runs it over a whole recording, so both agree bit for bit.
+a 10 Hz low-pass on both, tilt-compensated complementary yaw. ``NodeFusion.update`` (one sample,
+the stream) and ``NodeFusion.update_many`` (n samples in a row, a whole recording: ``fuse``) are the
+same filter, the same IEEE operations in the same order, and agree bit for bit (tests/test_fusion.py).
 Angles in degrees; inputs raw int16 LSB in the sensor's own axes.
 """
 from __future__ import annotations
