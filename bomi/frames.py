@@ -451,24 +451,24 @@ def row_positions(node_sequence: Sequence[int], node_ids: tuple[int, ...]) -> np
     (rows, len(node_ids)) positions in the sequence of the frame each row holds per node (a held
     frame's position repeats). The same rule, kept in plain ints: tests/test_frames.py checks it
     against the assembler frame by frame."""
-    slot = {node_id: k for k, node_id in enumerate(node_ids)}
-    k = len(node_ids)
-    pending: list[int | None] = [None] * k
-    last: list[int | None] = [None] * k
-    waiting, rows = 0, []
+    slot = {node_id: 1 << j for j, node_id in enumerate(node_ids)}
+    index = {node_id: j for j, node_id in enumerate(node_ids)}
+    k, full = len(node_ids), (1 << len(node_ids)) - 1
+    current: list[int] = [0] * k   # the last row emitted, overwritten by the frames pending since
+    pending = 0                     # bit mask of the nodes with a frame pending
+    emitted = False                 # no row yet: RowAssembler has no frame to hold, a repeat drops the pending
+    rows = []
     for position, node_id in enumerate(node_sequence):
-        j = slot.get(node_id)
-        if j is None:
+        bit = slot.get(node_id)
+        if bit is None:
             continue
-        if pending[j] is not None:    # the node again before the row was full: emit it with held frames
-            row = [p if p is not None else q for p, q in zip(pending, last)]
-            pending, waiting = [None] * k, 0
-            if None not in row:
-                rows.append(row)
-                last = row
-        pending[j] = position
-        waiting += 1
-        if waiting == k:
-            rows.append(pending)
-            last, pending, waiting = pending, [None] * k, 0
+        if pending & bit:           # the node again before the row was full: emit it with held frames
+            if emitted:
+                rows.append(current.copy())
+            pending = 0
+        current[index[node_id]] = position
+        pending |= bit
+        if pending == full:
+            rows.append(current.copy())
+            emitted, pending = True, 0
     return np.array(rows, dtype=np.int64).reshape(-1, k)
