@@ -348,7 +348,7 @@ class BomiChannel:
             return NEUTRAL_LABEL, 0.0
         (function, deflection), = intent.deflection.items()
         label = self._label_of[function]
-        feel = self.feel.get(label, LeanFeel(self.participant.params.feel))
+        feel = self.feel.get(label) or LeanFeel(self.participant.params.feel)
         return label, feel.lean_for(float(deflection))
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
