@@ -1,29 +1,40 @@
 """Out-of-sample check of the twin (`bomi twin`): does a twin fitted on one day predict the next day?
 
-    python benchmarks/twin_validation.py --first-seed S [--data DIR] [--population N]
+    python benchmarks/twin_validation.py --first-seed S [--pairs M] [--jobs J] [--data DIR]
+                                         [--population N] [--skip-days]
 
 P1, every ordered pair of days (k, j): the twin fitted on real day k alone (tasks.participants.twin,
 profile P1), with the drift between days it cannot see taken from a prior fitted on the three
-other days (neither k nor j: nothing of day j enters the prediction), performs two synthetic
-sessions (`bomi synth`: day k's protocol through simulated frames and the fusion, seeds S + 2i and
-S + 2i + 1). Its prediction of the real day k -> j accuracy is the session-to-session accuracy,
-the mean of session 1 -> 2 and 2 -> 1. Real: train on day k, test on day j, profile P1 (what
-`bomi evaluate --train dayk --test dayj --profile P1` prints). Per pair: prediction, real, gap.
+other days (neither k nor j: nothing of day j enters the prediction), performs M pairs of
+synthetic sessions (`bomi synth`: day k's protocol through simulated frames and the fusion; pair i
+of the 20 uses seeds S + 2Mi .. S + 2Mi + 2M - 1). A pair's accuracy is the mean of session 1 -> 2
+and 2 -> 1; the prediction of the real day k -> j accuracy is the mean over the M pairs, reported
+with its standard error (the pairs' spread / sqrt(M)): each synthetic session draws its own day,
+so one pair is one draw of the day-to-day drift. Real: train on day k, test on day j, profile P1
+(what `bomi evaluate --train dayk --test dayj --profile P1` prints). Per pair: prediction, its
+standard error, real, gap.
 
 With ``--population N``: N synthetic people (tasks/participants/population.py, people S .. S + N - 1)
 with known parameters, two passes each; the twin of each person's first pass (the person's profile,
 prior P1) against the true parameters (recovery, per parameter) and its pass-to-pass prediction
-(sessions S + 500 + 2i, + 1) against the person's pass 1 -> 2 accuracy.
+(M session pairs, seeds drawn from the person's seed) against the person's pass 1 -> 2 accuracy.
 
-Writes benchmarks/results/twin_validation_S.{md,json,png}.
+Writes benchmarks/results/twin_validation_S.{md,json,png} (with --skip-days: ..._S_population.*).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import itertools
 import json
 import sys
 import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from enum import Enum
+from multiprocessing import Pool
 from pathlib import Path
 
 import matplotlib
@@ -42,12 +53,13 @@ from bomi.reproduce import DAYS, read_days  # noqa: E402
 from tasks.cli.chain import fit_model  # noqa: E402
 from tasks.participants.participant import (ParticipantParams, load_participant, protocol_session,  # noqa: E402
                                             session_recording)
-from tasks.participants.population import draw_person, pass_recordings  # noqa: E402
+from tasks.participants.population import draw_person, pass_recordings, true_profile  # noqa: E402
 from tasks.participants.twin import fit_twin, twin_toml  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BAR_POINTS = 3.0
 BAR_PAIRS = 16
+DEFAULT_PAIRS = 4
 
 
 def accuracy(train_on: Recording, test_on: Recording, profile: Profile) -> float:
@@ -63,29 +75,92 @@ def as_participant(twin, directory: Path) -> ParticipantParams:
     return load_participant(path)
 
 
-def session(params: ParticipantParams, profile: Profile, seed: int) -> Recording:
-    """What `bomi synth --participant ... --seed seed` writes."""
-    return session_recording(protocol_session(params, profile, seed, params.protocol), profile,
+def session(params: ParticipantParams, profile: Profile, seed: int, worn: Profile | None = None) -> Recording:
+    """What `bomi synth --participant ... --seed seed` writes; ``worn``: the sensors' real mountings
+    when they differ from the ones ``profile`` (and so the fusion) assumes."""
+    return session_recording(protocol_session(params, worn or profile, seed, params.protocol), profile,
                              holds_only=params.protocol.holds_only)
 
 
-def predicted(params: ParticipantParams, profile: Profile, seeds: tuple[int, int]) -> float:
-    """The twin's session-to-session accuracy: mean of session 1 -> 2 and 2 -> 1."""
-    a, b = (session(params, profile, s) for s in seeds)
-    return (accuracy(a, b, profile) + accuracy(b, a, profile)) / 2
+@dataclass(frozen=True)
+class Prediction:
+    """The twin's session-to-session accuracy over disjoint pairs of synthetic sessions: per pair the
+    mean of session 1 -> 2 and 2 -> 1; the prediction is their mean, its standard error the pairs'
+    spread / sqrt(pairs)."""
+
+    per_pair: tuple[float, ...]
+
+    @property
+    def mean(self) -> float:
+        return float(np.mean(self.per_pair))
+
+    @property
+    def standard_error(self) -> float:
+        if len(self.per_pair) < 2:
+            return float("nan")
+        return float(np.std(self.per_pair, ddof=1) / np.sqrt(len(self.per_pair)))
 
 
-def day_pairs(days: dict[int, Recording], profile: Profile, first_seed: int, directory: Path) -> list[dict]:
-    rows = []
-    for i, (k, j) in enumerate(tqdm(list(itertools.permutations(DAYS, 2)), desc="day pairs", unit="pair")):
-        others = [days[d] for d in DAYS if d not in (k, j)]
-        prior = as_participant(fit_twin(others, profile, None, f"P1-prior-{k}{j}"), directory)
-        twin = as_participant(fit_twin([days[k]], profile, prior, f"P1-day{k}-for-{j}"), directory)
-        seeds = (first_seed + 2 * i, first_seed + 2 * i + 1)
-        pred, real = predicted(twin, profile, seeds), accuracy(days[k], days[j], profile)
-        rows.append({"train_day": k, "test_day": j, "seeds": list(seeds), "predicted_pct": pred, "real_pct": real,
-                     "gap_points": pred - real})
-    return rows
+def predicted(params: ParticipantParams, profile: Profile, seeds: Sequence[tuple[int, int]],
+              worn: Profile | None = None) -> Prediction:
+    """The twin's prediction from the session pairs of ``seeds``."""
+    values = []
+    for seed_a, seed_b in seeds:
+        a, b = session(params, profile, seed_a, worn), session(params, profile, seed_b, worn)
+        values.append((accuracy(a, b, profile) + accuracy(b, a, profile)) / 2)
+    return Prediction(tuple(values))
+
+
+def pair_seeds(first: int, pairs: int) -> list[tuple[int, int]]:
+    """``pairs`` session pairs from ``first`` on: (first, first + 1), (first + 2, first + 3), ..."""
+    return [(first + 2 * p, first + 2 * p + 1) for p in range(pairs)]
+
+
+def person_session_seeds(person_seed: int, pairs: int) -> list[tuple[int, int]]:
+    """The session pairs of a synthetic person's twin, drawn from the person's seed (a population
+    run's seeds are its people's)."""
+    state = np.random.SeedSequence([person_seed, 28]).generate_state(2 * pairs)
+    return [(int(state[2 * p]), int(state[2 * p + 1])) for p in range(pairs)]
+
+
+_DAYS: dict[int, Recording] = {}
+
+
+def _load_days(directory: Path) -> None:
+    """Worker initialiser: P1's five days, read once per process."""
+    _DAYS.update(read_days(directory))
+
+
+def day_pair(task: tuple[int, int, int, int]) -> dict:
+    """Ordered day pair (k, j): the twin of day k (its drift prior from the other three days) against day k -> j."""
+    k, j, first_seed, pairs = task
+    profile = load_profile("P1")
+    with tempfile.TemporaryDirectory() as temp:
+        others = [_DAYS[d] for d in DAYS if d not in (k, j)]
+        prior = as_participant(fit_twin(others, profile, None, f"P1-prior-{k}{j}"), Path(temp))
+        twin = as_participant(fit_twin([_DAYS[k]], profile, prior, f"P1-day{k}-for-{j}"), Path(temp))
+    seeds = pair_seeds(first_seed, pairs)
+    with contextlib.redirect_stdout(io.StringIO()):     # the settings choice's lines, once per model
+        pred, real = predicted(twin, profile, seeds), accuracy(_DAYS[k], _DAYS[j], profile)
+    return {"train_day": k, "test_day": j, "seeds": [seeds[0][0], seeds[-1][1]], "pairs": pairs,
+            "predicted_pct": pred.mean, "predicted_se": pred.standard_error, "per_pair_pct": list(pred.per_pair),
+            "real_pct": real, "gap_points": pred.mean - real}
+
+
+def run_tasks(function, tasks: list, jobs: int, desc: str, unit: str, initializer=None, initargs=()) -> list[dict]:
+    """``function`` over ``tasks``, results in order, in ``jobs`` processes, with a progress bar on stderr."""
+    if jobs <= 1:
+        if initializer is not None:
+            initializer(*initargs)
+        return [function(t) for t in tqdm(tasks, desc=desc, unit=unit)]
+    with Pool(jobs, initializer=initializer, initargs=initargs) as pool:
+        return list(tqdm(pool.imap(function, tasks), total=len(tasks), desc=desc, unit=unit))
+
+
+def day_pairs(directory: Path, first_seed: int, pairs: int, jobs: int) -> list[dict]:
+    """Every ordered pair of P1's days; pair i uses the session seeds first_seed + 2 * pairs * i on."""
+    tasks = [(k, j, first_seed + 2 * pairs * i, pairs) for i, (k, j) in enumerate(itertools.permutations(DAYS, 2))]
+    return run_tasks(day_pair, tasks, jobs, "day pairs", "pair", _load_days, (directory,))
 
 
 def _ratio(twin: np.ndarray, true: np.ndarray) -> float:
@@ -116,26 +191,81 @@ def recovery(person, twin: ParticipantParams) -> dict[str, float]:
     }
 
 
-def population(first_seed: int, people: int, directory: Path) -> list[dict]:
+class Swap(Enum):
+    """A group of the twin's parameters replaced by the person's truth (the ablation of --ablation)."""
+
+    DRIFT = "drift between passes"            # day_gain_log_std, day_std_deg: a prior for one pass
+    REPETITION = "repetition spread"          # rep_std_deg (classes and neutral)
+    SWAY_TREMOR = "sway, tremor"              # sway_std_deg, tremor_std_deg, the tremor spectrum
+    TIMING = "onset, reaction, spasms"        # priors for a holds-only pass; the twin has no spasms
+
+
+SWAP_KEYS = {Swap.DRIFT: ("day_gain_log_std", "day_std_deg"), Swap.REPETITION: ("rep_std_deg",),
+             Swap.SWAY_TREMOR: ("sway_std_deg", "tremor_std_deg")}
+
+
+def with_truth(twin: ParticipantParams, true: ParticipantParams, swap: Swap) -> ParticipantParams:
+    """The twin with one group of parameters taken from the person's truth (postures stay the twin's:
+    measured through the assumed mountings, as the fusion sees them)."""
+    if swap is Swap.TIMING:
+        return replace(twin, onset_s=true.onset_s, reaction_s=true.reaction_s, spasm=true.spasm)
+    keys = SWAP_KEYS[swap]
+    classes = {c: replace(m, **{k: getattr(true.classes[c], k) for k in keys}) for c, m in twin.classes.items()}
+    if swap is Swap.DRIFT:
+        return replace(twin, classes=classes)
+    neutral = replace(twin.neutral, **{k: getattr(true.neutral, k) for k in keys})
+    spectrum = true.tremor_spectrum if swap is Swap.SWAY_TREMOR else twin.tremor_spectrum
+    return replace(twin, classes=classes, neutral=neutral, tremor_spectrum=spectrum)
+
+
+def ablation(person, twin: ParticipantParams, seeds: Sequence[tuple[int, int]]) -> dict[str, float]:
+    """Predictions (same session seeds) of the twin with each group of parameters true, and of the
+    person's true parameters performing the twin's protocol with the real mountings (what the
+    participant model gives with every parameter right)."""
+    out = {f"twin with true {swap.value} %": predicted(with_truth(twin, person.params, swap), person.profile,
+                                                        seeds).mean for swap in Swap}
+    true = replace(person.params, protocol=twin.protocol)
+    out["true parameters %"] = predicted(true, person.profile, seeds, true_profile(person)).mean
+    return out
+
+
+def population_member(task: tuple[int, int, bool]) -> dict:
+    """One synthetic person: the twin of pass 1, its recovery and its prediction of the pass 1 -> 2
+    accuracy (and, with ``with_ablation``, the predictions with groups of true parameters)."""
+    seed, pairs, with_ablation = task
+    person = draw_person(seed)
+    first, second = pass_recordings(person)
+    with tempfile.TemporaryDirectory() as temp:
+        twin = as_participant(fit_twin([first], person.profile, load_participant("P1"), f"twin-of-N{seed}",
+                                       person.profile.name), Path(temp))
+    with contextlib.redirect_stdout(io.StringIO()):
+        seeds = person_session_seeds(seed, pairs)
+        pred = predicted(twin, person.profile, seeds)
+        real = accuracy(first, second, person.profile)
+        swapped = ablation(person, twin, seeds) if with_ablation else {}
+    return {"person": seed, "nodes": len(person.profile.nodes), "motions": len(person.params.classes),
+            "pairs": pairs, "predicted_pct": pred.mean, "predicted_se": pred.standard_error,
+            "per_pair_pct": list(pred.per_pair), "real_pct": real, "gap_points": pred.mean - real,
+            "truth": truth_summary(person), "ablation": swapped, **recovery(person, twin)}
+
+
+def truth_summary(person) -> dict[str, float | bool]:
+    """What of a synthetic person the participant model has no parameter for."""
+    return {"mounting_error_deg": person.mounting_error_deg,
+            "neutral_drift_deg": float(np.abs(person.neutral_drift_deg).max()),
+            "heading_drift_deg_per_min": float(np.abs(person.yaw_drift_deg_per_min).max()),
+            "glitching_node": person.glitch is not None}
+
+
+def population(first_seed: int, people: int, pairs: int, jobs: int, with_ablation: bool) -> list[dict]:
     """Each person's twin of pass 1: recovery, and its pass-to-pass prediction against the real pass 1 -> 2."""
-    prior = load_participant("P1")
-    rows = []
-    for i, seed in enumerate(tqdm(range(first_seed, first_seed + people), desc="people", unit="person")):
-        person = draw_person(seed)
-        first, second = pass_recordings(person)
-        twin = as_participant(fit_twin([first], person.profile, prior, f"twin-of-N{seed}", person.profile.name),
-                              directory)
-        seeds = (first_seed + 500 + 2 * i, first_seed + 500 + 2 * i + 1)
-        rows.append({"person": seed, "nodes": len(person.profile.nodes), "motions": len(person.params.classes),
-                     "seeds": list(seeds), "predicted_pct": predicted(twin, person.profile, seeds),
-                     "real_pct": accuracy(first, second, person.profile), **recovery(person, twin)})
-        rows[-1]["gap_points"] = rows[-1]["predicted_pct"] - rows[-1]["real_pct"]
-    return rows
+    tasks = [(seed, pairs, with_ablation) for seed in range(first_seed, first_seed + people)]
+    return run_tasks(population_member, tasks, jobs, "people", "person")
 
 
 def population_markdown(rows: list[dict]) -> str:
-    keys = [k for k in rows[0] if k not in ("person", "nodes", "motions", "seeds", "predicted_pct", "real_pct",
-                                            "gap_points")]
+    keys = [k for k in rows[0] if k not in ("person", "nodes", "motions", "pairs", "predicted_pct", "predicted_se",
+                                            "per_pair_pct", "real_pct", "gap_points", "truth", "ablation")]
     gaps = np.array([r["gap_points"] for r in rows])
     lines = ["## Synthetic people (tasks/participants/population.py): the twin of pass 1 against the truth", "",
              "Parameter recovery, median over people (per person: median over classes and angles):", "",
@@ -145,12 +275,44 @@ def population_markdown(rows: list[dict]) -> str:
         lines.append(f"| {key} | {np.median(values):+.3f} | {np.percentile(values, 10):+.3f} .. "
                      f"{np.percentile(values, 90):+.3f} |")
     lines += ["", "Prediction: the twin's session-to-session accuracy against the person's pass 1 -> 2 accuracy:", "",
-              "| person | nodes | motions | predicted % | real pass 1 -> 2 % | gap |", "|---|---|---|---|---|---|"]
-    lines += [f"| {r['person']} | {r['nodes']} | {r['motions']} | {r['predicted_pct']:.2f} | {r['real_pct']:.2f} | "
-              f"{r['gap_points']:+.2f} |" for r in rows]
+              "| person | nodes | motions | predicted % | standard error | real pass 1 -> 2 % | gap |",
+              "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['person']} | {r['nodes']} | {r['motions']} | {r['predicted_pct']:.2f} | {r['predicted_se']:.2f} | "
+              f"{r['real_pct']:.2f} | {r['gap_points']:+.2f} |" for r in rows]
     lines += ["", f"Mean absolute gap {np.mean(np.abs(gaps)):.2f} points (mean gap {np.mean(gaps):+.2f}); within "
-              f"{BAR_POINTS:g} points for {int(np.sum(np.abs(gaps) <= BAR_POINTS))} of {len(rows)} people.", ""]
+              f"{BAR_POINTS:g} points for {int(np.sum(np.abs(gaps) <= BAR_POINTS))} of {len(rows)} people; "
+              f"median standard error of a prediction {np.median([r['predicted_se'] for r in rows]):.2f} points "
+              f"({rows[0]['pairs']} session pairs).", ""]
+    if rows[0]["ablation"]:
+        lines += ablation_markdown(rows)
     return "\n".join(lines)
+
+
+def ablation_markdown(rows: list[dict]) -> list[str]:
+    """Per person: the prediction with each group of parameters true (same session seeds), and what
+    the participant model has no parameter for."""
+    names = list(rows[0]["ablation"])
+    lines = ["Ablation (same session seeds): the twin's prediction with one group of its parameters replaced by "
+             "the truth, and the true parameters themselves (real mountings). What is left between the last "
+             "column and the real accuracy is what the participant model has no parameter for (the neutral "
+             "posture's drift between passes, heading drift within a pass, glitching nodes) and the one draw the "
+             "real pass 2 is.", "",
+             "| person | twin % | " + " | ".join(names) + " | real % | mounting error (deg) | neutral drift (deg) "
+             "| heading drift (deg/min) | glitch |", "|---" * (len(names) + 7) + "|"]
+    for r in rows:
+        t = r["truth"]
+        lines.append(f"| {r['person']} | {r['predicted_pct']:.2f} | "
+                     + " | ".join(f"{r['ablation'][n]:.2f}" for n in names)
+                     + f" | {r['real_pct']:.2f} | {t['mounting_error_deg']:.1f} | {t['neutral_drift_deg']:.1f} | "
+                       f"{t['heading_drift_deg_per_min']:.1f} | {'yes' if t['glitching_node'] else 'no'} |")
+    real = np.array([r["real_pct"] for r in rows])
+    lines.append("| mean abs gap to real | " + " | ".join(
+        f"{np.mean(np.abs(np.array([r[k] if k == 'predicted_pct' else r['ablation'][k] for r in rows]) - real)):.2f}"
+        for k in ["predicted_pct"] + names) + " | | | | | |")
+    lines.append("| mean gap to real | " + " | ".join(
+        f"{np.mean(np.array([r[k] if k == 'predicted_pct' else r['ablation'][k] for r in rows]) - real):+.2f}"
+        for k in ["predicted_pct"] + names) + " | | | | | |")
+    return lines + [""]
 
 
 RATIO_KEYS = ("rep_std_deg twin / true", "neutral rep_std_deg twin / true", "sway_std_deg twin / true",
@@ -166,7 +328,8 @@ def population_figure(rows: list[dict], path: Path) -> None:
     ax.fill_between([lo, 100.5], [lo - BAR_POINTS, 100.5 - BAR_POINTS], [lo + BAR_POINTS, 100.5 + BAR_POINTS],
                     color="C2", alpha=0.15, label=f"within {BAR_POINTS:g} points")
     ax.plot([lo, 100.5], [lo, 100.5], "k--", lw=0.8)
-    ax.scatter(real, pred)
+    ax.errorbar(real, pred, yerr=[r["predicted_se"] for r in rows], fmt="o", ms=4, capsize=2,
+                label="twin (+- standard error)")
     for r in rows:
         ax.annotate(str(r["person"]), (r["real_pct"], r["predicted_pct"]), fontsize=6)
     ax.set_xlim(lo, 100.5)
@@ -185,25 +348,27 @@ def population_figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def markdown(rows: list[dict], first_seed: int) -> str:
+def markdown(rows: list[dict], command: str) -> str:
     gaps = np.array([r["gap_points"] for r in rows])
     within = int(np.sum(np.abs(gaps) <= BAR_POINTS))
     lines = [
         "# The twin of P1 fitted on one day, predicting the real accuracy on another day (out of sample)",
         "",
-        f"`python benchmarks/twin_validation.py --first-seed {first_seed}`. Twin: day k alone (`bomi twin`, profile "
-        "P1), its drift between days from a prior fitted on the three days that are neither k nor j. Prediction: "
-        "the twin's two synthetic sessions (`bomi synth`), mean of 1 -> 2 and 2 -> 1. Real: train on day k, test on "
-        "day j (`bomi evaluate --profile P1`).",
+        f"`{command}`. Twin: day k alone (`bomi twin`, profile P1), its drift between days from a prior fitted on "
+        "the three days that are neither k nor j. Prediction: the mean over pairs of the twin's synthetic sessions "
+        "(`bomi synth`) of the mean of 1 -> 2 and 2 -> 1; standard error: the pairs' spread / sqrt(pairs). Real: "
+        "train on day k, test on day j (`bomi evaluate --profile P1`).",
         "",
-        "| train day k | test day j | seeds | predicted % | real % | gap (points) |",
-        "|---|---|---|---|---|---|",
+        "| train day k | test day j | session seeds | pairs | predicted % | standard error | real % | gap (points) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
-    lines += [f"| {r['train_day']} | {r['test_day']} | {r['seeds'][0]}, {r['seeds'][1]} | {r['predicted_pct']:.2f} "
-              f"| {r['real_pct']:.2f} | {r['gap_points']:+.2f} |" for r in rows]
+    lines += [f"| {r['train_day']} | {r['test_day']} | {r['seeds'][0]}-{r['seeds'][1]} | {r['pairs']} | "
+              f"{r['predicted_pct']:.2f} | {r['predicted_se']:.2f} | {r['real_pct']:.2f} | {r['gap_points']:+.2f} |"
+              for r in rows]
     lines += ["", f"Mean absolute gap {np.mean(np.abs(gaps)):.2f} points (mean gap {np.mean(gaps):+.2f}); "
               f"within {BAR_POINTS:g} points on {within} of {len(rows)} pairs (bar: at least {BAR_PAIRS}) -> "
-              f"{'met' if within >= BAR_PAIRS else 'missed'}.", ""]
+              f"{'met' if within >= BAR_PAIRS else 'missed'}. Median standard error of a prediction "
+              f"{np.median([r['predicted_se'] for r in rows]):.2f} points ({rows[0]['pairs']} session pairs).", ""]
     return "\n".join(lines)
 
 
@@ -215,7 +380,8 @@ def figure(rows: list[dict], path: Path) -> None:
     ax.fill_between([lo, 100.5], [lo - BAR_POINTS, 100.5 - BAR_POINTS], [lo + BAR_POINTS, 100.5 + BAR_POINTS],
                     color="C2", alpha=0.15, label=f"within {BAR_POINTS:g} points")
     ax.plot([lo, 100.5], [lo, 100.5], "k--", lw=0.8)
-    ax.scatter(real, pred, color="C0")
+    ax.errorbar(real, pred, yerr=[r["predicted_se"] for r in rows], fmt="o", ms=4, capsize=2, color="C0",
+                label="twin (+- standard error)")
     for r in rows:
         ax.annotate(f"{r['train_day']}>{r['test_day']}", (r["real_pct"], r["predicted_pct"]), fontsize=6)
     ax.set_xlim(lo, 100.5)
@@ -224,8 +390,8 @@ def figure(rows: list[dict], path: Path) -> None:
     ax.set_ylabel("twin of day k: session-to-session accuracy (%)")
     ax.legend(loc="upper left", fontsize=8)
     labels = [f"{r['train_day']}>{r['test_day']}" for r in rows]
-    bx.bar(labels, [r["gap_points"] for r in rows], color=["C0" if abs(r["gap_points"]) <= BAR_POINTS else "C3"
-                                                           for r in rows])
+    bx.bar(labels, [r["gap_points"] for r in rows], yerr=[r["predicted_se"] for r in rows], capsize=2,
+           color=["C0" if abs(r["gap_points"]) <= BAR_POINTS else "C3" for r in rows])
     bx.axhspan(-BAR_POINTS, BAR_POINTS, color="C2", alpha=0.15)
     bx.set_ylabel("predicted - real (points)")
     bx.tick_params(axis="x", labelrotation=90, labelsize=7)
@@ -237,36 +403,51 @@ def figure(rows: list[dict], path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--first-seed", type=int, required=True, help="first synthetic-session seed (40 are used)")
+    parser.add_argument("--first-seed", type=int, required=True,
+                        help="first synthetic-session seed of the day pairs (40 x --pairs are used), and the first "
+                             "synthetic person of --population")
     parser.add_argument("--data", type=Path, default=None, help="directory of dayN_testp.mat (default: BOMI_DATA_DIR)")
     parser.add_argument("--population", type=int, default=0, metavar="N", help="also N synthetic people (default 0)")
     parser.add_argument("--skip-days", action="store_true", help="only the synthetic people")
+    parser.add_argument("--pairs", type=int, default=DEFAULT_PAIRS,
+                        help=f"pairs of synthetic sessions per prediction (default {DEFAULT_PAIRS}, at least 2)")
+    parser.add_argument("--ablation", action="store_true",
+                        help="population: also predict with each group of parameters true (5 more predictions)")
+    parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     args = parser.parse_args(argv)
-    profile = load_profile("P1")
-    try:
-        days = read_days(args.data or data_dir())
-    except BomiError as exc:
-        print(f"twin_validation: error: {exc}", file=sys.stderr)
-        return 2
+    for option, value, least in (("--pairs", args.pairs, 2), ("--jobs", args.jobs, 1)):
+        if value < least:
+            print(f"twin_validation: error: {option} must be at least {least}, got {value}", file=sys.stderr)
+            return 2
+    started = time.perf_counter()
+    directory = args.data or data_dir()
+    if not args.skip_days:
+        try:
+            read_days(directory)
+        except BomiError as exc:
+            print(f"twin_validation: error: {exc}", file=sys.stderr)
+            return 2
     name = f"twin_validation_{args.first_seed}"
+    command = " ".join(["python benchmarks/twin_validation.py"] + (argv if argv is not None else sys.argv[1:]))
     RESULTS.mkdir(exist_ok=True)
-    record: dict = {"first_seed": args.first_seed}
+    record: dict = {"first_seed": args.first_seed, "pairs_per_prediction": args.pairs, "command": command}
     text = ""
-    with tempfile.TemporaryDirectory() as temp:
-        if not args.skip_days:
-            rows = day_pairs(days, profile, args.first_seed, Path(temp))
-            gaps = [abs(r["gap_points"]) for r in rows]
-            record.update({"pairs": rows, "mean_abs_gap_points": float(np.mean(gaps)),
-                           "pairs_within_bar": int(sum(g <= BAR_POINTS for g in gaps)), "bar_points": BAR_POINTS,
-                           "bar_pairs": BAR_PAIRS})
-            text = markdown(rows, args.first_seed)
-            figure(rows, RESULTS / f"{name}.png")
-        if args.population:
-            people = population(args.first_seed, args.population, Path(temp))
-            record["population"] = people
-            population_figure(people, RESULTS / f"{name}_population.png")
-            text += "\n" + population_markdown(people)
-            name += "_population" if args.skip_days else ""
+    if not args.skip_days:
+        rows = day_pairs(directory, args.first_seed, args.pairs, args.jobs)
+        gaps = [abs(r["gap_points"]) for r in rows]
+        record.update({"day_pairs": rows, "mean_abs_gap_points": float(np.mean(gaps)),
+                       "pairs_within_bar": int(sum(g <= BAR_POINTS for g in gaps)), "bar_points": BAR_POINTS,
+                       "bar_pairs": BAR_PAIRS})
+        text = markdown(rows, command)
+        figure(rows, RESULTS / f"{name}.png")
+    if args.population:
+        people = population(args.first_seed, args.population, args.pairs, args.jobs, args.ablation)
+        record["population"] = people
+        population_figure(people, RESULTS / f"{name}_population.png")
+        text += "\n" + population_markdown(people)
+        name += "_population" if args.skip_days else ""
+    record["wall_time_s"] = round(time.perf_counter() - started, 1)
+    text += f"\nWall time {record['wall_time_s']:.0f} s (--jobs {args.jobs}).\n"
     (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1) + "\n")
     (RESULTS / f"{name}.md").write_text(text)
     print(text)

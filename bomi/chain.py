@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from operator import itemgetter
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -52,9 +53,9 @@ def node_states(rec: Recording, nodes: Sequence[int], neutral: np.ndarray) -> np
                       for k, i in enumerate(nodes)])
 
 
-def window_features(states: np.ndarray, spec: FeatureSpec) -> np.ndarray:
-    """Features of every window (time order) of the node-state sequence."""
-    return batch_window_features(states[:, spec.components], spec.kind, spec.window, spec.stride)
+def window_features(states: np.ndarray, spec: FeatureSpec, select: np.ndarray | None = None) -> np.ndarray:
+    """Features of every window (time order) of the node-state sequence (``select``: of the windows it keeps)."""
+    return batch_window_features(states[:, spec.components], spec.kind, spec.window, spec.stride, select)
 
 
 @dataclass
@@ -159,7 +160,7 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
     for scale in copies.scales:
         states = prepared.states.copy()
         states[motion_samples] *= scale
-        parts.append((window_features(states, spec)[motion_windows], prepared.labels[motion_windows],
+        parts.append((window_features(states, spec, motion_windows), prepared.labels[motion_windows],
                       prepared.ends[motion_windows], False))
     for label, node in copies.spread_nodes.items():
         samples, windows = rec.labels == label, pure & (prepared.labels == label)
@@ -167,7 +168,7 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
             continue
         for states in _spread_states(prepared.states, samples, spec.nodes.index(node),
                                      np.radians(copies.spread_degrees)):
-            parts.append((window_features(states, spec)[windows], prepared.labels[windows], prepared.ends[windows], False))
+            parts.append((window_features(states, spec, windows), prepared.labels[windows], prepared.ends[windows], False))
     windows = TrainingWindows(*(np.concatenate([part[k] for part in parts]) for k in range(3)),
                               np.concatenate([np.full(len(part[1]), part[3]) for part in parts]))
     return windows, prepared
@@ -347,6 +348,10 @@ class OnlineChain:
         self._fusion = {node: NodeFusion(calibrations[node]) for node in self.nodes}
         self._state = [0.0] * (len(self.nodes) * _WIDTH)
         self._components = model.spec.components.tolist()
+        self._gather = itemgetter(*self._components)   # the window's components of the node states
+        # per class with an amplitude: (its node's slot in the states, its direction as an array or None, its range)
+        self._amplitude = {label: (self._slot[r.node] * _WIDTH, None if r.direction is None else np.asarray(r.direction), r)
+                           for label, r in model.amplitude.items() if r.node in self._slot}
         self._classes = {cls.label: cls for cls in profile.classes}
         self._seen: set[int] = set()
         self._neutral = [(0.0, 0.0, 0.0)] * len(self.nodes)
@@ -421,21 +426,21 @@ class OnlineChain:
         index = self.ticks
         self.ticks += 1
         state = self._state
-        window = self._window.push(np.array([state[i] for i in self._components]))
+        window = self._window.push(np.array(self._gather(state), dtype=float))
         if window is None:
             return None
-        prob = posteriors(self.model, features(self.model.spec.kind, window[None]))[0]
+        model = self.model
+        prob = posteriors(model, features(model.spec.kind, window[None]))[0]
         best = int(prob.argmax())
         confidence = float(prob[best])
-        threshold = self.model.post.rejection_threshold
+        threshold = model.post.rejection_threshold
         is_rejected = threshold is not None and confidence < threshold
-        label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(self.model.classes[best]))
+        label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(model.classes[best]))
         cls = self._classes[label]
-        amplitude = self.model.amplitude.get(label)
-        g = 0.0
-        if amplitude is not None:
-            base = self._slot[amplitude.node] * _WIDTH
-            g = float(class_amplitude(state[base:base + 3], amplitude.direction))
+        g, amplitude = 0.0, None
+        if label in self._amplitude:
+            base, direction, amplitude = self._amplitude[label]
+            g = float(class_amplitude(state[base:base + 3], direction))
         return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
                         rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
 

@@ -192,7 +192,12 @@ def numerical_rank(features: np.ndarray) -> int:
     """How many directions of the standardised ``features`` have a singular value above
     RANK_TOLERANCE x the largest (at least 1)."""
     standardised = StandardScaler().fit_transform(features)
-    singular = np.linalg.svd(standardised - standardised.mean(axis=0), compute_uv=False)
+    centred = standardised - standardised.mean(axis=0)
+    # singular values as the square roots of the F x F Gram matrix's eigenvalues: one product over the
+    # n windows instead of an n x F SVD (10x less work); their error (~1e-8 of the largest, from
+    # squaring) is far below RANK_TOLERANCE, so only a value within that of the tolerance could count otherwise
+    eigenvalues = np.linalg.eigvalsh(centred.T @ centred)[::-1]
+    singular = np.sqrt(np.clip(eigenvalues, 0.0, None))
     return max(1, int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0])))
 
 

@@ -64,18 +64,27 @@ def features(kind: str, windows: np.ndarray) -> np.ndarray:
     raise ValueError(f"unknown feature vector {kind!r}")
 
 
-def window_features(samples: np.ndarray, kind: str, length: int = 8, stride: int = 1) -> np.ndarray:
-    """``features`` of every window ``sliding_windows`` cuts from (n, C) samples, without cutting them:
-    FV3's half-window statistics are computed once per run of ``length // 2`` consecutive samples,
-    and each window takes its two halves' (``_half_stats``, as ``fv3``: several times less work)."""
+def window_features(samples: np.ndarray, kind: str, length: int = 8, stride: int = 1,
+                    select: np.ndarray | None = None) -> np.ndarray:
+    """``features`` of every window ``sliding_windows`` cuts from (n, C) samples (``select``: of the
+    windows this boolean mask keeps), without cutting them: FV3's half-window statistics are computed
+    once per run of ``length // 2`` consecutive samples, and each window takes its two halves'
+    (``_half_stats``, as ``fv3``: several times less work); with ``select``, only the runs of the
+    kept windows (the same reductions of the same samples: the same bits)."""
     if kind != "FV3":
-        return features(kind, sliding_windows(samples, length, stride))
+        out = features(kind, sliding_windows(samples, length, stride))
+        return out if select is None else out[select]
     if length % 2:
         raise ValueError(f"FV3 needs an even window length (two equal sub-windows), got {length}")
     half = length // 2
     starts = window_ends(len(samples), length, stride) - (length - 1)
-    stats = _half_stats(sliding_windows(samples, half))
-    return np.hstack([stats[starts], stats[starts + half]])
+    if select is None:
+        stats = _half_stats(sliding_windows(samples, half))
+        return np.hstack([stats[starts], stats[starts + half]])
+    starts = starts[select]
+    runs = sliding_windows(samples, half)
+    stats = _half_stats(runs[np.concatenate([starts, starts + half])])
+    return np.hstack([stats[:len(starts)], stats[len(starts):]])
 
 
 def fv3(windows: np.ndarray) -> np.ndarray:

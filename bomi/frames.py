@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import struct
 from collections import Counter, deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -152,6 +153,62 @@ def encode_imu_frames(node_id: int, counters: np.ndarray, mag: np.ndarray, gyro:
     records["mag"], records["gyro"], records["acc"] = mag, gyro, acc
     block = records.tobytes()
     return [block[k:k + FRAME_SIZE] for k in range(0, len(block), FRAME_SIZE)]
+
+
+def frame_records(frames: Sequence[ImuFrame]) -> np.ndarray:
+    """Parsed frames as ``_FRAME_RECORD`` records (the batch form of a frame list)."""
+    records = np.zeros(len(frames), dtype=_FRAME_RECORD)
+    if frames:
+        records["start"], records["end"] = START_BYTE, END_BYTE
+        header = np.array([(f.node_id, f.period_ms, f.counter) for f in frames], dtype=np.int64)
+        records["node_id"], records["period_ms"], records["counter"] = header.T
+        values = np.array([f.mag + f.gyro + f.acc for f in frames], dtype=np.int64).reshape(-1, 3, 3)
+        records["mag"], records["gyro"], records["acc"] = values[:, 0], values[:, 1], values[:, 2]
+    return records
+
+
+def parse_stream(data: bytes) -> np.ndarray:
+    """The IMU frames a fresh ``FrameParser`` delivers when fed ``data`` whole, as ``_FRAME_RECORD``
+    records (fields node_id, period_ms, counter, mag, gyro, acc), in delivery order.
+
+    A clean stream (whole frames back to back, IMU nodes only, each node's frames following one
+    another by the guard's rule and every node confirmed within the first HOLD_FRAMES frames: the
+    parser then delivers every frame in arrival order) is read in one pass; any other goes through
+    the parser itself, frame by frame.  Both give the same records (tests/test_frames.py)."""
+    if len(data) % FRAME_SIZE == 0:
+        records = np.frombuffer(data, dtype=_FRAME_RECORD)
+        if _delivered_whole(records):
+            return records
+    return frame_records(FrameParser().feed(data))
+
+
+def _delivered_whole(records: np.ndarray) -> bool:
+    """Whether a default ``FrameParser`` fed these back-to-back frames delivers every one, in order."""
+    if not (np.all(records["start"] == START_BYTE) and np.all(records["end"] == END_BYTE)):
+        return False
+    node = records["node_id"]
+    if np.any((node < FIRST_IMU_NODE_ID) | (node >= FIRST_IMU_NODE_ID + MAX_IMU_NODES)):
+        return False
+    for node_id in np.unique(node):
+        mine = np.flatnonzero(node == node_id)
+        step = np.diff(records["counter"][mine].astype(int)) % COUNTER_MODULO
+        if (len(mine) < CONFIRM_FRAMES or mine[CONFIRM_FRAMES - 1] >= HOLD_FRAMES
+                or np.any(records["period_ms"][mine] != records["period_ms"][mine[0]])
+                or np.any((step < 1) | (step > MAX_COUNTER_GAP))):
+            return False
+    return True
+
+
+def sample_indices(node_ids: np.ndarray, counters: np.ndarray) -> np.ndarray:
+    """``SampleIndex`` of a whole sequence of frames at once: (n,) node ids and packet counters in
+    arrival order -> (n,) per-node sample indices (first frame: its counter; then + ``counter_step``)."""
+    counters = np.asarray(counters, dtype=np.int64)
+    out = np.empty(len(counters), dtype=np.int64)
+    for node_id in np.unique(node_ids):
+        mine = np.flatnonzero(node_ids == node_id)
+        steps = np.diff(counters[mine]) % COUNTER_MODULO
+        out[mine] = counters[mine[0]] + np.concatenate(([0], np.cumsum(steps)))
+    return out
 
 
 def encode_safety_key_frame(event: int, counter: int, period_ms: int = DEFAULT_PERIOD_MS) -> bytes:
@@ -387,3 +444,31 @@ class RowAssembler:
         self.held += len(self.node_ids) - fresh
         self._last = row
         return row
+
+
+def row_positions(node_sequence: Sequence[int], node_ids: tuple[int, ...]) -> np.ndarray:
+    """``RowAssembler`` over a whole sequence of frames at once: their node ids in arrival order ->
+    (rows, len(node_ids)) positions in the sequence of the frame each row holds per node (a held
+    frame's position repeats). The same rule, kept in plain ints: tests/test_frames.py checks it
+    against the assembler frame by frame."""
+    slot = {node_id: 1 << j for j, node_id in enumerate(node_ids)}
+    index = {node_id: j for j, node_id in enumerate(node_ids)}
+    k, full = len(node_ids), (1 << len(node_ids)) - 1
+    current: list[int] = [0] * k   # the last row emitted, overwritten by the frames pending since
+    pending = 0                     # bit mask of the nodes with a frame pending
+    emitted = False                 # no row yet: RowAssembler has no frame to hold, a repeat drops the pending
+    rows = []
+    for position, node_id in enumerate(node_sequence):
+        bit = slot.get(node_id)
+        if bit is None:
+            continue
+        if pending & bit:           # the node again before the row was full: emit it with held frames
+            if emitted:
+                rows.append(current.copy())
+            pending = 0
+        current[index[node_id]] = position
+        pending |= bit
+        if pending == full:
+            rows.append(current.copy())
+            emitted, pending = True, 0
+    return np.array(rows, dtype=np.int64).reshape(-1, k)

@@ -1,15 +1,14 @@
 """Per-node orientation fusion exactly as ../shared/docs/hardware.md section 3 describes it.
 
 Magnetometer hard/soft-iron correction, mounting rotation, complementary filters on pitch and roll,
-a 10 Hz low-pass on both, tilt-compensated complementary yaw. ``NodeFusion.update`` is the one
-implementation; the batch ``fuse`` runs it over a whole recording, so both agree bit for bit.
+a 10 Hz low-pass on both, tilt-compensated complementary yaw. ``NodeFusion.update`` (one sample,
+the stream) and ``NodeFusion.update_many`` (n samples in a row, a whole recording: ``fuse``) are the
+same filter, the same IEEE operations in the same order, and agree bit for bit (tests/test_fusion.py).
 Angles in degrees; inputs raw int16 LSB in the sensor's own axes.
 """
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
-from itertools import chain
 from math import atan2, cos, degrees, radians, sin
 from dataclasses import dataclass, field
 
@@ -133,13 +132,68 @@ class NodeFusion:
                                 + (1.0 - MAG_WEIGHT) * (self.yaw_state + gx * step))
         return pitch, roll, yaw
 
+    def update_many(self, acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray) -> np.ndarray:
+        """``update`` of n samples in a row, (n, 3) raw LSB each -> (n, 3) (pitch, roll, yaw); the
+        state advances as n calls of ``update`` would advance it, to the bit.
+
+        The same filter with the work split by kind: the products, sums and libm functions of every
+        sample at once (numpy elementwise operations are the same IEEE operations in the same order;
+        the transcendental functions are ``math``'s, mapped, as ``update`` calls them), and only the
+        recursions (complementary filters, low-pass) as a loop over plain floats."""
+        cal = self.calibration
+        (s00, s01, s02), (s10, s11, s12), (s20, s21, s22) = cal.soft_iron
+        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = cal.mounting
+        h0, h1, h2 = cal.hard_iron
+        mag, acc, gyro = (np.asarray(v, dtype=float).reshape(-1, 3) for v in (mag, acc, gyro))
+        x, y, z = mag[:, 0] - h0, mag[:, 1] - h1, -mag[:, 2] - h2
+        c0, c1, c2 = s00 * x + s01 * y + s02 * z, s10 * x + s11 * y + s12 * z, s20 * x + s21 * y + s22 * z
+        x, y, z = acc[:, 0], acc[:, 1], acc[:, 2]
+        ax, ay, az = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
+        x, y, z = gyro[:, 0], gyro[:, 1], gyro[:, 2]
+        gx, gy, gz = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
+        m1, m2, m3 = r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2
+        step = _GYRO_STEP
+
+        tilt_pitch = (ACC_WEIGHT * _degrees_atan2(-ay, -ax)).tolist()
+        tilt_roll = (ACC_WEIGHT * _degrees_atan2(-az, -ax)).tolist()
+        turn_pitch, turn_roll = (gz * step).tolist(), (gy * step).tolist()
+        pitch_state, roll_state, pitch, roll = self.pitch_state, self.roll_state, self.pitch, self.roll
+        pitches, rolls = [], []
+        for tp, tr, dp, dr in zip(tilt_pitch, tilt_roll, turn_pitch, turn_roll):
+            previous_pitch_state, previous_roll_state = pitch_state, roll_state
+            pitch_state = tp + GYRO_WEIGHT * (previous_pitch_state - dp)
+            roll_state = tr + GYRO_WEIGHT * (previous_roll_state + dr)
+            pitch = LOWPASS_B * (pitch_state + previous_pitch_state) + LOWPASS_A * pitch
+            roll = LOWPASS_B * (roll_state + previous_roll_state) + LOWPASS_A * roll
+            pitches.append(pitch)
+            rolls.append(roll)
+        self.pitch_state, self.roll_state, self.pitch, self.roll = pitch_state, roll_state, pitch, roll
+
+        p = np.array(list(map(radians, map(float.__neg__, pitches))))
+        r = np.array(list(map(radians, rolls)))
+        c_p, s_p = np.array(list(map(cos, p.tolist()))), np.array(list(map(sin, p.tolist())))
+        c_r, s_r = np.array(list(map(cos, r.tolist()))), np.array(list(map(sin, r.tolist())))
+        y_h = s_p * c_r * m1 + c_p * m2 + s_p * s_r * m3
+        z_h = -s_r * m1 + c_r * m3
+        heading = (MAG_WEIGHT * _degrees_atan2(-z_h, -y_h)).tolist()
+        turn_yaw = (gx * step).tolist()
+        yaw, keep, yaws = self.yaw_state, 1.0 - MAG_WEIGHT, []
+        for hd, dy in zip(heading, turn_yaw):
+            yaw = hd + keep * (yaw + dy)
+            yaws.append(yaw)
+        self.yaw_state = yaw
+        return np.column_stack([pitches, rolls, yaws]).reshape(-1, 3)
+
+
+def _degrees_atan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """math.degrees(math.atan2(y, x)) of every element (libm's, as ``NodeFusion.update`` computes it)."""
+    return np.array(list(map(degrees, map(atan2, y.tolist(), x.tolist()))), dtype=float)
+
 
 def fuse(acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,
          cal: NodeCalibration | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Batch fusion of a whole recording of one node: (n, 3) arrays -> pitch, roll, yaw arrays (n,)."""
-    node = NodeFusion(cal or NodeCalibration())
-    out = np.array([node.update(a, g, m) for a, g, m in zip(acc.tolist(), gyro.tolist(), mag.tolist())],
-                   dtype=float).reshape(-1, 3)
+    out = NodeFusion(cal or NodeCalibration()).update_many(acc, gyro, mag)
     return out[:, 0], out[:, 1], out[:, 2]
 
 
@@ -168,17 +222,6 @@ class FusedRows:
         return {imu_index(node_id): NodeSample(frame.acc, frame.gyro, frame.mag, self.angles(frame))
                 for node_id, frame in row.items()}
 
-    def columns(self, rows: list[dict[int, ImuFrame]]) -> dict[int, NodeData]:
-        """``samples`` of many rows at once (the same frames fused, in the same order), as one
-        ``NodeData`` of (n, 3) arrays per node index: a recording's columns without a per-row object."""
-        out = {}
-        for node_id in self._fusion:
-            frames = [row[node_id] for row in rows]
-            angles = [self.angles(frame) for frame in frames]
-            out[imu_index(node_id)] = NodeData(*(_rows_of(getattr(f, name) for f in frames) for name in ("acc", "gyro", "mag")),
-                                               angles=_rows_of(angles))
-        return out
-
     def angles(self, frame: ImuFrame) -> Vector3:
         """The frame's fused angles; fused once, when first asked (a row may hold a node's frame over
         a loss, and `bomi record` fuses frames one by one before they make rows)."""
@@ -187,11 +230,6 @@ class FusedRows:
         if last is None or last[0] is not frame:  # a held frame is not fused twice
             last = self._last[node_id] = (frame, self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag))
         return last[1]
-
-
-def _rows_of(triples: Iterable[Sequence[float]]) -> np.ndarray:
-    """3-sequences -> (n, 3) float array (one pass, no nested-list conversion)."""
-    return np.fromiter(chain.from_iterable(triples), dtype=float).reshape(-1, 3)
 
 
 def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) -> Recording:

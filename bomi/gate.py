@@ -20,6 +20,16 @@ A node is trusted once its orientation filter has **settled** and while its samp
   samples: ~0.001 deg. A person swaying (P1: 0.2 deg, P4: up to 0.8 deg) can delay the verdict,
   never hasten it past the decay (a decay and a sway would have to cancel over a whole window).
   Someone moving while the stream starts is not settled until they hold still: safe.
+  The half-mean test alone can be fooled while the filter is still decaying: a motion whose two
+  half means differ by the opposite of the decay's (a back-and-forth head turn of +-15 deg at
+  0.4 Hz passed it 2.7 s after the start) cancels it. So a node is never judged settled before
+  its filter is as old as the warm-up the offline path drops (``bomi.fusion.WARMUP_S``, 12 s:
+  ``filter_age_samples``), which covers the worst start: from the zero state yaw can be 180 deg
+  off and, while pitch and roll settle (error x 0.92 per sample: below 0.5 deg after 71 samples),
+  its magnetic reference can be as far off, so the error is at most 180 (1 + 0.01 sum_k<71
+  0.99^-k) 0.99^n = 365 x 0.99^n deg: below 0.5 deg after 656 samples (10.5 s). The filter is
+  created once per stream and never reset (implausible frames are kept from it): the floor
+  applies to a stream's start, not to a node settling again after a defect.
 - Plausible: no sensor vector all zero (acc and mag cannot read 0, 0, 0 on a node at rest or
   moving; a gyroscope can), no value at the int16 limits (-32768, 32767: saturation), no fused
   angle moving more than ``max_rate_deg_s`` between samples (600 deg/s: fast voluntary head turns
@@ -48,7 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bomi.frames import SAMPLE_RATE_HZ, counter_step
-from bomi.fusion import DT, MAG_WEIGHT
+from bomi.fusion import DT, MAG_WEIGHT, WARMUP_S
 
 INT16_LIMITS = (-32768, 32767)
 SETTLE_TAU_S = DT / MAG_WEIGHT        # the slowest filter time constant (yaw): 1.6 s
@@ -65,6 +75,7 @@ def half_mean_ratio(window_s: float, tau_s: float) -> float:
 class GateConfig:
     settle_samples: int = round(SETTLE_TAU_S / DT)                  # W = tau: 100 samples
     settle_change_deg: float = SETTLE_TOLERANCE_DEG * half_mean_ratio(SETTLE_TAU_S, SETTLE_TAU_S)
+    filter_age_samples: int = round(WARMUP_S / DT)                 # 750 samples (module docstring)
     max_rate_deg_s: float = 600.0
     max_counter_step: int = 16            # as the parser's phantom guard (bomi.frames.MAX_COUNTER_GAP)
     stale_s: float = 0.1
@@ -110,6 +121,7 @@ class NodeGate:
     defect: str | None = None            # the last implausibility, until the node has settled again
     last_defect: str | None = None       # the one before it settled
     lost: int = 0                        # samples lost, from the counters
+    fused_samples: int = 0               # the filter's age: samples it has taken since the stream began
     _angles: deque = field(default_factory=deque, repr=False)
     _last_counter: int | None = field(default=None, repr=False)
     _last_angles: tuple[float, float, float] | None = field(default=None, repr=False)
@@ -158,6 +170,7 @@ class NodeGate:
     def fused(self, angles: Sequence[float]) -> None:
         """The node's fused (pitch, roll, yaw) for the frame ``check_raw`` let through."""
         angles = (float(angles[0]), float(angles[1]), float(angles[2]))
+        self.fused_samples += 1
         previous, self._last_angles = self._last_angles, angles
         if previous is not None:
             jump = max(abs(a - b) for a, b in zip(angles, previous))
@@ -169,7 +182,8 @@ class NodeGate:
         window.append(angles)
         if len(window) > self.config.settle_samples:
             window.popleft()
-        if not self.settled and len(window) == self.config.settle_samples:
+        if (not self.settled and len(window) == self.config.settle_samples
+                and self.fused_samples >= self.config.filter_age_samples):
             if settle_change(np.array(window)) < self.config.settle_change_deg:
                 self.settled = True
                 self.last_defect, self.defect = self.defect, None

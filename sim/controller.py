@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.linalg import lapack
 
 from sim.config import ControlConfig, WorkspaceConfig
 from sim.kinematics import ArmKinematics
@@ -51,7 +52,7 @@ class Workspace:
 
     def lowest_tool_height(self, rotation: np.ndarray) -> float:
         """Tool height at which the hand, so oriented, just touches the floor."""
-        return self.floor - float((self.hand_box @ rotation[2]).min())
+        return self.floor - float(np.minimum.reduce(self.hand_box @ rotation[2]))
 
     def clamp(self, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
         """The nearest allowed point: onto the reach shell, then into the box and above the floor.
@@ -77,12 +78,16 @@ def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float
     """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities."""
     jjt = jacobian @ jacobian.T
     jjt.flat[::len(jjt) + 1] += damping**2  # the diagonal
-    return jacobian.T @ np.linalg.solve(jjt, twist)
+    # LAPACK's dgesv, as np.linalg.solve calls it (the same LU, bit for bit), without its wrapper's checks
+    _, _, solution, info = lapack.dgesv(jjt, twist)
+    if info > 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return jacobian.T @ solution
 
 
 def speed_scale(qd: np.ndarray, speed_limit: np.ndarray) -> float:
     """Largest factor <= 1 that keeps every joint within its speed limit (same factor for all)."""
-    ratio = (np.abs(qd) / speed_limit).max()
+    ratio = np.maximum.reduce(np.abs(qd) / speed_limit)  # .max() without the method's wrapper
     return 1.0 if ratio <= 1.0 else 1.0 / ratio
 
 
@@ -103,6 +108,9 @@ class CartesianVelocityController:
         self.dt = dt
         self.target_position = np.zeros(3)
         self.target_rotation = np.eye(3)
+        # where a limited joint stops (a margin short of its range): the same every tick
+        self._stop_lower = limits.lower + config.joint_limit_margin
+        self._stop_upper = limits.upper - config.joint_limit_margin
 
     def reset(self, q: np.ndarray) -> None:
         """Hold the pose the arm is in."""
@@ -113,14 +121,15 @@ class CartesianVelocityController:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
         position, rotation = self.kinematics.tool_pose(q)
         previous_position, previous_rotation = self.target_position, self.target_rotation
-        feedforward = self._advance_target(position, rotation, np.asarray(linear, float), np.asarray(angular, float))
+        feedforward, turn = self._advance_target(position, rotation, np.asarray(linear, float),
+                                                 np.asarray(angular, float))
         twist = feedforward + np.concatenate((
             self.config.position_gain * (self.target_position - position),
-            self.config.orientation_gain * rotation_error(self.target_rotation, rotation)))
+            self.config.orientation_gain * turn))
         jacobian = self.kinematics.jacobian(q)
         qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
         blocked = self._blocked_joints(q, qd)
-        if blocked.any():
+        if np.logical_or.reduce(blocked):  # blocked.any() without the method's wrapper
             jacobian[:, blocked] = 0.0
             qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
             qd[blocked] = 0.0
@@ -133,8 +142,9 @@ class CartesianVelocityController:
                 @ previous_rotation
         return qd * scale
 
-    def _advance_target(self, position, rotation, linear, angular) -> np.ndarray:
-        """Move the target by one tick of the command inside the walls; return the feedforward twist."""
+    def _advance_target(self, position, rotation, linear, angular) -> tuple[np.ndarray, np.ndarray]:
+        """Move the target by one tick of the command inside the walls; return the feedforward twist
+        and the rotation error (``rotation_error``) from the hand's ``rotation`` to the new target."""
         self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
         walled = self.workspace.clamp(self.target_position + linear * self.dt, self.target_rotation)
         linear_ff = (walled - self.target_position) / self.dt
@@ -149,9 +159,9 @@ class CartesianVelocityController:
         max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
         if angle > max_angle:
             self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
-        return np.concatenate((linear_ff, angular))
+            turn = rotation_error(self.target_rotation, rotation)
+        return np.concatenate((linear_ff, angular)), turn
 
     def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """Limited joints within the margin of a range end and moving further toward it."""
-        margin = self.config.joint_limit_margin
-        return ((q <= self.limits.lower + margin) & (qd < 0)) | ((q >= self.limits.upper - margin) & (qd > 0))
+        return ((q <= self._stop_lower) & (qd < 0)) | ((q >= self._stop_upper) & (qd > 0))

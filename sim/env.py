@@ -24,6 +24,14 @@ from sim.scene import Scene, build_scene
 HAND_DOWN = np.diag([1.0, -1.0, -1.0])
 
 
+def as_slice(ids: np.ndarray) -> slice | np.ndarray:
+    """``ids`` as a slice where they are consecutive (indexing then takes a view, not a gather)."""
+    ids = np.asarray(ids)
+    if len(ids) and np.array_equal(ids, np.arange(ids[0], ids[0] + len(ids))):
+        return slice(int(ids[0]), int(ids[0]) + len(ids))
+    return ids
+
+
 def joint_limits(scene: Scene) -> JointLimits:
     """Ranges (infinite for the continuous joints) and speed limits (the actuators' ctrlrange) of joints 1-6."""
     model = scene.model
@@ -54,6 +62,15 @@ class ArmSim:
         self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed, layout)
         self.finger_target = np.zeros(3)
         self._cube_quat_index = np.array([np.arange(a + 3, a + 7) for a in self.scene.cube_qpos], dtype=np.intp)
+        # geom id -> finger (0, 1, 2) and -> cube (0 .. n-1): a contact's role looked up, not searched for
+        self._finger_of = {g: i for i, geoms in enumerate(self.scene.finger_geoms) for g in geoms}
+        self._cube_of = {g: k for k, g in enumerate(self.scene.cube_geoms.tolist())}
+        self._finger_span = self.scene.finger_range[:, 1] - self.scene.finger_range[:, 0]
+        self._finger_limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1].copy()
+        # the addresses read and written every control tick
+        self._arm_q, self._finger_q = as_slice(self.scene.arm_qpos), as_slice(self.scene.finger_qpos)
+        self._arm_ctrl, self._finger_ctrl = as_slice(self.scene.arm_actuators), as_slice(self.scene.finger_actuators)
+        self._cube_rows = as_slice(self.scene.cube_geoms)
         self._renderer: FrameRenderer | None = None
         self.reset()
 
@@ -151,8 +168,8 @@ class ArmSim:
                    finger: float = 0.0) -> None:
         """One control tick below the joystick: a tool twist (m/s, rad/s, world axes), finger rate in [-1, 1]."""
         q = self.arm_qpos
-        self.data.ctrl[self.scene.arm_actuators] = self.controller.joint_velocities(q, linear, angular)
-        self.data.ctrl[self.scene.finger_actuators] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
+        self.data.ctrl[self._arm_ctrl] = self.controller.joint_velocities(q, linear, angular)
+        self.data.ctrl[self._finger_ctrl] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
         mujoco.mj_step(self.model, self.data, nstep=self.config.physics.substeps)
 
     def _finger_velocities(self, rate: float) -> np.ndarray:
@@ -161,8 +178,8 @@ class ArmSim:
         lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
         self.finger_target = np.minimum(np.maximum(self.finger_target + rate * control.finger_speed * self.dt,
                                                    lower), upper)
-        velocity = control.finger_gain * (self.finger_target - self.data.qpos[self.scene.finger_qpos])
-        limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1]
+        velocity = control.finger_gain * (self.finger_target - self.data.qpos[self._finger_q])
+        limit = self._finger_limit
         return np.minimum(np.maximum(velocity, -limit), limit)
 
     # -- read-outs -------------------------------------------------------------------------------
@@ -173,7 +190,7 @@ class ArmSim:
 
     @property
     def arm_qpos(self) -> np.ndarray:
-        return self.data.qpos[self.scene.arm_qpos].copy()
+        return self.data.qpos[self._arm_q].copy()
 
     @property
     def tool_position(self) -> np.ndarray:
@@ -186,13 +203,13 @@ class ArmSim:
     @property
     def finger_closure(self) -> float:
         """Mean finger closure: 0 fully open, 1 fully closed."""
-        lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
-        return float(np.mean((self.data.qpos[self.scene.finger_qpos] - lower) / (upper - lower)))
+        closures = (self.data.qpos[self._finger_q] - self.scene.finger_range[:, 0]) / self._finger_span
+        return float(np.add.reduce(closures)) / len(closures)  # np.mean's sum and division
 
     @property
     def cube_positions(self) -> np.ndarray:
         """(n, 3) cube centres."""
-        return self.data.geom_xpos[self.scene.cube_geoms].copy()
+        return self.data.geom_xpos[self._cube_rows].copy()
 
     @property
     def cube_quats(self) -> np.ndarray:
@@ -223,13 +240,12 @@ class ArmSim:
         """Put the arm in ``mode`` without a button press (what an assistance does; counted apart)."""
         self.joystick.switch_to(mode)
 
-    def _contact_pairs(self) -> list[tuple[int, int]]:
-        """The (geom1, geom2) pairs of the active contacts."""
-        contact, n = self.data.contact, self.data.ncon
-        return list(zip(contact.geom1[:n].tolist(), contact.geom2[:n].tolist()))
+    def _contact_pairs(self) -> list[list[int]]:
+        """The [geom1, geom2] pairs of the active contacts."""
+        return self.data.contact.geom.tolist()
 
     def touching(self, geoms_a: frozenset[int], geoms_b: frozenset[int],
-                 pairs: list[tuple[int, int]] | None = None) -> bool:
+                 pairs: list[list[int]] | None = None) -> bool:
         """Whether any active contact (of ``pairs``, by default the current ones) joins a geom of
         ``geoms_a`` to one of ``geoms_b``."""
         return any((a in geoms_a and b in geoms_b) or (a in geoms_b and b in geoms_a)
@@ -237,12 +253,15 @@ class ArmSim:
 
     def cube_in_grasp(self) -> np.ndarray:
         """Per cube: held between finger 1 and at least one of the opposing fingers 2, 3."""
-        one, two, three = self.scene.finger_geoms
-        pairs = self._contact_pairs()  # read once for every cube and finger
-        return np.array([
-            self.touching(one, frozenset({cube}), pairs) and (self.touching(two, frozenset({cube}), pairs)
-                                                              or self.touching(three, frozenset({cube}), pairs))
-            for cube in self.scene.cube_geoms.tolist()])
+        touched = set()  # (finger, cube) of the active contacts
+        finger_of, cube_of = self._finger_of, self._cube_of
+        for a, b in self._contact_pairs():
+            if a in finger_of and b in cube_of:
+                touched.add((finger_of[a], cube_of[b]))
+            if b in finger_of and a in cube_of:
+                touched.add((finger_of[b], cube_of[a]))
+        return np.array([(0, k) in touched and ((1, k) in touched or (2, k) in touched)
+                         for k in range(len(cube_of))])
 
     # -- rendering -------------------------------------------------------------------------------
 

@@ -30,6 +30,9 @@ class ArmKinematics:
     tool_frame: int
     base: pin.SE3  # arm base in the world
 
+    def __post_init__(self) -> None:
+        self.base_rotation = self.base.rotation.copy()  # read every tick: one copy out of Pinocchio, not one a tick
+
     def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) and rotation matrix (3, 3) of the tool frame."""
         pin.framesForwardKinematics(self.model, self.data, q)
@@ -39,8 +42,11 @@ class ArmKinematics:
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian [linear; angular] of the tool point, world axes (mj_jacSite's convention)."""
         jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
-        rot = self.base.rotation
-        return np.vstack((rot @ jac[:3], rot @ jac[3:]))
+        rot = self.base_rotation
+        out = np.empty((6, jac.shape[1]))
+        np.matmul(rot, jac[:3], out=out[:3])
+        np.matmul(rot, jac[3:], out=out[3:])
+        return out
 
     def solve_pose(self, position: np.ndarray, rotation: np.ndarray, seed: np.ndarray,
                    iterations: int = 200, tolerance: float = 1e-8) -> np.ndarray:

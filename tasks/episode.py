@@ -32,7 +32,7 @@ from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
-                           StickIntent, load_operator)
+                           StickIntent, load_operator, norm)
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
@@ -294,7 +294,8 @@ class BomiChannel:
         self._decided: int | None = None  # the label of the chain's latest decision
         self.stick = DecisionStick()
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
-        self._queue: list[Delivery] = []  # generated frames not yet arrived
+        self._queue: list[Delivery] = []  # generated frames, those from _next_frame on not yet arrived
+        self._next_frame = 0              # in the first delivery of the queue
         # An intent set at t moves the body from t + reaction_s: samples may be made that far ahead.
         self._lookahead = 0.95 * participant.params.reaction_s
         self._asked_until = -np.inf
@@ -328,13 +329,15 @@ class BomiChannel:
             self._asked_until = max(t_end, now + self._lookahead)
             self._queue.append(self.participant.deliveries(self._asked_until))
         arrived = []
-        while self._queue:
-            now_part, rest = self._queue[0].until(t_end)
-            arrived += now_part.frames
-            if len(rest.frames):
-                self._queue[0] = rest
+        while self._queue:   # (Delivery.until's split, kept as an index: no slicing of the rest every tick)
+            first = self._queue[0]
+            end = max(int(np.searchsorted(first.arrival_s, t_end, side="right")), self._next_frame)
+            arrived += first.frames[self._next_frame:end]
+            if end < len(first.frames):
+                self._next_frame = end
                 break
             self._queue.pop(0)
+            self._next_frame = 0
         return b"".join(arrived)
 
     def intent_class(self, intent: StickIntent) -> tuple[int, float]:
@@ -345,7 +348,7 @@ class BomiChannel:
             return NEUTRAL_LABEL, 0.0
         (function, deflection), = intent.deflection.items()
         label = self._label_of[function]
-        feel = self.feel.get(label, LeanFeel(self.participant.params.feel))
+        feel = self.feel.get(label) or LeanFeel(self.participant.params.feel)
         return label, feel.lean_for(float(deflection))
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
@@ -488,9 +491,9 @@ def calibrated_model(params: ParticipantParams, profile: Profile, seed: int, pos
 
 def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.ndarray:
     """Unit hand direction the person wants this tick (zero unless moving the hand in ``mode`` of ``layout``)."""
-    direction = combine(dict(intent.deflection), layout.axes(mode, Kind.LINEAR))
-    norm = np.linalg.norm(direction)
-    return direction / norm if norm > 0 else direction
+    direction = combine(intent.deflection, layout.axes(mode, Kind.LINEAR))
+    length = norm(direction)
+    return direction / length if length > 0 else direction
 
 
 def operator_user(params: OperatorParams, channel: OperatorChannel, seed: int) -> ScriptedUser | HumanOperator:

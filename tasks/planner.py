@@ -232,6 +232,11 @@ class Memory:
 # ---------------------------------------------------------------------------------------------
 # geometry of the task, as the person judges it
 
+def norm(v: np.ndarray) -> float:
+    """Euclidean length of a small vector: what ``np.linalg.norm`` computes for one (the square root
+    of ``v.dot(v)``, to the bit), without its generic checks (the planner takes a dozen per tick)."""
+    return math.sqrt(v.dot(v))
+
 def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]:
     """(cube resting on the table at B, cube resting on top of it), None where there is none.  A cube
     the fingers touch is placed only if the hand is open (it rests there; the hand is not holding it)."""
@@ -239,7 +244,7 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
     gripped = [touch and view.closure > p.open_closure for touch in view.touching]
     bottom = None
     for k, pos in enumerate(view.cube_pos):
-        at_b = np.linalg.norm(pos[:2] - view.target_xy) <= p.target_zone
+        at_b = norm(pos[:2] - view.target_xy) <= p.target_zone
         if at_b and abs(pos[2] - rest_z) <= p.placed and not gripped[k]:
             bottom = k
     if bottom is None:
@@ -247,7 +252,7 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
     for k, pos in enumerate(view.cube_pos):
         if k == bottom or gripped[k]:
             continue
-        on_top = np.linalg.norm(pos[:2] - view.cube_pos[bottom][:2]) <= p.placed
+        on_top = norm(pos[:2] - view.cube_pos[bottom][:2]) <= p.placed
         if on_top and abs(pos[2] - view.cube_pos[bottom][2] - view.cube_size) <= p.placed:
             return bottom, k
     return bottom, None
@@ -261,7 +266,7 @@ def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
     touching = [k for k, touch in enumerate(view.touching) if touch]
     if not touching or view.closure <= p.open_closure:
         return None
-    return min(touching, key=lambda k: float(np.linalg.norm(view.cube_pos[k] - view.hand_pos)))
+    return min(touching, key=lambda k: norm(view.cube_pos[k] - view.hand_pos))
 
 
 def missed_grasp(view: View, memory: Memory, p: OperatorParams) -> bool:
@@ -320,12 +325,12 @@ def deflection_for(distance: float, p: OperatorParams, anticipation: float, pace
     least_time = 0.0 if pace is None else pace(distance, 2 * p.stop)
     if least_time > 0:
         coast = min(coast, distance / (p.full_speed * least_time))
-    return float(np.clip(coast, p.fine, p.coarse))
+    return min(max(coast, p.fine), p.coarse)  # np.clip's result, without its overhead
 
 
 def turn_deflection_for(angle: float, p: OperatorParams, anticipation: float) -> float:
     """The same rule for a wrist turn of ``angle`` rad, between fine and ``turn``."""
-    return float(np.clip(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine, p.turn))
+    return min(max(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine), p.turn)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -373,13 +378,15 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
     open_hand = view.closure <= p.open_closure
     if memory.fingers_blocked is not None and not open_hand:  # the fingers are caught: lift them clear first
-        return _move("free the fingers", Phase.RISE, np.r_[view.hand_pos[:2], memory.fingers_blocked + p.hover])
+        return _move("free the fingers", Phase.RISE, np.array([view.hand_pos[0], view.hand_pos[1],
+                                                               memory.fingers_blocked + p.hover]))
     if memory.opening and not open_hand:  # a release is not taken back half-way (the touch may flicker)
         return _open("open hand")
     tilt_tolerance = math.radians(p.tilt_deg) * (p.settled_share if memory.turning else 1.0)
     at_cube = any(view.touching) and not open_hand
-    if not at_cube and np.max(np.abs(view.hand_tilt)) > tilt_tolerance:  # e.g. after a stray wrist command
-        return _turn("level the hand", np.r_[view.hand_tilt, 0.0])
+    tilt_x, tilt_y = view.hand_tilt
+    if not at_cube and max(abs(tilt_x), abs(tilt_y)) > tilt_tolerance:  # e.g. after a stray wrist command
+        return _turn("level the hand", np.array([tilt_x, tilt_y, 0.0]))
     if top is not None:
         return _finish(view, stack_top, open_hand, p)
     held = held_cube(view, memory, p)
@@ -406,8 +413,9 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
     grip = hand - cube  # where the hand holds the cube (it is not centred)
     dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
     support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
-    release = np.r_[dest_xy + grip[:2], support + view.cube_size / 2 + p.release_gap + grip[2]]
-    off = np.linalg.norm(cube[:2] - dest_xy)
+    release_xy = dest_xy + grip[:2]
+    release = np.array([release_xy[0], release_xy[1], support + view.cube_size / 2 + p.release_gap + grip[2]])
+    off = norm(cube[:2] - dest_xy)
     if off <= p.placed and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop:
         return _open(f"release cube {held + 1}")
     carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
@@ -416,7 +424,7 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
     # placed_cubes accepts: slide it there first, or it would be taken up and let go of again and again
     accepted = p.target_zone if bottom is None else p.placed
     arrival = (_open(f"release cube {held + 1}") if off <= accepted
-               else _move(step, Phase.TRAVEL, np.r_[release[:2], hand[2]]))
+               else _move(step, Phase.TRAVEL, np.array([release[0], release[1], hand[2]])))
     # an xy error no push could make smaller is left where the release tolerates it (its height is not: lower is blocked)
     # onto the other cube, lined up with it within the place's own tolerance before going down: an xy error
     # left for the bottom is slid away there, and a cube slid on top of the other drags or pushes it off B
@@ -428,9 +436,10 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
     """Reach cube ``k`` with an open hand lined up with its faces, and close on it."""
     hand, cube = view.hand_pos, view.cube_pos[k]
-    grasp = np.r_[cube[:2], cube[2] + p.grasp_offset]
+    grasp = np.array([cube[0], cube[1], cube[2] + p.grasp_offset])
+    xy_off = norm(hand[:2] - grasp[:2])
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
-    at_grasp = (np.linalg.norm(hand[:2] - grasp[:2]) <= p.reach * p.align
+    at_grasp = (xy_off <= p.reach * p.align
                 and (abs(hand[2] - grasp[2]) <= p.reach * p.stop or memory.stalled))
     if at_grasp and not memory.missed and (view.touching[k] or not open_hand):
         if missed_grasp(view, memory, p):
@@ -444,9 +453,9 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
     avoid = memory.missed_faces[1] if memory.missed_faces is not None and memory.missed_faces[0] == k else None
     turn = yaw_error(view, k, avoid)
     yaw_tolerance = math.radians(p.yaw_deg) * (p.settled_share if memory.turning else 1.0)
-    if np.linalg.norm(hand[:2] - grasp[:2]) <= p.turn_reach * p.align and abs(turn) > yaw_tolerance:
+    if xy_off <= p.turn_reach * p.align and abs(turn) > yaw_tolerance:
         if hand[2] < grasp[2] + p.turn_clearance * p.hover and not memory.turning:  # the fingers would hit the cube
-            return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.r_[hand[:2], hover_z])
+            return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.array([hand[0], hand[1], hover_z]))
         return _turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
     # what the grasp tolerates (at_grasp) bounds the error left when a push would move the hand too far to reduce it
     left = memory.pulse_step / 2
@@ -463,13 +472,14 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     a stalled one has arrived.  ``accepted``: (xy, z) errors left as they are even where larger than the
     align and stop tolerances (no push could make them smaller)."""
     align = p.align if align is None else align
-    xy_off = np.linalg.norm(hand[:2] - goal[:2])
+    xy_off = norm(hand[:2] - goal[:2])
     if xy_off > max(align * (2 if descending else 1), accepted[0]):
         if hand[2] < travel_z - p.rise_margin * p.stop and xy_off > p.reach * p.align:
-            return _move(step, Phase.RISE, np.r_[hand[:2], travel_z])
-        return _move(step, Phase.TRAVEL, np.r_[goal[:2], hand[2]])
+            return _move(step, Phase.RISE, np.array([hand[0], hand[1], travel_z]))
+        return _move(step, Phase.TRAVEL, np.array([goal[0], goal[1], hand[2]]))
     if abs(hand[2] - goal[2]) > max(p.stop, accepted[1]) and not stalled:
-        return _move(step, Phase.DESCEND, np.r_[hand[:2] if xy_off <= max(p.stop, accepted[0]) else goal[:2], goal[2]])
+        over = hand if xy_off <= max(p.stop, accepted[0]) else goal
+        return _move(step, Phase.DESCEND, np.array([over[0], over[1], goal[2]]))
     return on_arrival
 
 
@@ -490,23 +500,25 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     current travel before the goal; ``pace`` slows translations (``deflection_for``).
     """
     velocity = hand_velocity(view, memory)
-    memory = replace(_remember_touch(view, memory), last_seen=(view.t, view.hand_pos))
+    touching = any(view.touching)
+    since = view.t if memory.touch_since is None else memory.touch_since
+    memory = _updated(memory, touch_since=since if touching else None, last_seen=(view.t, view.hand_pos))
     action = next_action(view, memory, p)
     descending = action.goal.descending
     finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
     _, opening_fn = memory.controls.layout.find(Kind.FINGERS, -1.0)
-    closing = action.kind is ActionKind.CLOSE and view.mode is finger_mode and not any(view.touching)
+    closing = action.kind is ActionKind.CLOSE and view.mode is finger_mode and not touching
     missed = missed_grasp(view, memory, p)
     freed = memory.fingers_blocked is not None and (
         view.closure <= p.open_closure or view.hand_pos[2] >= memory.fingers_blocked + p.hover - p.stop)
-    memory = replace(memory, turning=action.kind is ActionKind.TURN, descending=descending,
-                     stalled=(memory.stalled or action.kind is ActionKind.CLOSE)
-                     and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE)) and not missed,
-                     missed=(memory.missed or missed) and not any(view.touching) and view.closure > p.open_closure,
-                     missed_faces=_missed_faces(view, p) if missed else None if any(view.touching) else memory.missed_faces,
-                     fingers_blocked=None if freed else memory.fingers_blocked,
-                     closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
-                     opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
+    learnt = dict(turning=action.kind is ActionKind.TURN, descending=descending,
+                  stalled=(memory.stalled or action.kind is ActionKind.CLOSE)
+                  and (descending or action.kind in (ActionKind.OPEN, ActionKind.CLOSE)) and not missed,
+                  missed=(memory.missed or missed) and not touching and view.closure > p.open_closure,
+                  missed_faces=_missed_faces(view, p) if missed else None if touching else memory.missed_faces,
+                  fingers_blocked=None if freed else memory.fingers_blocked,
+                  closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
+                  opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
     anticipation = p.anticipation if anticipation is None else anticipation
     if action.kind is ActionKind.MOVE:
         need, deflection, axis = _translation(view.hand_pos, velocity, anticipation, action.point, p, combine_axes,
@@ -515,13 +527,13 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
         button = mode_button(view.mode, need, memory.controls)
-        return StickIntent(button=button, goal=replace(action.goal, mode=need)), memory
+        return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt)
     remaining = 0.0
     if action.kind is ActionKind.MOVE:
         effects = memory.controls.layout.effects[view.mode]
         remaining = max((abs(float(np.dot(action.point - view.hand_pos, effects[fn].axis))) for fn in deflection),
                         default=0.0)
-    return StickIntent(deflection, goal=action.goal, remaining=remaining), replace(memory, axis=axis)
+    return StickIntent(deflection, goal=action.goal, remaining=remaining), _updated(memory, **learnt, axis=axis)
 
 
 def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipation: float
@@ -540,10 +552,9 @@ def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipatio
     return None, {}
 
 
-def _remember_touch(view: View, memory: Memory) -> Memory:
-    if not any(view.touching):
-        return replace(memory, touch_since=None)
-    return memory if memory.touch_since is not None else replace(memory, touch_since=view.t)
+def _updated(memory: Memory, **changes) -> Memory:
+    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes two a tick)."""
+    return Memory(**(vars(memory) | changes))
 
 
 def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, point: np.ndarray, p: OperatorParams,
@@ -707,22 +718,24 @@ class ScriptedUser:
     def stick_intent(self, view: View) -> StickIntent:
         """What the person does with the stick at this glance."""
         velocity = hand_velocity(view, self.memory)
-        if float(np.linalg.norm(velocity)) > self.params.still_speed:
+        speed = norm(velocity)
+        if speed > self.params.still_speed:
             self._last_moving = view.t
-        self._learn_coasting(view, float(np.linalg.norm(velocity)))
+        self._learn_coasting(view, speed)
         self._watch_descent(view)
         self._watch_opening(view)
-        self.memory = replace(self.memory, pulse_step=self.timing.pulse_step)
+        if self.memory.pulse_step != self.timing.pulse_step:
+            self.memory = replace(self.memory, pulse_step=self.timing.pulse_step)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation, self.timing.pace)
         if self.current.button is not None and view.mode is not self._mode_at_start:
-            wanted = replace(REST, goal=wanted.goal)  # the press worked: let go (press again if need be)
+            wanted = StickIntent(goal=wanted.goal)  # the press worked: let go (press again if need be)
         elif self.current.button is not None and view.t - self._started > self.params.button_patience:
             # the press did nothing: let go, relax as long again, then press anew
-            wanted = replace(REST, goal=wanted.goal)
+            wanted = StickIntent(goal=wanted.goal)
             self._relax_until = view.t + self.params.button_patience
         if self.current.deflection and view.t - self._started >= self._hold - 1e-9:
-            wanted = replace(REST, goal=wanted.goal)  # the move planned without watching is over: let go, wait, look
+            wanted = StickIntent(goal=wanted.goal)  # the move planned without watching is over: let go, wait, look
         if wanted.is_rest or _continues(self.current, wanted):
             if wanted.is_rest and not self.current.is_rest:
                 self._let_go(view, velocity)
@@ -736,10 +749,10 @@ class ScriptedUser:
             self._reaction = self.timing.reaction(view, wanted, self._let_go_of, self.memory.controls)
         ready = max(self._waiting_since + self._reaction,
                     self._stopped_at + max(self.timing.pause, self.settle), self._relax_until)
-        coasting = (float(np.linalg.norm(velocity)) > self.params.still_speed
+        coasting = (speed > self.params.still_speed
                     and view.t - self._stopped_at < self.params.max_wait)
         if view.t + 1e-9 < ready or coasting:  # watch the hand come to rest before the next move
-            return replace(REST, goal=wanted.goal)
+            return StickIntent(goal=wanted.goal)
         self._learn_settling()
         self.current, self._waiting_since, self._started, self._mode_at_start = wanted, None, view.t, view.mode
         self._hold = self.timing.hold(wanted, self.settle)
@@ -750,7 +763,7 @@ class ScriptedUser:
         effects = self.memory.controls.layout.effects[view.mode]
         self._let_go_of = frozenset(effects[fn].kind for fn in self.current.deflection if fn in effects)
         self._released_move = bool(self.current.deflection)
-        speed = float(np.linalg.norm(velocity))
+        speed = norm(velocity)
         moving = self.memory.controls.layout.axes(view.mode, Kind.LINEAR)
         if any(fn in moving for fn in self.current.deflection) and speed > self.params.coasting_min_speed:
             self._coasting = (view.t, view.hand_pos, speed)
@@ -810,7 +823,7 @@ class ScriptedUser:
         if self._coasting is None or (speed > self.params.still_speed and self.current.is_rest):
             return
         t0, start, speed0 = self._coasting
-        seconds = float(np.linalg.norm(view.hand_pos - start)) / speed0
+        seconds = norm(view.hand_pos - start) / speed0
         rate = self.params.learning_rate
         self.anticipation = (1.0 - rate) * self.anticipation + rate * min(seconds, self.params.max_anticipation)
         self._coasting = None

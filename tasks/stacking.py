@@ -9,12 +9,15 @@ Failure = the time limit or a cube off the table.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from sim.env import ArmSim
-from tasks.planner import View
+from tasks.planner import View, norm
+
+DOWN = np.array([0.0, 0.0, -1.0])
 
 
 @dataclass(frozen=True)
@@ -37,29 +40,32 @@ class Outcome:
     failure: str | None
 
 
-def cube_yaw(quat: np.ndarray) -> float:
+NOT_DONE = Outcome(False, False, None, None)
+
+
+def cube_yaw(quat: Sequence[float]) -> float:
     """Heading (rad) of a cube's x axis about the vertical, from a (w, x, y, z) quaternion."""
     w, x, y, z = quat
     return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
 
 
-def cube_tilt_deg(quat: np.ndarray) -> float:
+def cube_tilt_deg(quat: Sequence[float]) -> float:
     """Angle between the vertical and the cube's face normal closest to it."""
     w, x, y, z = quat
-    world_z_in_cube = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
-    return math.degrees(math.acos(min(1.0, float(np.max(np.abs(world_z_in_cube))))))
+    world_z_in_cube = (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
+    return math.degrees(math.acos(min(1.0, float(max(abs(c) for c in world_z_in_cube)))))
 
 
 def levelling_rotation(tool_z: np.ndarray) -> np.ndarray:
     """(x, y) of the rotation vector that turns the tool's z axis to point straight down."""
-    x, y, z = (float(v) for v in tool_z)
-    down = np.array([0.0, 0.0, -1.0])
+    x, y, z = tool_z.tolist()
     # np.cross(tool_z, down) written out (the same products and differences, at a tenth of the cost)
     axis = np.array([y * -1.0 - z * 0.0, z * 0.0 - x * -1.0, x * 0.0 - y * 0.0])
-    sin, cos = float(np.linalg.norm(axis)), float(np.dot(tool_z, down))
+    sin, cos = norm(axis), float(tool_z.dot(DOWN))
     if sin < 1e-12:
         return np.zeros(2)
-    return (axis * math.atan2(sin, cos) / sin)[:2]
+    angle = math.atan2(sin, cos)
+    return np.array([axis[0] * angle / sin, axis[1] * angle / sin])  # (axis * angle / sin)[:2]
 
 
 def start_poses(sim: ArmSim, config: TaskConfig, seed: int) -> np.ndarray:
@@ -84,6 +90,7 @@ class StackingTask:
         self.table_lo = table.pos[:2] - table.size[:2]
         self.table_hi = table.pos[:2] + table.size[:2]
         self.target_pos = np.r_[scene.location_b, self.table_z]
+        self._cubes = frozenset(scene.cube_geoms.tolist())
         self._still_since: float | None = None
         self._previous: np.ndarray | None = None
 
@@ -102,8 +109,8 @@ class StackingTask:
             closure=sim.finger_closure,
             mode=sim.mode,
             cube_pos=tuple(sim.cube_positions),
-            cube_yaw=tuple(cube_yaw(q) for q in sim.cube_quats),
-            touching=tuple(bool(g) for g in sim.cube_in_grasp()),
+            cube_yaw=tuple(cube_yaw(q) for q in sim.cube_quats.tolist()),
+            touching=tuple(sim.cube_in_grasp().tolist()),
             target_xy=self.target_pos[:2].copy(),
             table_z=self.table_z,
             cube_size=self.cube_size,
@@ -111,20 +118,20 @@ class StackingTask:
 
     def stacked(self) -> bool:
         """The top cube rests on the bottom one at B and the hand touches neither."""
-        pos, quats = self.sim.cube_positions, self.sim.cube_quats
-        bottom, top = np.argsort(pos[:, 2])[:2]
-        hand = self.sim.scene.hand_geoms
+        pos = self.sim.cube_positions
+        bottom, top = np.argsort(pos[:, 2])[:2].tolist()
         return bool(
-            np.linalg.norm(pos[bottom, :2] - self.target_pos[:2]) <= self.config.at_b
-            and np.linalg.norm(pos[top, :2] - pos[bottom, :2]) <= self.config.stack_xy
+            norm(pos[bottom, :2] - self.target_pos[:2]) <= self.config.at_b
+            and norm(pos[top, :2] - pos[bottom, :2]) <= self.config.stack_xy
             and abs(pos[top, 2] - pos[bottom, 2] - self.cube_size) <= 0.1 * self.cube_size
-            and cube_tilt_deg(quats[top]) <= self.config.stack_tilt_deg
-            and not any(self.sim.touching(hand, frozenset({int(g)})) for g in self.sim.scene.cube_geoms))
+            and cube_tilt_deg(self.sim.cube_quats[top].tolist()) <= self.config.stack_tilt_deg
+            and not self.sim.touching(self.sim.scene.hand_geoms, self._cubes))
 
     def outcome(self) -> Outcome:
         """Call once per control tick, after the step."""
         t, pos = self.sim.time, self.sim.cube_positions
-        speed = np.linalg.norm(pos - self._previous, axis=1).max() / self.sim.dt
+        moved = pos - self._previous
+        speed = np.sqrt(np.add.reduce(moved * moved, axis=1)).max() / self.sim.dt  # np.linalg.norm's, per cube
         self._previous = pos
         if speed <= self.config.still_speed and self.stacked():
             self._still_since = t if self._still_since is None else self._still_since
@@ -132,10 +139,10 @@ class StackingTask:
                 return Outcome(True, True, self._still_since, None)
         else:
             self._still_since = None
-        off = (pos[:, 2] < self.table_z - self.cube_size) | np.any(pos[:, :2] < self.table_lo, axis=1) \
-            | np.any(pos[:, :2] > self.table_hi, axis=1)
-        if off.any():
-            return Outcome(True, False, None, f"cube {int(np.flatnonzero(off)[0]) + 1} knocked off the table")
+        (lo_x, lo_y), (hi_x, hi_y) = self.table_lo.tolist(), self.table_hi.tolist()
+        for k, (x, y, z) in enumerate(pos.tolist()):
+            if z < self.table_z - self.cube_size or x < lo_x or y < lo_y or x > hi_x or y > hi_y:
+                return Outcome(True, False, None, f"cube {k + 1} knocked off the table")
         if t >= self.config.time_limit:
             return Outcome(True, False, None, f"time limit {self.config.time_limit:g} s")
-        return Outcome(False, False, None, None)
+        return NOT_DONE

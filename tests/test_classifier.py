@@ -8,7 +8,8 @@ import pytest
 
 from bomi.chain import MotionCopies, prepare, recorded_priors, training_windows
 from bomi.classifier import (AmplitudeRange, MajorityVote, PipelineParameters, PostProcessing, amplitude_ranges, class_amplitude,
-                             classify_windows, fit_pipeline, gamma, majority_vote, posteriors, proportional, reject)
+                             RANK_TOLERANCE, classify_windows, fit_pipeline, gamma, majority_vote, numerical_rank, posteriors,
+                             proportional, reject)
 from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.model_io import FORMAT_VERSION, load_model, save_model
@@ -156,3 +157,17 @@ def test_truncated_and_pickled_files_are_refused(tmp_path, day1_fv1_model, capsy
     assert main(["evaluate", "--train", str(pickled), "--test", "x.mat", "--png", str(tmp_path / "c.png")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("bomi: error: ") and err.count("\n") == 1 and "p.npz" in err
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_numerical_rank_is_the_svd_rank_of_the_standardised_features(seed):
+    """Against the naive reference (the SVD of the standardised, centred features): windows of
+    random rank with duplicated, near-duplicated (1e-9) and scaled columns, as FV3 of a slow signal has."""
+    rng = np.random.default_rng(seed)
+    rank = int(rng.integers(2, 30))
+    x = rng.normal(size=(3000, rank)) @ rng.normal(size=(rank, 40)) * rng.uniform(0.01, 100, 40)
+    x[:, 1] = x[:, 0] + 1e-9 * rng.normal(size=3000)
+    standardised = (x - x.mean(axis=0)) / x.std(axis=0)
+    singular = np.linalg.svd(standardised - standardised.mean(axis=0), compute_uv=False)
+    expected = int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0]))
+    assert numerical_rank(x) == expected

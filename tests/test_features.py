@@ -121,3 +121,16 @@ def naive_window_features(samples: np.ndarray, kind: str, length: int, stride: i
                 row += [stat([w[c] for w in half]) for c in range(samples.shape[1])]
         rows.append(row)
     return np.array(rows)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(["FV1", "FV2", "FV3"]), length=st.sampled_from([2, 4, 8, 16, 32]),
+       stride=st.integers(1, 3), n=st.integers(0, 60), channels=st.integers(1, 6))
+def test_features_of_selected_windows_are_those_windows_features_bit_for_bit(seed, kind, length, stride, n, channels):
+    rng = np.random.default_rng(seed)
+    samples = rng.normal(scale=30, size=(n, channels))
+    samples[::3] = -0.0
+    every = window_features(samples, kind, length, stride)
+    select = rng.random(len(every)) < 0.4
+    assert np.array_equal(window_features(samples, kind, length, stride, select).view(np.int64),
+                          every[select].view(np.int64))

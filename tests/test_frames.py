@@ -9,9 +9,8 @@ import numpy as np
 from hypothesis import assume, given, settings, strategies as st
 
 from bomi.frames import (
-    FRAME_SIZE, FrameParser, ImuFrame, SafetyKey, SampleIndex, counter_step, encode_imu_frame, encode_imu_frames,
-    encode_safety_key_frame,
-    imu_index, imu_node_id,
+    FRAME_SIZE, FrameParser, ImuFrame, RowAssembler, SafetyKey, SampleIndex, counter_step, encode_imu_frame,
+    encode_imu_frames, encode_safety_key_frame, imu_index, imu_node_id, parse_stream, row_positions, sample_indices,
 )
 
 # hardware.md §1 worked example: headset, counter 42, period 16 ms
@@ -342,3 +341,57 @@ def test_frames_encoded_at_once_are_the_frames_encoded_one_by_one(node, values, 
     many = encode_imu_frames(imu_node_id(node), counters, mag, gyro, acc, period)
     one_by_one = [encode_imu_frame(ImuFrame(imu_node_id(node), period, c, m, g, a)) for m, g, a, c in values]
     assert many == one_by_one
+
+
+# ------------------------------------------------------------------ whole-stream (batch) forms
+def as_record_tuples(records: np.ndarray) -> list[tuple]:
+    return [(int(r["node_id"]), int(r["period_ms"]), int(r["counter"]), tuple(r["mag"].tolist()),
+             tuple(r["gyro"].tolist()), tuple(r["acc"].tolist())) for r in records]
+
+
+@given(nodes=st.lists(st.integers(10, 15), min_size=1, max_size=6, unique=True), samples=st.integers(0, 40),
+       seed=st.integers(0, 2**32 - 1), loss=st.sampled_from([0.0, 0.1, 0.5]),
+       damage=st.sampled_from(["none", "garbage", "key", "wild counter", "late node", "period", "tail"]))
+@PROPERTY_SETTINGS
+def test_parse_stream_delivers_what_the_parser_delivers(nodes, samples, seed, loss, damage):
+    """The whole-stream parse (one pass over a clean stream, else the parser) against the parser fed
+    the same bytes, on clean interleaved streams with losses and on damaged ones."""
+    rng = np.random.default_rng(seed)
+    stream = [imu_frame(node, k, int(rng.integers(-999, 999))) for k in range(samples) for node in nodes
+              if rng.random() >= loss]
+    if damage == "garbage" and stream:
+        stream.insert(int(rng.integers(len(stream))), b"\x33\x01junk")
+    elif damage == "key":
+        stream.insert(int(rng.integers(len(stream) + 1)), encode_safety_key_frame(SafetyKey.STANDBY, 1))
+    elif damage == "wild counter" and stream:
+        stream.insert(int(rng.integers(len(stream))), imu_frame(nodes[0], 200))
+    elif damage == "late node":
+        stream += [imu_frame(9 + 1 + 5, k) for k in range(4)] if 15 not in nodes else []
+    elif damage == "period" and stream:
+        stream.append(imu_frame(nodes[0], samples, period_ms=20))
+    elif damage == "tail":
+        stream.append(b"\x33\x0a")
+    data = b"".join(stream)
+    assert as_record_tuples(parse_stream(data)) == [as_tuple(f) for f in FrameParser().feed(data)]
+
+
+@given(frames=st.lists(st.tuples(st.integers(10, 12), st.integers(0, 255)), max_size=60))
+@PROPERTY_SETTINGS
+def test_sample_indices_are_sample_index_frame_by_frame(frames):
+    index = SampleIndex()
+    expected = [index(ImuFrame(node, 16, counter, (0, 0, 0), (0, 0, 0), (0, 0, 0))) for node, counter in frames]
+    nodes = np.array([f[0] for f in frames], dtype=int)
+    counters = np.array([f[1] for f in frames], dtype=int)
+    assert sample_indices(nodes, counters).tolist() == expected
+
+
+@given(sequence=st.lists(st.integers(9, 13), max_size=80), k=st.integers(1, 4))
+@PROPERTY_SETTINGS
+def test_row_positions_are_the_row_assemblers_rows(sequence, k):
+    """Rows of positions against RowAssembler fed frames one by one (losses, repeats, other nodes)."""
+    ids = tuple(range(10, 10 + k))
+    frames = [ImuFrame(node, 16, position % 256, (position, 0, 0), (0, 0, 0), (0, 0, 0))
+              for position, node in enumerate(sequence)]
+    assembler = RowAssembler(ids)
+    expected = [[row[node_id].mag[0] for node_id in ids] for row in map(assembler.push, frames) if row is not None]
+    assert row_positions(sequence, ids).tolist() == expected

@@ -8,8 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bomi.frames import ImuFrame, imu_node_id
-from bomi.fusion import HEADSET_SOFT_IRON, FusedRows, NodeCalibration, NodeFusion, fuse, neutral_offsets
+from bomi.fusion import HEADSET_SOFT_IRON, NodeCalibration, NodeFusion, fuse, neutral_offsets
 
 K_DT = 2000 / 32768 / 62.5
 # hardware.md worked example, decoded (headset, counter 42): mag, gyro, acc in raw LSB
@@ -125,20 +124,25 @@ def test_update_follows_the_documented_formulas_with_any_calibration(seed):
         assert node.update(acc, gyro, mag) == pytest.approx(naive_update(state, cal, acc, gyro, mag), abs=1e-9)
 
 
-def test_recording_columns_are_the_rows_samples_and_a_held_frame_is_fused_once():
-    rng = np.random.default_rng(3)
-    frames = {node: [ImuFrame(imu_node_id(node), 16, k, *(tuple(rng.integers(-9000, 9000, 3).tolist()) for _ in range(3)))
-                     for k in range(6)] for node in (1, 2)}
-    # node 2's third frame was lost: its second one is held in the third row
-    rows = [{10: frames[1][k], 11: frames[2][k if k != 2 else 1]} for k in range(6)]
-    calibrations = {1: NodeCalibration(), 2: NodeCalibration.uncalibrated()}
-    columns = FusedRows(calibrations).columns(rows)
-    one_by_one, reference = FusedRows(calibrations), {1: NodeFusion(calibrations[1]), 2: NodeFusion(calibrations[2])}
-    samples = [one_by_one.samples(row) for row in rows]
-    for node in (1, 2):
-        assert np.array_equal(columns[node].angles, np.array([s[node].angles for s in samples]))
-        assert np.array_equal(columns[node].acc, np.array([s[node].acc for s in samples], float))
-        fused = [reference[node].update(f.acc, f.gyro, f.mag) for f in (frames[node][:2] + frames[node][3:] if node == 2
-                                                                          else frames[node])]
-        expected = fused[:2] + [fused[1]] + fused[2:] if node == 2 else fused
-        assert np.array_equal(columns[node].angles, np.array(expected))
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.lists(st.integers(0, 80), max_size=4))
+def test_update_many_is_update_sample_by_sample_to_the_bit(seed, cuts):
+    """The batch filter (numpy for the products, math's libm mapped, loops for the recursions) against
+    the per-sample ``update`` as the naive reference, over any calibration and cut into pieces."""
+    rng = np.random.default_rng(seed)
+    mounting = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    mounting *= np.sign(np.linalg.det(mounting))
+    cal = NodeCalibration(hard_iron=rng.normal(scale=100, size=3), soft_iron=np.eye(3) * 1e-4 + rng.normal(scale=1e-5, size=(3, 3)),
+                          mounting=mounting)
+    acc, gyro, mag = (rng.integers(-32768, 32768, (80, 3)) for _ in range(3))
+    acc[::7] = 0                                  # zero tilt components and signed zeros on the way
+    reference = NodeFusion(cal)
+    expected = np.array([reference.update(a, g, m) for a, g, m in zip(acc.tolist(), gyro.tolist(), mag.tolist())])
+    node, pieces = NodeFusion(cal), []
+    bounds = [0, *sorted(cuts), 80]
+    for lo, hi in zip(bounds, bounds[1:]):
+        pieces.append(node.update_many(acc[lo:hi], gyro[lo:hi], mag[lo:hi]))
+    got = np.vstack(pieces)
+    assert np.array_equal(got.view(np.int64), expected.view(np.int64))
+    assert node == reference   # the filter state too: a stream may go on from there
+

@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from bomi.frames import FrameParser
 from bomi.fusion import GYRO_DEG_PER_LSB, NodeCalibration, fuse
-from tasks.participants.imu_synth import (LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
-                             synthesize_raw, to_int16)
+from tasks.participants.imu_synth import (STACKED_FROM, EarthField, LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
+                             synthesize_raw, to_int16, euler_rotations, rotation_rows)
 
 NO_NOISE = SensorNoise(0.0, 0.0, 0.0)
 HEADSET = NodeCalibration()
@@ -194,3 +194,36 @@ def test_linear_acceleration_tilts_the_accelerometer_angles():
                            linear_acc_g=linear)[0]
     pitch, roll, _ = fused(raw, UNCALIBRATED)[-1]
     assert pitch == pytest.approx(np.degrees(np.arctan2(-0.1, 1.0)), abs=0.01) and abs(roll) < 0.01
+
+
+@pytest.mark.parametrize("seq, degrees", [("XZY", False), ("YZX", True)])
+def test_stacked_rotations_are_the_listed_rotations(seq, degrees):
+    """euler_rotations' stack (scipy's vectorised path, for long trajectories) against scipy's plain
+    list (its per-rotation path): the same quaternions and relative rotation vectors (the gyro), bit
+    for bit; applied vectors (gravity, the earth field) summed in another order, to round-off."""
+    rng = np.random.default_rng(11)
+    angles = rng.normal(0.0, 40.0 if degrees else 0.7, (STACKED_FROM + 9, 3))
+    angles[::50] = 0.0
+    stacked, listed = euler_rotations(seq, angles, degrees), Rotation.from_euler(seq, angles, degrees=degrees)
+    assert stacked.shape == (1, len(angles)) and listed.shape == (len(angles),)
+    assert np.array_equal(stacked.as_quat()[0], listed.as_quat())
+    now, before = rotation_rows(stacked, slice(3, None)), rotation_rows(stacked, slice(None, -3))
+    assert np.array_equal((before.inv() * now).as_rotvec()[0], (listed[:-3].inv() * listed[3:]).as_rotvec())
+    field = EarthField(inclination_deg=63.0).at_zero_heading()
+    np.testing.assert_allclose(now.apply(field)[0], listed[3:].apply(field), rtol=0, atol=1e-9)
+
+
+def test_a_trajectory_synthesised_whole_is_synthesised_in_pieces_count_for_count():
+    """Whole (scipy's stacked path) against short pieces (its per-rotation path, the naive reference):
+    the same int16 counts of every sensor (the round-off of an applied vector does not reach a count)."""
+    rng = np.random.default_rng(4)
+    angles = np.cumsum(rng.normal(0.0, 0.4, (1500, 2, 3)), axis=0) + [[10.0, -5.0, 30.0], [0.0, 3.0, -20.0]]
+    cals = [NodeCalibration(), NodeCalibration.uncalibrated()]
+    whole = synthesize_nodes(angles, cals, [np.random.default_rng(s) for s in (1, 2)])
+    rngs, pieces, previous = [np.random.default_rng(s) for s in (1, 2)], [], None
+    for lo in range(0, 1500, 100):
+        pieces.append(synthesize_nodes(angles[lo:lo + 100], cals, rngs, previous_deg=previous))
+        previous = angles[lo + 99]
+    for k in range(2):
+        for name in ("acc", "gyro", "mag"):
+            assert np.array_equal(getattr(whole[k], name), np.vstack([getattr(p[k], name) for p in pieces]))

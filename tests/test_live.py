@@ -160,7 +160,7 @@ def still_frame(counter: int, node: int = 1) -> ImuFrame:
 
 
 SETTLE = 4                                   # a short settle window for the scripted loops
-QUICK_GATE = GateConfig(settle_samples=SETTLE)
+QUICK_GATE = GateConfig(settle_samples=SETTLE, filter_age_samples=0)  # no start-up floor
 
 
 class ScriptedSource:
@@ -330,14 +330,14 @@ def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_p
     neutral is taken and live decides as the chain fed the same samples offline."""
     emulator = subprocess.Popen(
         [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--loss", "0",
-         "--hold", "2", "--neutral", "9", "--duration", "20", "--seed", str(SEED)],
+         "--hold", "2", "--neutral", "17", "--duration", "28", "--seed", str(SEED)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         path = emulator.stdout.readline().strip()
         assert path.startswith("/dev/pts/")
         log = tmp_path / "live.jsonl"
         assert main(["live", "--port", path, "--profile", "P1", "--model", str(p1_model_file), "--headless",
-                     "--duration", "13", "--log", str(log), "--retries", "0"]) == 0
+                     "--duration", "21", "--log", str(log), "--retries", "0"]) == 0
         emulator.wait(timeout=30)
     finally:
         emulator.kill()
@@ -345,15 +345,15 @@ def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_p
     assert "live: neutral offsets" in out.err
     assert "HELD: warming up (node " in out.err and " Hz | lost 0 (0.0 %) | " in out.err   # status lines
     ticks = read_log(log)
-    assert 0.8 * 13 * 60 < len(ticks) <= 13 * 60 + 1                      # 60 Hz (late ticks are skipped)
+    assert 0.8 * 21 * 60 < len(ticks) <= 21 * 60 + 1                      # 60 Hz (late ticks are skipped)
     warm = [tick for tick in ticks if (tick["hold"] or "").startswith("warming up")]
-    assert 1.6 < warm[-1]["t"] < 8.0                                       # settled on the signal, while still
+    assert 12.0 <= warm[-1]["t"] < 16.0                      # the filter's 12 s floor, then the signal, while still
     neutral_tick = next(tick for tick in ticks if "neutral" in tick)
     assert neutral_tick["t"] > warm[-1]["t"]
     assert all(np.linalg.norm(tick["linear"]) == 0 for tick in ticks if tick["t"] <= neutral_tick["t"])
     live = [{k: v for k, v in d.items() if k != "sample_index"} for tick in ticks for d in tick["decisions"]]
     assert len(live) > 150
-    offline = offline_decisions(p1_model_file, 2.0, 9.0, 20.0, neutral_tick["neutral"])
+    offline = offline_decisions(p1_model_file, 2.0, 17.0, 28.0, neutral_tick["neutral"])
     # live's filter starts at the first frame it polls (what arrived while it got ready is dropped), the
     # offline one at the first sample: after the warm-up they agree to far below the decisions' resolution
     start = next(k for k in range(len(offline) - len(live) + 1)
@@ -363,9 +363,9 @@ def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_p
         assert mine["confidence"] == pytest.approx(theirs["confidence"], abs=1e-3)
         assert mine["gamma"] == pytest.approx(theirs["gamma"], abs=0.05)
         assert mine["nu"] == pytest.approx(theirs["nu"], abs=0.01)
-    # the F cue at 9 s: recognised once the head is up, and the arm is driven by it
+    # the F cue at 17 s: recognised once the head is up, and the arm is driven by it
     first_f = next(tick for tick in ticks if any(d["function"] == "F" for d in tick["decisions"]))
-    assert 9.0 < first_f["t"] < 11.5
+    assert 17.0 < first_f["t"] < 19.5
     assert max(np.linalg.norm(tick["linear"]) for tick in ticks) > 0.5 * FULL_SPEED
 
 
@@ -373,10 +373,10 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     params, profile = load_participant("P1"), load_profile("P1")
-    cues = calibration_schedule(profile, hold_s=4.0, neutral_s=9.0)    # warm-up, neutral; F from 9 s (held ~10.2-13.4 s)
+    cues = calibration_schedule(profile, hold_s=4.0, neutral_s=17.0)   # warm-up, neutral; F from 17 s (held ~18.2-21.4 s)
     sink = PtySink(linger_s=1.0)
-    chunks = block_chunks(participant_blocks(params, profile, SEED, cues, 15.0), EmulatorConfig(), EmulatorStats())
-    paused = ((t + 0.5 if t >= 11.5 else t, data) for t, data in chunks)   # 0.5 s of silence at 11.5 s
+    chunks = block_chunks(participant_blocks(params, profile, SEED, cues, 23.0), EmulatorConfig(), EmulatorStats())
+    paused = ((t + 0.5 if t >= 19.5 else t, data) for t, data in chunks)   # 0.5 s of silence at 19.5 s
 
     def emulate():
         sink.wait_for_reader()
@@ -387,7 +387,7 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     thread.start()
     log = tmp_path / "live.jsonl"
     assert main(["live", "--port", sink.description, "--profile", "P1", "--model", str(p1_model_file),
-                 "--duration", "13.5", "--log", str(log), "--retries", "0"]) == 0  # no display: headless
+                 "--duration", "21.5", "--log", str(log), "--retries", "0"]) == 0  # no display: headless
     thread.join(timeout=10)
     ticks = read_log(log)
     arrived = [tick for tick in ticks if tick["frames"]]

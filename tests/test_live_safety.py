@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from bomi.fusion import DT, NodeFusion
+from bomi.fusion import DT, NodeCalibration, NodeFusion
 from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_ratio, raw_defect, settle_change
 from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
 from tasks.live import LiveLoop, TickLog, VideoDisplay
@@ -34,9 +34,9 @@ def test_settle_threshold_is_the_tolerance_times_the_decay_ratio():
 
 
 def test_a_decaying_yaw_settles_when_the_error_left_is_half_a_degree():
-    """Yaw 120 deg away decaying with the filter's 100-sample constant: the gate says settled at the
-    sample where 120 exp(-n / 100) drops below 0.5 deg (n = 100 ln 240 = 548), not before."""
-    gate = NodeGate(1)
+    """Yaw 120 deg away decaying with the filter's 100-sample constant: the signal test says settled
+    at the sample where 120 exp(-n / 100) drops below 0.5 deg (n = 100 ln 240 = 548), not before."""
+    gate = NodeGate(1, GateConfig(filter_age_samples=0))
     settled_at = None
     for n in range(1000):
         gate.fused((0.0, 0.0, 120.0 * math.exp(-n / 100)))
@@ -44,6 +44,37 @@ def test_a_decaying_yaw_settles_when_the_error_left_is_half_a_degree():
             settled_at = n
     assert 540 <= settled_at <= 556
     assert 120.0 * math.exp(-settled_at / 100) < 0.52
+
+
+def test_a_back_and_forth_turn_during_the_decay_is_not_taken_for_a_settled_filter():
+    """+-15 deg at 0.4 Hz on top of a decaying yaw fools the half-mean test within 3 s; the filter's
+    age keeps the node warming up until the worst start has decayed (12 s: 750 samples)."""
+    def yaw(n: int) -> float:
+        return 120.0 * math.exp(-n / 100) + 15.0 * math.sin(2 * math.pi * 0.4 * n * DT)
+
+    signal_only, gate = NodeGate(1, GateConfig(filter_age_samples=0)), NodeGate(1)
+    fooled_at = settled_at = None
+    for n in range(1200):
+        signal_only.fused((0.0, 0.0, yaw(n)))
+        gate.fused((0.0, 0.0, yaw(n)))
+        if signal_only.settled and fooled_at is None:
+            fooled_at = n
+        if gate.settled and settled_at is None:
+            settled_at = n
+    assert fooled_at is not None and fooled_at * DT < 3.0
+    assert settled_at is None or settled_at >= 749
+
+
+def test_the_real_filter_from_its_zero_state_has_settled_within_the_gates_floor():
+    """The fusion itself, a node facing about 179 deg and lying on its side (pitch and roll far from
+    the zero state too): its yaw stays within 0.5 deg of the final heading from sample 594 on, inside
+    the gate's floor of 750 and above the pure decay's 586 (the pitch/roll transient delays it)."""
+    fusion = NodeFusion(NodeCalibration.uncalibrated())
+    yaw = np.array([fusion.update((0, 0, 2048), (0, 0, 0), (-50, -3000, 0))[2] for _ in range(2000)])
+    error = np.abs(yaw - yaw[-1])
+    first_within = int(np.flatnonzero(error >= 0.5)[-1]) + 1
+    assert abs(yaw[-1]) > 178.0
+    assert 586 < first_within < GateConfig().filter_age_samples == 750
 
 
 def test_raw_defects_zero_and_saturated_values():
@@ -66,7 +97,7 @@ def _plausible_samples(gate: NodeGate, n: int, counter: int, now: float) -> int:
 
 
 def test_an_implausible_frame_holds_the_node_until_a_full_window_is_plausible_and_steady():
-    config = GateConfig(settle_samples=10)
+    config = GateConfig(settle_samples=10, filter_age_samples=0)
     gate = NodeGate(2, config)
     counter = _plausible_samples(gate, 10, 0, 0.0)
     assert gate.verdict(0.0) is None
@@ -82,7 +113,7 @@ def test_an_implausible_frame_holds_the_node_until_a_full_window_is_plausible_an
 
 
 def test_angle_jumps_counters_out_of_step_and_floods_are_implausible():
-    config = GateConfig(settle_samples=4)
+    config = GateConfig(settle_samples=4, filter_age_samples=0)
     gate = NodeGate(1, config)
     counter = _plausible_samples(gate, 4, 0, 0.0)
     gate.check_raw(counter, STILL.mag, STILL.gyro, STILL.acc)
@@ -104,7 +135,7 @@ def test_angle_jumps_counters_out_of_step_and_floods_are_implausible():
 
 
 def test_gate_of_several_nodes_names_the_first_untrusted_one():
-    gate = Gate((1, 2), GateConfig(settle_samples=4))
+    gate = Gate((1, 2), GateConfig(settle_samples=4, filter_age_samples=0))
     assert gate.verdict(0.0) == "no frames from node 1"
     _plausible_samples(gate.node[1], 4, 0, 0.0)
     gate.node[2].arrived(0.0, 1)
@@ -285,11 +316,11 @@ def test_the_loop_is_deterministic_given_each_ticks_frames(p1_model_file):
 
     profile = load_profile("P1")
     f_label = next(cls.label for cls in profile.classes if cls.function == "F")
-    cues = [Cue(NEUTRAL_LABEL, "neutral", 0.0, 12.0), Cue(f_label, "F", 12.0, 20.0)]
-    chunks = list(block_chunks(participant_blocks(load_participant("P1"), profile, 3, cues, 16.0),
+    cues = [Cue(NEUTRAL_LABEL, "neutral", 0.0, 16.0), Cue(f_label, "F", 16.0, 24.0)]    # settled at 12 s
+    chunks = list(block_chunks(participant_blocks(load_participant("P1"), profile, 3, cues, 20.0),
                                EmulatorConfig(), EmulatorStats()))
     parser, per_tick, i = FrameParser(), [], 0
-    for k in range(16 * 60):
+    for k in range(20 * 60):
         data = b""
         while i < len(chunks) and chunks[i][0] <= k / 60:
             data += chunks[i][1]

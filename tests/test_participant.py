@@ -9,11 +9,11 @@ import scipy.signal
 
 from bomi.chain import OnlineChain, train
 from bomi.errors import BomiError
-from bomi.frames import FrameParser
-from bomi.fusion import DT
+from bomi.frames import FrameParser, RowAssembler, SafetyKey, SampleIndex, encode_safety_key_frame
+from bomi.fusion import DT, FusedRows
 from bomi.profiles import load_profile
 from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
-                               load_participant, minimum_jerk, session_recording)
+                               load_participant, minimum_jerk, record_stream, session_recording)
 from helpers import edited_copy
 
 P1_TOML = PARTICIPANT_DIR / "P1.toml"
@@ -165,6 +165,27 @@ def test_stream_does_not_depend_on_how_time_is_sliced(name):
 
 
 @pytest.mark.parametrize("name", ["P1", "P4"])
+def test_passing_time_then_one_pass_is_making_the_samples_at_each_cue(name):
+    """pass_time (a protocol synthesised in one pass) against deliveries at every cue (the naive
+    reference): the same intents' timing, the same frames and arrivals, the angles to filter round-off."""
+    params, profile = load_participant(name), load_profile(name)
+    one, many = VirtualParticipant(params, profile, seed=7), VirtualParticipant(params, profile, seed=7)
+    cues = [(1.0, 3 if name == "P1" else 2, 1.0), (2.5, 0, 0.0), (2.6, 1, 0.6), (4.0, 0, 0.0)]
+    parts = []
+    for t, label, amplitude in cues:
+        one.pass_time(t)
+        parts.append(many.deliveries(t))
+        one.set_intent(label, amplitude, t)
+        many.set_intent(label, amplitude, t)
+    parts.append(many.deliveries(6.0))
+    whole = one.deliveries(6.0)
+    assert whole.stream() == b"".join(p.stream() for p in parts)
+    assert np.array_equal(whole.arrival_s, np.concatenate([p.arrival_s for p in parts]))
+    assert [m.t0 for m in one._moves] == [m.t0 for m in many._moves]
+    np.testing.assert_allclose(one.truth().angles, many.truth().angles, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["P1", "P4"])
 def test_calibration_and_task_share_the_person_but_not_the_noise(name):
     """Same seed: the task participant is the person who calibrated (same day's postures), but sway,
     tremor, spasms, sensor noise and frame loss are drawn afresh, so the streams differ from the start."""
@@ -244,6 +265,42 @@ def test_session_recording_fuses_back_to_the_true_angles(p1, session):
         error = rec.nodes[node].angles - truth[:, k]
         assert np.median(np.abs(error[:, :2])) < 0.3   # pitch, roll: filter lag on tremor, held lost frames
         assert np.median(np.abs(error[:, 2])) < 1.0    # yaw: its 1.6 s magnetometer time constant
+
+
+def live_record(stream: bytes, profile) -> tuple[dict, np.ndarray]:
+    """The naive reference of ``record_stream``: `bomi record`'s live steps frame by frame (parser,
+    RowAssembler, FusedRows fusing each frame once when a row first holds it, SampleIndex)."""
+    ids = tuple(node.node_id for node in profile.nodes)
+    assembler, fused = RowAssembler(ids), FusedRows({node.index: node.calibration for node in profile.nodes})
+    sample_index, index_of, columns, indices = SampleIndex(), {}, {node.index: [] for node in profile.nodes}, []
+    for frame in FrameParser().feed(stream):
+        if frame.node_id not in ids:
+            continue
+        index_of[frame.node_id, frame.counter] = sample_index(frame)
+        row = assembler.push(frame)
+        if row is not None:
+            for node, sample in fused.samples(row).items():
+                columns[node].append(np.concatenate([sample.acc, sample.gyro, sample.mag, sample.angles]))
+            indices.append(max(index_of[f.node_id, f.counter] for f in row.values()))
+    return {node: np.array(rows, dtype=float) for node, rows in columns.items()}, np.array(indices)
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_record_stream_is_the_live_recording_to_the_bit(p1, noise):
+    """The whole-stream recording (batch parse, rows, fusion) against `bomi record`'s live steps,
+    on a session with the link's losses (held frames), and with garbage bytes and a safety-key
+    frame in it (the parser's own path)."""
+    params, profile = p1
+    session = calibration_session(params, profile, 5, repetitions=1, hold_s=1.0, neutral_s=1.0, warmup_s=1.0)
+    stream = session.delivery.stream()
+    if noise:
+        stream = stream[:6400] + b"\x33\x00garbage" + encode_safety_key_frame(SafetyKey.STANDBY, 3) + stream[6400:]
+    rec, index = record_stream(stream, profile, "test")
+    columns, expected_index = live_record(stream, profile)
+    assert np.array_equal(index, expected_index) and len(rec) > 100
+    for node, data in rec.nodes.items():
+        got = np.hstack([data.acc, data.gyro, data.mag, data.angles])
+        assert np.array_equal(got.view(np.int64), columns[node].view(np.int64))
 
 
 def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):

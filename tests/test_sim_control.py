@@ -179,3 +179,30 @@ def test_the_demo_script_carries_a_cube_from_a_to_b_with_the_stick_alone(sim):
     assert np.linalg.norm(other - start[1]) < 0.002
     assert not sim.cube_in_grasp().any()
     assert (sim.button_presses, sim.mode_switches) == (5, 5)
+
+
+def naive_grasp(sim: ArmSim) -> list[bool]:
+    """Per cube: finger 1 and finger 2 or 3 in contact with it, searched contact by contact."""
+    contact = sim.data.contact
+    pairs = list(zip(contact.geom1[:sim.data.ncon].tolist(), contact.geom2[:sim.data.ncon].tolist()))
+
+    def touches(fingers, cube):
+        return any((a in fingers and b == cube) or (b in fingers and a == cube) for a, b in pairs)
+    one, two, three = sim.scene.finger_geoms
+    return [touches(one, c) and (touches(two, c) or touches(three, c)) for c in sim.scene.cube_geoms.tolist()]
+
+
+def test_read_outs_equal_their_naive_forms_along_the_demo_carry(sim):
+    """The per-tick read-outs (role tables, slices, np.mean's arithmetic written out) give exactly
+    what searching the contacts and gathering by address give, on every tick of a real grasp and carry."""
+    sim.reset()
+    lower, upper = sim.scene.finger_range[:, 0], sim.scene.finger_range[:, 1]
+    grasped = 0
+    for state in script_states(DEMO_SCRIPT, sim.config.physics.control_hz):
+        sim.step(state)
+        assert sim.cube_in_grasp().tolist() == naive_grasp(sim)
+        grasped += naive_grasp(sim)[0]
+        assert sim.finger_closure == float(np.mean((sim.data.qpos[sim.scene.finger_qpos] - lower) / (upper - lower)))
+        assert np.array_equal(sim.cube_positions, sim.data.geom_xpos[sim.scene.cube_geoms])
+        assert np.array_equal(sim.arm_qpos, sim.data.qpos[sim.scene.arm_qpos])
+    assert grasped > 60  # the carry held the cube for more than a second

@@ -91,3 +91,32 @@ def test_no_function_means_hold_still(stick):
 def test_invalid_states_are_rejected(bad):
     with pytest.raises(ValueError):
         JoystickState(**bad)
+
+
+def test_combine_and_layout_tables_equal_the_naive_forms():
+    """combine() on floats equals the sum of numpy axis arrays bit for bit; axes() and find() from
+    their tables equal a search through the layout's effects."""
+    from sim.joystick import FUNCTIONS, LAYOUTS, Kind, combine
+
+    rng = np.random.default_rng(5)
+    for layout in LAYOUTS.values():
+        for mode in layout.modes:
+            for kind in Kind:
+                naive_axes = {fn: e.axis for fn, e in layout.effects[mode].items() if e.kind is kind}
+                assert dict(layout.axes(mode, kind)) == naive_axes
+                for _ in range(20):
+                    held = rng.choice(FUNCTIONS, size=rng.integers(0, 4), replace=False)
+                    deflection = {str(fn): float(rng.uniform()) for fn in held}
+                    if kind is not Kind.FINGERS:
+                        total = np.zeros(3)
+                        for fn, amount in deflection.items():
+                            if fn in naive_axes:
+                                total += amount * np.asarray(naive_axes[fn])
+                        assert np.array_equal(combine(deflection, layout.axes(mode, kind)), total)
+        for mode in layout.modes:
+            for fn, effect in layout.effects[mode].items():
+                first = next((m, f) for m in layout.modes for f, e in layout.effects[m].items()
+                             if e.kind is effect.kind and e.axis == effect.axis)
+                assert layout.find(effect.kind, effect.axis) == first
+    with pytest.raises(ValueError, match="no function"):
+        LAYOUTS["2-axis"].find(Kind.LINEAR, (0.0, 0.0, 0.5))

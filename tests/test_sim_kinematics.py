@@ -73,3 +73,25 @@ def test_solve_pose_reaches_the_requested_pose(kinematics):
     position, rotation = kinematics.tool_pose(q)
     assert np.linalg.norm(position - target) < 1e-6
     assert rotation_angle(rotation, HAND_DOWN) < 1e-6
+
+
+@pytest.mark.parametrize("q", random_configurations(20, seed=11))
+def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
+    """The controller's Jacobian (products into one buffer) and DLS solve (LAPACK's dgesv called
+    directly) give exactly what the plain numpy forms give, and agree with a pinv-based DLS."""
+    import pinocchio as pin
+    from sim.controller import damped_least_squares
+
+    jac = pin.computeFrameJacobian(kinematics.model, kinematics.data, q, kinematics.tool_frame,
+                                   pin.LOCAL_WORLD_ALIGNED)
+    rot = kinematics.base.rotation
+    naive_jacobian = np.vstack((rot @ jac[:3], rot @ jac[3:]))
+    jacobian = kinematics.jacobian(q)
+    assert np.array_equal(jacobian, naive_jacobian)
+    twist = np.random.default_rng(int(1000 * q[0]) % 2**32).normal(size=6)
+    damping = 0.05
+    qd = damped_least_squares(jacobian.copy(), twist, damping)
+    naive = naive_jacobian.T @ np.linalg.solve(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6), twist)
+    assert np.array_equal(qd, naive)
+    by_pinv = naive_jacobian.T @ np.linalg.pinv(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6)) @ twist
+    np.testing.assert_allclose(qd, by_pinv, rtol=1e-9, atol=1e-9)

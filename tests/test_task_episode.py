@@ -247,3 +247,34 @@ def test_an_episode_on_the_process_s_reused_arm_is_the_episode_on_a_fresh_arm():
     assert reused.presses > 0 and reused.mode == fresh.mode and reused.presses == fresh.presses
     for field in ("t", "hand_pos", "cube_pos", "touching"):
         assert np.array_equal(getattr(reused, field), getattr(fresh, field)), field
+
+
+def test_view_and_outcome_equal_their_naive_forms_along_the_demo_carry(sim):
+    """The task's view and its off-table and tilt tests, written on Python floats, give exactly what
+    the numpy formulations give (np.cross, np.linalg.norm, np.any per axis), tick by tick."""
+    from sim.joystick import script_states
+    from tasks.cli.sim import DEMO_SCRIPT
+
+    task = StackingTask(sim)
+    task.reset(7)
+    table_lo, table_hi = task.table_lo, task.table_hi
+    for state in script_states(DEMO_SCRIPT, sim.config.physics.control_hz):
+        sim.step(state)
+        view = task.view()
+        rotation = sim.data.site_xmat[sim.scene.tool_site].reshape(3, 3)
+        tool_z, down = rotation[:, 2], np.array([0.0, 0.0, -1.0])
+        axis = np.cross(tool_z, down)
+        sin, cos = np.linalg.norm(axis), np.dot(tool_z, down)
+        naive = np.zeros(2) if sin < 1e-12 else (axis * math.atan2(sin, cos) / sin)[:2]
+        assert np.allclose(view.hand_tilt, naive, rtol=0, atol=1e-15)
+        pos = sim.data.geom_xpos[sim.scene.cube_geoms]
+        assert all(np.array_equal(a, b) for a, b in zip(view.cube_pos, pos))
+        for quat in sim.cube_quats:
+            w, x, y, z = quat
+            naive = np.degrees(np.arccos(min(1.0, np.max(np.abs(
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])))))
+            assert cube_tilt_deg(quat.tolist()) == naive
+        off = (pos[:, 2] < task.table_z - task.cube_size) | np.any(pos[:, :2] < table_lo, axis=1) \
+            | np.any(pos[:, :2] > table_hi, axis=1)
+        assert task.outcome().failure == (f"cube {int(np.flatnonzero(off)[0]) + 1} knocked off the table"
+                                          if off.any() else None)

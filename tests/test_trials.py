@@ -254,13 +254,13 @@ def test_a_controller_never_ready_ends_the_session_without_a_trial():
 
 def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_session(bomi_dir, tmp_path, capsys):
     """A person's session on a pty (`bomi emulate`'s virtual participant, real time, in its own
-    process) whose base station goes away 12 s in: the trial running then fails ("stream lost"), the
+    process) whose base station goes away 20 s in: the trial running then fails ("stream lost"), the
     session is written, the command ends with one error line, and the cut-short trial replays exactly."""
     import subprocess
     import sys
     emulator = subprocess.Popen(
-        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--neutral", "20",
-         "--duration", "12", "--linger", "0.5", "--seed", "3"],  # neutral throughout the 12 s
+        [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--neutral", "28",
+         "--duration", "20", "--linger", "0.5", "--seed", "3"],  # neutral throughout the 20 s (12 s of warm-up)
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         port = emulator.stdout.readline().strip()

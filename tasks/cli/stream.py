@@ -310,7 +310,10 @@ def _unsettled(gate: NodeGate, now: float) -> str:
     still warming up how far its last window is from the settle test."""
     reason = (gate.verdict(now) or "").removeprefix(f"node {gate.index}: ")
     change = gate.change
-    if not gate.settled and gate.defect is None and change is not None:
+    if not gate.settled and gate.defect is None and gate.fused_samples < gate.config.filter_age_samples:
+        reason = (f"still warming up: its filter has run {gate.fused_samples * DT:.1f} s of the "
+                  f"{gate.config.filter_age_samples * DT:g} s it needs from its zero state")
+    elif not gate.settled and gate.defect is None and change is not None:
         reason = (f"still warming up: its angles changed by {change:.2f} deg between the halves of the last "
                   f"{gate.config.resume_s:g} s, settled is below {gate.config.settle_change_deg:.2f}")
     return reason

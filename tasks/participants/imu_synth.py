@@ -76,11 +76,33 @@ class RawImu:
         return len(self.acc)
 
 
+# scipy's Rotation computes a stack of rotations (input of three dimensions) on its vectorised
+# array-API path and a plain list (two dimensions) on its compiled per-rotation path: the same
+# arithmetic, the same bits for what is computed here (tests/test_imu_synth.py: applied to x or to the
+# earth field, whose z is 0), at about 3 us a rotation on the latter (scipy
+# 1.17) against a fixed ~1 ms and a few hundred ns a rotation on the former. A calibration session
+# (tens of thousands of rotations at once) takes the vectorised path, a task's chunks the other.
+STACKED_FROM = 2000
+
+
+def euler_rotations(seq: str, angles: np.ndarray, degrees: bool = False) -> Rotation:
+    """``Rotation.from_euler`` of (n, 3) angles; as a (1, n) stack when n >= STACKED_FROM (see there):
+    index it with ``rotation_rows``, reshape what it returns (its arrays have the extra leading axis)."""
+    angles = np.atleast_2d(angles)
+    return Rotation.from_euler(seq, angles[None] if len(angles) >= STACKED_FROM else angles, degrees=degrees)
+
+
+def rotation_rows(rotations: Rotation, rows: slice) -> Rotation:
+    """``rotations[rows]`` of a plain list or of a ``euler_rotations`` stack alike (scipy's own
+    indexing, a raw quaternion slice, for both)."""
+    return Rotation(rotations.as_quat()[..., rows, :], normalize=False, copy=False)
+
+
 def body_rotation(angles_deg: np.ndarray) -> Rotation:
-    """Level-from-body rotations for (n, 3) fusion angles (pitch, roll, yaw) in degrees."""
+    """Level-from-body rotations for (n, 3) fusion angles (pitch, roll, yaw) in degrees (``euler_rotations``)."""
     pitch, roll, yaw = np.radians(np.atleast_2d(angles_deg)).T
     pitch_euler = np.arctan(np.tan(pitch) * np.cos(roll))
-    return Rotation.from_euler("XZY", np.column_stack([yaw, -pitch_euler, roll]))
+    return euler_rotations("XZY", np.column_stack([yaw, -pitch_euler, roll]))
 
 
 def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField()) -> np.ndarray:
@@ -90,8 +112,8 @@ def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField(
     the body field is Ry(-roll) Rz(pitch) Rx(yaw) applied to the zero-heading field.
     """
     pitch, roll, yaw = np.atleast_2d(angles_deg).T
-    to_body = Rotation.from_euler("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True)
-    return to_body.apply(field.at_zero_heading())
+    to_body = euler_rotations("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True)
+    return to_body.apply(field.at_zero_heading()).reshape(-1, 3)
 
 
 def to_sensor_axes(body_vectors: np.ndarray, cal: NodeCalibration) -> np.ndarray:
@@ -130,11 +152,11 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     n, k, _ = angles.shape
     first = angles[:1] if previous_deg is None else np.asarray(previous_deg, dtype=float).reshape(1, k, 3)
     rotations = body_rotation(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
-    now = rotations[k:]
+    now = rotation_rows(rotations, slice(k, None))
     acc_body = -now.inv().apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
     if linear_acc_g is not None:
         acc_body = acc_body + linear_acc_g
-    rate = np.degrees((rotations[:-k].inv() * now).as_rotvec()).reshape(n, k, 3) / DT
+    rate = np.degrees((rotation_rows(rotations, slice(None, -k)).inv() * now).as_rotvec()).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
     scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
     out = []

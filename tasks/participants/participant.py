@@ -34,8 +34,8 @@ import scipy.signal
 from bomi.config_files import check_table, load_toml, number
 from bomi.errors import BomiError
 from bomi.classifier import NEUTRAL_LABEL
-from bomi.fusion import DT, WARMUP_S, FusedRows
-from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, SampleIndex
+from bomi.fusion import DT, WARMUP_S, NodeFusion
+from bomi.frames import SAMPLE_RATE_HZ, parse_stream, row_positions, sample_indices
 from bomi.profiles import Profile
 from bomi.protocol import protocol_order
 from bomi.recording import NodeData, Recording
@@ -382,6 +382,7 @@ class VirtualParticipant:
         self._spasm_sizes = np.empty((0, n_spasm_nodes, 3))
         self._spasm_until = 0.0                 # spasm onsets are drawn up to this time
         self._generated = 0                     # samples generated so far (sample k at time k * DT)
+        self._passed = 0                        # samples whose time has passed (``pass_time``), made or not
         self._last_angles: np.ndarray | None = None     # (nodes, 3) angles of the last sample
         self._last_arrival: dict[int, float] = {}
         self._pending = _merge()
@@ -408,8 +409,14 @@ class VirtualParticipant:
 
     @property
     def time_s(self) -> float:
-        """Sim time up to which samples have been generated."""
-        return self._generated * DT
+        """Sim time up to which samples are made (or passed: ``pass_time``)."""
+        return max(self._generated, self._passed) * DT
+
+    def pass_time(self, t_end: float) -> None:
+        """Let sim time pass to ``t_end`` without making its samples yet: an intent set from now on
+        acts after them, exactly as if ``deliveries(t_end)`` had been called, and the next call that
+        makes samples makes them all in one pass (a whole protocol: one synthesis, not one per cue)."""
+        self._passed = max(self._passed, _samples_until(t_end))
 
     @property
     def intent(self) -> tuple[int, float]:
@@ -484,7 +491,7 @@ class VirtualParticipant:
 
     # -- output
     def _generate(self, t_end: float) -> None:
-        n_total = int(np.floor(t_end / DT + 1e-9)) + 1
+        n_total = max(_samples_until(t_end), self._passed)
         n = n_total - self._generated
         if n <= 0:
             return
@@ -529,6 +536,11 @@ class VirtualParticipant:
             return Truth(np.empty(0), np.empty(0, int), np.empty(0), np.empty((0, self.params.n_nodes, 3)))
         t, label, amp, angles = (np.concatenate(parts) for parts in zip(*self._truth))
         return Truth(t, label, amp, angles)
+
+
+def _samples_until(t_end: float) -> int:
+    """How many samples (sample k at time k * DT) are taken by sim time ``t_end``."""
+    return int(np.floor(t_end / DT + 1e-9)) + 1
 
 
 def _merge(*parts: Delivery) -> Delivery:
@@ -602,15 +614,13 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
         vp.set_intent(first, first_amp, 0.0)
     holds: list[tuple[float, float, int]] = [(warmup_s, warmup_s + first_s, first)]
     t = warmup_s + first_s
-    parts = []
     for cue_label, cue_amp, duration in rest:
-        parts.append(vp.deliveries(t))
+        vp.pass_time(t)
         vp.set_intent(cue_label, cue_amp, t)
         cues.append((t, cue_label))
         holds.append((t + settle, t + settle + duration, cue_label))
         t += settle + duration
-    parts += [vp.deliveries(t), vp.flush()]
-    delivery = _merge(*parts)
+    delivery = _merge(vp.deliveries(t), vp.flush())   # the whole session synthesised in one pass
     truth = vp.truth()
     keep = np.arange(len(truth.time_s)) <= int(np.floor(t / DT + 1e-9))   # the samples up to t, as generated
     truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
@@ -627,29 +637,27 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
 def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recording, np.ndarray]:
     """Parse base-station bytes into fused rows exactly as ``bomi record`` does; also each row's sample index.
 
-    Rows come from ``bomi.frames.RowAssembler`` (frames paired by arrival, a lost frame's node
-    repeats its previous sample) and ``FusedRows`` (each frame fused once by ``NodeFusion``). The
-    sample index of a row (to label it) is that of its newest frame, from the unwrapped packet counters.
+    The whole stream at once, by the batch forms of the live steps: the frames a ``FrameParser``
+    delivers (``parse_stream``), rows as ``RowAssembler`` pairs them by arrival, a lost frame's
+    node repeating its previous sample (``row_positions``), each frame in a row fused once, in
+    order, by the node's ``NodeFusion`` (``update_many``: the frames before a node's first row are
+    never fused, as ``FusedRows`` never sees them). The sample index of a row (to label it) is that
+    of its newest frame, from the unwrapped packet counters (``sample_indices``).
     """
     ids = tuple(node.node_id for node in profile.nodes)
-    assembler = RowAssembler(ids)
-    fused = FusedRows({node.index: node.calibration for node in profile.nodes})
-    sample_index = SampleIndex()
-    index_of: dict[tuple[int, int], int] = {}        # (node id, counter) -> sample index of that frame
-    rows: list[dict[int, ImuFrame]] = []
-    row_index: list[int] = []
-    for frame in FrameParser().feed(stream):
-        if frame.node_id not in ids:
-            continue
-        index_of[(frame.node_id, frame.counter)] = sample_index(frame)
-        row = assembler.push(frame)
-        if row is not None:
-            rows.append(row)
-            row_index.append(max(index_of[(f.node_id, f.counter)] for f in row.values()))
-    if not rows:
+    frames = parse_stream(stream)
+    frames = frames[np.isin(frames["node_id"], ids)]
+    rows = row_positions(frames["node_id"].tolist(), ids)
+    if not len(rows):
         raise BomiError(f"{source}: no complete row of nodes {list(profile.node_indices)} in the stream")
-    nodes = fused.columns(rows)
-    indices = np.array(row_index)
+    nodes = {}
+    for k, node in enumerate(profile.nodes):
+        used, row_frame = np.unique(rows[:, k], return_inverse=True)   # each frame once, in arrival order
+        mine = frames[used]
+        acc, gyro, mag = (mine[name].astype(float) for name in ("acc", "gyro", "mag"))
+        angles = NodeFusion(node.calibration).update_many(acc, gyro, mag)
+        nodes[node.index] = NodeData(acc[row_frame], gyro[row_frame], mag[row_frame], angles[row_frame])
+    indices = sample_indices(frames["node_id"], frames["counter"])[rows].max(axis=1)
     return Recording(nodes=nodes, labels=None, time=indices * DT, source=source), indices
 
 

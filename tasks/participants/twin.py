@@ -7,7 +7,8 @@ each measured where the recordings show it and taken from a documented prior oth
 
 - the posture of each class (median held level minus the neutral around it), its spread from
   repetition to repetition within a pass, its slow sway and tremor in holds (level per node and
-  angle; the tremor's spectrum from the first node);
+  angle, the sway corrected for what a hold's median takes of it; the tremor's spectrum from the
+  first node);
 - the onset (duration of a move) and reaction time (cue to movement), from the transitions of
   continuous recordings (cue-labelled, every row kept: what `bomi record` writes). Post-processed
   recordings keep only the holds, stitched (the published 5-day set): no transition to measure;
@@ -39,8 +40,8 @@ from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ
 from bomi.profiles import Profile
 from bomi.recording import Recording, Signal
-from tasks.participants.participant import (SWAY_CUTOFF_HZ, ClassMotion, ParticipantParams, Protocol,
-                                                  minimum_jerk)
+from tasks.participants.participant import (SWAY_CUTOFF_HZ, ClassMotion, ColouredNoise, ParticipantParams, Protocol,
+                                            minimum_jerk, sway_filter)
 
 EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
 MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
@@ -111,6 +112,18 @@ def split_sway_tremor(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     sway = x - tremor - np.median(x, axis=0)
     keep = slice(EDGE_SAMPLES, -EDGE_SAMPLES)
     return sway[keep], tremor[keep]
+
+
+SPLIT_DRAWS = 400             # simulated holds of the model's sway when measuring the split's gain
+
+
+@functools.cache
+def sway_gain(samples: int) -> float:
+    """The median std the sway/tremor split measures over holds of ``samples`` per unit std of the
+    participant model's sway (simulated, fixed seed: deterministic). Below 1: a hold's median takes
+    the slowest sway (0.75 over the published 5 s holds)."""
+    x = ColouredNoise(*sway_filter(), SPLIT_DRAWS, np.random.default_rng(0)).next(samples)
+    return float(np.median(split_sway_tremor(x)[0].std(axis=0)))
 
 
 def motion_spectrum(freqs: np.ndarray, psd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -295,6 +308,7 @@ class _Holds:
     sway: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)    # (label, node) -> per-block std (3,)
     tremor: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)
     spectra: list[np.ndarray] = field(default_factory=list)
+    lengths: list[int] = field(default_factory=list)    # samples of every block measured for noise
 
     def add_levels(self, day: int, blocks: list[Block], angles: np.ndarray) -> None:
         """Each block's median posture; a motion's as a delta from the neutral before and after it
@@ -318,6 +332,7 @@ class _Holds:
                 if len(x) <= 4 * EDGE_SAMPLES or repeated_fraction(x) > MAX_REPEATED_ROWS:
                     continue
                 s, t = split_sway_tremor(x)
+                self.lengths.append(len(x))
                 self.sway.setdefault((block.label, node), []).append(s.std(axis=0))
                 self.tremor.setdefault((block.label, node), []).append(t.std(axis=0))
                 if node == 0 and len(t) >= WELCH_SEGMENT:
@@ -326,6 +341,14 @@ class _Holds:
 
     def per_node(self, table: dict, label: int) -> np.ndarray:
         return np.array([_typical(table.get((label, node), [])) for node in range(self.n_nodes)])
+
+    def noise(self, label: int) -> tuple[np.ndarray, np.ndarray]:
+        """A class's (sway, tremor) stds per node (NaN: no hold measured); the sway divided by the
+        split's gain for the typical hold length, so that the twin's sessions, split the same way,
+        show the sway measured here. The tremor is taken as measured (its leak from the sway, and the
+        sway's from it, are left: a weak tremor's spectrum, measured in that band, does not show them)."""
+        sway, tremor = self.per_node(self.sway, label), self.per_node(self.tremor, label)
+        return (sway / sway_gain(int(np.median(self.lengths))) if self.lengths else sway), tremor
 
     def per_day(self, table: dict, label: int, days: int) -> list[np.ndarray]:
         return [np.array(table[(label, d)]) for d in range(1, days + 1) if (label, d) in table]
@@ -478,31 +501,6 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
                 .replace(f"class c{labels[0]}", "classes") if prior is not None else None)
         from_prior(("day_gain_log_std", "day_std_deg"), "one pass shows no drift between days", what)
 
-    # sway and tremor: per class where a hold is long enough, else the neutral's, else the prior's
-    neutral_sway = holds.per_node(holds.sway, NEUTRAL_LABEL)
-    neutral_tremor = holds.per_node(holds.tremor, NEUTRAL_LABEL)
-    provenance["sway_std_deg"] = provenance["tremor_std_deg"] = (
-        f"measured: median over holds of the std below / above {SWAY_CUTOFF_HZ:g} Hz, yaw as the mean of pitch and "
-        f"roll ({names})")
-    if np.isnan(neutral_sway).any():
-        from_prior(("neutral.sway_std_deg", "neutral.tremor_std_deg"),
-                   f"no neutral hold of a node longer than {4 * EDGE_SAMPLES} samples")
-        neutral_sway = np.where(np.isnan(neutral_sway), prior_nodes(prior, profile, prior.neutral.sway_std_deg),
-                                neutral_sway)
-        neutral_tremor = np.where(np.isnan(neutral_tremor), prior_nodes(prior, profile, prior.neutral.tremor_std_deg),
-                                  neutral_tremor)
-    neutral_sway, neutral_tremor = isotropic_yaw(neutral_sway), isotropic_yaw(neutral_tremor)
-    sway = {label: isotropic_yaw(holds.per_node(holds.sway, label)) for label in labels}
-    tremor = {label: isotropic_yaw(holds.per_node(holds.tremor, label)) for label in labels}
-    short = [label for label in labels if np.isnan(sway[label]).any()]
-    if short:
-        note = (f"{', '.join(f'c{c}' for c in short)}: no hold longer than {4 * EDGE_SAMPLES} samples on some node, "
-                "the neutral's level there")
-        provenance["sway_std_deg"] += f"; {note}"
-        fallbacks.append(f"sway_std_deg, tremor_std_deg: {note}")
-        sway = {label: np.where(np.isnan(s), neutral_sway, s) for label, s in sway.items()}
-        tremor = {label: np.where(np.isnan(s), neutral_tremor, s) for label, s in tremor.items()}
-
     if holds.spectra:
         freqs = np.fft.rfftfreq(WELCH_SEGMENT, 1.0 / SAMPLE_RATE_HZ)
         spectrum = motion_spectrum(freqs, np.mean(holds.spectra, axis=0))
@@ -512,6 +510,31 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         from_prior(("tremor",), f"no hold of node {profile.nodes[0].index} long enough for a "
                              f"{WELCH_SEGMENT}-sample spectrum")
         spectrum = prior.tremor_spectrum
+
+    # sway and tremor: per class where a hold is long enough, else the neutral's, else the prior's
+    neutral_sway, neutral_tremor = holds.noise(NEUTRAL_LABEL)
+    provenance["sway_std_deg"] = provenance["tremor_std_deg"] = (
+        f"measured: median over holds of the std below / above {SWAY_CUTOFF_HZ:g} Hz, the sway divided by "
+        f"the split's gain for the model's sway (twin.sway_gain), yaw as the mean of pitch and roll ({names})")
+    if np.isnan(neutral_sway).any():
+        from_prior(("neutral.sway_std_deg", "neutral.tremor_std_deg"),
+                   f"no neutral hold of a node longer than {4 * EDGE_SAMPLES} samples")
+        neutral_sway = np.where(np.isnan(neutral_sway), prior_nodes(prior, profile, prior.neutral.sway_std_deg),
+                                neutral_sway)
+        neutral_tremor = np.where(np.isnan(neutral_tremor), prior_nodes(prior, profile, prior.neutral.tremor_std_deg),
+                                  neutral_tremor)
+    neutral_sway, neutral_tremor = isotropic_yaw(neutral_sway), isotropic_yaw(neutral_tremor)
+    noise = {label: holds.noise(label) for label in labels}
+    sway = {label: isotropic_yaw(noise[label][0]) for label in labels}
+    tremor = {label: isotropic_yaw(noise[label][1]) for label in labels}
+    short = [label for label in labels if np.isnan(sway[label]).any()]
+    if short:
+        note = (f"{', '.join(f'c{c}' for c in short)}: no hold longer than {4 * EDGE_SAMPLES} samples on some node, "
+                "the neutral's level there")
+        provenance["sway_std_deg"] += f"; {note}"
+        fallbacks.append(f"sway_std_deg, tremor_std_deg: {note}")
+        sway = {label: np.where(np.isnan(s), neutral_sway, s) for label, s in sway.items()}
+        tremor = {label: np.where(np.isnan(s), neutral_tremor, s) for label, s in tremor.items()}
 
     first = Path(passes[0].source).name
     provenance["neutral.angles_deg"] = f"measured: median of the first pass's neutral holds ({first})"
