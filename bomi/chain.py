@@ -3,6 +3,15 @@
 Both forms share every stage: node states -> ``component_index`` -> windows -> ``features`` ->
 ``posteriors`` -> post-processing -> class, joystick function, proportional output nu.
 Node state = neutral-subtracted (pitch, roll, yaw) + gyroscope as the recording holds it (raw LSB).
+
+A new person's settings (``select_settings``, when a profile leaves them to "select") follow one
+rule: the plain LDA (no shrinkage, no copies, no rejection) unless the person's own cross-validation
+(whole holds held out) shows an extra's gain to be both large (REQUIRED_GAIN, 2 points) and steady
+over the held-out holds (the simplest option within CONSISTENCY, 2, standard errors of the best,
+``choose_option``), one extra at a time: shrinkage, then the smaller copies, then rejection. A
+within-pass CV cannot see the drift to the next recording; gains made on a few holds did not carry to
+it on development people (benchmarks/new_people_candidates.py, docs/signal_chain.md). ``bomi train``
+and ``bomi evaluate`` print what was chosen, the gain and its standard error.
 """
 from __future__ import annotations
 
