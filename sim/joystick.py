@@ -108,6 +108,11 @@ class Layout:
         object.__setattr__(self, "_axes", axes)
         object.__setattr__(self, "_found", found)
 
+    def __reduce__(self):
+        """Pickled as its fields (the tables are made again): `bomi live --video` sends the layout to
+        the film's own process."""
+        return type(self), (self.name, self.modes, self.effects)
+
     @property
     def functions(self) -> tuple[str, ...]:
         """The functions the layout uses in some mode (the stick directions a user needs)."""

@@ -280,6 +280,23 @@ def test_filming_never_waits_a_film_frame_is_dropped_instead():
     assert json.dumps(film._frames.get_nowait()[2])   # the caption: two lines of the status
 
 
+def test_a_real_film_process_receives_the_arms_layout_and_writes_a_playable_film(tmp_path):
+    """The film's own (spawned) process gets the real arm's layout and writes the MP4: the layout must
+    pickle (its per-tick tables once did not, and `bomi live --video` stopped with an internal error)."""
+    import imageio.v3 as iio
+
+    from sim.env import ArmSim
+
+    sim = ArmSim()
+    film = VideoDisplay(sim, tmp_path / "film.mp4")
+    for _ in range(5):
+        film.sync(lambda: "a | b | c | d | e | f")
+        time.sleep(1.0 / film.fps)
+    film.close()
+    sim.close()
+    assert film.frames >= 3 and iio.imread(tmp_path / "film.mp4").shape[0] >= film.frames
+
+
 def test_a_poll_parses_the_newest_bytes_only_and_counts_the_rest():
     from bomi.frames import ImuFrame, encode_imu_frame
     from bomi.serial_source import POLL_BYTES

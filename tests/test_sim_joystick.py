@@ -120,3 +120,18 @@ def test_combine_and_layout_tables_equal_the_naive_forms():
                 assert layout.find(effect.kind, effect.axis) == first
     with pytest.raises(ValueError, match="no function"):
         LAYOUTS["2-axis"].find(Kind.LINEAR, (0.0, 0.0, 0.5))
+
+
+def test_a_layout_survives_pickling_as_the_film_process_receives_it():
+    """`bomi live --video` hands the arm's layout to a spawned process: pickled, it must come back
+    with the same cycle, effects and tables (its per-tick tables once made pickling fail)."""
+    import pickle
+
+    from sim.joystick import LAYOUTS, Kind
+
+    for layout in LAYOUTS.values():
+        copy = pickle.loads(pickle.dumps(layout))
+        assert copy.name == layout.name and copy.modes == layout.modes and copy.effects == layout.effects
+        for mode in layout.modes:
+            for kind in Kind:
+                assert dict(copy.axes(mode, kind)) == dict(layout.axes(mode, kind))
