@@ -32,9 +32,9 @@ NODE_DETECTION_S = 0.5
 # How long record waits for frames of every node of the profile before giving up.
 NODE_WAIT_S = 5.0
 # How long record waits for every node's orientation filter to settle (bomi.gate) before giving up.
-# From its zero state the filter's heading error decays with tau = 1.6 s: even 180 deg is below the
-# gate's 0.5 deg after 1.6 s x ln(360) = 9.4 s, and the gate sees it one window (1.6 s) later, so a
-# person holding still is recorded about 11 s after the stream starts. 60 s leaves five times that to
+# The gate trusts no node before its filter has run the 12 s warm-up (bomi.gate: the worst start's
+# error is below 0.5 deg by then), so a person holding still is recorded about 12-14 s after the
+# stream starts. 60 s leaves four times that to
 # sit still (adjust the headset, stop talking); a node not settled by then has a fault that waiting does
 # not cure (a sensor reading zeros or saturated, a person who cannot hold still, motion nearby).
 SETTLE_WAIT_S = 60.0
