@@ -79,7 +79,7 @@ def test_live_viewer_draws_the_arm_and_its_status_and_closes_cleanly(tmp_path, p
     env.pop("WAYLAND_DISPLAY", None)
     emulator = subprocess.Popen(
         [sys.executable, "-m", "tasks.cli", "emulate", "--participant", "P1", "--to", "pty", "--loss", "0",
-         "--hold", "2", "--neutral", "10", "--duration", "60", "--linger", "1"],   # still while the filter settles
+         "--hold", "2", "--neutral", "18", "--duration", "60", "--linger", "1"],   # still while the filter settles (12 s)
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
     video = tmp_path / "live.mp4"
     try:
@@ -87,7 +87,7 @@ def test_live_viewer_draws_the_arm_and_its_status_and_closes_cleanly(tmp_path, p
         assert port.startswith("/dev/pts/")
         live = subprocess.Popen(
             [sys.executable, "-m", "tasks.cli", "live", "--port", port, "--profile", "P1", "--model",
-             str(p1_model_file), "--duration", "14", "--retries", "0", "--video", str(video)],
+             str(p1_model_file), "--duration", "22", "--retries", "0", "--video", str(video)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         err: list[str] = []
         calibrated = threading.Event()
@@ -122,7 +122,7 @@ def test_live_viewer_draws_the_arm_and_its_status_and_closes_cleanly(tmp_path, p
     assert text_pixels(shot[400:, 900:]) < 50  # (text only where the status is)
     # the film made alongside: the fixed camera with the status line as caption
     frames = imageio.mimread(video, memtest=False)
-    assert 0.5 * 14 * 30 < len(frames) <= 30 * 15, out  # real time at 30 fps (frames repeat if rendering lags)
+    assert 0.5 * 22 * 30 < len(frames) <= 30 * 23, out  # real time at 30 fps (frames repeat if rendering lags)
     assert arm_pixels(np.asarray(frames[-1])[:, :, :3].astype(int)) > 1000
     assert text_pixels(np.asarray(frames[-1])[:32].astype(int)) > 100
 

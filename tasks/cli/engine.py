@@ -124,10 +124,11 @@ class RayCluster:
                     continue
                 yield i, result
         finally:
-            for ref in pending:
-                ray.cancel(ref, force=True)
-            if started_here:
-                ray.shutdown()
+            if started_here:   # its workers end with it; cancelling them first races with their replies
+                ray.shutdown()  # (Ray 2.60's core worker then aborts: "Tried to complete task that was not pending")
+            else:               # a cluster's workers are shared: free them
+                for ref in pending:
+                    ray.cancel(ref, force=True)
 
 
 def import_ray():
