@@ -8,8 +8,8 @@ candidate of ``select_settings`` (each shrinkage of SHRINKAGE_GRID, with and wit
 copies) at every rejection threshold of THRESHOLD_GRID (and none): its CV accuracy, its paired gain
 over plain per held-out hold (mean, standard error, share of holds it wins/loses), and its pass-2
 accuracy. Shows which extras win the within-pass CV and lose across passes, and what their CV win
-looked like. Writes benchmarks/results/new_people_candidates_<name>.{json,md}; the json keeps
-per-hold counts, on which the shipped rule (``bomi.chain.choose_candidate``, ``choose_threshold``) is
+looked like. Writes benchmarks/results/new_people_candidates_<name>.{json,md}; the json (not kept in the
+repository: 0.6-1.6 MB, rewritten by this command) keeps per-hold counts, on which the shipped rule (``bomi.chain.choose_candidate``, ``choose_threshold``) is
 replayed (``replay``: what it would choose, and that choice's pass-2 accuracy against plain's):
 
     python benchmarks/new_people_candidates.py --replay benchmarks/results/new_people_candidates_dev200.json

@@ -122,16 +122,20 @@ def test_combine_and_layout_tables_equal_the_naive_forms():
         LAYOUTS["2-axis"].find(Kind.LINEAR, (0.0, 0.0, 0.5))
 
 
-def test_a_layout_survives_pickling_as_the_film_process_receives_it():
-    """`bomi live --video` hands the arm's layout to a spawned process: pickled, it must come back
-    with the same cycle, effects and tables (its per-tick tables once made pickling fail)."""
-    import pickle
+
+def test_a_layout_survives_the_queue_that_takes_it_to_the_film_process():
+    """`bomi live --video` hands the arm's layout to a spawned process: through a multiprocessing queue
+    it must come back with the same cycle, effects and tables (its per-tick tables once could not)."""
+    import multiprocessing
 
     from sim.joystick import LAYOUTS, Kind
 
+    channel = multiprocessing.get_context("spawn").Queue()
     for layout in LAYOUTS.values():
-        copy = pickle.loads(pickle.dumps(layout))
+        channel.put(layout)
+        copy = channel.get(timeout=10)
         assert copy.name == layout.name and copy.modes == layout.modes and copy.effects == layout.effects
         for mode in layout.modes:
             for kind in Kind:
                 assert dict(copy.axes(mode, kind)) == dict(layout.axes(mode, kind))
+    channel.close()
