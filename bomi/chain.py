@@ -640,8 +640,12 @@ def choose_option(options: Sequence[HoldScores], consistency: float = CONSISTENC
     unless it gains less than REQUIRED_GAIN over the first option, which is then kept. (0: the best,
     the rule before the standard errors; other values only to replay it, benchmarks/new_people_candidates.py.)"""
     best = max(range(len(options)), key=lambda i: options[i].accuracy)
-    chosen = next(i for i, option in enumerate(options)
-                  if i == best or options[best].gain_over(option)[0] <= consistency * options[best].gain_over(option)[1])
+
+    def within(i: int) -> bool:
+        gain, se = options[best].gain_over(options[i])
+        return i == best or gain <= consistency * se
+
+    chosen = next(i for i in range(len(options)) if within(i))
     return chosen if options[chosen].gain_over(options[0])[0] >= REQUIRED_GAIN else 0
 
 
