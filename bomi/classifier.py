@@ -1,12 +1,15 @@
 """LDA classification, optional post-processing, and the paper's proportional output.
 
 scikit-learn fits the classifier as a ``Pipeline``: ``StandardScaler`` (every feature on one scale,
-whatever the person, sensor, unit or mounting), ``PCA`` rotating onto the numerical rank of
-the standardised training windows (FV1-FV3 hold near-duplicate columns: the statistics of an
-8-sample window of a slow signal are almost equal; not whitened, so that a shrinkage keeps damping
-the directions of negligible variance, which whitening would weigh as much as any other: trained so
-on a virtual P1 session with shrinkage 0.001, the live chain read the next session's neutral
-posture as c8), then ``LinearDiscriminantAnalysis``. Every
+whatever the person, sensor, unit or mounting), then ``LinearDiscriminantAnalysis``. Without
+shrinkage (the plain setting) the LDA is scikit-learn's default 'svd' solver, which itself keeps only
+the directions of the (within-class standardised) windows above its rank tolerance: the plain setting
+is exactly plain LDA. With a shrinkage, a ``PCA`` first rotates onto the numerical rank of the
+standardised training windows (FV1-FV3 hold near-duplicate columns: the statistics of an 8-sample
+window of a slow signal are almost equal) and the least-squares solver shrinks in that space; the
+PCA is not whitened, so that a shrinkage keeps damping the directions of negligible variance, which
+whitening would weigh as much as any other (trained so on a virtual P1 session with shrinkage
+0.001, the live chain read the next session's neutral posture as c8). Every
 step is affine, so the fitted pipeline is one linear discriminant on the raw features; decisions
 use it (``Model.coef``, ``Model.intercept``) through ``posteriors``, the same softmax sklearn's
 ``predict_proba`` computes, because sklearn's per-call input validation costs ~90 us per single
@@ -89,8 +92,8 @@ class PipelineParameters:
 
     scaler_mean: np.ndarray      # (F,)
     scaler_scale: np.ndarray     # (F,)
-    pca_mean: np.ndarray         # (F,) mean of the standardised features (about 0)
-    pca_components: np.ndarray   # (R, F)
+    pca_mean: np.ndarray         # (F,) mean of the standardised features (about 0; 0 without a PCA)
+    pca_components: np.ndarray   # (R, F) (the F x F identity without a PCA: the plain setting)
     lda_coef: np.ndarray         # (K, R)
     lda_intercept: np.ndarray    # (K,)
 
@@ -203,29 +206,36 @@ def numerical_rank(features: np.ndarray) -> int:
 
 def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None,
                  priors: np.ndarray | None = None) -> Pipeline:
-    """StandardScaler -> PCA (a rotation onto the numerical rank) -> LDA with the least-squares solver
-    (supports shrinkage, which on standardised features means the same for every person, sensor and
-    unit; the PCA is not whitened, so a shrinkage still damps the directions of negligible variance).
+    """StandardScaler -> LDA. Without shrinkage (None): scikit-learn's default 'svd' solver, whose
+    predictions are plain LDA's to the last window (the scaling does not change them). With one: a PCA
+    (a rotation onto the numerical rank, not whitened, so a shrinkage still damps the directions of
+    negligible variance) between the two and the least-squares solver (supports shrinkage, which on
+    standardised features means the same for every person, sensor and unit).
     ``priors``: class probabilities in sorted label order (None: the class frequencies of ``labels``).
 
     BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
     threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
     """
+    if shrinkage is None:
+        steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd", priors=priors))]
+    else:
+        steps = [("pca", PCA(n_components=numerical_rank(features), svd_solver="full")),
+                 ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
     with threadpool_limits(limits=1, user_api="blas"):
-        return Pipeline([("scale", StandardScaler()),
-                         ("pca", PCA(n_components=numerical_rank(features), svd_solver="full")),
-                         ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
-                        ).fit(features, labels)
+        return Pipeline([("scale", StandardScaler()), *steps]).fit(features, labels)
 
 
 def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParameters]:
-    """(classes, the fitted parameters of every step) of a fitted multi-class ``fit_pipeline``."""
+    """(classes, the fitted parameters of every step) of a fitted multi-class ``fit_pipeline``; a
+    pipeline without a PCA keeps the identity rotation in its place."""
     scale, pca, lda = (pipeline.named_steps[name] for name in ("scale", "pca", "lda"))
     if len(lda.classes_) < 3:
         raise ValueError("need at least three classes (binary LDA has a single discriminant)")
+    n_features = len(scale.mean_)
+    pca_mean, components = ((np.zeros(n_features), np.eye(n_features)) if pca == "passthrough"
+                            else (pca.mean_.copy(), pca.components_.copy()))
     return np.asarray(lda.classes_, dtype=np.int64), PipelineParameters(
-        scale.mean_.copy(), scale.scale_.copy(), pca.mean_.copy(), pca.components_.copy(), lda.coef_.copy(),
-        lda.intercept_.copy())
+        scale.mean_.copy(), scale.scale_.copy(), pca_mean, components, lda.coef_.copy(), lda.intercept_.copy())
 
 
 def posteriors(model: Model, features: np.ndarray) -> np.ndarray:
