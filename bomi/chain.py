@@ -101,10 +101,13 @@ class TrainingWindows:
     recorded: np.ndarray     # (m,) True for the recorded windows, False for the synthesised copies
 
 
-def recorded_priors(labels: np.ndarray, recorded: np.ndarray) -> np.ndarray:
+def recorded_priors(labels: np.ndarray, recorded: np.ndarray) -> np.ndarray | None:
     """Class priors (sorted label order) from the recorded windows alone: a synthesised copy of a motion
     is another example of it, not a sign that the motion is more frequent, so the copies must not
-    lower the prior of the neutral posture (which is never copied)."""
+    lower the prior of the neutral posture (which is never copied). None without copies: the class
+    frequencies, scikit-learn's default (``fit_pipeline`` then fits plain LDA)."""
+    if recorded.all():
+        return None
     classes = np.unique(labels)
     counts = np.array([np.count_nonzero(labels[recorded] == c) for c in classes], dtype=float)
     return counts / counts.sum()

@@ -206,17 +206,19 @@ def numerical_rank(features: np.ndarray) -> int:
 
 def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | str | None,
                  priors: np.ndarray | None = None) -> Pipeline:
-    """StandardScaler -> LDA. Without shrinkage (None): scikit-learn's default 'svd' solver, whose
-    predictions are plain LDA's to the last window (the scaling does not change them). With one: a PCA
-    (a rotation onto the numerical rank, not whitened, so a shrinkage still damps the directions of
-    negligible variance) between the two and the least-squares solver (supports shrinkage, which on
-    standardised features means the same for every person, sensor and unit).
-    ``priors``: class probabilities in sorted label order (None: the class frequencies of ``labels``).
+    """StandardScaler -> LDA. The plain setting (no shrinkage, ``priors`` None: the class frequencies
+    of ``labels``): scikit-learn's default 'svd' solver, whose predictions are plain LDA's to the last
+    window (the scaling does not change them). Otherwise a PCA (a rotation onto the numerical rank, not
+    whitened, so a shrinkage still damps the directions of negligible variance) between the two and
+    the least-squares solver, which takes a shrinkage (on standardised features it means the same for
+    every person, sensor and unit) and weighs each class's covariance by its prior (given priors
+    come with synthesised copies of the motions: the 'svd' solver would pool the covariance over the
+    copies, which then outweigh the recorded neutral posture).
 
     BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
     threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
     """
-    if shrinkage is None:
+    if shrinkage is None and priors is None:
         steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd", priors=priors))]
     else:
         steps = [("pca", PCA(n_components=numerical_rank(features), svd_solver="full")),

@@ -243,29 +243,15 @@ def test_smaller_copies_leave_the_class_priors_to_the_recorded_windows():
     windows, _ = training_windows(training, profile.spec, 100, MotionCopies.of(profile))
     assert np.bincount(windows.labels).tolist() == [1430, 3 * 429, 3 * 429, 3 * 429]
     priors = np.array([1430, 429, 429, 429]) / 2717
-    # the discriminant by hand: S the pooled within-class covariance of every window (copies
-    # included, scikit-learn's maximum-likelihood 1/n), coef_k = S^+ mu_k and intercept_k =
-    # -mu_k' S^+ mu_k / 2 + log prior_k, S^+ inverting S (on each column's within-class scale) where its
-    # singular values exceed plain LDA's tolerance 1e-4; LDA without shrinkage does not depend on an
-    # affine map of the features (the pipeline's standardising) but for a term common to every class
-    x, y = windows.features, windows.labels
-    means = np.array([x[y == c].mean(axis=0) for c in range(4)])
-    within = x - means[y]
-    scale = within.std(axis=0)
-    values, vectors = np.linalg.eigh((within / scale).T @ (within / scale) / len(x))
-    kept = values > 1e-4 ** 2
-    inverse = (vectors[:, kept] / values[kept]) @ vectors[:, kept].T / np.outer(scale, scale)
-    coef = means @ inverse
-    intercept = -0.5 * np.einsum("kf,kf->k", coef, means) + np.log(priors)
+    independent = LinearDiscriminantAnalysis(solver="lsqr", priors=priors).fit(windows.features, windows.labels)
+    # LDA without shrinkage does not depend on an affine map of the features (the pipeline's
+    # standardising and rotating) but for a term common to every class, which no decision sees
     common = lambda a: a - a.mean(axis=0)  # noqa: E731
-    np.testing.assert_allclose(common(model.intercept), common(intercept), rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(common(model.coef), common(coef), rtol=1e-6, atol=1e-6)
-    # the copies' frequencies (neutral 1430/5291, each motion 1287/5291) would give another model:
-    # by log(prior / frequency) per class, 0.82 for the neutral class against the others
-    frequencies = LinearDiscriminantAnalysis().fit(windows.features, windows.labels)
-    shift = np.log(priors / (np.array([1430, 1287, 1287, 1287]) / 5291))
-    np.testing.assert_allclose(common(model.intercept - frequencies.intercept_), common(shift), atol=1e-6)
-    assert shift[0] - shift[1] > 0.8
+    np.testing.assert_allclose(common(model.intercept), common(independent.intercept_), rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(common(model.coef), common(independent.coef_), rtol=1e-7, atol=1e-7)
+    # the copies' frequencies (neutral 1430/5291) would give another model
+    frequencies = LinearDiscriminantAnalysis(solver="lsqr").fit(windows.features, windows.labels)
+    assert np.abs(common(frequencies.intercept_) - common(model.intercept)).max() > 1.0
 
 
 def test_turned_copies_keep_the_size_and_turn_the_direction_by_the_spread():
