@@ -4,7 +4,7 @@
 
 Members: synthetic people drawn by ``tasks.participants.population`` (seeds first-seed ..
 first-seed + people - 1; development used seeds 0-43, 100-139 and 200-339, confirmations
-10100-10129, 10200-10229, 10300-10329, 10400-10429 and 10500-10529), each trained on pass 1 and
+10100-10129, 10200-10229, 10300-10329, 10400-10429, 10500-10529 and 10600-10629), each trained on pass 1 and
 tested on pass 2,
 and P1's five real days (each ordered day pair, 20 members). Every member goes through what
 ``bomi train`` / ``bomi evaluate`` do without ``--profile``: the profile derived from the training
