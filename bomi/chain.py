@@ -431,6 +431,44 @@ class OnlineChain:
             self._calibration = None
             self.set_neutral(offsets)
 
+    def push_many(self, node: np.ndarray, acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray
+                  ) -> tuple[np.ndarray, list[Decision]]:
+        """``push`` of n frames in arrival order ((n,) node indices, (n, 3) raw values each), stage by
+        stage over all of them: each node's fusion by ``NodeFusion.update_many``, the node states at
+        every tick, the windows (``WindowBuffer.push_many``), features, posteriors and vote of every
+        full window at once. Returns the positions of the frames that made a decision and the
+        decisions: what n calls of ``push`` return, to the bit (tests/test_chain_batch.py). A neutral
+        calibration under way takes its frames one by one, as ``push`` does."""
+        n, first = len(node), 0
+        while self._calibration is not None and first < n:
+            self.push(int(node[first]), acc[first].tolist(), gyro[first].tolist(), mag[first].tolist())
+            first += 1
+        node, acc, gyro, mag = node[first:], acc[first:], gyro[first:], mag[first:]
+        previous = np.array(self._state).reshape(len(self.nodes), _WIDTH)
+        per_node, opened = [], -1   # opened: the position from which every node has reported
+        for slot, index in enumerate(self.nodes):
+            mine = np.flatnonzero(node == index)
+            states = np.empty((len(mine) + 1, _WIDTH))   # row 0: the state before these frames
+            states[0] = previous[slot]
+            if len(mine):
+                states[1:, :3] = self._fusion[index].update_many(acc[mine], gyro[mine], mag[mine])
+                states[1:, :3] -= self._neutral[slot]
+                states[1:, 3:] = gyro[mine]
+                if index not in self._seen:
+                    opened = max(opened, int(mine[0]))
+                    self._seen.add(index)
+            elif index not in self._seen:
+                opened = len(node)
+            per_node.append((mine, states))
+        self._state = np.concatenate([states[-1] for _, states in per_node]).tolist()
+        lead = per_node[0][0]
+        ticking = lead[lead >= opened]
+        states = np.hstack([states[np.searchsorted(mine, ticking, side="right")] for mine, states in per_node])
+        indices = self.ticks + np.arange(len(ticking))
+        self.ticks += len(ticking)
+        windows, made = self._window.push_many(states[:, self._components])
+        return ticking[made] + first, self._decide(windows, states[made], indices[made].tolist())
+
     def _tick(self) -> Decision | None:
         index = self.ticks
         self.ticks += 1
@@ -438,20 +476,29 @@ class OnlineChain:
         window = self._window.push(np.array(self._gather(state), dtype=float))
         if window is None:
             return None
+        return self._decide(window[None], [state], [index])[0]
+
+    def _decide(self, windows: np.ndarray, states: Sequence[Sequence[float]], indices: Sequence[int]) -> list[Decision]:
+        """The decisions of full (w, window, C) ``windows``, made at node states ``states`` by ticks ``indices``."""
         model = self.model
-        prob = posteriors(model, features(model.spec.kind, window[None]))[0]
-        best = int(prob.argmax())
-        confidence = float(prob[best])
+        # each window's scores a product of its own ((1, F) x (F, K), stacked): one product over all the
+        # windows would sum in another order (other bits) than the stream's window by window
+        prob = posteriors(model, features(model.spec.kind, windows)[:, None, :])[:, 0]
+        best = prob.argmax(axis=1).tolist()
+        confidence = prob[np.arange(len(best)), best].tolist()
         threshold = model.post.rejection_threshold
-        is_rejected = threshold is not None and confidence < threshold
-        label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(model.classes[best]))
-        cls = self._classes[label]
-        g, amplitude = 0.0, None
-        if label in self._amplitude:
-            base, direction, amplitude = self._amplitude[label]
-            g = float(class_amplitude(state[base:base + 3], direction))
-        return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
-                        rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
+        out = []
+        for k, index in enumerate(indices):
+            is_rejected = threshold is not None and confidence[k] < threshold
+            label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(model.classes[best[k]]))
+            cls = self._classes[label]
+            g, amplitude = 0.0, None
+            if label in self._amplitude:
+                base, direction, amplitude = self._amplitude[label]
+                g = float(class_amplitude(states[k][base:base + 3], direction))
+            out.append(Decision(label=label, name=cls.name, function=cls.function, confidence=confidence[k],
+                                rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index))
+        return out
 
 
 # ---------------------------------------------------------------- settings chosen on the training data
