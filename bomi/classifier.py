@@ -267,6 +267,8 @@ class MajorityVote:
         history.append(label)
         counts[label] = counts.get(label, 0) + 1
         best = max(counts.values())
+        if counts[label] == best:   # the most recent label is among the most frequent
+            return label
         return next(item for item in reversed(history) if counts[item] == best)
 
 

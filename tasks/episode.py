@@ -217,7 +217,7 @@ class LeanFeel:
             self.zero = self.feel.least_lean
 
     def lean_for(self, deflection: float) -> float:
-        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean, 1.0))
+        return min(max(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean), 1.0)
 
     def learn(self, lean: float, deflection: float) -> None:
         if deflection < 1.0:
@@ -226,7 +226,7 @@ class LeanFeel:
     def corrected(self, lean: float, further: bool) -> float:
         """The lean one correction of ``lean`` takes (``lean_step`` further, or less far)."""
         step = self.feel.lean_step if further else -self.feel.lean_step
-        return float(np.clip(lean + step, self.feel.least_lean, 1.0))
+        return min(max(lean + step, self.feel.least_lean), 1.0)
 
 
 @dataclass
