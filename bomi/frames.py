@@ -308,13 +308,18 @@ class FrameParser:
         del buf[:pos]
         return frames
 
+    @property
+    def idle(self) -> bool:
+        """Nothing buffered, held on probation or queued: the next frame is judged on its own."""
+        return not (self._buffer or self._queue or any(self._probation.values()))
+
     def feed_whole(self, data: bytes, now: float | None = None) -> np.ndarray | None:
         """``feed`` in one pass where it would deliver every frame of ``data`` at once and in order:
         nothing buffered or held, and ``data`` back-to-back frames of confirmed IMU nodes, each
         following its node's last frame by the guard's rule (a continuing clean stream). Then the
         frames as ``_FRAME_RECORD`` records, the parser's state advanced as ``feed`` advances it;
         otherwise None, nothing consumed (feed it to ``feed``). tests/test_frames.py compares both."""
-        if self._buffer or self._queue or any(self._probation.values()) or len(data) % FRAME_SIZE:
+        if not self.idle or len(data) % FRAME_SIZE:
             return None
         records = np.frombuffer(data, dtype=_FRAME_RECORD)
         if not (np.all(records["start"] == START_BYTE) and np.all(records["end"] == END_BYTE)):
