@@ -343,6 +343,7 @@ class OnlineChain:
     The other nodes contribute their latest state; no decision is made until every node has
     reported once and the window is full. Node states are kept as Python floats (the same IEEE
     arithmetic as the batch form's arrays) because per-sample numpy calls dominate the cost.
+    ``push_many`` takes many frames at once (a simulated participant's chunk) with the same result.
     """
 
     def __init__(self, model: Model, profile: Profile):
@@ -467,7 +468,7 @@ class OnlineChain:
         indices = self.ticks + np.arange(len(ticking))
         self.ticks += len(ticking)
         windows, made = self._window.push_many(states[:, self._components])
-        return ticking[made] + first, self._decide(windows, states[made], indices[made].tolist())
+        return ticking[made] + first, self._decide_many(windows, states[made], indices[made].tolist())
 
     def _tick(self) -> Decision | None:
         index = self.ticks
@@ -476,29 +477,30 @@ class OnlineChain:
         window = self._window.push(np.array(self._gather(state), dtype=float))
         if window is None:
             return None
-        return self._decide(window[None], [state], [index])[0]
+        return self._decide(posteriors(self.model, features(self.model.spec.kind, window[None]))[0], state, index)
 
-    def _decide(self, windows: np.ndarray, states: Sequence[Sequence[float]], indices: Sequence[int]) -> list[Decision]:
-        """The decisions of full (w, window, C) ``windows``, made at node states ``states`` by ticks ``indices``."""
+    def _decide_many(self, windows: np.ndarray, states: np.ndarray, indices: Sequence[int]) -> list[Decision]:
+        """``_decide`` of (w, window, C) full ``windows`` at node states ``states`` (w rows), in order. Each
+        window's scores a product of its own ((1, F) x (F, K), stacked as (w, 1, F)), as ``_tick``'s: one
+        product over all the windows would sum in another order (other bits)."""
+        prob = posteriors(self.model, features(self.model.spec.kind, windows)[:, None, :])[:, 0]
+        return [self._decide(prob[k], states[k], index) for k, index in enumerate(indices)]
+
+    def _decide(self, prob: np.ndarray, state: Sequence[float], index: int) -> Decision:
+        """The decision of tick ``index`` from the window's (K,) posteriors and the node states then."""
         model = self.model
-        # each window's scores a product of its own ((1, F) x (F, K), stacked): one product over all the
-        # windows would sum in another order (other bits) than the stream's window by window
-        prob = posteriors(model, features(model.spec.kind, windows)[:, None, :])[:, 0]
-        best = prob.argmax(axis=1).tolist()
-        confidence = prob[np.arange(len(best)), best].tolist()
+        best = int(prob.argmax())
+        confidence = float(prob[best])
         threshold = model.post.rejection_threshold
-        out = []
-        for k, index in enumerate(indices):
-            is_rejected = threshold is not None and confidence[k] < threshold
-            label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(model.classes[best[k]]))
-            cls = self._classes[label]
-            g, amplitude = 0.0, None
-            if label in self._amplitude:
-                base, direction, amplitude = self._amplitude[label]
-                g = float(class_amplitude(states[k][base:base + 3], direction))
-            out.append(Decision(label=label, name=cls.name, function=cls.function, confidence=confidence[k],
-                                rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index))
-        return out
+        is_rejected = threshold is not None and confidence < threshold
+        label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(model.classes[best]))
+        cls = self._classes[label]
+        g, amplitude = 0.0, None
+        if label in self._amplitude:
+            base, direction, amplitude = self._amplitude[label]
+            g = float(class_amplitude(state[base:base + 3], direction))
+        return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
+                        rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
 
 
 # ---------------------------------------------------------------- settings chosen on the training data
