@@ -147,6 +147,7 @@ STAGES = (  # (stage, path fragment, function names or None for any); first matc
     ("fusion", "bomi/fusion.py", None),
     ("windows + features", "bomi/features.py", None),
     ("chain (streaming glue)", "bomi/chain.py", None),
+    ("chain (streaming glue)", "tasks/participants/receiver.py", None),
     ("synthesis (virtual participant, link)", "tasks/participants/", None),
     ("IK (DLS, Pinocchio)", "sim/controller.py", None),
     ("IK (DLS, Pinocchio)", "sim/kinematics.py", None),
