@@ -147,6 +147,7 @@ STAGES = (  # (stage, path fragment, function names or None for any); first matc
     ("fusion", "bomi/fusion.py", None),
     ("windows + features", "bomi/features.py", None),
     ("chain (streaming glue)", "bomi/chain.py", None),
+    ("chain (streaming glue)", "tasks/participants/receiver.py", None),
     ("synthesis (virtual participant, link)", "tasks/participants/", None),
     ("IK (DLS, Pinocchio)", "sim/controller.py", None),
     ("IK (DLS, Pinocchio)", "sim/kinematics.py", None),
@@ -233,8 +234,10 @@ INSTRUMENTED = (  # (stage, owner, method): the calls of a control tick timed on
     ("task: outcome", StackingTask, "outcome"),
     ("IK (joint_velocities)", CartesianVelocityController, "joint_velocities"),
     ("synthesis (participant deliveries)", VirtualParticipant, "deliveries"),
-    ("frames (parser)", FrameParser, "feed"),
-    ("chain: fusion, window, features, LDA, vote (push_frame)", OnlineChain, "push_frame"),
+    ("frames (parser, frame by frame)", FrameParser, "feed"),
+    ("frames (parser, a chunk at once)", FrameParser, "feed_whole"),
+    ("chain: fusion, window, features, LDA, vote (push_frame, frame by frame)", OnlineChain, "push_frame"),
+    ("chain: fusion, window, features, LDA, vote (push_many, a chunk at once)", OnlineChain, "push_many"),
 )
 
 

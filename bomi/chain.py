@@ -346,6 +346,7 @@ class OnlineChain:
     The other nodes contribute their latest state; no decision is made until every node has
     reported once and the window is full. Node states are kept as Python floats (the same IEEE
     arithmetic as the batch form's arrays) because per-sample numpy calls dominate the cost.
+    ``push_many`` takes many frames at once (a simulated participant's chunk) with the same result.
     """
 
     def __init__(self, model: Model, profile: Profile):
@@ -434,6 +435,44 @@ class OnlineChain:
             self._calibration = None
             self.set_neutral(offsets)
 
+    def push_many(self, node: np.ndarray, acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray
+                  ) -> tuple[np.ndarray, list[Decision]]:
+        """``push`` of n frames in arrival order ((n,) node indices, (n, 3) raw values each), stage by
+        stage over all of them: each node's fusion by ``NodeFusion.update_many``, the node states at
+        every tick, the windows (``WindowBuffer.push_many``), features, posteriors and vote of every
+        full window at once. Returns the positions of the frames that made a decision and the
+        decisions: what n calls of ``push`` return, to the bit (tests/test_chain_batch.py). A neutral
+        calibration under way takes its frames one by one, as ``push`` does."""
+        n, first = len(node), 0
+        while self._calibration is not None and first < n:
+            self.push(int(node[first]), acc[first].tolist(), gyro[first].tolist(), mag[first].tolist())
+            first += 1
+        node, acc, gyro, mag = node[first:], acc[first:], gyro[first:], mag[first:]
+        previous = np.array(self._state).reshape(len(self.nodes), _WIDTH)
+        per_node, opened = [], -1   # opened: the position from which every node has reported
+        for slot, index in enumerate(self.nodes):
+            mine = np.flatnonzero(node == index)
+            states = np.empty((len(mine) + 1, _WIDTH))   # row 0: the state before these frames
+            states[0] = previous[slot]
+            if len(mine):
+                states[1:, :3] = self._fusion[index].update_many(acc[mine], gyro[mine], mag[mine])
+                states[1:, :3] -= self._neutral[slot]
+                states[1:, 3:] = gyro[mine]
+                if index not in self._seen:
+                    opened = max(opened, int(mine[0]))
+                    self._seen.add(index)
+            elif index not in self._seen:
+                opened = len(node)
+            per_node.append((mine, states))
+        self._state = np.concatenate([states[-1] for _, states in per_node]).tolist()
+        lead = per_node[0][0]
+        ticking = lead[lead >= opened]
+        states = np.hstack([states[np.searchsorted(mine, ticking, side="right")] for mine, states in per_node])
+        indices = self.ticks + np.arange(len(ticking))
+        self.ticks += len(ticking)
+        windows, made = self._window.push_many(states[:, self._components])
+        return ticking[made] + first, self._decide_many(windows, states[made], indices[made].tolist())
+
     def _tick(self) -> Decision | None:
         index = self.ticks
         self.ticks += 1
@@ -441,8 +480,18 @@ class OnlineChain:
         window = self._window.push(np.array(self._gather(state), dtype=float))
         if window is None:
             return None
+        return self._decide(posteriors(self.model, features(self.model.spec.kind, window[None]))[0], state, index)
+
+    def _decide_many(self, windows: np.ndarray, states: np.ndarray, indices: Sequence[int]) -> list[Decision]:
+        """``_decide`` of (w, window, C) full ``windows`` at node states ``states`` (w rows), in order. Each
+        window's scores a product of its own ((1, F) x (F, K), stacked as (w, 1, F)), as ``_tick``'s: one
+        product over all the windows would sum in another order (other bits)."""
+        prob = posteriors(self.model, features(self.model.spec.kind, windows)[:, None, :])[:, 0]
+        return [self._decide(prob[k], states[k], index) for k, index in enumerate(indices)]
+
+    def _decide(self, prob: np.ndarray, state: Sequence[float], index: int) -> Decision:
+        """The decision of tick ``index`` from the window's (K,) posteriors and the node states then."""
         model = self.model
-        prob = posteriors(model, features(model.spec.kind, window[None]))[0]
         best = int(prob.argmax())
         confidence = float(prob[best])
         threshold = model.post.rejection_threshold

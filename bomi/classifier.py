@@ -241,12 +241,12 @@ def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParamet
 
 
 def posteriors(model: Model, features: np.ndarray) -> np.ndarray:
-    """(n, F) -> (n, K) class posteriors: softmax of the linear discriminant scores."""
+    """(..., F) -> (..., K) class posteriors: softmax of the linear discriminant scores."""
     scores = features @ model.coef.T
     scores += model.intercept
-    scores -= np.maximum.reduce(scores, axis=1, keepdims=True)
+    scores -= np.maximum.reduce(scores, axis=-1, keepdims=True)
     np.exp(scores, out=scores)
-    scores /= np.add.reduce(scores, axis=1, keepdims=True)
+    scores /= np.add.reduce(scores, axis=-1, keepdims=True)
     return scores
 
 
@@ -268,16 +268,20 @@ class MajorityVote:
 
     def __init__(self, length: int):
         self._history: deque[int] = deque(maxlen=length)
+        self._counts: dict[int, int] = {}   # of each label in the history
 
     def push(self, label: int) -> int:
-        if self._history.maxlen == 1:   # vote off: the common case, kept cheap for the stream
+        history, counts = self._history, self._counts
+        if history.maxlen == 1:   # vote off: the common case, kept cheap for the stream
             return label
-        self._history.append(label)
-        counts: dict[int, int] = {}
-        for item in self._history:
-            counts[item] = counts.get(item, 0) + 1
+        if len(history) == history.maxlen:
+            counts[history[0]] -= 1   # the oldest label leaves the history
+        history.append(label)
+        counts[label] = counts.get(label, 0) + 1
         best = max(counts.values())
-        return next(item for item in reversed(self._history) if counts[item] == best)
+        if counts[label] == best:   # the most recent label is among the most frequent
+            return label
+        return next(item for item in reversed(history) if counts[item] == best)
 
 
 def majority_vote(labels: np.ndarray, length: int) -> np.ndarray:

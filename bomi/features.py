@@ -153,5 +153,22 @@ class WindowBuffer:
         start = slot + 1
         return self._buffer[start:start + self.length]
 
+    def push_many(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``push`` of (n, C) rows in order, in one pass: (the (w, length, C) windows the pushes
+        return, in order; the positions in ``rows`` of the pushes that return one). The buffer ends
+        as n pushes leave it."""
+        length, count, n = self.length, self._count, len(rows)
+        before = min(count, length - 1)            # the rows a window ending at the first new row reaches back to
+        start = (count - before) % length
+        history = np.concatenate([self._buffer[start:start + before], rows])
+        pushes = count + 1 + np.arange(n)          # each row's push number
+        made = np.flatnonzero((pushes >= length) & ((pushes - length) % self.stride == 0))
+        windows = sliding_windows(history, length)[made + before - (length - 1)]
+        for k in range(max(0, n - length), n):     # the rows still in the buffer, each in its two slots
+            slot = (count + k) % length
+            self._buffer[slot] = self._buffer[slot + length] = rows[k]
+        self._count = count + n
+        return windows, made
+
     def reset(self) -> None:
         self._count = 0

@@ -130,6 +130,18 @@ class SampleIndex:
         index = self._last[frame.node_id] = last + counter_step(last, frame.counter)
         return index
 
+    def many(self, node_ids: np.ndarray, counters: np.ndarray) -> np.ndarray:
+        """The indices of n frames in arrival order at once ((n,) node ids and packet counters), as n calls make them."""
+        counters = np.asarray(counters, dtype=np.int64)
+        out = np.empty(len(counters), dtype=np.int64)
+        for node_id in np.unique(node_ids).tolist():
+            mine = np.flatnonzero(node_ids == node_id)
+            last = self._last.get(node_id, int(counters[mine[0]]) - 1)
+            steps = np.concatenate(([last], counters[mine]))
+            out[mine] = last + np.cumsum((steps[1:] - steps[:-1]) % COUNTER_MODULO)
+            self._last[node_id] = int(out[mine[-1]])
+        return out
+
 
 def encode_imu_frame(frame: ImuFrame) -> bytes:
     """The 32 bytes the base station sends for ``frame``."""
@@ -202,13 +214,7 @@ def _delivered_whole(records: np.ndarray) -> bool:
 def sample_indices(node_ids: np.ndarray, counters: np.ndarray) -> np.ndarray:
     """``SampleIndex`` of a whole sequence of frames at once: (n,) node ids and packet counters in
     arrival order -> (n,) per-node sample indices (first frame: its counter; then + ``counter_step``)."""
-    counters = np.asarray(counters, dtype=np.int64)
-    out = np.empty(len(counters), dtype=np.int64)
-    for node_id in np.unique(node_ids):
-        mine = np.flatnonzero(node_ids == node_id)
-        steps = np.diff(counters[mine]) % COUNTER_MODULO
-        out[mine] = counters[mine[0]] + np.concatenate(([0], np.cumsum(steps)))
-    return out
+    return SampleIndex().many(node_ids, counters)
 
 
 def encode_safety_key_frame(event: int, counter: int, period_ms: int = DEFAULT_PERIOD_MS) -> bytes:
@@ -301,6 +307,49 @@ class FrameParser:
             pos = start + FRAME_SIZE
         del buf[:pos]
         return frames
+
+    @property
+    def idle(self) -> bool:
+        """Nothing buffered, held on probation or queued: the next frame is judged on its own."""
+        return not (self._buffer or self._queue or any(self._probation.values()))
+
+    def feed_whole(self, data: bytes, now: float | None = None) -> np.ndarray | None:
+        """``feed`` in one pass where it would deliver every frame of ``data`` at once and in order:
+        nothing buffered or held, and ``data`` back-to-back frames of confirmed IMU nodes, each
+        following its node's last frame by the guard's rule (a continuing clean stream). Then the
+        frames as ``_FRAME_RECORD`` records, the parser's state advanced as ``feed`` advances it;
+        otherwise None, nothing consumed (feed it to ``feed``). tests/test_frames.py compares both."""
+        if not self.idle or len(data) % FRAME_SIZE:
+            return None
+        records = np.frombuffer(data, dtype=_FRAME_RECORD)
+        if not (np.all(records["start"] == START_BYTE) and np.all(records["end"] == END_BYTE)):
+            return None
+        node, counter = records["node_id"], records["counter"].astype(np.int64)
+        nodes = []
+        for node_id in np.unique(node).tolist():
+            mine = np.flatnonzero(node == node_id)
+            last = self._last.get(node_id)
+            if last is None or np.any(records["period_ms"][mine] != last.period_ms):
+                return None
+            counters = np.concatenate(([last.counter], counter[mine]))
+            steps = (counters[1:] - counters[:-1]) % COUNTER_MODULO
+            if np.any((steps < 1) | (steps > self.max_counter_gap)):
+                return None
+            nodes.append((node_id, mine, steps))
+        self.frames_accepted += len(records)
+        for node_id, mine, steps in nodes:
+            end = records[mine[-1]]
+            frame = ImuFrame(node_id, int(end["period_ms"]), int(end["counter"]), *(tuple(end[name].tolist())
+                                                                                  for name in ("mag", "gyro", "acc")))
+            stats = self.nodes[node_id]   # its last counter is the last frame's (nothing held)
+            stats.lost += int(steps.sum()) - len(steps)
+            stats.frames += len(mine)
+            stats.period_ms, stats.last_counter = frame.period_ms, frame.counter
+            if now is not None:
+                stats.first_time = now if stats.first_time is None else stats.first_time
+                stats.last_time = now
+            self._last[node_id] = frame
+        return records
 
     def _accept(self, buf: bytearray, start: int, now: float | None) -> list[ImuFrame]:
         self.frames_accepted += 1

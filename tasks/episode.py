@@ -18,7 +18,7 @@ import numpy as np
 
 from bomi.chain import Decision, OnlineChain, train
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
-from bomi.frames import SAMPLE_PERIOD_S, FrameParser, SampleIndex
+from bomi.frames import SAMPLE_PERIOD_S
 from bomi.errors import BomiError
 from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
@@ -31,6 +31,7 @@ from tasks.human import HumanOperator, load_human
 from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
+from tasks.participants.receiver import Receiver
 from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
                            StickIntent, load_operator, norm)
 from tasks.stacking import StackingTask, TaskConfig
@@ -216,7 +217,7 @@ class LeanFeel:
             self.zero = self.feel.least_lean
 
     def lean_for(self, deflection: float) -> float:
-        return float(np.clip(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean, 1.0))
+        return min(max(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean), 1.0)
 
     def learn(self, lean: float, deflection: float) -> None:
         if deflection < 1.0:
@@ -225,7 +226,7 @@ class LeanFeel:
     def corrected(self, lean: float, further: bool) -> float:
         """The lean one correction of ``lean`` takes (``lean_step`` further, or less far)."""
         step = self.feel.lean_step if further else -self.feel.lean_step
-        return float(np.clip(lean + step, self.feel.least_lean, 1.0))
+        return min(max(lean + step, self.feel.least_lean), 1.0)
 
 
 @dataclass
@@ -276,7 +277,7 @@ class BomiChannel:
         """``calibrate``: warm up and take the neutral posture here, on ``chain``, before the task's
         clock starts (False: the frames go elsewhere, e.g. a live loop that calibrates itself)."""
         self.participant, self.chain, self.profile = participant, chain, profile
-        self.parser = FrameParser()
+        self.receiver = Receiver(chain)
         self.controls = profile_controls(profile)
         self._label_of = {cls.function: cls.label for cls in profile.classes}
         self._function_of = {cls.label: cls.function for cls in profile.classes}
@@ -290,7 +291,6 @@ class BomiChannel:
         self._patience = participant.params.reaction_s + participant.params.onset_s + participant.params.feel.watch_s
         # the body starts moving reaction_s after an intent: that much of the person's reaction is here
         self.body_reaction = participant.params.reaction_s
-        self._sample_index = SampleIndex()
         self._decided: int | None = None  # the label of the chain's latest decision
         self.stick = DecisionStick()
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
@@ -302,32 +302,31 @@ class BomiChannel:
         self.clock_offset = 0.0
         if not calibrate:
             return
-        self._feed(participant.advance(WARMUP_S), record=False)
+        self.receiver.take(participant.deliveries(WARMUP_S))
+        self.receiver.until(WARMUP_S)
         chain.begin_neutral_calibration()
         t = WARMUP_S
         while chain.calibrating:
             t += 0.1
-            self._feed(participant.advance(t), record=False)
+            self.receiver.take(participant.deliveries(t))
+            self.receiver.until(t)
         self.clock_offset = t
 
-    def _feed(self, data: bytes, record: bool = True) -> list[Decision]:
-        decisions = []
-        for frame in self.parser.feed(data):
-            sample = self._sample_index(frame)
-            decision = self.chain.push_frame(frame)
-            if decision is not None:
-                decisions.append(decision)
-                if record:
-                    self._rows.append((sample, decision.label, decision.gamma, decision.nu))
-        return decisions
+    def _made(self, now: float, t_end: float) -> Delivery | None:
+        """A new chunk of the participant's frames when frames of samples not made yet could arrive by
+        ``t_end``: samples are made in chunks as long as the lookahead allows (each chunk costs a call
+        of the synthesis: fewer, longer chunks; the same samples, frames and arrival times, as a chunk's
+        samples do not depend on where it was cut)."""
+        if t_end <= self._asked_until:
+            return None
+        self._asked_until = max(t_end, now + self._lookahead)
+        return self.participant.deliveries(self._asked_until)
 
     def arrived(self, now: float, t_end: float) -> bytes:
-        """Frames arriving by ``t_end``; samples are made in chunks as long as the lookahead allows
-        (each chunk costs a call of the synthesis: fewer, longer chunks; the same samples, frames and
-        arrival times, as a chunk's samples do not depend on where it was cut)."""
-        if t_end > self._asked_until:  # frames of samples not made yet could arrive by t_end
-            self._asked_until = max(t_end, now + self._lookahead)
-            self._queue.append(self.participant.deliveries(self._asked_until))
+        """The bytes of the frames arriving by ``t_end`` (for a receiver of its own: a live loop)."""
+        made = self._made(now, t_end)
+        if made is not None:
+            self._queue.append(made)
         arrived = []
         while self._queue:   # (Delivery.until's split, kept as an index: no slicing of the rest every tick)
             first = self._queue[0]
@@ -356,7 +355,12 @@ class BomiChannel:
         """``seen``: the hand's velocity as a fraction of full speed, in the arm's ``mode``: what the
         participant watches to judge whether to lean further or less."""
         self.perform(intent, t, seen, mode)
-        return self.answered(self._feed(self.arrived(self.clock_offset + t, self.clock_offset + t_end)))
+        made = self._made(self.clock_offset + t, self.clock_offset + t_end)
+        if made is not None:
+            self.receiver.take(made)
+        decided = self.receiver.until(self.clock_offset + t_end)
+        self._rows += [(sample, decision.label, decision.gamma, decision.nu) for sample, decision in decided]
+        return self.answered([decision for _, decision in decided])
 
     def answered(self, decisions: list[Decision]) -> JoystickState:
         """The chain's ``decisions`` reach the stick (what the participant then sees the arm answer)."""

@@ -125,21 +125,23 @@ def test_update_follows_the_documented_formulas_with_any_calibration(seed):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.lists(st.integers(0, 80), max_size=4))
+@given(st.integers(0, 2**32 - 1), st.lists(st.integers(0, 300), max_size=4))
 def test_update_many_is_update_sample_by_sample_to_the_bit(seed, cuts):
     """The batch filter (numpy for the products, math's libm mapped, loops for the recursions) against
-    the per-sample ``update`` as the naive reference, over any calibration and cut into pieces."""
+    the per-sample ``update`` as the naive reference, over any calibration, whole (the array passes) and cut
+    into pieces (those shorter than ARRAY_PASSES_FROM go through ``update``)."""
     rng = np.random.default_rng(seed)
     mounting = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     mounting *= np.sign(np.linalg.det(mounting))
     cal = NodeCalibration(hard_iron=rng.normal(scale=100, size=3), soft_iron=np.eye(3) * 1e-4 + rng.normal(scale=1e-5, size=(3, 3)),
                           mounting=mounting)
-    acc, gyro, mag = (rng.integers(-32768, 32768, (80, 3)) for _ in range(3))
+    acc, gyro, mag = (rng.integers(-32768, 32768, (300, 3)) for _ in range(3))
     acc[::7] = 0                                  # zero tilt components and signed zeros on the way
     reference = NodeFusion(cal)
     expected = np.array([reference.update(a, g, m) for a, g, m in zip(acc.tolist(), gyro.tolist(), mag.tolist())])
     node, pieces = NodeFusion(cal), []
-    bounds = [0, *sorted(cuts), 80]
+    assert np.array_equal(NodeFusion(cal).update_many(acc, gyro, mag).view(np.int64), expected.view(np.int64))
+    bounds = [0, *sorted(cuts), 300]
     for lo, hi in zip(bounds, bounds[1:]):
         pieces.append(node.update_many(acc[lo:hi], gyro[lo:hi], mag[lo:hi]))
     got = np.vstack(pieces)

@@ -13,7 +13,8 @@ from bomi.frames import FrameParser, RowAssembler, SafetyKey, SampleIndex, encod
 from bomi.fusion import DT, FusedRows
 from bomi.profiles import load_profile
 from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
-                               load_participant, minimum_jerk, record_stream, session_recording)
+                               fir_filter, load_participant, minimum_jerk, record_stream, session_recording,
+                               tremor_filter)
 from helpers import edited_copy
 
 P1_TOML = PARTICIPANT_DIR / "P1.toml"
@@ -147,6 +148,19 @@ def test_spasms_are_bursts_up_to_ten_degrees():
     assert 5.0 < deviation[single].max() <= params.spasm.max_deg + 1e-9
     onsets = np.flatnonzero(np.diff((deviation > 0.01).astype(int)) == 1)
     assert 15 <= len(onsets) <= 45            # Poisson(0.1/s x 300 s = 30), bursts can merge
+
+
+@pytest.mark.parametrize("n", [1, 23, 700])
+def test_fir_filter_is_scipy_lfilter_to_the_bit(p1, n):
+    """The tremor's FIR filter, chunk after chunk, against scipy.signal.lfilter with the same state."""
+    b, _ = tremor_filter(p1[0].tremor_spectrum)
+    rng = np.random.default_rng(n)
+    state = expected_state = rng.standard_normal((len(b) - 1, 9))
+    for _ in range(3):
+        x = rng.standard_normal((n, 9))
+        expected, expected_state = scipy.signal.lfilter(b, [1.0], x, axis=0, zi=expected_state)
+        got, state = fir_filter(b, x, state)
+        assert np.array_equal(got, expected) and np.array_equal(state, expected_state)
 
 
 # --------------------------------------------------------------------------------------- frames

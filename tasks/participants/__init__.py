@@ -6,6 +6,8 @@ Map (data flows down):
   ``VirtualParticipant`` performing classes, calibration sessions) -> node angles.
 - ``imu_synth``: node angles -> raw accelerometer/gyroscope/magnetometer counts -> deliveries of
   base-station samples (link model, sensor noise).
+- ``receiver``: the host end of the link in a simulated episode: a chunk of deliveries through the
+  parser and the streaming chain at once, each decision handed out at its frame's arrival.
 - ``wire``: a participant as base-station byte blocks (``bomi emulate --participant``).
 - ``twin``: the fitter (``bomi twin``) of a participant to a person's calibration recording(s), with
   per-parameter provenance and the recording's protocol (``bomi synth`` performs it); ``P1.toml`` is

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -50,8 +51,10 @@ class EarthField:
         return self.strength_lsb * np.array([np.sin(dip), -np.cos(dip), 0.0])
 
 
+@cache
 def corrected_units(cal: NodeCalibration) -> float:
-    """Raw LSB -> the node's corrected magnetometer units: the soft-iron matrix's mean gain (cube-root determinant)."""
+    """Raw LSB -> the node's corrected magnetometer units: the soft-iron matrix's mean gain (cube-root
+    determinant); once per calibration (a chunk of the stream asks for it per node)."""
     return float(np.cbrt(abs(np.linalg.det(np.array(cal.soft_iron)))))
 
 
@@ -164,8 +167,8 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
         acc = to_sensor_axes(acc_body[:, node], cal) * ACC_LSB_PER_G
         gyro = to_sensor_axes(rate[:, node], cal) * GYRO_LSB_PER_DEG_S
         mag = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * corrected_units(cal), cal), cal)
-        values = np.hstack([acc, gyro, mag]) + rng.standard_normal((n, 9)) * scale
-        out.append(RawImu(acc=to_int16(values[:, 0:3]), gyro=to_int16(values[:, 3:6]), mag=to_int16(values[:, 6:9])))
+        counts = to_int16(np.hstack([acc, gyro, mag]) + rng.standard_normal((n, 9)) * scale)
+        out.append(RawImu(acc=counts[:, 0:3], gyro=counts[:, 3:6], mag=counts[:, 6:9]))
     return out
 
 
