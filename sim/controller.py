@@ -43,6 +43,11 @@ class Workspace:
     floor: float           # lowest height for any point of the hand
     hand_box: np.ndarray   # (8, 3) corners in the tool frame
 
+    def __post_init__(self) -> None:
+        # ``clamp`` runs every control tick: its bounds as Python floats, made once
+        lower = tuple(float(v) for v in self.lower)
+        object.__setattr__(self, "_bounds", (lower, tuple(max(lo, float(hi)) for lo, hi in zip(lower, self.upper))))
+
     @classmethod
     def from_config(cls, config: WorkspaceConfig, shoulder: np.ndarray, table_top: float,
                     hand_box: np.ndarray) -> Workspace:
@@ -58,7 +63,8 @@ class Workspace:
         """The nearest allowed point: onto the reach shell, then into the box and above the floor.
 
         The box and the floor come last, so they always hold (the table is solid); where they
-        disagree with the shell, the shell gives way.
+        disagree with the shell, the shell gives way.  (On Python floats: the same comparisons as
+        ``np.minimum(np.maximum(point, lower), np.maximum(lower, upper))``, at a fraction of the cost.)
         """
         offset = point - self.shoulder
         distance = math.sqrt(offset @ offset)
@@ -66,9 +72,13 @@ class Workspace:
             point = self.shoulder + offset * (self.reach_max / distance)
         elif 0 < distance < self.reach_min:
             point = self.shoulder + offset * (self.reach_min / distance)
-        lower = self.lower.copy()
-        lower[2] = max(lower[2], self.lowest_tool_height(rotation))
-        return np.minimum(np.maximum(point, lower), np.maximum(lower, self.upper))
+        (lx, ly, lz), (ux, uy, uz) = self._bounds
+        floor = self.lowest_tool_height(rotation)
+        if floor > lz:
+            lz = floor
+            uz = max(floor, float(self.upper[2]))
+        x, y, z = point.tolist()
+        return np.array([min(max(x, lx), ux), min(max(y, ly), uy), min(max(z, lz), uz)])
 
     def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
         return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
@@ -109,8 +119,8 @@ class CartesianVelocityController:
         self.target_position = np.zeros(3)
         self.target_rotation = np.eye(3)
         # where a limited joint stops (a margin short of its range): the same every tick
-        self._stop_lower = limits.lower + config.joint_limit_margin
-        self._stop_upper = limits.upper - config.joint_limit_margin
+        self._stop_lower = (limits.lower + config.joint_limit_margin).tolist()
+        self._stop_upper = (limits.upper - config.joint_limit_margin).tolist()
 
     def reset(self, q: np.ndarray) -> None:
         """Hold the pose the arm is in."""
@@ -121,15 +131,15 @@ class CartesianVelocityController:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
         position, rotation = self.kinematics.tool_pose(q)
         previous_position, previous_rotation = self.target_position, self.target_rotation
-        feedforward, turn = self._advance_target(position, rotation, np.asarray(linear, float),
-                                                 np.asarray(angular, float))
-        twist = feedforward + np.concatenate((
-            self.config.position_gain * (self.target_position - position),
-            self.config.orientation_gain * turn))
+        angular = np.asarray(angular, float)
+        linear_ff, turn = self._advance_target(position, rotation, np.asarray(linear, float), angular)
+        # the feedforward twist (linear_ff, angular) plus the pull toward the target
+        twist = np.concatenate((linear_ff + self.config.position_gain * (self.target_position - position),
+                                angular + self.config.orientation_gain * turn))
         jacobian = self.kinematics.jacobian(q)
         qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
         blocked = self._blocked_joints(q, qd)
-        if np.logical_or.reduce(blocked):  # blocked.any() without the method's wrapper
+        if blocked:
             jacobian[:, blocked] = 0.0
             qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
             qd[blocked] = 0.0
@@ -140,12 +150,15 @@ class CartesianVelocityController:
             self.target_position = previous_position + scale * (self.target_position - previous_position)
             self.target_rotation = pin.exp3(scale * rotation_error(self.target_rotation, previous_rotation)) \
                 @ previous_rotation
-        return qd * scale
+            return qd * scale
+        return qd
 
     def _advance_target(self, position, rotation, linear, angular) -> tuple[np.ndarray, np.ndarray]:
-        """Move the target by one tick of the command inside the walls; return the feedforward twist
-        and the rotation error (``rotation_error``) from the hand's ``rotation`` to the new target."""
-        self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
+        """Move the target by one tick of the command inside the walls; return the feedforward
+        linear velocity and the rotation error (``rotation_error``) from the hand's ``rotation`` to
+        the new target."""
+        if angular.any():  # (no turn leaves the target's rotation as it is: exp3(0) is the identity)
+            self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
         walled = self.workspace.clamp(self.target_position + linear * self.dt, self.target_rotation)
         linear_ff = (walled - self.target_position) / self.dt
         self.target_position = walled
@@ -160,8 +173,10 @@ class CartesianVelocityController:
         if angle > max_angle:
             self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
             turn = rotation_error(self.target_rotation, rotation)
-        return np.concatenate((linear_ff, angular)), turn
+        return linear_ff, turn
 
-    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Limited joints within the margin of a range end and moving further toward it."""
-        return ((q <= self._stop_lower) & (qd < 0)) | ((q >= self._stop_upper) & (qd > 0))
+    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> list[int]:
+        """Limited joints within the margin of a range end and moving further toward it (indices;
+        on Python floats, the same comparisons as on arrays at a fraction of the cost)."""
+        return [j for j, (a, v, lo, hi) in enumerate(zip(q.tolist(), qd.tolist(), self._stop_lower, self._stop_upper))
+                if (a <= lo and v < 0) or (a >= hi and v > 0)]

@@ -44,6 +44,10 @@ class Mode(enum.Enum):
     WRIST = "wrist"
     FINGERS = "fingers"
 
+    # Members are singletons: hashed by identity in C, not by enum's Python ``__hash__`` (tables keyed
+    # by mode are read a dozen times per control tick).  Equality is identity either way.
+    __hash__ = object.__hash__
+
 
 BUTTON_STEP = {"B1": 1, "B2": -1}
 
@@ -66,6 +70,8 @@ class Kind(enum.Enum):
     LINEAR = "move"  # the hand along ``axis`` (world, unit) at full_speed * deflection
     ANGULAR = "turn"  # the hand about ``axis`` (world, unit) through the tool point at wrist_speed * deflection
     FINGERS = "fingers"  # the fingers at the rate ``axis`` * deflection (+1 closes)
+
+    __hash__ = object.__hash__  # as Mode's
 
 
 @dataclass(frozen=True)
