@@ -60,13 +60,14 @@ class ArmSim:
         self.controller = CartesianVelocityController(self.kinematics, self.limits, self.workspace,
                                                       self.config.control, self.dt)
         self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed, layout)
-        self.finger_target = np.zeros(3)
+        self.finger_target: list[float] = [0.0, 0.0, 0.0]  # the fingers' servo targets (rad)
         self._cube_quat_index = np.array([np.arange(a + 3, a + 7) for a in self.scene.cube_qpos], dtype=np.intp)
         # geom id -> finger (0, 1, 2) and -> cube (0 .. n-1): a contact's role looked up, not searched for
         self._finger_of = {g: i for i, geoms in enumerate(self.scene.finger_geoms) for g in geoms}
         self._cube_of = {g: k for k, g in enumerate(self.scene.cube_geoms.tolist())}
         self._finger_span = self.scene.finger_range[:, 1] - self.scene.finger_range[:, 0]
-        self._finger_limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1].copy()
+        self._finger_limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1].tolist()
+        self._finger_bounds = self.scene.finger_range.tolist()  # (lower, upper) per finger
         # the addresses read and written every control tick
         self._arm_q, self._finger_q = as_slice(self.scene.arm_qpos), as_slice(self.scene.finger_qpos)
         self._arm_ctrl, self._finger_ctrl = as_slice(self.scene.arm_actuators), as_slice(self.scene.finger_actuators)
@@ -154,7 +155,7 @@ class ArmSim:
         mujoco.mj_forward(self.model, self.data)
         self.controller.reset(start)
         self.joystick.reset()
-        self.finger_target = self.data.qpos[self.scene.finger_qpos].copy()
+        self.finger_target = self.data.qpos[self.scene.finger_qpos].tolist()
 
     # -- control ---------------------------------------------------------------------------------
 
@@ -172,15 +173,16 @@ class ArmSim:
         self.data.ctrl[self._finger_ctrl] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
         mujoco.mj_step(self.model, self.data, nstep=self.config.physics.substeps)
 
-    def _finger_velocities(self, rate: float) -> np.ndarray:
-        """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing."""
+    def _finger_velocities(self, rate: float) -> list[float]:
+        """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing.
+        (On Python floats: the same sums, products and bounds as on arrays of three.)"""
         control = self.config.control
-        lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
-        self.finger_target = np.minimum(np.maximum(self.finger_target + rate * control.finger_speed * self.dt,
-                                                   lower), upper)
-        velocity = control.finger_gain * (self.finger_target - self.data.qpos[self._finger_q])
-        limit = self._finger_limit
-        return np.minimum(np.maximum(velocity, -limit), limit)
+        step, gain = rate * control.finger_speed * self.dt, control.finger_gain
+        self.finger_target = [min(max(target + step, lower), upper)
+                              for target, (lower, upper) in zip(self.finger_target, self._finger_bounds)]
+        return [min(max(gain * (target - q), -limit), limit)
+                for target, q, limit in zip(self.finger_target, self.data.qpos[self._finger_q].tolist(),
+                                            self._finger_limit)]
 
     # -- read-outs -------------------------------------------------------------------------------
 

@@ -143,6 +143,8 @@ class Phase(enum.Enum):
     DESCEND = "descend"
     RISE_TO_TURN = "rise to turn"
 
+    __hash__ = object.__hash__  # members are singletons: hashed by identity in C (sim.joystick.Mode's)
+
 
 @dataclass(frozen=True)
 class Goal:
