@@ -72,6 +72,12 @@ class ArmSim:
         self._arm_q, self._finger_q = as_slice(self.scene.arm_qpos), as_slice(self.scene.finger_qpos)
         self._arm_ctrl, self._finger_ctrl = as_slice(self.scene.arm_actuators), as_slice(self.scene.finger_actuators)
         self._cube_rows = as_slice(self.scene.cube_geoms)
+        # MjData's arrays keep their buffers for its lifetime: the ones read every control tick are
+        # fetched once (each attribute read of MjData makes a new array object)
+        self._qpos, self._geom_xpos = self.data.qpos, self.data.geom_xpos
+        self._tool_xpos = self.data.site_xpos[self.scene.tool_site]  # live views of the tool site's row
+        self._tool_xmat = self.data.site_xmat[self.scene.tool_site]
+        self._finger_lower = self.scene.finger_range[:, 0].copy()
         self._renderer: FrameRenderer | None = None
         self.reset()
 
@@ -181,7 +187,7 @@ class ArmSim:
         self.finger_target = [min(max(target + step, lower), upper)
                               for target, (lower, upper) in zip(self.finger_target, self._finger_bounds)]
         return [min(max(gain * (target - q), -limit), limit)
-                for target, q, limit in zip(self.finger_target, self.data.qpos[self._finger_q].tolist(),
+                for target, q, limit in zip(self.finger_target, self._qpos[self._finger_q].tolist(),
                                             self._finger_limit)]
 
     # -- read-outs -------------------------------------------------------------------------------
@@ -192,31 +198,36 @@ class ArmSim:
 
     @property
     def arm_qpos(self) -> np.ndarray:
-        return self.data.qpos[self._arm_q].copy()
+        return self._qpos[self._arm_q].copy()
 
     @property
     def tool_position(self) -> np.ndarray:
-        return self.data.site_xpos[self.scene.tool_site].copy()
+        return self._tool_xpos.copy()
 
     @property
     def tool_rotation(self) -> np.ndarray:
-        return self.data.site_xmat[self.scene.tool_site].reshape(3, 3).copy()
+        return self._tool_xmat.reshape(3, 3).copy()
+
+    @property
+    def tool_rotation_rows(self) -> list[float]:
+        """The tool's rotation matrix as 9 Python floats, row after row (what a per-tick reader needs)."""
+        return self._tool_xmat.tolist()
 
     @property
     def finger_closure(self) -> float:
         """Mean finger closure: 0 fully open, 1 fully closed."""
-        closures = (self.data.qpos[self._finger_q] - self.scene.finger_range[:, 0]) / self._finger_span
+        closures = (self._qpos[self._finger_q] - self._finger_lower) / self._finger_span
         return float(np.add.reduce(closures)) / len(closures)  # np.mean's sum and division
 
     @property
     def cube_positions(self) -> np.ndarray:
         """(n, 3) cube centres."""
-        return self.data.geom_xpos[self._cube_rows].copy()
+        return self._geom_xpos[self._cube_rows].copy()
 
     @property
     def cube_quats(self) -> np.ndarray:
         """(n, 4) cube orientations (w, x, y, z)."""
-        return self.data.qpos[self._cube_quat_index]
+        return self._qpos[self._cube_quat_index]
 
     @property
     def mode(self) -> Mode:

@@ -102,7 +102,7 @@ class StackingTask:
 
     def view(self) -> View:
         sim = self.sim
-        r = sim.data.site_xmat[sim.scene.tool_site].tolist()  # the tool's rotation matrix, row after row
+        r = sim.tool_rotation_rows
         return View(
             t=sim.time,
             hand_pos=sim.tool_position,
