@@ -129,14 +129,13 @@ class CartesianVelocityController:
 
     def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
-        position, rotation = self.kinematics.tool_pose(q)
+        position, rotation, jacobian = self.kinematics.pose_and_jacobian(q)
         previous_position, previous_rotation = self.target_position, self.target_rotation
         angular = np.asarray(angular, float)
         linear_ff, turn = self._advance_target(position, rotation, np.asarray(linear, float), angular)
         # the feedforward twist (linear_ff, angular) plus the pull toward the target
         twist = np.concatenate((linear_ff + self.config.position_gain * (self.target_position - position),
                                 angular + self.config.orientation_gain * turn))
-        jacobian = self.kinematics.jacobian(q)
         qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
         blocked = self._blocked_joints(q, qd)
         if blocked:
