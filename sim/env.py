@@ -65,7 +65,7 @@ class ArmSim:
         # geom id -> finger (0, 1, 2) and -> cube (0 .. n-1): a contact's role looked up, not searched for
         self._finger_of = {g: i for i, geoms in enumerate(self.scene.finger_geoms) for g in geoms}
         self._cube_of = {g: k for k, g in enumerate(self.scene.cube_geoms.tolist())}
-        self._finger_span = self.scene.finger_range[:, 1] - self.scene.finger_range[:, 0]
+        self._finger_span = (self.scene.finger_range[:, 1] - self.scene.finger_range[:, 0]).tolist()
         self._finger_limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1].tolist()
         self._finger_bounds = self.scene.finger_range.tolist()  # (lower, upper) per finger
         # the addresses read and written every control tick
@@ -77,7 +77,7 @@ class ArmSim:
         self._qpos, self._geom_xpos = self.data.qpos, self.data.geom_xpos
         self._tool_xpos = self.data.site_xpos[self.scene.tool_site]  # live views of the tool site's row
         self._tool_xmat = self.data.site_xmat[self.scene.tool_site]
-        self._finger_lower = self.scene.finger_range[:, 0].copy()
+        self._finger_lower = self.scene.finger_range[:, 0].tolist()
         self._renderer: FrameRenderer | None = None
         self.reset()
 
@@ -216,8 +216,13 @@ class ArmSim:
     @property
     def finger_closure(self) -> float:
         """Mean finger closure: 0 fully open, 1 fully closed."""
-        closures = (self._qpos[self._finger_q] - self._finger_lower) / self._finger_span
-        return float(np.add.reduce(closures)) / len(closures)  # np.mean's sum and division
+        # np.mean's sum (left to right) and division, on Python floats
+        closures = [(q - lower) / span for q, lower, span in zip(self._qpos[self._finger_q].tolist(), self._finger_lower,
+                                                                  self._finger_span)]
+        total = closures[0]
+        for closure in closures[1:]:
+            total += closure
+        return total / len(closures)
 
     @property
     def cube_positions(self) -> np.ndarray:

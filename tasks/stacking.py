@@ -93,6 +93,8 @@ class StackingTask:
         # read every control tick: as Python floats, made once
         self._table_lo, self._table_hi = self.table_lo.tolist(), self.table_hi.tolist()
         self._target_xy = self.target_pos[:2].tolist()
+        self._target_xy_array = self.target_pos[:2].copy()  # the view's, the same every tick: read-only
+        self._target_xy_array.flags.writeable = False
         self._still_since: float | None = None
         self._previous: list[list[float]] | None = None
 
@@ -113,7 +115,7 @@ class StackingTask:
             cube_pos=tuple(sim.cube_positions),
             cube_yaw=tuple(cube_yaw(q) for q in sim.cube_quats.tolist()),
             touching=tuple(sim.cube_in_grasp().tolist()),
-            target_xy=self.target_pos[:2].copy(),
+            target_xy=self._target_xy_array,
             table_z=self.table_z,
             cube_size=self.cube_size,
         )
