@@ -74,7 +74,8 @@ class ArmSim:
         self._cube_rows = as_slice(self.scene.cube_geoms)
         # MjData's arrays keep their buffers for its lifetime: the ones read every control tick are
         # fetched once (each attribute read of MjData makes a new array object)
-        self._qpos, self._geom_xpos = self.data.qpos, self.data.geom_xpos
+        self._qpos, self._geom_xpos, self._ctrl = self.data.qpos, self.data.geom_xpos, self.data.ctrl
+        self._substeps = self.config.physics.substeps
         self._tool_xpos = self.data.site_xpos[self.scene.tool_site]  # live views of the tool site's row
         self._tool_xmat = self.data.site_xmat[self.scene.tool_site]
         self._finger_lower = self.scene.finger_range[:, 0].tolist()
@@ -174,10 +175,10 @@ class ArmSim:
     def step_twist(self, linear: Sequence[float], angular: Sequence[float] = (0.0, 0.0, 0.0),
                    finger: float = 0.0) -> None:
         """One control tick below the joystick: a tool twist (m/s, rad/s, world axes), finger rate in [-1, 1]."""
-        q = self.arm_qpos
-        self.data.ctrl[self._arm_ctrl] = self.controller.joint_velocities(q, linear, angular)
-        self.data.ctrl[self._finger_ctrl] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
-        mujoco.mj_step(self.model, self.data, nstep=self.config.physics.substeps)
+        ctrl = self._ctrl
+        ctrl[self._arm_ctrl] = self.controller.joint_velocities(self.arm_qpos, linear, angular)
+        ctrl[self._finger_ctrl] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
+        mujoco.mj_step(self.model, self.data, nstep=self._substeps)
 
     def _finger_velocities(self, rate: float) -> list[float]:
         """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing.

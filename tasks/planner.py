@@ -501,14 +501,15 @@ def hand_velocity(view: View, memory: Memory) -> np.ndarray:
 
 def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
          holding: Mapping[str, float] | None = None, anticipation: float | None = None,
-         pace: Pace | None = None) -> tuple[StickIntent, Memory]:
+         pace: Pace | None = None, velocity: np.ndarray | None = None) -> tuple[StickIntent, Memory]:
     """Decide the stick intent for this tick.
 
     ``holding`` is the deflection currently applied per function (what the person feels in the
     hand); the person lets go ``anticipation`` seconds (default: the parameter) of the hand's
-    current travel before the goal; ``pace`` slows translations (``deflection_for``).
+    current travel before the goal; ``pace`` slows translations (``deflection_for``); ``velocity``:
+    ``hand_velocity(view, memory)`` when the caller has it already.
     """
-    velocity = hand_velocity(view, memory)
+    velocity = hand_velocity(view, memory) if velocity is None else velocity
     touching = any(view.touching)
     since = view.t if memory.touch_since is None else memory.touch_since
     memory = _updated(memory, touch_since=since if touching else None, last_seen=(view.t, view.hand_pos))
@@ -737,7 +738,7 @@ class ScriptedUser:
         if self.memory.pulse_step != self.timing.pulse_step:
             self.memory = replace(self.memory, pulse_step=self.timing.pulse_step)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
-                                   self.anticipation, self.timing.pace)
+                                   self.anticipation, self.timing.pace, velocity)
         if self.current.button is not None and view.mode is not self._mode_at_start:
             wanted = StickIntent(goal=wanted.goal)  # the press worked: let go (press again if need be)
         elif self.current.button is not None and view.t - self._started > self.params.button_patience:
