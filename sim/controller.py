@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import truediv
 
 import numpy as np
 import pinocchio as pin
@@ -104,7 +105,7 @@ def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float
 
 def speed_scale(qd: np.ndarray | list[float], speed_limit: np.ndarray | list[float]) -> float:
     """Largest factor <= 1 that keeps every joint within its speed limit (same factor for all)."""
-    ratio = max(abs(v) / limit for v, limit in zip(qd, speed_limit))
+    ratio = max(map(truediv, map(abs, qd), speed_limit))  # each |qd| / limit, the largest
     return 1.0 if ratio <= 1.0 else 1.0 / ratio
 
 
