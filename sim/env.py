@@ -217,7 +217,7 @@ class ArmSim:
     @property
     def finger_closure(self) -> float:
         """Mean finger closure: 0 fully open, 1 fully closed."""
-        # np.mean's sum (left to right) and division, on Python floats
+        # np.mean's sum (left to right; not sum(), compensated from Python 3.12) and division, on floats
         closures = [(q - lower) / span for q, lower, span in zip(self._qpos[self._finger_q].tolist(), self._finger_lower,
                                                                   self._finger_span)]
         total = closures[0]
