@@ -512,7 +512,9 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     velocity = hand_velocity(view, memory) if velocity is None else velocity
     touching = any(view.touching)
     since = view.t if memory.touch_since is None else memory.touch_since
-    memory = _updated(memory, touch_since=since if touching else None, last_seen=(view.t, view.hand_pos))
+    glance = {"touch_since": since if touching else None, "last_seen": (view.t, view.hand_pos)}
+    if glance["touch_since"] != memory.touch_since:  # the plan reads it (held_cube); last_seen is the next glance's
+        memory = _updated(memory, touch_since=glance["touch_since"])
     action = next_action(view, memory, p)
     descending = action.goal.descending
     finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
@@ -537,14 +539,15 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
         button = mode_button(view.mode, need, memory.controls)
-        return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt)
+        return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt, **glance)
     remaining = 0.0
     if action.kind is ActionKind.MOVE:
         effects = memory.controls.layout.effects[view.mode]
         dx, dy, dz = (action.point - view.hand_pos).tolist()  # np.dot with each axis, on floats (to the bit)
         remaining = max((abs(dx * ax + dy * ay + dz * az) for ax, ay, az in (effects[fn].axis for fn in deflection)),
                         default=0.0)
-    return StickIntent(deflection, goal=action.goal, remaining=remaining), _updated(memory, **learnt, axis=axis)
+    return (StickIntent(deflection, goal=action.goal, remaining=remaining),
+            _updated(memory, **learnt, **glance, axis=axis))
 
 
 def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipation: float
@@ -564,7 +567,7 @@ def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipatio
 
 
 def _updated(memory: Memory, **changes) -> Memory:
-    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes two a tick)."""
+    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes one or two a tick)."""
     return Memory(**(vars(memory) | changes))
 
 
