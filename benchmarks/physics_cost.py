@@ -236,10 +236,11 @@ def markdown(record: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def replay_arguments(description: str, rounds: int, rounds_help: str) -> argparse.Namespace:
+    """``--seed``, ``--rounds`` and ``--rest-ticks`` of a replay benchmark, checked (one line, exit 2)."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--seed", type=int, default=0, help="the joystick episode's task seed (development: 0-999)")
-    parser.add_argument("--rounds", type=int, default=3, help="replays per variant and kind")
+    parser.add_argument("--rounds", type=int, default=rounds, help=rounds_help)
     parser.add_argument("--rest-ticks", type=int, default=600, help="control ticks at rest to replay")
     args = parser.parse_args()
     for name in ("rounds", "rest_ticks"):
@@ -247,6 +248,11 @@ def main() -> None:
             parser.exit(2, f"bomi: error: --{name.replace('_', '-')}: must be at least 1, got {getattr(args, name)}\n")
     if not 0 <= args.seed <= 999:
         parser.exit(2, f"bomi: error: --seed: a development task seed is 0-999, got {args.seed}\n")
+    return args
+
+
+def main() -> None:
+    args = replay_arguments(__doc__.split("\n\n")[0], 3, "replays per variant and kind")
     episode, success = record_episode(args.seed)
     kinds = {"rest": record_rest(args.rest_ticks), "episode": episode}
     variants = []
@@ -254,14 +260,19 @@ def main() -> None:
         variants.append({"name": variant.name, "adopted": variant.adopted} | measure(variant, kinds, args.rounds))
         print(f"{variant.name}: rest {variants[-1]['rest']['cpu_us']:.0f}, episode "
               f"{variants[-1]['episode']['cpu_us']:.0f} us/tick", flush=True)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                            cwd=Path(__file__).parent).stdout.strip()
     record = {"seed": args.seed, "rounds": args.rounds, "rest_ticks": args.rest_ticks, "episode_ticks": len(episode),
-              "success": success, "commit": commit, "variants": variants,
-              "machine": f"{platform.machine()}, Python {platform.python_version()}, mujoco {version('mujoco')}."}
+              "success": success, "variants": variants}
+    write_results("physics_cost", record, markdown)
+
+
+def write_results(name: str, record: dict, markdown: Callable[[dict], str]) -> None:
+    """``record`` with the commit and the machine, as benchmarks/results/NAME.json and NAME.md (printed too)."""
+    record["commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                      cwd=Path(__file__).parent).stdout.strip()
+    record["machine"] = f"{platform.machine()}, Python {platform.python_version()}, mujoco {version('mujoco')}."
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "physics_cost.json").write_text(json.dumps(record, indent=1))
-    (RESULTS / "physics_cost.md").write_text(markdown(record))
+    (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1))
+    (RESULTS / f"{name}.md").write_text(markdown(record))
     print(markdown(record))
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import truediv
 
 import numpy as np
 import pinocchio as pin
@@ -43,6 +44,12 @@ class Workspace:
     floor: float           # lowest height for any point of the hand
     hand_box: np.ndarray   # (8, 3) corners in the tool frame
 
+    def __post_init__(self) -> None:
+        # ``clamp`` runs every control tick: its bounds as Python floats, made once
+        lower = tuple(float(v) for v in self.lower)
+        object.__setattr__(self, "_bounds", (lower, tuple(max(lo, float(hi)) for lo, hi in zip(lower, self.upper))))
+        object.__setattr__(self, "_shoulder", tuple(float(v) for v in self.shoulder))
+
     @classmethod
     def from_config(cls, config: WorkspaceConfig, shoulder: np.ndarray, table_top: float,
                     hand_box: np.ndarray) -> Workspace:
@@ -60,15 +67,26 @@ class Workspace:
         The box and the floor come last, so they always hold (the table is solid); where they
         disagree with the shell, the shell gives way.
         """
-        offset = point - self.shoulder
-        distance = math.sqrt(offset @ offset)
+        return np.array(self.clamp_xyz(*point, rotation))
+
+    def clamp_xyz(self, x: float, y: float, z: float, rotation: np.ndarray) -> tuple[float, float, float]:
+        """``clamp`` on Python floats (what the controller calls every tick): the same differences,
+        products, square root and comparisons as on arrays of three, at a fraction of the cost."""
+        sx, sy, sz = self._shoulder
+        ox, oy, oz = x - sx, y - sy, z - sz
+        distance = math.sqrt(ox * ox + oy * oy + oz * oz)
         if distance > self.reach_max:
-            point = self.shoulder + offset * (self.reach_max / distance)
+            scale = self.reach_max / distance
+            x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
         elif 0 < distance < self.reach_min:
-            point = self.shoulder + offset * (self.reach_min / distance)
-        lower = self.lower.copy()
-        lower[2] = max(lower[2], self.lowest_tool_height(rotation))
-        return np.minimum(np.maximum(point, lower), np.maximum(lower, self.upper))
+            scale = self.reach_min / distance
+            x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
+        (lx, ly, lz), (ux, uy, uz) = self._bounds
+        floor = self.lowest_tool_height(rotation)
+        if floor > lz:
+            lz = floor
+            uz = max(floor, float(self.upper[2]))
+        return min(max(x, lx), ux), min(max(y, ly), uy), min(max(z, lz), uz)
 
     def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
         return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
@@ -85,9 +103,9 @@ def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float
     return jacobian.T @ solution
 
 
-def speed_scale(qd: np.ndarray, speed_limit: np.ndarray) -> float:
+def speed_scale(qd: np.ndarray | list[float], speed_limit: np.ndarray | list[float]) -> float:
     """Largest factor <= 1 that keeps every joint within its speed limit (same factor for all)."""
-    ratio = np.maximum.reduce(np.abs(qd) / speed_limit)  # .max() without the method's wrapper
+    ratio = max(map(truediv, map(abs, qd), speed_limit))  # each |qd| / limit, the largest
     return 1.0 if ratio <= 1.0 else 1.0 / ratio
 
 
@@ -109,8 +127,9 @@ class CartesianVelocityController:
         self.target_position = np.zeros(3)
         self.target_rotation = np.eye(3)
         # where a limited joint stops (a margin short of its range): the same every tick
-        self._stop_lower = limits.lower + config.joint_limit_margin
-        self._stop_upper = limits.upper - config.joint_limit_margin
+        self._stop_lower = (limits.lower + config.joint_limit_margin).tolist()
+        self._stop_upper = (limits.upper - config.joint_limit_margin).tolist()
+        self._speed_limit = limits.speed.tolist()
 
     def reset(self, q: np.ndarray) -> None:
         """Hold the pose the arm is in."""
@@ -118,50 +137,63 @@ class CartesianVelocityController:
         self.target_position = self.workspace.clamp(self.target_position, self.target_rotation)
 
     def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
-        """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes)."""
-        position, rotation = self.kinematics.tool_pose(q)
+        """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes).
+
+        The 3-vectors of the target's advance are worked on Python floats (the same elementwise
+        operations and, for a length, the same sum of squares in the same order as on arrays, so
+        the same bits) and the 6-vectors and matrices with numpy, Pinocchio and LAPACK."""
+        position, rotation, jacobian = self.kinematics.pose_and_jacobian(q)
         previous_position, previous_rotation = self.target_position, self.target_rotation
-        feedforward, turn = self._advance_target(position, rotation, np.asarray(linear, float),
-                                                 np.asarray(angular, float))
-        twist = feedforward + np.concatenate((
-            self.config.position_gain * (self.target_position - position),
-            self.config.orientation_gain * turn))
-        jacobian = self.kinematics.jacobian(q)
+        angular = np.asarray(angular, float)
+        pull, turn = self._advance_target(position.tolist(), rotation, np.asarray(linear, float).tolist(), angular)
+        twist = np.concatenate((pull, angular + self.config.orientation_gain * turn))
         qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
         blocked = self._blocked_joints(q, qd)
-        if np.logical_or.reduce(blocked):  # blocked.any() without the method's wrapper
+        if blocked:
             jacobian[:, blocked] = 0.0
             qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
             qd[blocked] = 0.0
-        scale = speed_scale(qd, self.limits.speed)
+        scale = speed_scale(qd.tolist(), self._speed_limit)
         if scale < 1.0:
             # The arm does only this fraction of the tick's motion: so does the target, which then
             # never runs ahead and the hand stops where it is when the command stops.
             self.target_position = previous_position + scale * (self.target_position - previous_position)
             self.target_rotation = pin.exp3(scale * rotation_error(self.target_rotation, previous_rotation)) \
                 @ previous_rotation
-        return qd * scale
+            return qd * scale
+        return qd
 
-    def _advance_target(self, position, rotation, linear, angular) -> tuple[np.ndarray, np.ndarray]:
-        """Move the target by one tick of the command inside the walls; return the feedforward twist
-        and the rotation error (``rotation_error``) from the hand's ``rotation`` to the new target."""
-        self.target_rotation = pin.exp3(angular * self.dt) @ self.target_rotation
-        walled = self.workspace.clamp(self.target_position + linear * self.dt, self.target_rotation)
-        linear_ff = (walled - self.target_position) / self.dt
-        self.target_position = walled
+    def _advance_target(self, position: list[float], rotation: np.ndarray, linear: list[float],
+                        angular: np.ndarray) -> tuple[list[float], np.ndarray]:
+        """Move the target by one tick of the command inside the walls; return the linear part of
+        the twist (the feedforward velocity plus the pull toward the target) and the rotation error
+        (``rotation_error``) from the hand's ``rotation`` to the new target."""
+        dt = self.dt
+        if angular.any():  # (no turn leaves the target's rotation as it is: exp3(0) is the identity)
+            self.target_rotation = pin.exp3(angular * dt) @ self.target_rotation
+        tx, ty, tz = self.target_position.tolist()
+        lx, ly, lz = linear
+        wx, wy, wz = self.workspace.clamp_xyz(tx + lx * dt, ty + ly * dt, tz + lz * dt, self.target_rotation)
+        feedforward = ((wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt)
         # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
-        lag = self.target_position - position
-        distance = math.sqrt(lag @ lag)
+        px, py, pz = position
+        gx, gy, gz = wx - px, wy - py, wz - pz
+        distance = math.sqrt(gx * gx + gy * gy + gz * gz)
         if distance > self.config.max_tracking_error:
-            self.target_position = position + lag * (self.config.max_tracking_error / distance)
+            scale = self.config.max_tracking_error / distance
+            wx, wy, wz = px + gx * scale, py + gy * scale, pz + gz * scale
+        self.target_position = np.array([wx, wy, wz])
         turn = rotation_error(self.target_rotation, rotation)
         angle = math.sqrt(turn @ turn)
         max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
         if angle > max_angle:
             self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
             turn = rotation_error(self.target_rotation, rotation)
-        return np.concatenate((linear_ff, angular)), turn
+        gain = self.config.position_gain
+        return [f + gain * (w - p) for f, w, p in zip(feedforward, (wx, wy, wz), position)], turn
 
-    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """Limited joints within the margin of a range end and moving further toward it."""
-        return ((q <= self._stop_lower) & (qd < 0)) | ((q >= self._stop_upper) & (qd > 0))
+    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> list[int]:
+        """Limited joints within the margin of a range end and moving further toward it (indices;
+        on Python floats, the same comparisons as on arrays at a fraction of the cost)."""
+        return [j for j, (a, v, lo, hi) in enumerate(zip(q.tolist(), qd.tolist(), self._stop_lower, self._stop_upper))
+                if (a <= lo and v < 0) or (a >= hi and v > 0)]

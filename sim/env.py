@@ -60,17 +60,25 @@ class ArmSim:
         self.controller = CartesianVelocityController(self.kinematics, self.limits, self.workspace,
                                                       self.config.control, self.dt)
         self.joystick = JoystickInterpreter(self.config.control.full_speed, self.config.control.wrist_speed, layout)
-        self.finger_target = np.zeros(3)
+        self.finger_target: list[float] = [0.0, 0.0, 0.0]  # the fingers' servo targets (rad)
         self._cube_quat_index = np.array([np.arange(a + 3, a + 7) for a in self.scene.cube_qpos], dtype=np.intp)
         # geom id -> finger (0, 1, 2) and -> cube (0 .. n-1): a contact's role looked up, not searched for
         self._finger_of = {g: i for i, geoms in enumerate(self.scene.finger_geoms) for g in geoms}
         self._cube_of = {g: k for k, g in enumerate(self.scene.cube_geoms.tolist())}
-        self._finger_span = self.scene.finger_range[:, 1] - self.scene.finger_range[:, 0]
-        self._finger_limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1].copy()
+        self._finger_span = (self.scene.finger_range[:, 1] - self.scene.finger_range[:, 0]).tolist()
+        self._finger_limit = self.model.actuator_ctrlrange[self.scene.finger_actuators, 1].tolist()
+        self._finger_bounds = self.scene.finger_range.tolist()  # (lower, upper) per finger
         # the addresses read and written every control tick
         self._arm_q, self._finger_q = as_slice(self.scene.arm_qpos), as_slice(self.scene.finger_qpos)
         self._arm_ctrl, self._finger_ctrl = as_slice(self.scene.arm_actuators), as_slice(self.scene.finger_actuators)
         self._cube_rows = as_slice(self.scene.cube_geoms)
+        # MjData's arrays keep their buffers for its lifetime: the ones read every control tick are
+        # fetched once (each attribute read of MjData makes a new array object)
+        self._qpos, self._geom_xpos, self._ctrl = self.data.qpos, self.data.geom_xpos, self.data.ctrl
+        self._substeps = self.config.physics.substeps
+        self._tool_xpos = self.data.site_xpos[self.scene.tool_site]  # live views of the tool site's row
+        self._tool_xmat = self.data.site_xmat[self.scene.tool_site]
+        self._finger_lower = self.scene.finger_range[:, 0].tolist()
         self._renderer: FrameRenderer | None = None
         self.reset()
 
@@ -154,7 +162,7 @@ class ArmSim:
         mujoco.mj_forward(self.model, self.data)
         self.controller.reset(start)
         self.joystick.reset()
-        self.finger_target = self.data.qpos[self.scene.finger_qpos].copy()
+        self.finger_target = self.data.qpos[self.scene.finger_qpos].tolist()
 
     # -- control ---------------------------------------------------------------------------------
 
@@ -167,20 +175,21 @@ class ArmSim:
     def step_twist(self, linear: Sequence[float], angular: Sequence[float] = (0.0, 0.0, 0.0),
                    finger: float = 0.0) -> None:
         """One control tick below the joystick: a tool twist (m/s, rad/s, world axes), finger rate in [-1, 1]."""
-        q = self.arm_qpos
-        self.data.ctrl[self._arm_ctrl] = self.controller.joint_velocities(q, linear, angular)
-        self.data.ctrl[self._finger_ctrl] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
-        mujoco.mj_step(self.model, self.data, nstep=self.config.physics.substeps)
+        ctrl = self._ctrl
+        ctrl[self._arm_ctrl] = self.controller.joint_velocities(self.arm_qpos, linear, angular)
+        ctrl[self._finger_ctrl] = self._finger_velocities(min(1.0, max(-1.0, float(finger))))
+        mujoco.mj_step(self.model, self.data, nstep=self._substeps)
 
-    def _finger_velocities(self, rate: float) -> np.ndarray:
-        """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing."""
+    def _finger_velocities(self, rate: float) -> list[float]:
+        """Move the finger target at ``rate * finger_speed``; servo toward it so a grip keeps squeezing.
+        (On Python floats: the same sums, products and bounds as on arrays of three.)"""
         control = self.config.control
-        lower, upper = self.scene.finger_range[:, 0], self.scene.finger_range[:, 1]
-        self.finger_target = np.minimum(np.maximum(self.finger_target + rate * control.finger_speed * self.dt,
-                                                   lower), upper)
-        velocity = control.finger_gain * (self.finger_target - self.data.qpos[self._finger_q])
-        limit = self._finger_limit
-        return np.minimum(np.maximum(velocity, -limit), limit)
+        step, gain = rate * control.finger_speed * self.dt, control.finger_gain
+        self.finger_target = [min(max(target + step, lower), upper)
+                              for target, (lower, upper) in zip(self.finger_target, self._finger_bounds)]
+        return [min(max(gain * (target - q), -limit), limit)
+                for target, q, limit in zip(self.finger_target, self._qpos[self._finger_q].tolist(),
+                                            self._finger_limit)]
 
     # -- read-outs -------------------------------------------------------------------------------
 
@@ -190,31 +199,41 @@ class ArmSim:
 
     @property
     def arm_qpos(self) -> np.ndarray:
-        return self.data.qpos[self._arm_q].copy()
+        return self._qpos[self._arm_q].copy()
 
     @property
     def tool_position(self) -> np.ndarray:
-        return self.data.site_xpos[self.scene.tool_site].copy()
+        return self._tool_xpos.copy()
 
     @property
     def tool_rotation(self) -> np.ndarray:
-        return self.data.site_xmat[self.scene.tool_site].reshape(3, 3).copy()
+        return self._tool_xmat.reshape(3, 3).copy()
+
+    @property
+    def tool_rotation_rows(self) -> list[float]:
+        """The tool's rotation matrix as 9 Python floats, row after row (what a per-tick reader needs)."""
+        return self._tool_xmat.tolist()
 
     @property
     def finger_closure(self) -> float:
         """Mean finger closure: 0 fully open, 1 fully closed."""
-        closures = (self.data.qpos[self._finger_q] - self.scene.finger_range[:, 0]) / self._finger_span
-        return float(np.add.reduce(closures)) / len(closures)  # np.mean's sum and division
+        # np.mean's sum (left to right; not sum(), compensated from Python 3.12) and division, on floats
+        closures = [(q - lower) / span for q, lower, span in zip(self._qpos[self._finger_q].tolist(), self._finger_lower,
+                                                                  self._finger_span)]
+        total = closures[0]
+        for closure in closures[1:]:
+            total += closure
+        return total / len(closures)
 
     @property
     def cube_positions(self) -> np.ndarray:
         """(n, 3) cube centres."""
-        return self.data.geom_xpos[self._cube_rows].copy()
+        return self._geom_xpos[self._cube_rows].copy()
 
     @property
     def cube_quats(self) -> np.ndarray:
         """(n, 4) cube orientations (w, x, y, z)."""
-        return self.data.qpos[self._cube_quat_index]
+        return self._qpos[self._cube_quat_index]
 
     @property
     def mode(self) -> Mode:

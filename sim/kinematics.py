@@ -36,6 +36,15 @@ class ArmKinematics:
     def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) and rotation matrix (3, 3) of the tool frame."""
         pin.framesForwardKinematics(self.model, self.data, q)
+        return self._placed_tool()
+
+    def pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``tool_pose`` and ``jacobian`` at ``q`` from one kinematics pass: Pinocchio's
+        computeFrameJacobian places the tool frame as it goes (the same bits as framesForwardKinematics)."""
+        jacobian = self.jacobian(q)
+        return (*self._placed_tool(), jacobian)
+
+    def _placed_tool(self) -> tuple[np.ndarray, np.ndarray]:
         world = self.base * self.data.oMf[self.tool_frame]
         return world.translation.copy(), world.rotation.copy()
 

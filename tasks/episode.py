@@ -7,6 +7,7 @@ presses its button on the rising edge) -> arm.  IMU samples and control ticks sh
 """
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,7 +24,7 @@ from bomi.errors import BomiError
 from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
 from sim.env import ArmSim
-from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combine
+from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combined
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
 from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label
@@ -32,12 +33,14 @@ from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.participants.receiver import Receiver
-from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, ScriptedUser,
-                           StickIntent, load_operator, norm)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, Phase,
+                           ScriptedUser, StickIntent, load_operator)
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
 OPERATORS = ("joystick", "bomi")
+_MODE_VALUE = {mode: mode.value for mode in Mode}  # what a log records of a mode and a stage, looked up
+_STAGE_VALUE = {None: "", **{phase: phase.value for phase in Phase}}
 
 
 @dataclass
@@ -493,11 +496,12 @@ def calibrated_model(params: ParticipantParams, profile: Profile, seed: int, pos
     return train([session_recording(session, profile)], profile, post=post)
 
 
-def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> np.ndarray:
-    """Unit hand direction the person wants this tick (zero unless moving the hand in ``mode`` of ``layout``)."""
-    direction = combine(intent.deflection, layout.axes(mode, Kind.LINEAR))
-    length = norm(direction)
-    return direction / length if length > 0 else direction
+def intended_direction(mode: Mode, intent: StickIntent, layout: Layout) -> tuple[float, float, float]:
+    """Unit hand direction the person wants this tick (zero unless moving the hand in ``mode`` of
+    ``layout``), on Python floats (``norm`` and the division of the combined array, bit for bit)."""
+    x, y, z = combined(intent.deflection, layout.axes(mode, Kind.LINEAR))
+    length = math.sqrt(x * x + y * y + z * z)
+    return (x / length, y / length, z / length) if length > 0 else (x, y, z)
 
 
 def operator_user(params: OperatorParams, channel: OperatorChannel, seed: int) -> ScriptedUser | HumanOperator:
@@ -540,13 +544,13 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal", "stage",
                                                    "pushing")}
     film = _Film(sim, video, video_speedup) if video is not None else None
-    full_speed, previous = sim.config.control.full_speed, None
+    seen_scale, previous = sim.dt * sim.config.control.full_speed, None
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
         while True:
             view = task.view()
             intent = user.stick_intent(view)
-            seen = None if previous is None else (view.hand_pos - previous) / (sim.dt * full_speed)
+            seen = None if previous is None else (view.hand_pos - previous) / seen_scale
             previous = view.hand_pos
             state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)
             if assistance is not None:
@@ -554,11 +558,11 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             rows["t"].append(view.t)
             rows["hand"].append(view.hand_pos)
             rows["dir"].append(intended_direction(view.mode, intent, sim.layout))
-            rows["mode"].append(view.mode.value)
-            rows["cubes"].append(np.array(view.cube_pos))
+            rows["mode"].append(_MODE_VALUE[view.mode])
+            rows["cubes"].append(view.cube_pos)
             rows["touching"].append(view.touching)
             rows["goal"].append(intent.goal.step)
-            rows["stage"].append("" if intent.goal.phase is None else intent.goal.phase.value)
+            rows["stage"].append(_STAGE_VALUE[intent.goal.phase])
             rows["pushing"].append(bool(intent.deflection))
             sim.step(state)
             if on_tick is not None:
@@ -574,7 +578,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             film.close()
     return EpisodeLog(
         operator=operator, participant=participant, seed=seed, controls=channel.controls.label,
-        t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]),
+        t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]).reshape(-1, 3),
         mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
         touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(), goals=tuple(rows["goal"]),
         stages=tuple(rows["stage"]),

@@ -143,6 +143,8 @@ class Phase(enum.Enum):
     DESCEND = "descend"
     RISE_TO_TURN = "rise to turn"
 
+    __hash__ = object.__hash__  # members are singletons: hashed by identity in C (sim.joystick.Mode's)
+
 
 @dataclass(frozen=True)
 class Goal:
@@ -237,6 +239,13 @@ def norm(v: np.ndarray) -> float:
     of ``v.dot(v)``, to the bit), without its generic checks (the planner takes a dozen per tick)."""
     return math.sqrt(v.dot(v))
 
+
+def xy_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """``norm(a[:2] - b[:2])`` to the bit (the same differences, products and sum), without the
+    arrays it makes."""
+    dx, dy = a[0] - b[0], a[1] - b[1]
+    return math.sqrt(dx * dx + dy * dy)
+
 def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]:
     """(cube resting on the table at B, cube resting on top of it), None where there is none.  A cube
     the fingers touch is placed only if the hand is open (it rests there; the hand is not holding it)."""
@@ -244,7 +253,7 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
     gripped = [touch and view.closure > p.open_closure for touch in view.touching]
     bottom = None
     for k, pos in enumerate(view.cube_pos):
-        at_b = norm(pos[:2] - view.target_xy) <= p.target_zone
+        at_b = xy_distance(pos, view.target_xy) <= p.target_zone
         if at_b and abs(pos[2] - rest_z) <= p.placed and not gripped[k]:
             bottom = k
     if bottom is None:
@@ -252,7 +261,7 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
     for k, pos in enumerate(view.cube_pos):
         if k == bottom or gripped[k]:
             continue
-        on_top = norm(pos[:2] - view.cube_pos[bottom][:2]) <= p.placed
+        on_top = xy_distance(pos, view.cube_pos[bottom]) <= p.placed
         if on_top and abs(pos[2] - view.cube_pos[bottom][2] - view.cube_size) <= p.placed:
             return bottom, k
     return bottom, None
@@ -415,7 +424,7 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
     support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
     release_xy = dest_xy + grip[:2]
     release = np.array([release_xy[0], release_xy[1], support + view.cube_size / 2 + p.release_gap + grip[2]])
-    off = norm(cube[:2] - dest_xy)
+    off = xy_distance(cube, dest_xy)
     if off <= p.placed and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop:
         return _open(f"release cube {held + 1}")
     carry_z = stack_top + p.carry_clearance + view.cube_size / 2 + grip[2]
@@ -437,7 +446,7 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
     """Reach cube ``k`` with an open hand lined up with its faces, and close on it."""
     hand, cube = view.hand_pos, view.cube_pos[k]
     grasp = np.array([cube[0], cube[1], cube[2] + p.grasp_offset])
-    xy_off = norm(hand[:2] - grasp[:2])
+    xy_off = xy_distance(hand, grasp)
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
     at_grasp = (xy_off <= p.reach * p.align
                 and (abs(hand[2] - grasp[2]) <= p.reach * p.stop or memory.stalled))
@@ -472,7 +481,7 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     a stalled one has arrived.  ``accepted``: (xy, z) errors left as they are even where larger than the
     align and stop tolerances (no push could make them smaller)."""
     align = p.align if align is None else align
-    xy_off = norm(hand[:2] - goal[:2])
+    xy_off = xy_distance(hand, goal)
     if xy_off > max(align * (2 if descending else 1), accepted[0]):
         if hand[2] < travel_z - p.rise_margin * p.stop and xy_off > p.reach * p.align:
             return _move(step, Phase.RISE, np.array([hand[0], hand[1], travel_z]))
@@ -492,17 +501,20 @@ def hand_velocity(view: View, memory: Memory) -> np.ndarray:
 
 def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
          holding: Mapping[str, float] | None = None, anticipation: float | None = None,
-         pace: Pace | None = None) -> tuple[StickIntent, Memory]:
+         pace: Pace | None = None, velocity: np.ndarray | None = None) -> tuple[StickIntent, Memory]:
     """Decide the stick intent for this tick.
 
     ``holding`` is the deflection currently applied per function (what the person feels in the
     hand); the person lets go ``anticipation`` seconds (default: the parameter) of the hand's
-    current travel before the goal; ``pace`` slows translations (``deflection_for``).
+    current travel before the goal; ``pace`` slows translations (``deflection_for``); ``velocity``:
+    ``hand_velocity(view, memory)`` when the caller has it already.
     """
-    velocity = hand_velocity(view, memory)
+    velocity = hand_velocity(view, memory) if velocity is None else velocity
     touching = any(view.touching)
     since = view.t if memory.touch_since is None else memory.touch_since
-    memory = _updated(memory, touch_since=since if touching else None, last_seen=(view.t, view.hand_pos))
+    glance = {"touch_since": since if touching else None, "last_seen": (view.t, view.hand_pos)}
+    if glance["touch_since"] != memory.touch_since:  # the plan reads it (held_cube); last_seen is the next glance's
+        memory = _updated(memory, touch_since=glance["touch_since"])
     action = next_action(view, memory, p)
     descending = action.goal.descending
     finger_mode, _ = memory.controls.layout.find(Kind.FINGERS, 1.0)
@@ -527,13 +539,15 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
         button = mode_button(view.mode, need, memory.controls)
-        return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt)
+        return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt, **glance)
     remaining = 0.0
     if action.kind is ActionKind.MOVE:
         effects = memory.controls.layout.effects[view.mode]
-        remaining = max((abs(float(np.dot(action.point - view.hand_pos, effects[fn].axis))) for fn in deflection),
+        dx, dy, dz = (action.point - view.hand_pos).tolist()  # np.dot with each axis, on floats (to the bit)
+        remaining = max((abs(dx * ax + dy * ay + dz * az) for ax, ay, az in (effects[fn].axis for fn in deflection)),
                         default=0.0)
-    return StickIntent(deflection, goal=action.goal, remaining=remaining), _updated(memory, **learnt, axis=axis)
+    return (StickIntent(deflection, goal=action.goal, remaining=remaining),
+            _updated(memory, **learnt, **glance, axis=axis))
 
 
 def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipation: float
@@ -553,7 +567,7 @@ def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipatio
 
 
 def _updated(memory: Memory, **changes) -> Memory:
-    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes two a tick)."""
+    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes one or two a tick)."""
     return Memory(**(vars(memory) | changes))
 
 
@@ -727,7 +741,7 @@ class ScriptedUser:
         if self.memory.pulse_step != self.timing.pulse_step:
             self.memory = replace(self.memory, pulse_step=self.timing.pulse_step)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
-                                   self.anticipation, self.timing.pace)
+                                   self.anticipation, self.timing.pace, velocity)
         if self.current.button is not None and view.mode is not self._mode_at_start:
             wanted = StickIntent(goal=wanted.goal)  # the press worked: let go (press again if need be)
         elif self.current.button is not None and view.t - self._started > self.params.button_patience:

@@ -15,9 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.env import ArmSim
-from tasks.planner import View, norm
-
-DOWN = np.array([0.0, 0.0, -1.0])
+from tasks.planner import View
 
 
 @dataclass(frozen=True)
@@ -56,16 +54,17 @@ def cube_tilt_deg(quat: Sequence[float]) -> float:
     return math.degrees(math.acos(min(1.0, float(max(abs(c) for c in world_z_in_cube)))))
 
 
-def levelling_rotation(tool_z: np.ndarray) -> np.ndarray:
+def levelling_rotation(tool_z: Sequence[float]) -> np.ndarray:
     """(x, y) of the rotation vector that turns the tool's z axis to point straight down."""
-    x, y, z = tool_z.tolist()
-    # np.cross(tool_z, down) written out (the same products and differences, at a tenth of the cost)
-    axis = np.array([y * -1.0 - z * 0.0, z * 0.0 - x * -1.0, x * 0.0 - y * 0.0])
-    sin, cos = norm(axis), float(tool_z.dot(DOWN))
+    x, y, z = tool_z
+    # np.cross(tool_z, down), its norm and tool_z.dot(down) written out on Python floats (the same
+    # products, sums and square root, in the same order, at a tenth of the cost)
+    ax, ay, az = y * -1.0 - z * 0.0, z * 0.0 - x * -1.0, x * 0.0 - y * 0.0
+    sin, cos = math.sqrt(ax * ax + ay * ay + az * az), x * 0.0 + y * 0.0 + z * -1.0
     if sin < 1e-12:
         return np.zeros(2)
     angle = math.atan2(sin, cos)
-    return np.array([axis[0] * angle / sin, axis[1] * angle / sin])  # (axis * angle / sin)[:2]
+    return np.array([ax * angle / sin, ay * angle / sin])  # (axis * angle / sin)[:2]
 
 
 def start_poses(sim: ArmSim, config: TaskConfig, seed: int) -> np.ndarray:
@@ -91,56 +90,68 @@ class StackingTask:
         self.table_hi = table.pos[:2] + table.size[:2]
         self.target_pos = np.r_[scene.location_b, self.table_z]
         self._cubes = frozenset(scene.cube_geoms.tolist())
+        # read every control tick: as Python floats, made once
+        self._table_lo, self._table_hi = self.table_lo.tolist(), self.table_hi.tolist()
+        self._target_xy = self.target_pos[:2].tolist()
+        self._target_xy_array = self.target_pos[:2].copy()  # the view's, the same every tick: read-only
+        self._target_xy_array.flags.writeable = False
         self._still_since: float | None = None
-        self._previous: np.ndarray | None = None
+        self._previous: list[list[float]] | None = None
 
     def reset(self, seed: int) -> None:
         self.sim.reset(start_poses(self.sim, self.config, seed))
-        self._still_since, self._previous = None, self.sim.cube_positions
+        self._still_since, self._previous = None, self.sim.cube_positions.tolist()
 
     def view(self) -> View:
         sim = self.sim
-        rotation = sim.tool_rotation
+        r = sim.tool_rotation_rows
         return View(
             t=sim.time,
             hand_pos=sim.tool_position,
-            hand_yaw=math.atan2(rotation[1, 0], rotation[0, 0]),
-            hand_tilt=levelling_rotation(rotation[:, 2]),
+            hand_yaw=math.atan2(r[3], r[0]),
+            hand_tilt=levelling_rotation((r[2], r[5], r[8])),
             closure=sim.finger_closure,
             mode=sim.mode,
             cube_pos=tuple(sim.cube_positions),
             cube_yaw=tuple(cube_yaw(q) for q in sim.cube_quats.tolist()),
             touching=tuple(sim.cube_in_grasp().tolist()),
-            target_xy=self.target_pos[:2].copy(),
+            target_xy=self._target_xy_array,
             table_z=self.table_z,
             cube_size=self.cube_size,
         )
 
-    def stacked(self) -> bool:
-        """The top cube rests on the bottom one at B and the hand touches neither."""
-        pos = self.sim.cube_positions
-        bottom, top = np.argsort(pos[:, 2])[:2].tolist()
+    def stacked(self, pos: list[list[float]] | None = None) -> bool:
+        """The top cube rests on the bottom one at B and the hand touches neither (``pos``: the cube
+        centres now, ``ArmSim.cube_positions`` as lists, if already read).  On Python floats: the
+        same differences, lengths and order as on arrays."""
+        pos = self.sim.cube_positions.tolist() if pos is None else pos
+        heights = [p[2] for p in pos]
+        bottom, top = sorted(range(len(pos)), key=heights.__getitem__)[:2]  # np.argsort's order (stable)
+        (bx, by, bz), (tx, ty, tz) = pos[bottom], pos[top]
+        dx, dy = bx - self._target_xy[0], by - self._target_xy[1]
+        ox, oy = tx - bx, ty - by
         return bool(
-            norm(pos[bottom, :2] - self.target_pos[:2]) <= self.config.at_b
-            and norm(pos[top, :2] - pos[bottom, :2]) <= self.config.stack_xy
-            and abs(pos[top, 2] - pos[bottom, 2] - self.cube_size) <= 0.1 * self.cube_size
+            math.sqrt(dx * dx + dy * dy) <= self.config.at_b
+            and math.sqrt(ox * ox + oy * oy) <= self.config.stack_xy
+            and abs(tz - bz - self.cube_size) <= 0.1 * self.cube_size
             and cube_tilt_deg(self.sim.cube_quats[top].tolist()) <= self.config.stack_tilt_deg
             and not self.sim.touching(self.sim.scene.hand_geoms, self._cubes))
 
     def outcome(self) -> Outcome:
         """Call once per control tick, after the step."""
-        t, pos = self.sim.time, self.sim.cube_positions
-        moved = pos - self._previous
-        speed = np.sqrt(np.add.reduce(moved * moved, axis=1)).max() / self.sim.dt  # np.linalg.norm's, per cube
+        t, pos = self.sim.time, self.sim.cube_positions.tolist()
+        # the fastest cube's speed since the previous tick (np.linalg.norm's per cube, on Python floats)
+        speed = max(math.sqrt((x - px) * (x - px) + (y - py) * (y - py) + (z - pz) * (z - pz))
+                    for (x, y, z), (px, py, pz) in zip(pos, self._previous)) / self.sim.dt
         self._previous = pos
-        if speed <= self.config.still_speed and self.stacked():
+        if speed <= self.config.still_speed and self.stacked(pos):
             self._still_since = t if self._still_since is None else self._still_since
             if t - self._still_since >= self.config.still_time - 1e-9:
                 return Outcome(True, True, self._still_since, None)
         else:
             self._still_since = None
-        (lo_x, lo_y), (hi_x, hi_y) = self.table_lo.tolist(), self.table_hi.tolist()
-        for k, (x, y, z) in enumerate(pos.tolist()):
+        (lo_x, lo_y), (hi_x, hi_y) = self._table_lo, self._table_hi
+        for k, (x, y, z) in enumerate(pos):
             if z < self.table_z - self.cube_size or x < lo_x or y < lo_y or x > hi_x or y > hi_y:
                 return Outcome(True, False, None, f"cube {k + 1} knocked off the table")
         if t >= self.config.time_limit:

@@ -205,4 +205,24 @@ def test_read_outs_equal_their_naive_forms_along_the_demo_carry(sim):
         assert sim.finger_closure == float(np.mean((sim.data.qpos[sim.scene.finger_qpos] - lower) / (upper - lower)))
         assert np.array_equal(sim.cube_positions, sim.data.geom_xpos[sim.scene.cube_geoms])
         assert np.array_equal(sim.arm_qpos, sim.data.qpos[sim.scene.arm_qpos])
+        assert np.array_equal(sim.tool_position, sim.data.site_xpos[sim.scene.tool_site])
+        assert sim.tool_rotation_rows == sim.data.site_xmat[sim.scene.tool_site].tolist()
     assert grasped > 60  # the carry held the cube for more than a second
+
+
+def test_read_outs_follow_the_data_after_a_reset_elsewhere(sim):
+    """The read-outs keep views of MjData's arrays across episodes: after a reset to other cube
+    starts and another arm pose they give the new state, not the last episode's."""
+    sim.reset()
+    for _ in range(30):
+        sim.step_twist((0.1, 0.0, 0.0))
+    before = sim.tool_position, sim.cube_positions
+    start = sim.default_cube_positions() + 0.03
+    q = sim.home_q + 0.1
+    sim.reset(start, arm_qpos=q)
+    assert np.allclose(sim.cube_positions[:, :2], start)
+    assert not np.allclose(sim.tool_position, before[0]) and not np.allclose(sim.cube_positions, before[1])
+    position, rotation = sim.kinematics.tool_pose(q)  # Pinocchio, independent of MuJoCo's data
+    assert np.allclose(sim.tool_position, position, atol=1e-9)
+    assert np.allclose(np.reshape(sim.tool_rotation_rows, (3, 3)), rotation, atol=1e-9)
+    assert np.array_equal(sim.arm_qpos, q)

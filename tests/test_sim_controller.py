@@ -84,3 +84,23 @@ def test_points_inside_are_left_alone():
     np.testing.assert_array_equal(WORKSPACE.clamp(point, down), point)
     assert WORKSPACE.contains(point, down)
     assert not WORKSPACE.contains(np.array([0.1, -0.4, 0.0]), down)
+
+
+def numpy_clamp(workspace: Workspace, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """The clamp as it was written on arrays (before it went to Python floats)."""
+    offset = point - workspace.shoulder
+    distance = np.sqrt(offset @ offset)
+    if distance > workspace.reach_max:
+        point = workspace.shoulder + offset * (workspace.reach_max / distance)
+    elif 0 < distance < workspace.reach_min:
+        point = workspace.shoulder + offset * (workspace.reach_min / distance)
+    lower = workspace.lower.copy()
+    lower[2] = max(lower[2], workspace.lowest_tool_height(rotation))
+    return np.minimum(np.maximum(point, lower), np.maximum(lower, workspace.upper))
+
+
+@settings(max_examples=300, deadline=None)
+@given(arrays(float, 3, elements=st.floats(-1.2, 1.2, allow_nan=False)), rotations())
+def test_clamp_on_floats_is_bit_for_bit_the_array_form(point, rotation):
+    """Inside and outside the shell, the box and the floor: the same bits as on arrays."""
+    assert WORKSPACE.clamp(point, rotation).tobytes() == numpy_clamp(WORKSPACE, point, rotation).tobytes()

@@ -95,3 +95,13 @@ def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
     assert np.array_equal(qd, naive)
     by_pinv = naive_jacobian.T @ np.linalg.pinv(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6)) @ twist
     np.testing.assert_allclose(qd, by_pinv, rtol=1e-9, atol=1e-9)
+
+
+def test_pose_and_jacobian_equals_its_two_calls_bit_for_bit(kinematics):
+    """One kinematics pass (the Jacobian's) gives the tool pose of framesForwardKinematics exactly,
+    at every configuration, never the pose of the previous call."""
+    for q in random_configurations(50, seed=11):
+        position, rotation, jacobian = kinematics.pose_and_jacobian(q)
+        expected_position, expected_rotation = kinematics.tool_pose(q)
+        assert np.array_equal(position, expected_position) and np.array_equal(rotation, expected_rotation)
+        assert np.array_equal(jacobian, kinematics.jacobian(q))

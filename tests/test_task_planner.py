@@ -9,7 +9,7 @@ from bomi.errors import BomiError
 from helpers import assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
 from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
-                           held_cube, load_operator, mode_button, placed_cubes, plan, turn_deflection_for)
+                           held_cube, load_operator, mode_button, norm, placed_cubes, plan, turn_deflection_for, xy_distance)
 
 P = load_operator()
 TWO_AXIS_B1 = Memory(controls=Controls(TWO_AXIS, ("B1",)))  # P4, P5: four directions and one button
@@ -628,3 +628,13 @@ def test_a_cube_is_lined_up_with_the_other_within_the_place_tolerance_before_it_
     first = view(hand=tuple(above), cubes=(tuple(above[:2]), (-0.14, -0.51)), cube_z=(above[2], HALF), closure=0.7,
                  touching=(True, False), t=5.0)
     assert str(plan(first, Memory(touch_since=0.0), P, combine_axes=False)[0].goal) == "carry cube 1: descend"
+
+
+def test_xy_distance_is_bit_for_bit_norm_of_the_xy_difference():
+    """xy_distance (a speed-up) gives norm(a[:2] - b[:2]) to the bit, zeros and tiny values included."""
+    rng = np.random.default_rng(3)
+    for _ in range(3000):
+        a, b = rng.normal(size=3) * 10.0 ** rng.integers(-8, 2), rng.normal(size=3)
+        if rng.integers(4) == 0:
+            b[:2] = a[:2]  # a zero difference now and then
+        assert xy_distance(a, b) == norm(a[:2] - b[:2])

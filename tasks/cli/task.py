@@ -112,7 +112,7 @@ def _simulated_time(what: str, progress: bool) -> Iterator:
     """A bar counting simulated seconds (an episode's length is not known in advance)."""
     with tqdm(desc=what, file=sys.stderr, disable=not progress, unit="s", mininterval=0.5,
               bar_format="{desc}: {n:.0f} s simulated in {elapsed} ({rate_noinv_fmt})") as bar:
-        yield lambda t: bar.update(t - bar.n)
+        yield (lambda t: bar.update(t - bar.n)) if progress else None  # no bar: no call a tick
 
 
 def episode_record(job: EpisodeJob) -> dict:

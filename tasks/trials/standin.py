@@ -56,7 +56,7 @@ class StandIn:
         full_speed = arm.sim.config.control.full_speed
         seen = None if self._previous is None else (view.hand_pos - self._previous) / (arm.dt * full_speed)
         self._previous = view.hand_pos
-        self._truth = {"intended_dir": tuple(intended_direction(view.mode, intent, arm.sim.layout).tolist()),
+        self._truth = {"intended_dir": intended_direction(view.mode, intent, arm.sim.layout),
                        "pushing": bool(intent.deflection), "goal": intent.goal.step,
                        "stage": "" if intent.goal.phase is None else intent.goal.phase.value}
         return intent, view.t, seen, view.mode
