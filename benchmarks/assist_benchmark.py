@@ -11,7 +11,8 @@ the participant's profile) depends only on those controls: one cell per layout (
 the successes), its change against the first setting on the seeds both finished (ratio of the
 means, 95 % bootstrap interval over seeds), user mode switches, automatic switches, wrong-goal
 switches (tasks.episode.WRONG_GOAL_WINDOW_S), unintended displacement.  Seeds 0-999 are for
-development; report held-out seeds (1000-4999) only after the assistance is frozen.
+development; report held-out seeds (a fresh range of 10000-19999; 1000-4999 are spent) only after
+the assistance is frozen.
 """
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ joystick mean (58 s): benchmarks/results/human_calibration.{md,json}.  Nothing o
 BoMI/joystick ratio, time per phase, the share of time spent switching modes (Herlant et al. 2016:
 17.4 % for able-bodied JACO users), the fastest joystick and P1 BoMI trials in the paper's layout:
 benchmarks/results/N.{md,json,png}, N_phases.png, N_best.png.  Development seeds by default; a
-held-out range (1000-4999) only once the model is frozen.
+held-out range (a fresh one of 10000-19999; 1000-4999 are spent) only once the model is frozen.
 
 ``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
 benchmarks/results/human_sensitivity.{md,json}.

@@ -113,7 +113,8 @@ def main() -> None:
     parser.add_argument("--participants", default="P1")
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0,
-                        help="first seed (0-999: development seeds; 1000-4999: held out, run once frozen)")
+                        help="first seed (0-999: development seeds; 10000-19999: held out, a fresh range "
+                             "run once frozen; 1000-4999 spent)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default="task_benchmark", help="results file name in benchmarks/results/")
     parser.add_argument("--records", nargs="+", type=Path,
