@@ -1,15 +1,16 @@
 """LDA classification, optional post-processing, and the paper's proportional output.
 
 scikit-learn fits the classifier as a ``Pipeline``: ``StandardScaler`` (every feature on one scale,
-whatever the person, sensor, unit or mounting), then ``LinearDiscriminantAnalysis``. Without
-shrinkage (the plain setting) the LDA is scikit-learn's default 'svd' solver, which itself keeps only
-the directions of the (within-class standardised) windows above its rank tolerance: the plain setting
-is exactly plain LDA. With a shrinkage, a ``PCA`` first rotates onto the numerical rank of the
-standardised training windows (FV1-FV3 hold near-duplicate columns: the statistics of an 8-sample
-window of a slow signal are almost equal) and the least-squares solver shrinks in that space; the
-PCA is not whitened, so that a shrinkage keeps damping the directions of negligible variance, which
-whitening would weigh as much as any other (trained so on a virtual P1 session with shrinkage
-0.001, the live chain read the next session's neutral posture as c8). Every
+whatever the person, sensor, unit or mounting), then ``LinearDiscriminantAnalysis``. In the plain
+setting (no shrinkage, no synthesised copies) the LDA is scikit-learn's default 'svd' solver, which
+itself keeps only the directions of the (within-class standardised) windows above its rank
+tolerance: the plain setting is exactly plain LDA. With a shrinkage or copies, a ``PCA`` first
+rotates onto the numerical rank of the standardised training windows (FV1-FV3 hold near-duplicate
+columns: the statistics of an 8-sample window of a slow signal are almost equal) and the
+least-squares solver works in that space; the PCA is not whitened, so that a shrinkage keeps
+damping the directions of negligible variance, which whitening would weigh as much as any other
+(trained so on a virtual P1 session with shrinkage 0.001, the live chain read the next session's
+neutral posture as c8). Every
 step is affine, so the fitted pipeline is one linear discriminant on the raw features; decisions
 use it (``Model.coef``, ``Model.intercept``) through ``posteriors``, the same softmax sklearn's
 ``predict_proba`` computes, because sklearn's per-call input validation costs ~90 us per single
@@ -219,7 +220,7 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
     """
     if shrinkage is None and priors is None:
-        steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd", priors=priors))]
+        steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd"))]
     else:
         steps = [("pca", PCA(n_components=numerical_rank(features), svd_solver="full")),
                  ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
