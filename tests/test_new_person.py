@@ -7,12 +7,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import scipy.io
+from sklearn.decomposition import PCA
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
 
 from bomi.chain import (CONSISTENCY, MIN_CLASS_WINDOWS, Candidate, HoldScores, choose_candidate, choose_threshold, N_FOLDS,
                         REQUIRED_GAIN, MotionCopies, choose_option, cross_validate, evaluate, hold_folds, prepare,
                         select_settings, train, training_windows)
-from bomi.classifier import PostProcessing, classify_windows
+from bomi.classifier import PostProcessing, classify_windows, fit_pipeline
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
@@ -232,6 +235,21 @@ def test_the_plain_setting_is_plain_lda_to_the_last_window(p1_days):
     ours = classify_windows(model, b.features[b.pure]).labels
     assert len(ours) == 16170
     np.testing.assert_array_equal(ours, plain.predict(b.features[b.pure]))
+
+
+def test_the_shrinkage_path_pca_from_the_covariance_decides_as_the_full_svd(p1_days):
+    # the PCA of the shrinkage path comes from the F x F covariance; scikit-learn's full n x F SVD,
+    # an independent route to the same rotation, must read every window of a real pair alike
+    training, test = p1_days[1], p1_days[3]
+    profile = derive_profile([training])
+    a, b = (prepare(rec, profile.spec, profile.neutral_samples) for rec in (training, test))
+    features, labels = a.features[a.pure], a.labels[a.pure]
+    ours = fit_pipeline(features, labels, shrinkage=0.1)
+    full_svd = Pipeline([("scale", StandardScaler()),
+                         ("pca", PCA(n_components=ours.named_steps["pca"].n_components_, svd_solver="full")),
+                         ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=0.1))]).fit(features, labels)
+    assert ours.named_steps["pca"].n_components_ < features.shape[1]   # a rank-reducing projection
+    np.testing.assert_array_equal(ours.predict(b.features[b.pure]), full_svd.predict(b.features[b.pure]))
 
 
 def test_smaller_copies_leave_the_class_priors_to_the_recorded_windows():
