@@ -330,17 +330,25 @@ def markdown(record: dict) -> str:
         lines.append(f"| {kind} | {wall[kind]['x']:.1f} | {wall[kind]['of_limit']:.2f} | {wall[kind]['of_dm_control']:.2f} "
                      f"| {cpu[kind]['x']:.1f} | {cpu[kind]['of_limit']:.2f} | {cpu[kind]['of_dm_control']:.2f} | {bar_text} |")
     lines += ["", "Our episodes apart (medians over rounds, CPU seconds; x real time of the task loop alone and of "
-              "the episode's own `mj_step` calls alone):", "",
+              "the episode's own `mj_step` calls alone). The episode's own physics as a share of the limit is the "
+              "ceiling of an episode whose every other cost were zero; the last column is what the bar leaves "
+              "for all the rest (set-up, control, participant, chain) per control tick:", "",
               "| kind | simulated (s) | ticks | set-up (s) | task loop (s) | loop x real time | episode's own physics (s) "
-              "| its x real time | physics share of the loop |", "|---|---|---|---|---|---|---|---|---|"]
+              "| its x real time | its share of the limit (ceiling) | physics share of the loop "
+              "| left for the rest at the bar (us/tick) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    limit_x = [r[PHYSICS]["sim_s"] / r[PHYSICS]["cpu_s"] for r in rounds]
     for kind in (JOY, BOMI):
         med = {k: statistics.median(r[kind][k] for r in rounds) for k in
                ("sim_s", "ticks", "setup_cpu_s", "loop_cpu_s", "physics_cpu_s")}
         loop_x = statistics.median(r[kind]["sim_s"] / r[kind]["loop_cpu_s"] for r in rounds)
         phys_x = statistics.median(r[kind]["sim_s"] / r[kind]["physics_cpu_s"] for r in rounds)
+        ceiling = statistics.median(r[kind]["sim_s"] / r[kind]["physics_cpu_s"] / x for r, x in zip(rounds, limit_x))
         share = statistics.median(r[kind]["physics_cpu_s"] / r[kind]["loop_cpu_s"] for r in rounds)
+        left = statistics.median(1e6 * (r[kind]["sim_s"] / (BARS[kind][0] * x) - r[kind]["physics_cpu_s"]) / r[kind]["ticks"]
+                                 for r, x in zip(rounds, limit_x))
         lines.append(f"| {kind} | {med['sim_s']:.1f} | {med['ticks']:.0f} | {med['setup_cpu_s']:.2f} | "
-                     f"{med['loop_cpu_s']:.2f} | {loop_x:.1f} | {med['physics_cpu_s']:.2f} | {phys_x:.1f} | {share:.2f} |")
+                     f"{med['loop_cpu_s']:.2f} | {loop_x:.1f} | {med['physics_cpu_s']:.2f} | {phys_x:.1f} | "
+                     f"{ceiling:.2f} | {share:.2f} | {left:.0f} |")
     lines += ["", "Every round (CPU s / wall s):", "", "| round | seed | " + " | ".join(wall) + " |",
               "|---|---|" + "---|" * len(wall)]
     for k, r in enumerate(rounds):
