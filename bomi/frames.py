@@ -155,10 +155,11 @@ _FRAME_RECORD = np.dtype([("start", "u1"), ("node_id", "u1"), ("period_ms", "u1"
                           ("end", "u1")])
 
 
-def encode_imu_frames(node_id: int, counters: np.ndarray, mag: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-                      period_ms: int = DEFAULT_PERIOD_MS) -> list[bytes]:
-    """``encode_imu_frame`` of n frames of one node at once: (n,) packet counters (0..255) and (n, 3)
-    int16 mag, gyro, acc -> n frames of 32 bytes, each the bytes ``encode_imu_frame`` gives."""
+def encode_imu_frames(node_id: int | np.ndarray, counters: np.ndarray, mag: np.ndarray, gyro: np.ndarray,
+                      acc: np.ndarray, period_ms: int = DEFAULT_PERIOD_MS) -> list[bytes]:
+    """``encode_imu_frame`` of n frames at once: the node id of all of them (or (n,) node ids), (n,) packet
+    counters (0..255) and (n, 3) int16 mag, gyro, acc -> n frames of 32 bytes, each the bytes
+    ``encode_imu_frame`` gives."""
     records = np.zeros(len(counters), dtype=_FRAME_RECORD)
     records["start"], records["node_id"], records["period_ms"], records["end"] = START_BYTE, node_id, period_ms, END_BYTE
     records["counter"] = counters

@@ -229,14 +229,17 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     rate = np.degrees(relative_rotvecs(quats[:-k], now)).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
     scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
-    out = []
+    clean, draws = np.empty((2, k, n, 9))   # per node: acc, gyro, mag in sensor axes, and the noise
     for node, (cal, rng) in enumerate(zip(cals, rngs, strict=True)):
-        acc = to_sensor_axes(acc_body[:, node], cal) * ACC_LSB_PER_G
-        gyro = to_sensor_axes(rate[:, node], cal) * GYRO_LSB_PER_DEG_S
-        mag = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * node_arrays(cal).units, cal), cal)
-        counts = to_int16(np.hstack([acc, gyro, mag]) + rng.standard_normal((n, 9)) * scale)
-        out.append(RawImu(acc=counts[:, 0:3], gyro=counts[:, 3:6], mag=counts[:, 6:9]))
-    return out
+        clean[node, :, 0:3] = to_sensor_axes(acc_body[:, node], cal)
+        clean[node, :, 3:6] = to_sensor_axes(rate[:, node], cal)
+        clean[node, :, 6:9] = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * node_arrays(cal).units, cal),
+                                                   cal)
+        draws[node] = rng.standard_normal((n, 9))
+    clean[..., 0:3] *= ACC_LSB_PER_G
+    clean[..., 3:6] *= GYRO_LSB_PER_DEG_S
+    counts = to_int16(clean + draws * scale)
+    return [RawImu(acc=c[:, 0:3], gyro=c[:, 3:6], mag=c[:, 6:9]) for c in counts]
 
 
 def synthesize_raw(angles_deg: np.ndarray, cal: NodeCalibration, rng: np.random.Generator,
@@ -295,18 +298,20 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
     ``not_before_s`` gives per node the arrival time of its last frame of an earlier call.
     """
     sample_index = np.asarray(sample_index)
-    times, nodes, indices, frames = [np.empty(0)], [np.empty(0, int)], [np.empty(0, int)], []
-    for node, raw in sorted(raw_by_node.items()):
-        draws = rngs[node].random((len(raw), 2))
-        kept = draws[:, 0] >= link.loss_fraction
-        sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[:, 1])   # exponential jitter
-        kept_index = np.flatnonzero(kept)          # lost frames hold nothing up
-        arrival = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
-        times.append(np.maximum(arrival, (not_before_s or {}).get(node, -np.inf)))
-        nodes.append(np.full(len(kept_index), node))
-        indices.append(sample_index[kept_index].astype(int))
-        frames += encode_imu_frames(imu_node_id(node), indices[-1] % COUNTER_MODULO, raw.mag[kept_index],
-                                    raw.gyro[kept_index], raw.acc[kept_index], period_ms)
-    times, nodes, indices = np.concatenate(times), np.concatenate(nodes), np.concatenate(indices)
+    by_node = sorted(raw_by_node.items())
+    draws = np.stack([rngs[node].random((len(raw), 2)) for node, raw in by_node])     # (nodes, n, 2)
+    sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[..., 1])   # exponential jitter
+    kept = draws[..., 0] >= link.loss_fraction
+    sent[~kept] = -np.inf                      # lost frames hold nothing up
+    slots, rows = np.nonzero(kept)             # per frame: its node's slot and its sample's row
+    arrival = np.ceil(np.maximum.accumulate(sent, axis=1)[slots, rows] / link.burst_s) * link.burst_s
+    times = np.maximum(arrival, np.array([(not_before_s or {}).get(node, -np.inf) for node, _ in by_node])[slots])
+    nodes = np.array([node for node, _ in by_node], dtype=int)[slots]
+    indices = sample_index[rows].astype(int)
     order = np.lexsort((nodes, indices, times))
-    return Delivery(times[order], nodes[order], indices[order], [frames[i] for i in order])
+    slots, rows, indices = slots[order], rows[order], indices[order]
+    node_ids = np.array([imu_node_id(node) for node, _ in by_node])[slots]
+    values = {name: np.stack([getattr(raw, name) for _, raw in by_node])[slots, rows] for name in ("mag", "gyro", "acc")}
+    frames = encode_imu_frames(node_ids, indices % COUNTER_MODULO, values["mag"], values["gyro"], values["acc"],
+                               period_ms)   # every node's frames in one pass, in arrival order
+    return Delivery(times[order], nodes[order], indices, frames)

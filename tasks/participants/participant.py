@@ -527,8 +527,8 @@ class VirtualParticipant:
         self._last_angles = angles[-1]
         raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
         fresh = deliver(raw, index, t, self._link_rngs, self.link, not_before_s=self._last_arrival)
-        for node in np.unique(fresh.node_index):
-            self._last_arrival[int(node)] = float(fresh.arrival_s[fresh.node_index == node].max())
+        # in arrival order: a node's last frame is its latest
+        self._last_arrival.update(zip(fresh.node_index.tolist(), fresh.arrival_s.tolist()))
         self._pending = _merge(self._pending, fresh)
         self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
