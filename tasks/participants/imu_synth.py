@@ -105,17 +105,20 @@ STACKED_FROM = 2000
 # operations of its vectorised path (scipy.spatial.transform._rotation_xp: from_euler's elementary
 # compose, compose_quat, the normalisation of a product, inv, as_rotvec) in the same order: the same
 # bits as either of scipy's paths (tests/test_imu_synth.py compares them on random rotations), on a
-# whole chunk in a few array operations, not per rotation or through the array API's dispatch.
+# whole chunk in a few array operations, not per rotation or through the array API's dispatch. A
+# quaternion is taken apart into its components (x, y, z, w), each an (n,) array or, where scipy's
+# component is a constant 0, the float 0.0: the same IEEE operations on fewer elements.
 _AXIS = {"X": 0, "Y": 1, "Z": 2}
+Components = tuple   # (x, y, z, w): each an (n,) array or a float
 
 
-def compose_quats(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Quaternions of the rotations p then q (scipy's ``compose_quat``, not normalised)."""
-    p0, p1, p2, p3 = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
-    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+def compose_quats(p: Components, q: Components) -> Components:
+    """Components of the rotations p then q (scipy's ``compose_quat``, not normalised)."""
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
     cross = (p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0)   # numpy.cross, term by term
-    return np.stack([p3 * q0 + q3 * p0 + cross[0], p3 * q1 + q3 * p1 + cross[1], p3 * q2 + q3 * p2 + cross[2],
-                     p3 * q3 - p0 * q0 - p1 * q1 - p2 * q2], axis=-1)
+    return (p3 * q0 + q3 * p0 + cross[0], p3 * q1 + q3 * p1 + cross[1], p3 * q2 + q3 * p2 + cross[2],
+            p3 * q3 - p0 * q0 - p1 * q1 - p2 * q2)
 
 
 def euler_quats(seq: str, angles: np.ndarray, degrees: bool = False) -> np.ndarray:
@@ -125,12 +128,11 @@ def euler_quats(seq: str, angles: np.ndarray, degrees: bool = False) -> np.ndarr
         angles = angles * (np.pi / 180.0)
     quat = None
     for column, axis in enumerate(seq):
-        angle = angles[..., column]
-        elementary = np.zeros((*angle.shape, 4))
-        elementary[..., 3] = np.cos(angle / 2.0)
-        elementary[..., _AXIS[axis]] = np.sin(angle / 2.0)
+        half = angles[:, column] / 2.0
+        elementary = [0.0, 0.0, 0.0, np.cos(half)]
+        elementary[_AXIS[axis]] = np.sin(half)
         quat = elementary if quat is None else compose_quats(quat, elementary)
-    return quat
+    return np.stack(quat, axis=-1)
 
 
 def inverse_quats(quat: np.ndarray) -> np.ndarray:
@@ -142,7 +144,7 @@ def inverse_quats(quat: np.ndarray) -> np.ndarray:
 
 def relative_rotvecs(before: np.ndarray, after: np.ndarray) -> np.ndarray:
     """``(Rotation(before).inv() * Rotation(after)).as_rotvec()`` of two (n, 4) quaternion arrays (radians)."""
-    quat = compose_quats(inverse_quats(before), after)
+    quat = np.stack(compose_quats(tuple(inverse_quats(before).T), tuple(after.T)), axis=-1)
     quat = quat / np.linalg.norm(quat, ord=2, axis=-1, keepdims=True)     # the product's normalisation
     flip = quat[..., 3] < 0                                                # as_rotvec's canonical sign
     zero_w = quat[..., 3] == 0
