@@ -323,25 +323,25 @@ class FrameParser:
         if not self.idle or len(data) % FRAME_SIZE:
             return None
         records = np.frombuffer(data, dtype=_FRAME_RECORD)
-        if not (np.all(records["start"] == START_BYTE) and np.all(records["end"] == END_BYTE)):
+        if not ((records["start"] == START_BYTE).all() and (records["end"] == END_BYTE).all()):
             return None
-        node, counter = records["node_id"], records["counter"].astype(np.int64)
+        node, counter, period = records["node_id"], records["counter"].astype(np.int64), records["period_ms"]
         nodes = []
         for node_id in np.unique(node).tolist():
             mine = np.flatnonzero(node == node_id)
             last = self._last.get(node_id)
-            if last is None or np.any(records["period_ms"][mine] != last.period_ms):
+            if last is None or (period[mine] != last.period_ms).any():
                 return None
             counters = np.concatenate(([last.counter], counter[mine]))
             steps = (counters[1:] - counters[:-1]) % COUNTER_MODULO
-            if np.any((steps < 1) | (steps > self.max_counter_gap)):
+            if ((steps < 1) | (steps > self.max_counter_gap)).any():
                 return None
             nodes.append((node_id, mine, steps))
         self.frames_accepted += len(records)
+        values = [records[name] for name in ("mag", "gyro", "acc")]
         for node_id, mine, steps in nodes:
-            end = records[mine[-1]]
-            frame = ImuFrame(node_id, int(end["period_ms"]), int(end["counter"]), *(tuple(end[name].tolist())
-                                                                                  for name in ("mag", "gyro", "acc")))
+            end = int(mine[-1])
+            frame = ImuFrame(node_id, int(period[end]), int(counter[end]), *(tuple(v[end].tolist()) for v in values))
             stats = self.nodes[node_id]   # its last counter is the last frame's (nothing held)
             stats.lost += int(steps.sum()) - len(steps)
             stats.frames += len(mine)

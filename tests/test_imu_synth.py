@@ -163,6 +163,23 @@ def test_delivery_in_pieces_equals_delivery_in_one_piece():
     np.testing.assert_array_equal(arrival[order], whole.arrival_s)
 
 
+def test_nodes_delivered_together_are_each_node_delivered_alone_interleaved():
+    """The link's arithmetic over all nodes at once against one node at a time (each its own generator),
+    the frames then put in arrival order by hand: the same frames, arrival times and indices."""
+    raw, index, floor = make_raw(400, 5), np.arange(400), {2: 3.5}
+    together = deliver(raw, index, index / 62.5, generators(3), not_before_s=floor)
+    alone = [deliver({node: raw[node]}, index, index / 62.5, {node: generators(3)[node]}, not_before_s=floor)
+             for node in (3, 1, 2)]
+    arrival, node, sample = (np.concatenate([getattr(a, name) for a in alone])
+                             for name in ("arrival_s", "node_index", "sample_index"))
+    frames = [f for a in alone for f in a.frames]
+    order = np.lexsort((node, sample, arrival))
+    assert together.frames == [frames[i] for i in order]
+    assert np.array_equal(together.arrival_s, arrival[order]) and together.arrival_s.min() < 3.5
+    assert np.array_equal(together.node_index, node[order]) and np.array_equal(together.sample_index, sample[order])
+    assert together.arrival_s[together.node_index == 2].min() == 3.5
+
+
 def test_no_loss_link_delivers_everything():
     raw = make_raw(200, 2)
     index = np.arange(200)
