@@ -92,12 +92,12 @@ class RawImu:
         return len(self.acc)
 
 
-# scipy's Rotation computes a stack of rotations (input of three dimensions) on its vectorised
-# array-API path and a plain list (two dimensions) on its compiled per-rotation path: the same
-# quaternions and relative rotation vectors, but vectors applied by summing in another order
-# (round-off that, tests/test_imu_synth.py, does not reach a count). The compiled path costs about
-# 1.3 us a rotation (scipy 1.17), the vectorised one a fixed ~0.2 ms: a calibration session (tens of
-# thousands of rotations at once) applies its vectors on the latter, a task's chunks on the other.
+# scipy's Rotation applies a vector to a stack of rotations (input of three dimensions) on its
+# vectorised array-API path and to a plain list (two dimensions) on its compiled per-rotation path,
+# summing the products in another order (round-off that, tests/test_imu_synth.py, does not reach a
+# count). A calibration session (tens of thousands of rotations at once) takes the former, as it
+# always has (the former's from_euler was the cheaper one for it), a task's chunks the latter (the
+# former costs a fixed ~0.2 ms a call): kept so, every sample is the one it always was.
 STACKED_FROM = 2000
 
 
