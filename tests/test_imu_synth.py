@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 from bomi.frames import FrameParser
 from bomi.fusion import GYRO_DEG_PER_LSB, NodeCalibration, fuse
 from tasks.participants.imu_synth import (STACKED_FROM, EarthField, LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
-                             synthesize_raw, to_int16, euler_quats, relative_rotvecs, rotations)
+                             synthesize_raw, to_int16, euler_quats, node_arrays, relative_rotvecs, rotations)
 
 NO_NOISE = SensorNoise(0.0, 0.0, 0.0)
 HEADSET = NodeCalibration()
@@ -52,7 +52,7 @@ def test_headset_pitch_rate_lands_on_sensor_y():
 def test_magnetometer_distortion_is_undone_by_the_hardware_correction():
     rng = np.random.default_rng(1)
     corrected = rng.normal(0.0, 0.8, (50, 3))
-    raw = distort_magnetometer(corrected, ODD)
+    raw, = distort_magnetometer(corrected[None], node_arrays((ODD,)))
     h, c = np.array(ODD.hard_iron), np.array(ODD.soft_iron)
     # hardware.md step 1, written out: m = C (mx - h0, my - h1, -mz - h2)
     again = np.array([c @ np.array([x - h[0], y - h[1], -z - h[2]]) for x, y, z in raw])

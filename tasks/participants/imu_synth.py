@@ -53,22 +53,25 @@ class EarthField:
 
 @dataclass(frozen=True)
 class NodeArrays:
-    """A node's calibration as the synthesis uses it, made once per calibration (``node_arrays``: a
-    chunk of the stream asks for it per node). ``units``: raw LSB -> the node's corrected magnetometer
-    units, the soft-iron matrix's mean gain (cube-root determinant)."""
+    """k nodes' calibrations as the synthesis uses them, stacked node by node: (k, 3, 3) ``mounting``
+    and ``soft_iron``, (k, 3) ``hard_iron``, and (k,) ``units``: raw LSB -> each node's corrected
+    magnetometer units, its soft-iron matrix's mean gain (cube-root determinant). Made once per set of
+    calibrations (``node_arrays``: every chunk of the stream asks for them)."""
 
     mounting: np.ndarray
     soft_iron: np.ndarray
     hard_iron: np.ndarray
-    units: float
+    units: np.ndarray
 
 
 @cache
-def node_arrays(cal: NodeCalibration) -> NodeArrays:
-    mounting, soft_iron, hard_iron = (np.array(v) for v in (cal.mounting, cal.soft_iron, cal.hard_iron))
-    for array in (mounting, soft_iron, hard_iron):
+def node_arrays(cals: tuple[NodeCalibration, ...]) -> NodeArrays:
+    mounting, soft_iron, hard_iron = (np.array([getattr(cal, name) for cal in cals], dtype=float)
+                                      for name in ("mounting", "soft_iron", "hard_iron"))
+    units = np.array([float(np.cbrt(abs(np.linalg.det(matrix)))) for matrix in soft_iron])
+    for array in (mounting, soft_iron, hard_iron, units):
         array.flags.writeable = False
-    return NodeArrays(mounting, soft_iron, hard_iron, float(np.cbrt(abs(np.linalg.det(soft_iron)))))
+    return NodeArrays(mounting, soft_iron, hard_iron, units)
 
 
 @dataclass(frozen=True)
@@ -187,17 +190,19 @@ def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField(
     return to_body.apply(field.at_zero_heading()).reshape(-1, 3)
 
 
-def to_sensor_axes(body_vectors: np.ndarray, cal: NodeCalibration) -> np.ndarray:
-    """Undo the node's mounting rotation (body = mounting @ sensor) for (n, 3) row vectors."""
-    return np.asarray(body_vectors, dtype=float) @ node_arrays(cal).mounting
+# Each node's products below are numpy's for that node alone: a stack of matrices goes through the same
+# BLAS (matmul) or LAPACK (solve) call per node as one matrix does.
+def to_sensor_axes(body_vectors: np.ndarray, arrays: NodeArrays) -> np.ndarray:
+    """Undo each node's mounting rotation (body = mounting @ sensor) for its (n, 3) row vectors, (k, n, 3)."""
+    return np.asarray(body_vectors, dtype=float) @ arrays.mounting
 
 
-def distort_magnetometer(corrected_sensor: np.ndarray, cal: NodeCalibration) -> np.ndarray:
-    """Raw magnetometer LSB whose correction m = C (mx - h0, my - h1, -mz - h2) gives ``corrected_sensor``."""
-    arrays = node_arrays(cal)
-    uncorrected = np.linalg.solve(arrays.soft_iron, np.asarray(corrected_sensor, float).T).T
-    raw = uncorrected + arrays.hard_iron
-    raw[:, 2] *= -1.0
+def distort_magnetometer(corrected_sensor: np.ndarray, arrays: NodeArrays) -> np.ndarray:
+    """Raw magnetometer LSB whose correction m = C (mx - h0, my - h1, -mz - h2) gives each node's
+    ``corrected_sensor``, (k, n, 3)."""
+    uncorrected = np.linalg.solve(arrays.soft_iron, np.asarray(corrected_sensor, float).transpose(0, 2, 1))
+    raw = uncorrected.transpose(0, 2, 1) + arrays.hard_iron[:, None]
+    raw[..., 2] *= -1.0
     return raw
 
 
@@ -231,12 +236,15 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     rate = np.degrees(relative_rotvecs(quats[:-k], now)).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
     scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
+    if not len(cals) == len(rngs) == k:
+        raise ValueError(f"angles of {k} nodes, {len(cals)} calibrations and {len(rngs)} generators")
+    arrays = node_arrays(tuple(cals))
     clean, draws = np.empty((2, k, n, 9))   # per node: acc, gyro, mag in sensor axes, and the noise
-    for node, (cal, rng) in enumerate(zip(cals, rngs, strict=True)):
-        clean[node, :, 0:3] = to_sensor_axes(acc_body[:, node], cal)
-        clean[node, :, 3:6] = to_sensor_axes(rate[:, node], cal)
-        clean[node, :, 6:9] = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * node_arrays(cal).units, cal),
-                                                   cal)
+    clean[..., 0:3] = to_sensor_axes(acc_body.transpose(1, 0, 2), arrays)
+    clean[..., 3:6] = to_sensor_axes(rate.transpose(1, 0, 2), arrays)
+    field_sensor = to_sensor_axes((field_lsb * arrays.units[:, None]).transpose(1, 0, 2), arrays)
+    clean[..., 6:9] = distort_magnetometer(field_sensor, arrays)
+    for node, rng in enumerate(rngs):
         draws[node] = rng.standard_normal((n, 9))
     clean[..., 0:3] *= ACC_LSB_PER_G
     clean[..., 3:6] *= GYRO_LSB_PER_DEG_S
