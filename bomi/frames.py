@@ -164,8 +164,7 @@ def encode_imu_frames(node_id: int | np.ndarray, counters: np.ndarray, mag: np.n
     records["start"], records["node_id"], records["period_ms"], records["end"] = START_BYTE, node_id, period_ms, END_BYTE
     records["counter"] = counters
     records["mag"], records["gyro"], records["acc"] = mag, gyro, acc
-    block = records.tobytes()
-    return [block[k:k + FRAME_SIZE] for k in range(0, len(block), FRAME_SIZE)]
+    return records.view(f"S{FRAME_SIZE}").tolist()   # whole: numpy strips a bytes item's trailing zeros, END_BYTE is not 0
 
 
 def frame_records(frames: Sequence[ImuFrame]) -> np.ndarray:

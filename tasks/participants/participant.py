@@ -565,10 +565,12 @@ def _merge(*parts: Delivery) -> Delivery:
     """Deliveries in one arrival order (stable: earlier parts first on ties); no parts: nothing."""
     parts = (Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), []),) + parts
     arrival = np.concatenate([p.arrival_s for p in parts])
-    order = np.argsort(arrival, kind="stable")
+    node, sample = (np.concatenate([getattr(p, name) for p in parts]) for name in ("node_index", "sample_index"))
     frames = [frame for p in parts for frame in p.frames]
-    return Delivery(arrival[order], np.concatenate([p.node_index for p in parts])[order],
-                    np.concatenate([p.sample_index for p in parts])[order], [frames[i] for i in order])
+    if (arrival[1:] >= arrival[:-1]).all():   # in order already (the stable sort would keep it so)
+        return Delivery(arrival, node, sample, frames)
+    order = np.argsort(arrival, kind="stable")
+    return Delivery(arrival[order], node[order], sample[order], [frames[i] for i in order])
 
 
 # ------------------------------------------------------------------------- calibration protocol
