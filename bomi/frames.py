@@ -155,16 +155,16 @@ _FRAME_RECORD = np.dtype([("start", "u1"), ("node_id", "u1"), ("period_ms", "u1"
                           ("end", "u1")])
 
 
-def encode_imu_frames(node_id: int, counters: np.ndarray, mag: np.ndarray, gyro: np.ndarray, acc: np.ndarray,
-                      period_ms: int = DEFAULT_PERIOD_MS) -> list[bytes]:
-    """``encode_imu_frame`` of n frames of one node at once: (n,) packet counters (0..255) and (n, 3)
-    int16 mag, gyro, acc -> n frames of 32 bytes, each the bytes ``encode_imu_frame`` gives."""
+def encode_imu_frames(node_id: int | np.ndarray, counters: np.ndarray, mag: np.ndarray, gyro: np.ndarray,
+                      acc: np.ndarray, period_ms: int = DEFAULT_PERIOD_MS) -> list[bytes]:
+    """``encode_imu_frame`` of n frames at once: the node id of all of them (or (n,) node ids), (n,) packet
+    counters (0..255) and (n, 3) int16 mag, gyro, acc -> n frames of 32 bytes, each the bytes
+    ``encode_imu_frame`` gives."""
     records = np.zeros(len(counters), dtype=_FRAME_RECORD)
     records["start"], records["node_id"], records["period_ms"], records["end"] = START_BYTE, node_id, period_ms, END_BYTE
     records["counter"] = counters
     records["mag"], records["gyro"], records["acc"] = mag, gyro, acc
-    block = records.tobytes()
-    return [block[k:k + FRAME_SIZE] for k in range(0, len(block), FRAME_SIZE)]
+    return records.view(f"S{FRAME_SIZE}").tolist()   # whole: numpy strips a bytes item's trailing zeros, END_BYTE is not 0
 
 
 def frame_records(frames: Sequence[ImuFrame]) -> np.ndarray:
@@ -322,25 +322,25 @@ class FrameParser:
         if not self.idle or len(data) % FRAME_SIZE:
             return None
         records = np.frombuffer(data, dtype=_FRAME_RECORD)
-        if not (np.all(records["start"] == START_BYTE) and np.all(records["end"] == END_BYTE)):
+        if not ((records["start"] == START_BYTE).all() and (records["end"] == END_BYTE).all()):
             return None
-        node, counter = records["node_id"], records["counter"].astype(np.int64)
+        node, counter, period = records["node_id"], records["counter"].astype(np.int64), records["period_ms"]
         nodes = []
         for node_id in np.unique(node).tolist():
             mine = np.flatnonzero(node == node_id)
             last = self._last.get(node_id)
-            if last is None or np.any(records["period_ms"][mine] != last.period_ms):
+            if last is None or (period[mine] != last.period_ms).any():
                 return None
             counters = np.concatenate(([last.counter], counter[mine]))
             steps = (counters[1:] - counters[:-1]) % COUNTER_MODULO
-            if np.any((steps < 1) | (steps > self.max_counter_gap)):
+            if ((steps < 1) | (steps > self.max_counter_gap)).any():
                 return None
             nodes.append((node_id, mine, steps))
         self.frames_accepted += len(records)
+        values = [records[name] for name in ("mag", "gyro", "acc")]
         for node_id, mine, steps in nodes:
-            end = records[mine[-1]]
-            frame = ImuFrame(node_id, int(end["period_ms"]), int(end["counter"]), *(tuple(end[name].tolist())
-                                                                                  for name in ("mag", "gyro", "acc")))
+            end = int(mine[-1])
+            frame = ImuFrame(node_id, int(period[end]), int(counter[end]), *(tuple(v[end].tolist()) for v in values))
             stats = self.nodes[node_id]   # its last counter is the last frame's (nothing held)
             stats.lost += int(steps.sum()) - len(steps)
             stats.frames += len(mine)

@@ -289,6 +289,13 @@ class BomiChannel:
         self.feel = {cls.label: LeanFeel(participant.params.feel) for cls in profile.classes
                      if cls.function in FUNCTIONS}
         self._watched: Watched | None = None  # the proportional posture taken up last
+        # what _watch reads every tick, made once: per mode, the hand axis each stick function moves along
+        # (as the arrays the speed's dot product takes), and the share of a tick in the speed's smoothing
+        layout = self.controls.layout
+        self._linear_axes = {mode: {function: np.array(axis, dtype=float)
+                                    for function, axis in layout.axes(mode, Kind.LINEAR).items()}
+                             for mode in layout.modes}
+        self._smoothing = min(1.0, DT / participant.params.feel.speed_smoothing_s)
         # how long the person waits for a posture (or a change of lean) to take effect before
         # leaning further: reaction + the body's move + a second of watching
         self._patience = participant.params.reaction_s + participant.params.onset_s + participant.params.feel.watch_s
@@ -416,12 +423,12 @@ class BomiChannel:
         if watched is None or seen is None:
             return False
         function = self._function_of[watched.label]
-        axis = self.controls.layout.axes(mode, Kind.LINEAR).get(function)
+        axis = self._linear_axes[mode].get(function)
         if axis is None:
             return False
         if self.stick.function == function:
             along = float(np.dot(seen, axis))
-            watched.speed += (along - watched.speed) * min(1.0, DT / self.participant.params.feel.speed_smoothing_s)
+            watched.speed += (along - watched.speed) * self._smoothing
         return True
 
     def _corrected_lean(self, label: int, lean: float, t: float, judged: bool) -> float:

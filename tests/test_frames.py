@@ -333,14 +333,19 @@ def test_sample_index_unwraps_each_nodes_counter_and_counts_lost_samples():
 
 
 @settings(max_examples=50, deadline=None)
-@given(node=st.integers(1, 6), values=st.lists(st.tuples(vector3, vector3, vector3, st.integers(0, 255)), max_size=30),
+@given(node=st.integers(1, 6), values=st.lists(st.tuples(vector3, vector3, vector3, st.integers(0, 255),
+                                                         st.integers(1, 6)), max_size=30),
        period=st.integers(0, 255))
 def test_frames_encoded_at_once_are_the_frames_encoded_one_by_one(node, values, period):
+    """One node's frames, and frames of a node each (the last field of ``values``)."""
     mag, gyro, acc = (np.array([v[k] for v in values], dtype=np.int64).reshape(len(values), 3) for k in range(3))
     counters = np.array([v[3] for v in values], dtype=np.int64)
     many = encode_imu_frames(imu_node_id(node), counters, mag, gyro, acc, period)
-    one_by_one = [encode_imu_frame(ImuFrame(imu_node_id(node), period, c, m, g, a)) for m, g, a, c in values]
+    one_by_one = [encode_imu_frame(ImuFrame(imu_node_id(node), period, c, m, g, a)) for m, g, a, c, _ in values]
     assert many == one_by_one
+    ids = np.array([imu_node_id(v[4]) for v in values], dtype=np.int64)
+    each_own = [encode_imu_frame(ImuFrame(imu_node_id(k), period, c, m, g, a)) for m, g, a, c, k in values]
+    assert encode_imu_frames(ids, counters, mag, gyro, acc, period) == each_own
 
 
 # ------------------------------------------------------------------ whole-stream (batch) forms

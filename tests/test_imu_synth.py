@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 from bomi.frames import FrameParser
 from bomi.fusion import GYRO_DEG_PER_LSB, NodeCalibration, fuse
 from tasks.participants.imu_synth import (STACKED_FROM, EarthField, LinkModel, RawImu, SensorNoise, deliver, distort_magnetometer, synthesize_nodes,
-                             synthesize_raw, to_int16, euler_rotations, rotation_rows)
+                             synthesize_raw, to_int16, euler_quats, node_arrays, relative_rotvecs, rotations)
 
 NO_NOISE = SensorNoise(0.0, 0.0, 0.0)
 HEADSET = NodeCalibration()
@@ -52,7 +52,7 @@ def test_headset_pitch_rate_lands_on_sensor_y():
 def test_magnetometer_distortion_is_undone_by_the_hardware_correction():
     rng = np.random.default_rng(1)
     corrected = rng.normal(0.0, 0.8, (50, 3))
-    raw = distort_magnetometer(corrected, ODD)
+    raw, = distort_magnetometer(corrected[None], node_arrays((ODD,)))
     h, c = np.array(ODD.hard_iron), np.array(ODD.soft_iron)
     # hardware.md step 1, written out: m = C (mx - h0, my - h1, -mz - h2)
     again = np.array([c @ np.array([x - h[0], y - h[1], -z - h[2]]) for x, y, z in raw])
@@ -163,6 +163,23 @@ def test_delivery_in_pieces_equals_delivery_in_one_piece():
     np.testing.assert_array_equal(arrival[order], whole.arrival_s)
 
 
+def test_nodes_delivered_together_are_each_node_delivered_alone_interleaved():
+    """The link's arithmetic over all nodes at once against one node at a time (each its own generator),
+    the frames then put in arrival order by hand: the same frames, arrival times and indices."""
+    raw, index, floor = make_raw(400, 5), np.arange(400), {2: 3.5}
+    together = deliver(raw, index, index / 62.5, generators(3), not_before_s=floor)
+    alone = [deliver({node: raw[node]}, index, index / 62.5, {node: generators(3)[node]}, not_before_s=floor)
+             for node in (3, 1, 2)]
+    arrival, node, sample = (np.concatenate([getattr(a, name) for a in alone])
+                             for name in ("arrival_s", "node_index", "sample_index"))
+    frames = [f for a in alone for f in a.frames]
+    order = np.lexsort((node, sample, arrival))
+    assert together.frames == [frames[i] for i in order]
+    assert np.array_equal(together.arrival_s, arrival[order]) and together.arrival_s.min() < 3.5
+    assert np.array_equal(together.node_index, node[order]) and np.array_equal(together.sample_index, sample[order])
+    assert together.arrival_s[together.node_index == 2].min() == 3.5
+
+
 def test_no_loss_link_delivers_everything():
     raw = make_raw(200, 2)
     index = np.arange(200)
@@ -196,21 +213,41 @@ def test_linear_acceleration_tilts_the_accelerometer_angles():
     assert pitch == pytest.approx(np.degrees(np.arctan2(-0.1, 1.0)), abs=0.01) and abs(roll) < 0.01
 
 
+def _bits(values: np.ndarray) -> np.ndarray:
+    """The IEEE bit patterns of float64 values (signed zeros told apart)."""
+    return np.ascontiguousarray(values, dtype=np.float64).view(np.int64)
+
+
 @pytest.mark.parametrize("seq, degrees", [("XZY", False), ("YZX", True)])
-def test_stacked_rotations_are_the_listed_rotations(seq, degrees):
-    """euler_rotations' stack (scipy's vectorised path, for long trajectories) against scipy's plain
-    list (its per-rotation path): the same quaternions and relative rotation vectors (the gyro), bit
-    for bit; applied vectors (gravity, the earth field) summed in another order, to round-off."""
-    rng = np.random.default_rng(11)
-    angles = rng.normal(0.0, 40.0 if degrees else 0.7, (STACKED_FROM + 9, 3))
-    angles[::50] = 0.0
-    stacked, listed = euler_rotations(seq, angles, degrees), Rotation.from_euler(seq, angles, degrees=degrees)
-    assert stacked.shape == (1, len(angles)) and listed.shape == (len(angles),)
-    assert np.array_equal(stacked.as_quat()[0], listed.as_quat())
-    now, before = rotation_rows(stacked, slice(3, None)), rotation_rows(stacked, slice(None, -3))
-    assert np.array_equal((before.inv() * now).as_rotvec()[0], (listed[:-3].inv() * listed[3:]).as_rotvec())
+@pytest.mark.parametrize("n", [1, 2, 7, 64, STACKED_FROM + 9])
+def test_quaternion_arithmetic_is_scipys_on_both_its_paths_bit_for_bit(seq, degrees, n):
+    """The synthesis' own quaternion arithmetic against scipy's Rotation on its per-rotation path (a
+    plain list: a task's chunks) and its vectorised path (a stack: a calibration session): the same
+    quaternions and relative rotation vectors (the gyro) to the bit, signed zeros included (zero angles)."""
+    rng = np.random.default_rng(11 + n)
+    angles = rng.normal(0.0, 40.0 if degrees else 0.7, (n + 3, 3))
+    angles[::5] = 0.0
+    angles[1::7, 1] = -0.0
+    quats = euler_quats(seq, angles, degrees)
+    listed = Rotation.from_euler(seq, angles, degrees=degrees)
+    stacked = Rotation.from_euler(seq, angles[None], degrees=degrees).as_quat()
+    assert np.array_equal(_bits(quats), _bits(listed.as_quat()))
+    assert np.array_equal(_bits(quats), _bits(stacked[0]))
+    mine = relative_rotvecs(quats[:-3], quats[3:])
+    assert np.array_equal(_bits(mine), _bits((listed[:-3].inv() * listed[3:]).as_rotvec()))
+    before, now = (Rotation(q, normalize=False) for q in (stacked[:, :-3], stacked[:, 3:]))
+    assert np.array_equal(_bits(mine), _bits((before.inv() * now).as_rotvec()[0]))
+
+
+def test_stacked_rotations_apply_vectors_to_round_off_of_the_listed_ones():
+    """``rotations``' stack (scipy's vectorised path, for long trajectories) sums an applied vector in
+    another order than its plain list: the earth field to round-off."""
+    angles = np.random.default_rng(12).normal(0.0, 40.0, (STACKED_FROM + 9, 3))
+    quats = euler_quats("YZX", angles, degrees=True)
+    stacked, listed = rotations(quats), Rotation(quats, normalize=False)
+    assert stacked.shape == (1, len(angles)) and rotations(quats[:9]).shape == (9,)
     field = EarthField(inclination_deg=63.0).at_zero_heading()
-    np.testing.assert_allclose(now.apply(field)[0], listed[3:].apply(field), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(stacked.apply(field)[0], listed.apply(field), rtol=0, atol=1e-9)
 
 
 def test_a_trajectory_synthesised_whole_is_synthesised_in_pieces_count_for_count():

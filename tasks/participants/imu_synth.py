@@ -51,11 +51,27 @@ class EarthField:
         return self.strength_lsb * np.array([np.sin(dip), -np.cos(dip), 0.0])
 
 
+@dataclass(frozen=True)
+class NodeArrays:
+    """k nodes' calibrations as the synthesis uses them, stacked node by node: (k, 3, 3) ``mounting``
+    and ``soft_iron``, (k, 3) ``hard_iron``, and (k,) ``units``: raw LSB -> each node's corrected
+    magnetometer units, its soft-iron matrix's mean gain (cube-root determinant). Made once per set of
+    calibrations (``node_arrays``: every chunk of the stream asks for them)."""
+
+    mounting: np.ndarray
+    soft_iron: np.ndarray
+    hard_iron: np.ndarray
+    units: np.ndarray
+
+
 @cache
-def corrected_units(cal: NodeCalibration) -> float:
-    """Raw LSB -> the node's corrected magnetometer units: the soft-iron matrix's mean gain (cube-root
-    determinant); once per calibration (a chunk of the stream asks for it per node)."""
-    return float(np.cbrt(abs(np.linalg.det(np.array(cal.soft_iron)))))
+def node_arrays(cals: tuple[NodeCalibration, ...]) -> NodeArrays:
+    mounting, soft_iron, hard_iron = (np.array([getattr(cal, name) for cal in cals], dtype=float)
+                                      for name in ("mounting", "soft_iron", "hard_iron"))
+    units = np.array([float(np.cbrt(abs(np.linalg.det(matrix)))) for matrix in soft_iron])
+    for array in (mounting, soft_iron, hard_iron, units):
+        array.flags.writeable = False
+    return NodeArrays(mounting, soft_iron, hard_iron, units)
 
 
 @dataclass(frozen=True)
@@ -79,33 +95,88 @@ class RawImu:
         return len(self.acc)
 
 
-# scipy's Rotation computes a stack of rotations (input of three dimensions) on its vectorised
-# array-API path and a plain list (two dimensions) on its compiled per-rotation path: the same
-# arithmetic, the same bits for what is computed here (tests/test_imu_synth.py: applied to x or to the
-# earth field, whose z is 0), at about 3 us a rotation on the latter (scipy
-# 1.17) against a fixed ~1 ms and a few hundred ns a rotation on the former. A calibration session
-# (tens of thousands of rotations at once) takes the vectorised path, a task's chunks the other.
+# scipy's Rotation applies a vector to a stack of rotations (input of three dimensions) on its
+# vectorised array-API path and to a plain list (two dimensions) on its compiled per-rotation path,
+# summing the products in another order (round-off that, tests/test_imu_synth.py, does not reach a
+# count). A calibration session (tens of thousands of rotations at once) takes the former, as it
+# always has (the former's from_euler was the cheaper one for it), a task's chunks the latter (the
+# former costs a fixed ~0.2 ms a call): kept so, every sample is the one it always was.
 STACKED_FROM = 2000
 
 
-def euler_rotations(seq: str, angles: np.ndarray, degrees: bool = False) -> Rotation:
-    """``Rotation.from_euler`` of (n, 3) angles; as a (1, n) stack when n >= STACKED_FROM (see there):
-    index it with ``rotation_rows``, reshape what it returns (its arrays have the extra leading axis)."""
-    angles = np.atleast_2d(angles)
-    return Rotation.from_euler(seq, angles[None] if len(angles) >= STACKED_FROM else angles, degrees=degrees)
+# The quaternion arithmetic of scipy's Rotation (scalar last) that the synthesis uses, by the numpy
+# operations of its vectorised path (scipy.spatial.transform._rotation_xp: from_euler's elementary
+# compose, compose_quat, the normalisation of a product, inv, as_rotvec) in the same order: the same
+# bits as either of scipy's paths (tests/test_imu_synth.py compares them on random rotations), on a
+# whole chunk in a few array operations, not per rotation or through the array API's dispatch. A
+# quaternion is taken apart into its components (x, y, z, w), each an (n,) array or, where scipy's
+# component is a constant 0, the float 0.0: the same IEEE operations on fewer elements.
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+Components = tuple   # (x, y, z, w): each an (n,) array or a float
 
 
-def rotation_rows(rotations: Rotation, rows: slice) -> Rotation:
-    """``rotations[rows]`` of a plain list or of a ``euler_rotations`` stack alike (scipy's own
-    indexing, a raw quaternion slice, for both)."""
-    return Rotation(rotations.as_quat()[..., rows, :], normalize=False, copy=False)
+def compose_quats(p: Components, q: Components) -> Components:
+    """Components of the rotations p then q (scipy's ``compose_quat``, not normalised)."""
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    cross = (p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0)   # numpy.cross, term by term
+    return (p3 * q0 + q3 * p0 + cross[0], p3 * q1 + q3 * p1 + cross[1], p3 * q2 + q3 * p2 + cross[2],
+            p3 * q3 - p0 * q0 - p1 * q1 - p2 * q2)
 
 
-def body_rotation(angles_deg: np.ndarray) -> Rotation:
-    """Level-from-body rotations for (n, 3) fusion angles (pitch, roll, yaw) in degrees (``euler_rotations``)."""
+def euler_quats(seq: str, angles: np.ndarray, degrees: bool = False) -> np.ndarray:
+    """``Rotation.from_euler(seq, angles, degrees).as_quat()`` of (n, 3) angles, ``seq`` intrinsic (upper case)."""
+    angles = np.atleast_2d(np.asarray(angles, dtype=float))
+    if degrees:
+        angles = angles * (np.pi / 180.0)
+    quat = None
+    for column, axis in enumerate(seq):
+        half = angles[:, column] / 2.0
+        elementary = [0.0, 0.0, 0.0, np.cos(half)]
+        elementary[_AXIS[axis]] = np.sin(half)
+        quat = elementary if quat is None else compose_quats(quat, elementary)
+    return np.stack(quat, axis=-1)
+
+
+def inverse_quats(quat: np.ndarray) -> np.ndarray:
+    """Quaternions of the inverse rotations (scipy's ``inv``)."""
+    out = quat.copy()
+    out[..., :3] *= -1
+    return out
+
+
+def relative_rotvecs(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """``(Rotation(before).inv() * Rotation(after)).as_rotvec()`` of two (n, 4) quaternion arrays (radians)."""
+    quat = np.stack(compose_quats(tuple(inverse_quats(before).T), tuple(after.T)), axis=-1)
+    quat = quat / np.linalg.norm(quat, ord=2, axis=-1, keepdims=True)     # the product's normalisation
+    flip = quat[..., 3] < 0                                                # as_rotvec's canonical sign
+    zero_w = quat[..., 3] == 0
+    flip = flip | (zero_w & (quat[..., 0] < 0))
+    zero_wx = zero_w & (quat[..., 0] == 0)
+    flip = flip | (zero_wx & (quat[..., 1] < 0))
+    zero_wxy = zero_wx & (quat[..., 1] == 0)
+    flip = flip | (zero_wxy & (quat[..., 2] < 0))
+    quat = np.where(flip[..., None], -quat, quat)
+    ax_norm = np.linalg.norm(quat[..., :3], ord=2, axis=-1, keepdims=True)
+    angle = 2 * np.arctan2(ax_norm, quat[..., 3][..., None])
+    small_angle = angle <= 1e-3
+    angle2 = angle ** 2
+    small_scale = 2 + angle2 / 12 + 7 * angle2 ** 2 / 2880
+    large_scale = angle / (np.sin(angle / 2.0) + small_angle.astype(angle.dtype))
+    return np.where(small_angle, small_scale, large_scale) * quat[..., :3]
+
+
+def rotations(quat: np.ndarray) -> Rotation:
+    """scipy Rotations of (n, 4) quaternions (to apply to vectors), as a (1, n) stack when n >=
+    STACKED_FROM (see there): reshape what they return (its arrays have the extra leading axis)."""
+    return Rotation(quat[None] if len(quat) >= STACKED_FROM else quat, normalize=False, copy=False)
+
+
+def body_quats(angles_deg: np.ndarray) -> np.ndarray:
+    """Level-from-body rotations (quaternions, (n, 4)) for (n, 3) fusion angles (pitch, roll, yaw) in degrees."""
     pitch, roll, yaw = np.radians(np.atleast_2d(angles_deg)).T
     pitch_euler = np.arctan(np.tan(pitch) * np.cos(roll))
-    return euler_rotations("XZY", np.column_stack([yaw, -pitch_euler, roll]))
+    return euler_quats("XZY", np.column_stack([yaw, -pitch_euler, roll]))
 
 
 def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField()) -> np.ndarray:
@@ -115,20 +186,23 @@ def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField(
     the body field is Ry(-roll) Rz(pitch) Rx(yaw) applied to the zero-heading field.
     """
     pitch, roll, yaw = np.atleast_2d(angles_deg).T
-    to_body = euler_rotations("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True)
+    to_body = rotations(euler_quats("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True))
     return to_body.apply(field.at_zero_heading()).reshape(-1, 3)
 
 
-def to_sensor_axes(body_vectors: np.ndarray, cal: NodeCalibration) -> np.ndarray:
-    """Undo the node's mounting rotation (body = mounting @ sensor) for (n, 3) row vectors."""
-    return np.asarray(body_vectors, dtype=float) @ np.array(cal.mounting)
+# Each node's products below are numpy's for that node alone: a stack of matrices goes through the same
+# BLAS (matmul) or LAPACK (solve) call per node as one matrix does.
+def to_sensor_axes(body_vectors: np.ndarray, arrays: NodeArrays) -> np.ndarray:
+    """Undo each node's mounting rotation (body = mounting @ sensor) for its (n, 3) row vectors, (k, n, 3)."""
+    return np.asarray(body_vectors, dtype=float) @ arrays.mounting
 
 
-def distort_magnetometer(corrected_sensor: np.ndarray, cal: NodeCalibration) -> np.ndarray:
-    """Raw magnetometer LSB whose correction m = C (mx - h0, my - h1, -mz - h2) gives ``corrected_sensor``."""
-    uncorrected = np.linalg.solve(np.array(cal.soft_iron), np.asarray(corrected_sensor, float).T).T
-    raw = uncorrected + np.array(cal.hard_iron)
-    raw[:, 2] *= -1.0
+def distort_magnetometer(corrected_sensor: np.ndarray, arrays: NodeArrays) -> np.ndarray:
+    """Raw magnetometer LSB whose correction m = C (mx - h0, my - h1, -mz - h2) gives each node's
+    ``corrected_sensor``, (k, n, 3)."""
+    uncorrected = np.linalg.solve(arrays.soft_iron, np.asarray(corrected_sensor, float).transpose(0, 2, 1))
+    raw = uncorrected.transpose(0, 2, 1) + arrays.hard_iron[:, None]
+    raw[..., 2] *= -1.0
     return raw
 
 
@@ -154,22 +228,28 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     angles = np.asarray(angles_deg, dtype=float)
     n, k, _ = angles.shape
     first = angles[:1] if previous_deg is None else np.asarray(previous_deg, dtype=float).reshape(1, k, 3)
-    rotations = body_rotation(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
-    now = rotation_rows(rotations, slice(k, None))
-    acc_body = -now.inv().apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
+    quats = body_quats(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
+    now = quats[k:]
+    acc_body = -rotations(inverse_quats(now)).apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
     if linear_acc_g is not None:
         acc_body = acc_body + linear_acc_g
-    rate = np.degrees((rotation_rows(rotations, slice(None, -k)).inv() * now).as_rotvec()).reshape(n, k, 3) / DT
+    rate = np.degrees(relative_rotvecs(quats[:-k], now)).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
     scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
-    out = []
-    for node, (cal, rng) in enumerate(zip(cals, rngs, strict=True)):
-        acc = to_sensor_axes(acc_body[:, node], cal) * ACC_LSB_PER_G
-        gyro = to_sensor_axes(rate[:, node], cal) * GYRO_LSB_PER_DEG_S
-        mag = distort_magnetometer(to_sensor_axes(field_lsb[:, node] * corrected_units(cal), cal), cal)
-        counts = to_int16(np.hstack([acc, gyro, mag]) + rng.standard_normal((n, 9)) * scale)
-        out.append(RawImu(acc=counts[:, 0:3], gyro=counts[:, 3:6], mag=counts[:, 6:9]))
-    return out
+    if not len(cals) == len(rngs) == k:
+        raise ValueError(f"angles of {k} nodes, {len(cals)} calibrations and {len(rngs)} generators")
+    arrays = node_arrays(tuple(cals))
+    clean, draws = np.empty((2, k, n, 9))   # per node: acc, gyro, mag in sensor axes, and the noise
+    clean[..., 0:3] = to_sensor_axes(acc_body.transpose(1, 0, 2), arrays)
+    clean[..., 3:6] = to_sensor_axes(rate.transpose(1, 0, 2), arrays)
+    field_sensor = to_sensor_axes((field_lsb * arrays.units[:, None]).transpose(1, 0, 2), arrays)
+    clean[..., 6:9] = distort_magnetometer(field_sensor, arrays)
+    for node, rng in enumerate(rngs):
+        draws[node] = rng.standard_normal((n, 9))
+    clean[..., 0:3] *= ACC_LSB_PER_G
+    clean[..., 3:6] *= GYRO_LSB_PER_DEG_S
+    counts = to_int16(clean + draws * scale)
+    return [RawImu(acc=c[:, 0:3], gyro=c[:, 3:6], mag=c[:, 6:9]) for c in counts]
 
 
 def synthesize_raw(angles_deg: np.ndarray, cal: NodeCalibration, rng: np.random.Generator,
@@ -228,18 +308,20 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
     ``not_before_s`` gives per node the arrival time of its last frame of an earlier call.
     """
     sample_index = np.asarray(sample_index)
-    times, nodes, indices, frames = [np.empty(0)], [np.empty(0, int)], [np.empty(0, int)], []
-    for node, raw in sorted(raw_by_node.items()):
-        draws = rngs[node].random((len(raw), 2))
-        kept = draws[:, 0] >= link.loss_fraction
-        sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[:, 1])   # exponential jitter
-        kept_index = np.flatnonzero(kept)          # lost frames hold nothing up
-        arrival = np.ceil(np.maximum.accumulate(sent[kept_index]) / link.burst_s) * link.burst_s
-        times.append(np.maximum(arrival, (not_before_s or {}).get(node, -np.inf)))
-        nodes.append(np.full(len(kept_index), node))
-        indices.append(sample_index[kept_index].astype(int))
-        frames += encode_imu_frames(imu_node_id(node), indices[-1] % COUNTER_MODULO, raw.mag[kept_index],
-                                    raw.gyro[kept_index], raw.acc[kept_index], period_ms)
-    times, nodes, indices = np.concatenate(times), np.concatenate(nodes), np.concatenate(indices)
+    by_node = sorted(raw_by_node.items())
+    draws = np.stack([rngs[node].random((len(raw), 2)) for node, raw in by_node])     # (nodes, n, 2)
+    sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[..., 1])   # exponential jitter
+    kept = draws[..., 0] >= link.loss_fraction
+    sent[~kept] = -np.inf                      # lost frames hold nothing up
+    slots, rows = np.nonzero(kept)             # per frame: its node's slot and its sample's row
+    arrival = np.ceil(np.maximum.accumulate(sent, axis=1)[slots, rows] / link.burst_s) * link.burst_s
+    times = np.maximum(arrival, np.array([(not_before_s or {}).get(node, -np.inf) for node, _ in by_node])[slots])
+    nodes = np.array([node for node, _ in by_node], dtype=int)[slots]
+    indices = sample_index[rows].astype(int)
     order = np.lexsort((nodes, indices, times))
-    return Delivery(times[order], nodes[order], indices[order], [frames[i] for i in order])
+    slots, rows, indices = slots[order], rows[order], indices[order]
+    node_ids = np.array([imu_node_id(node) for node, _ in by_node])[slots]
+    values = {name: np.stack([getattr(raw, name) for _, raw in by_node])[slots, rows] for name in ("mag", "gyro", "acc")}
+    frames = encode_imu_frames(node_ids, indices % COUNTER_MODULO, values["mag"], values["gyro"], values["acc"],
+                               period_ms)   # every node's frames in one pass, in arrival order
+    return Delivery(times[order], nodes[order], indices, frames)

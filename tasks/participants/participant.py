@@ -340,7 +340,11 @@ class PostureMove:
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """Posture at times ``t``, (n, nodes, 3)."""
-        return self.start[None] + self.progress(t)[:, None, None] * (self.target - self.start)[None]
+        return self.posture(self.progress(t))
+
+    def posture(self, progress: np.ndarray) -> np.ndarray:
+        """Posture at (n,) shares ``progress`` of the move, (n, nodes, 3)."""
+        return self.start[None] + progress[:, None, None] * (self.target - self.start)[None]
 
 
 @dataclass(frozen=True)
@@ -392,6 +396,7 @@ class VirtualParticipant:
                              + person.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
         rest = self._target(NEUTRAL_LABEL, 0.0)
         self._moves: list[PostureMove] = [PostureMove(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
+        self._starts = np.array([0.0])          # each move's t0
         n_spasm_nodes = len(params.spasm.nodes) if params.spasm else 0
         self._spasm_onsets = np.empty(0)
         self._spasm_sizes = np.empty((0, n_spasm_nodes, 3))
@@ -449,33 +454,35 @@ class VirtualParticipant:
         if (label, amplitude) == self.intent or (label == NEUTRAL_LABEL and self.intent[0] == NEUTRAL_LABEL):
             return
         t0 = max(t + self.params.reaction_s, self.time_s, self._moves[-1].t0)
-        start = self._posture_at(np.array([t0]))[0]
+        t = np.array([t0])
+        start = self._moves[self._move_index(t)[0]].at(t)[0]
         self._moves.append(PostureMove(t0, self.params.onset_s, start, self._target(label, amplitude), label,
                                       amplitude))
+        self._starts = np.append(self._starts, t0)
 
-    def _segment_index(self, t: np.ndarray) -> np.ndarray:
-        """Index of the segment in force at each time of ``t``."""
-        return np.maximum(np.searchsorted([s.t0 for s in self._moves], t, side="right") - 1, 0)
+    def _move_index(self, t: np.ndarray) -> np.ndarray:
+        """Index of the move in force at each time of ``t``."""
+        return np.maximum(np.searchsorted(self._starts, t, side="right") - 1, 0)
 
-    def _posture_at(self, t: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
-        """Deliberate posture (no sway/tremor/spasm) at times ``t``, (n, nodes, 3) (``which``: their segments)."""
-        which = self._segment_index(t) if which is None else which
-        out = np.empty((len(t), self.params.n_nodes, 3))
-        for k in np.unique(which):
-            out[which == k] = self._moves[k].at(t[which == k])
-        return out
-
-    def _noise_scales(self, t: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per-sample std (n, nodes, 3) of the sway and of the tremor while holding, each blended from the
-        old to the new class over each move (``which``: the segment of each time of ``t``)."""
-        sway, tremor = np.empty((2, len(t), self.params.n_nodes, 3))
-        for k in np.unique(which):
-            seg, rows = self._moves[k], which == k
-            old, new = self.params.motion(self._moves[max(k - 1, 0)].label), self.params.motion(seg.label)
-            progress = seg.progress(t[rows])[:, None, None]
-            sway[rows] = (1 - progress) * old.sway_std_deg[None] + progress * new.sway_std_deg[None]
-            tremor[rows] = (1 - progress) * old.tremor_std_deg[None] + progress * new.tremor_std_deg[None]
-        return sway, tremor
+    def _holding(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """At the increasing times ``t``: the deliberate posture (no sway/tremor/spasm), the std of the sway and
+        of the tremor while holding (each blended from the old to the new class over each move), all
+        (n, nodes, 3), and the intent's (n,) label and amplitude; one pass per move in force."""
+        posture, sway, tremor = np.empty((3, len(t), self.params.n_nodes, 3))
+        label, amplitude = np.empty(len(t), dtype=int), np.empty(len(t))
+        which = self._move_index(t)
+        cuts = (np.flatnonzero(which[1:] != which[:-1]) + 1).tolist()
+        for first, end in zip([0, *cuts], [*cuts, len(t)]):
+            k, rows = int(which[first]), slice(first, end)
+            move = self._moves[k]
+            old, new = self.params.motion(self._moves[max(k - 1, 0)].label), self.params.motion(move.label)
+            progress = move.progress(t[rows])
+            posture[rows] = move.posture(progress)
+            blend = progress[:, None, None]
+            sway[rows] = (1 - blend) * old.sway_std_deg[None] + blend * new.sway_std_deg[None]
+            tremor[rows] = (1 - blend) * old.tremor_std_deg[None] + blend * new.tremor_std_deg[None]
+            label[rows], amplitude[rows] = move.label, move.amplitude
+        return posture, sway, tremor, label, amplitude
 
     def _spasms(self, t: np.ndarray) -> np.ndarray:
         """Spasm bursts over the samples at ``t``, (n, nodes, 3)."""
@@ -512,20 +519,18 @@ class VirtualParticipant:
         index = np.arange(self._generated, n_total)
         t = index * DT
         shape = (n, self.params.n_nodes, 3)
-        which = self._segment_index(t)
-        sway, tremor = self._noise_scales(t, which)
-        angles = (self._posture_at(t, which) + self._sway.next(n).reshape(shape) * sway
+        posture, sway, tremor, label, amplitude = self._holding(t)
+        angles = (posture + self._sway.next(n).reshape(shape) * sway
                   + self._tremor.next(n).reshape(shape) * tremor + self._spasms(t))
         raws = synthesize_nodes(angles, [node.calibration for node in self.profile.nodes], self._sensor_rngs,
                                 self.noise, previous_deg=self._last_angles)
         self._last_angles = angles[-1]
         raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
         fresh = deliver(raw, index, t, self._link_rngs, self.link, not_before_s=self._last_arrival)
-        for node in np.unique(fresh.node_index):
-            self._last_arrival[int(node)] = float(fresh.arrival_s[fresh.node_index == node].max())
+        # in arrival order: a node's last frame is its latest
+        self._last_arrival.update(zip(fresh.node_index.tolist(), fresh.arrival_s.tolist()))
         self._pending = _merge(self._pending, fresh)
-        self._truth.append((t, np.array([self._moves[k].label for k in which]),
-                            np.array([self._moves[k].amplitude for k in which]), angles))
+        self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
 
     def deliveries(self, t_end: float) -> Delivery:
@@ -560,10 +565,12 @@ def _merge(*parts: Delivery) -> Delivery:
     """Deliveries in one arrival order (stable: earlier parts first on ties); no parts: nothing."""
     parts = (Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), []),) + parts
     arrival = np.concatenate([p.arrival_s for p in parts])
-    order = np.argsort(arrival, kind="stable")
+    node, sample = (np.concatenate([getattr(p, name) for p in parts]) for name in ("node_index", "sample_index"))
     frames = [frame for p in parts for frame in p.frames]
-    return Delivery(arrival[order], np.concatenate([p.node_index for p in parts])[order],
-                    np.concatenate([p.sample_index for p in parts])[order], [frames[i] for i in order])
+    if (arrival[1:] >= arrival[:-1]).all():   # in order already (the stable sort would keep it so)
+        return Delivery(arrival, node, sample, frames)
+    order = np.argsort(arrival, kind="stable")
+    return Delivery(arrival[order], node[order], sample[order], [frames[i] for i in order])
 
 
 # ------------------------------------------------------------------------- calibration protocol
