@@ -95,88 +95,33 @@ class RawImu:
         return len(self.acc)
 
 
-# scipy's Rotation applies a vector to a stack of rotations (input of three dimensions) on its
-# vectorised array-API path and to a plain list (two dimensions) on its compiled per-rotation path,
-# summing the products in another order (round-off that, tests/test_imu_synth.py, does not reach a
-# count). A calibration session (tens of thousands of rotations at once) takes the former, as it
-# always has (the former's from_euler was the cheaper one for it), a task's chunks the latter (the
-# former costs a fixed ~0.2 ms a call): kept so, every sample is the one it always was.
+# scipy's Rotation computes a stack of rotations (input of three dimensions) on its vectorised
+# array-API path and a plain list (two dimensions) on its compiled per-rotation path: the same
+# quaternions, but vectors applied by summing in another order (round-off that,
+# tests/test_imu_synth.py, does not reach a count). The compiled path costs about 1.3 us a rotation
+# (scipy 1.17), the vectorised one a fixed ~0.2 ms a call: a calibration session (tens of thousands
+# of rotations at once) takes the latter, a task's chunks the former.
 STACKED_FROM = 2000
 
 
-# The quaternion arithmetic of scipy's Rotation (scalar last) that the synthesis uses, by the numpy
-# operations of its vectorised path (scipy.spatial.transform._rotation_xp: from_euler's elementary
-# compose, compose_quat, the normalisation of a product, inv, as_rotvec) in the same order: the same
-# bits as either of scipy's paths (tests/test_imu_synth.py compares them on random rotations), on a
-# whole chunk in a few array operations, not per rotation or through the array API's dispatch. A
-# quaternion is taken apart into its components (x, y, z, w), each an (n,) array or, where scipy's
-# component is a constant 0, the float 0.0: the same IEEE operations on fewer elements.
-_AXIS = {"X": 0, "Y": 1, "Z": 2}
-Components = tuple   # (x, y, z, w): each an (n,) array or a float
+def euler_rotations(seq: str, angles: np.ndarray, degrees: bool = False) -> Rotation:
+    """``Rotation.from_euler`` of (n, 3) angles; as a (1, n) stack when n >= STACKED_FROM (see there):
+    index it with ``rotation_rows``, reshape what it returns (its arrays have the extra leading axis)."""
+    angles = np.atleast_2d(angles)
+    return Rotation.from_euler(seq, angles[None] if len(angles) >= STACKED_FROM else angles, degrees=degrees)
 
 
-def compose_quats(p: Components, q: Components) -> Components:
-    """Components of the rotations p then q (scipy's ``compose_quat``, not normalised)."""
-    p0, p1, p2, p3 = p
-    q0, q1, q2, q3 = q
-    cross = (p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0)   # numpy.cross, term by term
-    return (p3 * q0 + q3 * p0 + cross[0], p3 * q1 + q3 * p1 + cross[1], p3 * q2 + q3 * p2 + cross[2],
-            p3 * q3 - p0 * q0 - p1 * q1 - p2 * q2)
+def rotation_rows(rotations: Rotation, rows: slice) -> Rotation:
+    """``rotations[rows]`` of a plain list or of a ``euler_rotations`` stack alike (scipy's own
+    indexing, a raw quaternion slice, for both)."""
+    return Rotation(rotations.as_quat()[..., rows, :], normalize=False, copy=False)
 
 
-def euler_quats(seq: str, angles: np.ndarray, degrees: bool = False) -> np.ndarray:
-    """``Rotation.from_euler(seq, angles, degrees).as_quat()`` of (n, 3) angles, ``seq`` intrinsic (upper case)."""
-    angles = np.atleast_2d(np.asarray(angles, dtype=float))
-    if degrees:
-        angles = angles * (np.pi / 180.0)
-    quat = None
-    for column, axis in enumerate(seq):
-        half = angles[:, column] / 2.0
-        elementary = [0.0, 0.0, 0.0, np.cos(half)]
-        elementary[_AXIS[axis]] = np.sin(half)
-        quat = elementary if quat is None else compose_quats(quat, elementary)
-    return np.stack(quat, axis=-1)
-
-
-def inverse_quats(quat: np.ndarray) -> np.ndarray:
-    """Quaternions of the inverse rotations (scipy's ``inv``)."""
-    out = quat.copy()
-    out[..., :3] *= -1
-    return out
-
-
-def relative_rotvecs(before: np.ndarray, after: np.ndarray) -> np.ndarray:
-    """``(Rotation(before).inv() * Rotation(after)).as_rotvec()`` of two (n, 4) quaternion arrays (radians)."""
-    quat = np.stack(compose_quats(tuple(inverse_quats(before).T), tuple(after.T)), axis=-1)
-    quat = quat / np.linalg.norm(quat, ord=2, axis=-1, keepdims=True)     # the product's normalisation
-    flip = quat[..., 3] < 0                                                # as_rotvec's canonical sign
-    zero_w = quat[..., 3] == 0
-    flip = flip | (zero_w & (quat[..., 0] < 0))
-    zero_wx = zero_w & (quat[..., 0] == 0)
-    flip = flip | (zero_wx & (quat[..., 1] < 0))
-    zero_wxy = zero_wx & (quat[..., 1] == 0)
-    flip = flip | (zero_wxy & (quat[..., 2] < 0))
-    quat = np.where(flip[..., None], -quat, quat)
-    ax_norm = np.linalg.norm(quat[..., :3], ord=2, axis=-1, keepdims=True)
-    angle = 2 * np.arctan2(ax_norm, quat[..., 3][..., None])
-    small_angle = angle <= 1e-3
-    angle2 = angle ** 2
-    small_scale = 2 + angle2 / 12 + 7 * angle2 ** 2 / 2880
-    large_scale = angle / (np.sin(angle / 2.0) + small_angle.astype(angle.dtype))
-    return np.where(small_angle, small_scale, large_scale) * quat[..., :3]
-
-
-def rotations(quat: np.ndarray) -> Rotation:
-    """scipy Rotations of (n, 4) quaternions (to apply to vectors), as a (1, n) stack when n >=
-    STACKED_FROM (see there): reshape what they return (its arrays have the extra leading axis)."""
-    return Rotation(quat[None] if len(quat) >= STACKED_FROM else quat, normalize=False, copy=False)
-
-
-def body_quats(angles_deg: np.ndarray) -> np.ndarray:
-    """Level-from-body rotations (quaternions, (n, 4)) for (n, 3) fusion angles (pitch, roll, yaw) in degrees."""
+def body_rotation(angles_deg: np.ndarray) -> Rotation:
+    """Level-from-body rotations for (n, 3) fusion angles (pitch, roll, yaw) in degrees (``euler_rotations``)."""
     pitch, roll, yaw = np.radians(np.atleast_2d(angles_deg)).T
     pitch_euler = np.arctan(np.tan(pitch) * np.cos(roll))
-    return euler_quats("XZY", np.column_stack([yaw, -pitch_euler, roll]))
+    return euler_rotations("XZY", np.column_stack([yaw, -pitch_euler, roll]))
 
 
 def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField()) -> np.ndarray:
@@ -186,7 +131,7 @@ def magnetometer_reading(angles_deg: np.ndarray, field: EarthField = EarthField(
     the body field is Ry(-roll) Rz(pitch) Rx(yaw) applied to the zero-heading field.
     """
     pitch, roll, yaw = np.atleast_2d(angles_deg).T
-    to_body = rotations(euler_quats("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True))
+    to_body = euler_rotations("YZX", np.column_stack([-roll, pitch, yaw]), degrees=True)
     return to_body.apply(field.at_zero_heading()).reshape(-1, 3)
 
 
@@ -228,12 +173,12 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     angles = np.asarray(angles_deg, dtype=float)
     n, k, _ = angles.shape
     first = angles[:1] if previous_deg is None else np.asarray(previous_deg, dtype=float).reshape(1, k, 3)
-    quats = body_quats(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
-    now = quats[k:]
-    acc_body = -rotations(inverse_quats(now)).apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
+    rotations = body_rotation(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
+    now = rotation_rows(rotations, slice(k, None))
+    acc_body = -now.inv().apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
     if linear_acc_g is not None:
         acc_body = acc_body + linear_acc_g
-    rate = np.degrees(relative_rotvecs(quats[:-k], now)).reshape(n, k, 3) / DT
+    rate = np.degrees((rotation_rows(rotations, slice(None, -k)).inv() * now).as_rotvec()).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
     scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
     if not len(cals) == len(rngs) == k:
