@@ -51,11 +51,8 @@ class ArmKinematics:
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian [linear; angular] of the tool point, world axes (mj_jacSite's convention)."""
         jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
-        rot = self.base_rotation
-        out = np.empty((6, jac.shape[1]))
-        np.matmul(rot, jac[:3], out=out[:3])
-        np.matmul(rot, jac[3:], out=out[3:])
-        return out
+        # the base rotation times the linear and the angular block: one matmul over the two as a stack
+        return np.matmul(self.base_rotation, jac.reshape(2, 3, -1)).reshape(jac.shape)
 
     def solve_pose(self, position: np.ndarray, rotation: np.ndarray, seed: np.ndarray,
                    iterations: int = 200, tolerance: float = 1e-8) -> np.ndarray:

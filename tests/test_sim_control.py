@@ -100,6 +100,26 @@ def test_pushing_into_the_table_stops_the_hand_above_it(sim):
     assert min(lowest) < 0.03  # it did get down to the table (open fingers reach 2 cm below the tool)
 
 
+def test_the_floor_kept_with_the_target_rotation_follows_every_turn(sim):
+    """The controller works out the floor under the hand when its target turns, not every tick: along
+    turns (some capped by a joint speed limit), moves and a reset, it is always the floor of the
+    target's rotation worked out afresh, and the rotation cannot be changed behind its back."""
+    controller = sim.controller
+    sim.reset(cube_positions=[(0.3, -0.6), (0.3, -0.7)])
+    floors = set()
+    for function, mode in (("F", Mode.WRIST), ("Lr", Mode.TRANSLATION), ("R", Mode.WRIST), ("Rr", Mode.WRIST)):
+        enter_mode(sim, mode)
+        for _ in range(30):
+            sim.step(JoystickState({function: 1.0}))
+            assert controller._floor == sim.workspace.lowest_tool_height(controller.target_rotation)
+            floors.add(controller._floor)
+    assert len(floors) > 30  # the turns did tip the hand, tick after tick
+    with pytest.raises(ValueError):
+        controller.target_rotation[0, 0] = 1.0
+    sim.reset()
+    assert controller._floor == sim.workspace.lowest_tool_height(controller.target_rotation)
+
+
 def test_a_virtual_wall_stops_the_hand_without_jitter(sim):
     sim.reset()
     samples = hold(sim, JoystickState({"L": 1.0}), 3.5)  # x+ at 0.2 m/s until the x = 0.45 wall
