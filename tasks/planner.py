@@ -13,8 +13,9 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field, replace
+from functools import cache
 from pathlib import Path
-from typing import Any, Callable, Mapping, Protocol
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -234,10 +235,14 @@ class Memory:
 # ---------------------------------------------------------------------------------------------
 # geometry of the task, as the person judges it
 
-def norm(v: np.ndarray) -> float:
-    """Euclidean length of a small vector: what ``np.linalg.norm`` computes for one (the square root
-    of ``v.dot(v)``, to the bit), without its generic checks (the planner takes a dozen per tick)."""
-    return math.sqrt(v.dot(v))
+def norm(v: Sequence[float]) -> float:
+    """Euclidean length of a small vector (2 or 3 elements, an array or Python floats): what
+    ``np.linalg.norm`` computes for one (the square root of ``v.dot(v)``, whose BLAS sum of so few
+    starts at 0 and adds the squares in order: the same bits), without its generic checks."""
+    squares = 0.0
+    for c in v:
+        squares += c * c
+    return math.sqrt(squares)
 
 
 def xy_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -492,16 +497,19 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     return on_arrival
 
 
-def hand_velocity(view: View, memory: Memory) -> np.ndarray:
-    """What the person sees the hand doing: the change since the previous glance."""
+def hand_velocity(view: View, memory: Memory) -> tuple[float, float, float]:
+    """What the person sees the hand doing: the change since the previous glance (m/s, on Python
+    floats: the array form's differences and divisions)."""
     if memory.last_seen is None or view.t <= memory.last_seen[0]:
-        return np.zeros(3)
-    return (view.hand_pos - memory.last_seen[1]) / (view.t - memory.last_seen[0])
+        return 0.0, 0.0, 0.0
+    seen_t, seen = memory.last_seen
+    elapsed, (x, y, z), (x0, y0, z0) = view.t - seen_t, view.hand_pos.tolist(), seen.tolist()
+    return (x - x0) / elapsed, (y - y0) / elapsed, (z - z0) / elapsed
 
 
 def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
          holding: Mapping[str, float] | None = None, anticipation: float | None = None,
-         pace: Pace | None = None, velocity: np.ndarray | None = None) -> tuple[StickIntent, Memory]:
+         pace: Pace | None = None, velocity: tuple[float, float, float] | None = None) -> tuple[StickIntent, Memory]:
     """Decide the stick intent for this tick.
 
     ``holding`` is the deflection currently applied per function (what the person feels in the
@@ -567,11 +575,15 @@ def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipatio
 
 
 def _updated(memory: Memory, **changes) -> Memory:
-    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes one or two a tick)."""
-    return Memory(**(vars(memory) | changes))
+    """``dataclasses.replace(memory, **changes)`` at a third of its cost (``plan`` makes one or two a
+    tick): the frozen fields set at once, not one ``object.__setattr__`` at a time (Memory has no
+    ``__post_init__`` to run)."""
+    updated = object.__new__(Memory)
+    updated.__dict__.update(vars(memory), **changes)
+    return updated
 
 
-def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, point: np.ndarray, p: OperatorParams,
+def _translation(hand: np.ndarray, velocity: tuple[float, float, float], anticipation: float, point: np.ndarray, p: OperatorParams,
                  combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode,
                  pace: Pace | None = None) -> tuple[Mode, dict[str, float], int | None]:
     """The mode, and the joystick functions (and their deflections) in it, that bring the hand to ``point``.
@@ -583,9 +595,9 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
     in another mode (2-axis: z in the height mode), the axes of the current ``mode`` are finished
     first: a switch costs presses.
     """
-    error = point - hand
-    coast = velocity * anticipation
-    movers = [_function_along(layout, i, error[i]) for i in range(3)]  # (mode, function) per axis
+    error = (point - hand).tolist()  # on Python floats: the array form's differences and products
+    coast = [v * anticipation for v in velocity]
+    movers = [_function_along(layout, i, error[i] >= 0) for i in range(3)]  # (mode, function) per axis
     held = {fn for fn in holding if fn in layout.axes(mode, Kind.LINEAR)}  # moving the hand now
     moving = []
     for i, (need, fn) in enumerate(movers):
@@ -597,7 +609,7 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
         if keep:
             moving.append(i)
     if not moving and not held:
-        moving = [int(np.argmax(np.abs(error)))]
+        moving = [max(range(3), key=lambda i: abs(error[i]))]  # np.argmax's: the first of the largest
     if not moving:
         return mode, {}, None
     moving = [i for i in moving if movers[i][0] is mode] or moving
@@ -611,10 +623,11 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
     return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, anticipation, pace) for i in moving}, axis
 
 
-def _function_along(layout: Layout, axis: int, signed: float) -> tuple[Mode, str]:
-    """The mode and the function that move the hand along world ``axis`` in the direction of ``signed``."""
+@cache  # three per tick, always the same few answers per layout
+def _function_along(layout: Layout, axis: int, positive: bool) -> tuple[Mode, str]:
+    """The mode and the function that move the hand along world ``axis``, in its ``positive`` direction or not."""
     direction = [0.0, 0.0, 0.0]
-    direction[axis] = 1.0 if signed >= 0 else -1.0
+    direction[axis] = 1.0 if positive else -1.0
     return layout.find(Kind.LINEAR, tuple(direction))
 
 
@@ -772,7 +785,7 @@ class ScriptedUser:
         self._hold = self.timing.hold(wanted, self.settle)
         return wanted
 
-    def _let_go(self, view: View, velocity: np.ndarray) -> None:
+    def _let_go(self, view: View, velocity: tuple[float, float, float]) -> None:
         self._stopped_at = view.t
         effects = self.memory.controls.layout.effects[view.mode]
         self._let_go_of = frozenset(effects[fn].kind for fn in self.current.deflection if fn in effects)
