@@ -17,6 +17,7 @@ import pinocchio as pin
 from scipy.linalg import lapack
 
 from sim.config import ControlConfig, WorkspaceConfig
+from sim.floats import clip
 from sim.kinematics import ArmKinematics
 
 
@@ -88,7 +89,7 @@ class Workspace:
         if floor > lz:
             lz = floor
             uz = max(floor, self._upper_z)
-        return min(max(x, lx), ux), min(max(y, ly), uy), min(max(z, lz), uz)
+        return clip(x, lx, ux), clip(y, ly, uy), clip(z, lz, uz)
 
     def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
         return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
@@ -165,12 +166,14 @@ class CartesianVelocityController:
         gain, (ex, ey, ez) = self.config.orientation_gain, turn.tolist()
         twist = np.array([*pull, wx + gain * ex, wy + gain * ey, wz + gain * ez])
         qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
-        blocked = self._blocked_joints(q, qd)
+        speeds = qd.tolist()
+        blocked = self._blocked_joints(q.tolist(), speeds)
         if blocked:
             jacobian[:, blocked] = 0.0
             qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
             qd[blocked] = 0.0
-        scale = speed_scale(qd.tolist(), self._speed_limit)
+            speeds = qd.tolist()
+        scale = speed_scale(speeds, self._speed_limit)
         if scale < 1.0:
             # The arm does only this fraction of the tick's motion: so does the target, which then
             # never runs ahead and the hand stops where it is when the command stops.
@@ -210,8 +213,8 @@ class CartesianVelocityController:
         gain = self.config.position_gain
         return [f + gain * (w - p) for f, w, p in zip(feedforward, (wx, wy, wz), position)], turn
 
-    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> list[int]:
+    def _blocked_joints(self, q: list[float], qd: list[float]) -> list[int]:
         """Limited joints within the margin of a range end and moving further toward it (indices;
         on Python floats, the same comparisons as on arrays at a fraction of the cost)."""
-        return [j for j, (a, v, lo, hi) in enumerate(zip(q.tolist(), qd.tolist(), self._stop_lower, self._stop_upper))
+        return [j for j, (a, v, lo, hi) in enumerate(zip(q, qd, self._stop_lower, self._stop_upper))
                 if (a <= lo and v < 0) or (a >= hi and v > 0)]

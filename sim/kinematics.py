@@ -32,6 +32,8 @@ class ArmKinematics:
 
     def __post_init__(self) -> None:
         self.base_rotation = self.base.rotation.copy()  # read every tick: one copy out of Pinocchio, not one a tick
+        # the tool frame's placement in Pinocchio's data: a reference, which every kinematics pass updates in place
+        self._tool_placement = self.data.oMf[self.tool_frame]
 
     def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) and rotation matrix (3, 3) of the tool frame."""
@@ -45,7 +47,7 @@ class ArmKinematics:
         return (*self._placed_tool(), jacobian)
 
     def _placed_tool(self) -> tuple[np.ndarray, np.ndarray]:
-        world = self.base * self.data.oMf[self.tool_frame]
+        world = self.base * self._tool_placement
         return world.translation.copy(), world.rotation.copy()
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:

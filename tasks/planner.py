@@ -20,6 +20,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import numpy as np
 
 from bomi.config_files import check_table, load_toml, number, typed
+from sim.floats import clip
 from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
@@ -245,7 +246,7 @@ def norm(v: Sequence[float]) -> float:
     return math.sqrt(squares)
 
 
-def xy_distance(a: np.ndarray, b: np.ndarray) -> float:
+def xy_distance(a: Sequence[float], b: Sequence[float]) -> float:
     """``norm(a[:2] - b[:2])`` to the bit (the same differences, products and sum), without the
     arrays it makes."""
     dx, dy = a[0] - b[0], a[1] - b[1]
@@ -256,18 +257,19 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
     the fingers touch is placed only if the hand is open (it rests there; the hand is not holding it)."""
     rest_z = view.table_z + view.cube_size / 2
     gripped = [touch and view.closure > p.open_closure for touch in view.touching]
+    cubes, target = [pos.tolist() for pos in view.cube_pos], view.target_xy.tolist()  # read as Python floats
     bottom = None
-    for k, pos in enumerate(view.cube_pos):
-        at_b = xy_distance(pos, view.target_xy) <= p.target_zone
+    for k, pos in enumerate(cubes):
+        at_b = xy_distance(pos, target) <= p.target_zone
         if at_b and abs(pos[2] - rest_z) <= p.placed and not gripped[k]:
             bottom = k
     if bottom is None:
         return None, None
-    for k, pos in enumerate(view.cube_pos):
+    for k, pos in enumerate(cubes):
         if k == bottom or gripped[k]:
             continue
-        on_top = xy_distance(pos, view.cube_pos[bottom]) <= p.placed
-        if on_top and abs(pos[2] - view.cube_pos[bottom][2] - view.cube_size) <= p.placed:
+        on_top = xy_distance(pos, cubes[bottom]) <= p.placed
+        if on_top and abs(pos[2] - cubes[bottom][2] - view.cube_size) <= p.placed:
             return bottom, k
     return bottom, None
 
@@ -339,12 +341,12 @@ def deflection_for(distance: float, p: OperatorParams, anticipation: float, pace
     least_time = 0.0 if pace is None else pace(distance, 2 * p.stop)
     if least_time > 0:
         coast = min(coast, distance / (p.full_speed * least_time))
-    return min(max(coast, p.fine), p.coarse)  # np.clip's result, without its overhead
+    return clip(coast, p.fine, p.coarse)  # np.clip's result, without its overhead
 
 
 def turn_deflection_for(angle: float, p: OperatorParams, anticipation: float) -> float:
     """The same rule for a wrist turn of ``angle`` rad, between fine and ``turn``."""
-    return min(max(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine), p.turn)
+    return clip(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine, p.turn)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -422,13 +424,13 @@ def _finish(view: View, stack_top: float, open_hand: bool, p: OperatorParams) ->
 
 def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top: float, p: OperatorParams
            ) -> Action:
-    """Take the held cube over B (or onto the cube at B) and set it down."""
-    hand, cube = view.hand_pos, view.cube_pos[held]
-    grip = hand - cube  # where the hand holds the cube (it is not centred)
-    dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
+    """Take the held cube over B (or onto the cube at B) and set it down.  (The points on Python floats:
+    the array forms' elementwise sums and differences.)"""
+    hand, cube = view.hand_pos.tolist(), view.cube_pos[held].tolist()
+    grip = [h - c for h, c in zip(hand, cube)]  # where the hand holds the cube (it is not centred)
+    dest_xy = view.target_xy.tolist() if bottom is None else view.cube_pos[bottom].tolist()[:2]
     support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
-    release_xy = dest_xy + grip[:2]
-    release = np.array([release_xy[0], release_xy[1], support + view.cube_size / 2 + p.release_gap + grip[2]])
+    release = [dest_xy[0] + grip[0], dest_xy[1] + grip[1], support + view.cube_size / 2 + p.release_gap + grip[2]]
     off = xy_distance(cube, dest_xy)
     if off <= p.placed and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop:
         return _open(f"release cube {held + 1}")
@@ -448,9 +450,10 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
 
 
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
-    """Reach cube ``k`` with an open hand lined up with its faces, and close on it."""
-    hand, cube = view.hand_pos, view.cube_pos[k]
-    grasp = np.array([cube[0], cube[1], cube[2] + p.grasp_offset])
+    """Reach cube ``k`` with an open hand lined up with its faces, and close on it.  (The points on
+    Python floats, as in ``_carry``.)"""
+    hand, (x, y, z) = view.hand_pos.tolist(), view.cube_pos[k].tolist()
+    grasp = [x, y, z + p.grasp_offset]
     xy_off = xy_distance(hand, grasp)
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
     at_grasp = (xy_off <= p.reach * p.align
@@ -478,7 +481,7 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
                      accepted=(min(left, p.reach * p.align), min(left, p.reach * p.stop)))
 
 
-def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, step: str,
+def _approach(hand: Sequence[float], goal: Sequence[float], travel_z: float, p: OperatorParams, step: str,
               on_arrival: Action, descending: bool, stalled: bool = False,
               accepted: tuple[float, float] = (0.0, 0.0), align: float | None = None) -> Action:
     """Rise to the travel height if low and far, travel over the goal, go down, then act.
