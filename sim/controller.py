@@ -195,7 +195,7 @@ class CartesianVelocityController:
         tx, ty, tz = self.target_position
         lx, ly, lz = linear
         wx, wy, wz = self.workspace.clamp_xyz(tx + lx * dt, ty + ly * dt, tz + lz * dt, self._floor)
-        feedforward = ((wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt)
+        fx, fy, fz = (wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt  # the feedforward velocity
         # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
         px, py, pz = position
         gx, gy, gz = wx - px, wy - py, wz - pz
@@ -211,7 +211,7 @@ class CartesianVelocityController:
             self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
             turn = rotation_error(self.target_rotation, rotation)
         gain = self.config.position_gain
-        return [f + gain * (w - p) for f, w, p in zip(feedforward, (wx, wy, wz), position)], turn
+        return [fx + gain * (wx - px), fy + gain * (wy - py), fz + gain * (wz - pz)], turn
 
     def _blocked_joints(self, q: list[float], qd: list[float]) -> list[int]:
         """Limited joints within the margin of a range end and moving further toward it (indices;

@@ -805,9 +805,8 @@ class ScriptedUser:
         stalls as well), and starts again when the hand goes lower or another move of the stick is made.
         A push shorter than the interface has needed to answer (``Timing.answered_hold``) and not
         answered says nothing of the hand: it does not count."""
-        effects = self.memory.controls.layout.effects[view.mode]
-        pushing_down = any(fn in effects and effects[fn].kind is Kind.LINEAR and effects[fn].axis[2] < 0
-                           for fn in self.current.deflection)
+        moves = self.memory.controls.layout.axes(view.mode, Kind.LINEAR)
+        pushing_down = any(fn in moves and moves[fn][2] < 0 for fn in self.current.deflection)
         descent = self.current.goal.descending and pushing_down
         # what was held since the last glance was held this long
         held = max(0.0, view.t - self._last_glance) if math.isfinite(self._last_glance) else 0.0
@@ -829,9 +828,8 @@ class ScriptedUser:
     def _watch_opening(self, view: View) -> None:
         """Fingers pushed open for ``miss_time`` without opening further are caught (on a cube set
         down askew, between the cubes): the person lifts the hand before opening on."""
-        effects = self.memory.controls.layout.effects[view.mode]
-        opening = any(fn in effects and effects[fn].kind is Kind.FINGERS and effects[fn].axis < 0
-                      for fn in self.current.deflection)
+        fingers = self.memory.controls.layout.axes(view.mode, Kind.FINGERS)
+        opening = any(fn in fingers and fingers[fn] < 0 for fn in self.current.deflection)
         since, closure = self._closure_seen
         if not opening or closure - view.closure > OPENING_PROGRESS:
             self._closure_seen = (view.t, view.closure)
