@@ -282,6 +282,8 @@ def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
     touching = [k for k, touch in enumerate(view.touching) if touch]
     if not touching or view.closure <= p.open_closure:
         return None
+    if len(touching) == 1:  # (min's answer, without the distance it would work out for nothing)
+        return touching[0]
     return min(touching, key=lambda k: norm(view.cube_pos[k] - view.hand_pos))
 
 
@@ -370,20 +372,28 @@ class Action:
     turn: np.ndarray | None = None  # for TURN: wanted rotation about world x, y, z (rad)
 
 
+# The plan names the same few goals (and opens and closes) tick after tick: each is made once (they are immutable).
+@cache
+def _goal(step: str, phase: Phase | None = None) -> Goal:
+    return Goal(step, phase)
+
+
+@cache
 def _open(step: str) -> Action:
-    return Action(ActionKind.OPEN, Goal(step))
+    return Action(ActionKind.OPEN, _goal(step))
 
 
+@cache
 def _close(step: str) -> Action:
-    return Action(ActionKind.CLOSE, Goal(step))
+    return Action(ActionKind.CLOSE, _goal(step))
 
 
 def _move(step: str, phase: Phase | None, point: np.ndarray) -> Action:
-    return Action(ActionKind.MOVE, Goal(step, phase), point)
+    return Action(ActionKind.MOVE, _goal(step, phase), point)
 
 
 def _turn(step: str, turn: np.ndarray) -> Action:
-    return Action(ActionKind.TURN, Goal(step), turn=turn)
+    return Action(ActionKind.TURN, _goal(step), turn=turn)
 
 
 def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
@@ -544,7 +554,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
                   opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
     anticipation = p.anticipation if anticipation is None else anticipation
     if action.kind is ActionKind.MOVE:
-        need, deflection, axis = _translation(view.hand_pos, velocity, anticipation, action.point, p, combine_axes,
+        error = (action.point - view.hand_pos).tolist()  # to the point, on Python floats (the array's differences)
+        need, deflection, axis = _translation(error, velocity, anticipation, p, combine_axes,
                                               memory.axis, holding or {}, memory.controls.layout, view.mode, pace)
     else:
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
@@ -554,7 +565,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     remaining = 0.0
     if action.kind is ActionKind.MOVE:
         effects = memory.controls.layout.effects[view.mode]
-        dx, dy, dz = (action.point - view.hand_pos).tolist()  # np.dot with each axis, on floats (to the bit)
+        dx, dy, dz = error  # np.dot with each axis, on floats (to the bit)
         remaining = max((abs(dx * ax + dy * ay + dz * az) for ax, ay, az in (effects[fn].axis for fn in deflection)),
                         default=0.0)
     return (StickIntent(deflection, goal=action.goal, remaining=remaining),
@@ -586,10 +597,11 @@ def _updated(memory: Memory, **changes) -> Memory:
     return updated
 
 
-def _translation(hand: np.ndarray, velocity: tuple[float, float, float], anticipation: float, point: np.ndarray, p: OperatorParams,
+def _translation(error: list[float], velocity: tuple[float, float, float], anticipation: float, p: OperatorParams,
                  combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode,
                  pace: Pace | None = None) -> tuple[Mode, dict[str, float], int | None]:
-    """The mode, and the joystick functions (and their deflections) in it, that bring the hand to ``point``.
+    """The mode, and the joystick functions (and their deflections) in it, that take the hand the ``error``
+    (the point minus the hand, world axes) to its point.
 
     An axis being moved stops when the hand would coast (``anticipation`` seconds of its ``velocity``: the
     travel expected after letting go) to within the stop tolerance of its goal; an idle axis
@@ -598,7 +610,6 @@ def _translation(hand: np.ndarray, velocity: tuple[float, float, float], anticip
     in another mode (2-axis: z in the height mode), the axes of the current ``mode`` are finished
     first: a switch costs presses.
     """
-    error = (point - hand).tolist()  # on Python floats: the array form's differences and products
     coast = [v * anticipation for v in velocity]
     movers = [_function_along(layout, i, error[i] >= 0) for i in range(3)]  # (mode, function) per axis
     held = {fn for fn in holding if fn in layout.axes(mode, Kind.LINEAR)}  # moving the hand now
@@ -866,4 +877,4 @@ def _continues(current: StickIntent, wanted: StickIntent) -> bool:
         return False
     if wanted.button is not None:
         return wanted.button == current.button
-    return bool(wanted.functions & current.functions)
+    return not wanted.deflection.keys().isdisjoint(current.deflection)
