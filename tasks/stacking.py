@@ -141,8 +141,8 @@ class StackingTask:
         """Call once per control tick, after the step."""
         t, pos = self.sim.time, self.sim.cube_positions.tolist()
         # the fastest cube's speed since the previous tick (np.linalg.norm's per cube, on Python floats)
-        speed = max(math.sqrt((x - px) * (x - px) + (y - py) * (y - py) + (z - pz) * (z - pz))
-                    for (x, y, z), (px, py, pz) in zip(pos, self._previous)) / self.sim.dt
+        speed = max([math.sqrt((x - px) * (x - px) + (y - py) * (y - py) + (z - pz) * (z - pz))
+                     for (x, y, z), (px, py, pz) in zip(pos, self._previous)]) / self.sim.dt
         self._previous = pos
         if speed <= self.config.still_speed and self.stacked(pos):
             self._still_since = t if self._still_since is None else self._still_since
