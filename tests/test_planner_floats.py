@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from tasks import planner
-from tasks.planner import (Action, ActionKind, Memory, Phase, View, _approach, _close, _move, _open, cube_to_take,
+from tasks.planner import (Action, Memory, Phase, View, _approach, _close, _move, _open, _turn, cube_to_take,
                            held_cube, load_operator, missed_grasp, placed_cubes, xy_distance, yaw_error)
 from sim.joystick import Mode
 
@@ -72,8 +72,8 @@ def take_on_arrays(view, memory, k, stack_top, open_hand, p) -> Action:
     yaw_tolerance = math.radians(p.yaw_deg) * (p.settled_share if memory.turning else 1.0)
     if xy_off <= p.turn_reach * p.align and abs(turn) > yaw_tolerance:
         if hand[2] < grasp[2] + p.turn_clearance * p.hover and not memory.turning:
-            return planner._move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.array([hand[0], hand[1], hover_z]))
-        return planner._turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
+            return _move(f"reach cube {k + 1}", Phase.RISE_TO_TURN, np.array([hand[0], hand[1], hover_z]))
+        return _turn(f"turn to cube {k + 1}", np.array([0.0, 0.0, turn]))
     left = memory.pulse_step / 2
     return _approach(hand, grasp, hover_z, p, f"reach cube {k + 1}", _close(f"grasp cube {k + 1}"),
                      memory.descending, memory.stalled,

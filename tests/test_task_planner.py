@@ -8,9 +8,9 @@ import pytest
 from bomi.errors import BomiError
 from helpers import assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, _updated, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
-                           hand_velocity, held_cube, load_operator, mode_button, norm, placed_cubes, plan, turn_deflection_for,
-                           xy_distance)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View,
+                           _updated, cube_to_take, deflection_for, hand_velocity, held_cube, load_operator,
+                           mode_button, norm, placed_cubes, plan, turn_deflection_for, xy_distance)
 
 P = load_operator()
 TWO_AXIS_B1 = Memory(controls=Controls(TWO_AXIS, ("B1",)))  # P4, P5: four directions and one button
