@@ -17,6 +17,7 @@ import pinocchio as pin
 from scipy.linalg import lapack
 
 from sim.config import ControlConfig, WorkspaceConfig
+from sim.floats import clip
 from sim.kinematics import ArmKinematics
 
 
@@ -48,6 +49,7 @@ class Workspace:
         # ``clamp`` runs every control tick: its bounds as Python floats, made once
         lower = tuple(float(v) for v in self.lower)
         object.__setattr__(self, "_bounds", (lower, tuple(max(lo, float(hi)) for lo, hi in zip(lower, self.upper))))
+        object.__setattr__(self, "_upper_z", float(self.upper[2]))
         object.__setattr__(self, "_shoulder", tuple(float(v) for v in self.shoulder))
 
     @classmethod
@@ -67,11 +69,13 @@ class Workspace:
         The box and the floor come last, so they always hold (the table is solid); where they
         disagree with the shell, the shell gives way.
         """
-        return np.array(self.clamp_xyz(*point, rotation))
+        return np.array(self.clamp_xyz(*point, self.lowest_tool_height(rotation)))
 
-    def clamp_xyz(self, x: float, y: float, z: float, rotation: np.ndarray) -> tuple[float, float, float]:
-        """``clamp`` on Python floats (what the controller calls every tick): the same differences,
-        products, square root and comparisons as on arrays of three, at a fraction of the cost."""
+    def clamp_xyz(self, x: float, y: float, z: float, floor: float) -> tuple[float, float, float]:
+        """``clamp`` on Python floats (what the controller calls every tick), ``floor`` being
+        ``lowest_tool_height`` of the rotation (the controller's changes only when its target turns):
+        the same differences, products, square root and comparisons as on arrays of three, at a
+        fraction of the cost."""
         sx, sy, sz = self._shoulder
         ox, oy, oz = x - sx, y - sy, z - sz
         distance = math.sqrt(ox * ox + oy * oy + oz * oz)
@@ -82,11 +86,10 @@ class Workspace:
             scale = self.reach_min / distance
             x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
         (lx, ly, lz), (ux, uy, uz) = self._bounds
-        floor = self.lowest_tool_height(rotation)
         if floor > lz:
             lz = floor
-            uz = max(floor, float(self.upper[2]))
-        return min(max(x, lx), ux), min(max(y, ly), uy), min(max(z, lz), uz)
+            uz = max(floor, self._upper_z)
+        return clip(x, lx, ux), clip(y, ly, uy), clip(z, lz, uz)
 
     def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
         return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
@@ -94,8 +97,8 @@ class Workspace:
 
 def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float) -> np.ndarray:
     """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities."""
-    jjt = jacobian @ jacobian.T
-    jjt.flat[::len(jjt) + 1] += damping**2  # the diagonal
+    jjt = jacobian @ jacobian.T  # a new C-ordered array: ravel() is a view of it
+    jjt.ravel()[::len(jjt) + 1] += damping**2  # the diagonal
     # LAPACK's dgesv, as np.linalg.solve calls it (the same LU, bit for bit), without its wrapper's checks
     _, _, solution, info = lapack.dgesv(jjt, twist)
     if info > 0:
@@ -124,57 +127,75 @@ class CartesianVelocityController:
         self.workspace = workspace
         self.config = config
         self.dt = dt
-        self.target_position = np.zeros(3)
+        self.target_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.target_rotation = np.eye(3)
         # where a limited joint stops (a margin short of its range): the same every tick
         self._stop_lower = (limits.lower + config.joint_limit_margin).tolist()
         self._stop_upper = (limits.upper - config.joint_limit_margin).tolist()
         self._speed_limit = limits.speed.tolist()
 
+    @property
+    def target_rotation(self) -> np.ndarray:
+        """The target's rotation matrix (read-only: a turn sets a new one)."""
+        return self._target_rotation
+
+    @target_rotation.setter
+    def target_rotation(self, rotation: np.ndarray) -> None:
+        # the floor under the hand so turned: the same every tick until the target turns (a move of
+        # the hand alone leaves it), so worked out here, not in every tick's clamp
+        self._target_rotation = rotation
+        rotation.flags.writeable = False
+        self._floor = self.workspace.lowest_tool_height(rotation)
+
     def reset(self, q: np.ndarray) -> None:
         """Hold the pose the arm is in."""
-        self.target_position, self.target_rotation = self.kinematics.tool_pose(q)
-        self.target_position = self.workspace.clamp(self.target_position, self.target_rotation)
+        position, self.target_rotation = self.kinematics.tool_pose(q)
+        self.target_position = self.workspace.clamp_xyz(*position.tolist(), self._floor)
 
     def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes).
 
-        The 3-vectors of the target's advance are worked on Python floats (the same elementwise
-        operations and, for a length, the same sum of squares in the same order as on arrays, so
-        the same bits) and the 6-vectors and matrices with numpy, Pinocchio and LAPACK."""
+        The 3-vectors (the target's position, the command, the twist) are worked on Python floats
+        (the same elementwise operations and, for a length, the same sum of squares in the same
+        order as on arrays, so the same bits) and the 6-vectors and matrices with numpy, Pinocchio
+        and LAPACK."""
         position, rotation, jacobian = self.kinematics.pose_and_jacobian(q)
         previous_position, previous_rotation = self.target_position, self.target_rotation
-        angular = np.asarray(angular, float)
+        wx, wy, wz = angular = np.asarray(angular, float).tolist()
         pull, turn = self._advance_target(position.tolist(), rotation, np.asarray(linear, float).tolist(), angular)
-        twist = np.concatenate((pull, angular + self.config.orientation_gain * turn))
+        gain, (ex, ey, ez) = self.config.orientation_gain, turn.tolist()
+        twist = np.array([*pull, wx + gain * ex, wy + gain * ey, wz + gain * ez])
         qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
-        blocked = self._blocked_joints(q, qd)
+        speeds = qd.tolist()
+        blocked = self._blocked_joints(q.tolist(), speeds)
         if blocked:
             jacobian[:, blocked] = 0.0
             qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
             qd[blocked] = 0.0
-        scale = speed_scale(qd.tolist(), self._speed_limit)
+            speeds = qd.tolist()
+        scale = speed_scale(speeds, self._speed_limit)
         if scale < 1.0:
             # The arm does only this fraction of the tick's motion: so does the target, which then
             # never runs ahead and the hand stops where it is when the command stops.
-            self.target_position = previous_position + scale * (self.target_position - previous_position)
+            self.target_position = tuple(p + scale * (t - p) for p, t in zip(previous_position, self.target_position))
             self.target_rotation = pin.exp3(scale * rotation_error(self.target_rotation, previous_rotation)) \
                 @ previous_rotation
             return qd * scale
         return qd
 
     def _advance_target(self, position: list[float], rotation: np.ndarray, linear: list[float],
-                        angular: np.ndarray) -> tuple[list[float], np.ndarray]:
+                        angular: list[float]) -> tuple[list[float], np.ndarray]:
         """Move the target by one tick of the command inside the walls; return the linear part of
         the twist (the feedforward velocity plus the pull toward the target) and the rotation error
         (``rotation_error``) from the hand's ``rotation`` to the new target."""
         dt = self.dt
-        if angular.any():  # (no turn leaves the target's rotation as it is: exp3(0) is the identity)
-            self.target_rotation = pin.exp3(angular * dt) @ self.target_rotation
-        tx, ty, tz = self.target_position.tolist()
+        ax, ay, az = angular
+        if ax or ay or az:  # (no turn leaves the target's rotation as it is: exp3(0) is the identity)
+            self.target_rotation = pin.exp3(np.array([ax * dt, ay * dt, az * dt])) @ self.target_rotation
+        tx, ty, tz = self.target_position
         lx, ly, lz = linear
-        wx, wy, wz = self.workspace.clamp_xyz(tx + lx * dt, ty + ly * dt, tz + lz * dt, self.target_rotation)
-        feedforward = ((wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt)
+        wx, wy, wz = self.workspace.clamp_xyz(tx + lx * dt, ty + ly * dt, tz + lz * dt, self._floor)
+        fx, fy, fz = (wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt  # the feedforward velocity
         # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
         px, py, pz = position
         gx, gy, gz = wx - px, wy - py, wz - pz
@@ -182,7 +203,7 @@ class CartesianVelocityController:
         if distance > self.config.max_tracking_error:
             scale = self.config.max_tracking_error / distance
             wx, wy, wz = px + gx * scale, py + gy * scale, pz + gz * scale
-        self.target_position = np.array([wx, wy, wz])
+        self.target_position = wx, wy, wz
         turn = rotation_error(self.target_rotation, rotation)
         angle = math.sqrt(turn @ turn)
         max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
@@ -190,10 +211,10 @@ class CartesianVelocityController:
             self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
             turn = rotation_error(self.target_rotation, rotation)
         gain = self.config.position_gain
-        return [f + gain * (w - p) for f, w, p in zip(feedforward, (wx, wy, wz), position)], turn
+        return [fx + gain * (wx - px), fy + gain * (wy - py), fz + gain * (wz - pz)], turn
 
-    def _blocked_joints(self, q: np.ndarray, qd: np.ndarray) -> list[int]:
+    def _blocked_joints(self, q: list[float], qd: list[float]) -> list[int]:
         """Limited joints within the margin of a range end and moving further toward it (indices;
         on Python floats, the same comparisons as on arrays at a fraction of the cost)."""
-        return [j for j, (a, v, lo, hi) in enumerate(zip(q.tolist(), qd.tolist(), self._stop_lower, self._stop_upper))
+        return [j for j, (a, v, lo, hi) in enumerate(zip(q, qd, self._stop_lower, self._stop_upper))
                 if (a <= lo and v < 0) or (a >= hi and v > 0)]

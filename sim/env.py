@@ -15,6 +15,7 @@ import pinocchio as pin
 from sim.config import MODELS_DIR, SimConfig, load_config
 from sim.controller import CartesianVelocityController, JointLimits, Workspace
 from sim.errors import SimError
+from sim.floats import clip
 from sim.joystick import THREE_AXIS, ArmCommand, JoystickInterpreter, JoystickState, Layout, Mode
 from sim.kinematics import arm_kinematics
 from sim.render import FrameRenderer, Legend
@@ -185,9 +186,9 @@ class ArmSim:
         (On Python floats: the same sums, products and bounds as on arrays of three.)"""
         control = self.config.control
         step, gain = rate * control.finger_speed * self.dt, control.finger_gain
-        self.finger_target = [min(max(target + step, lower), upper)
+        self.finger_target = [clip(target + step, lower, upper)
                               for target, (lower, upper) in zip(self.finger_target, self._finger_bounds)]
-        return [min(max(gain * (target - q), -limit), limit)
+        return [clip(gain * (target - q), -limit, limit)
                 for target, q, limit in zip(self.finger_target, self._qpos[self._finger_q].tolist(),
                                             self._finger_limit)]
 
@@ -270,7 +271,7 @@ class ArmSim:
         return any((a in geoms_a and b in geoms_b) or (a in geoms_b and b in geoms_a)
                    for a, b in (self._contact_pairs() if pairs is None else pairs))
 
-    def cube_in_grasp(self) -> np.ndarray:
+    def cube_in_grasp(self) -> tuple[bool, ...]:
         """Per cube: held between finger 1 and at least one of the opposing fingers 2, 3."""
         touched = set()  # (finger, cube) of the active contacts
         finger_of, cube_of = self._finger_of, self._cube_of
@@ -279,8 +280,7 @@ class ArmSim:
                 touched.add((finger_of[a], cube_of[b]))
             if b in finger_of and a in cube_of:
                 touched.add((finger_of[b], cube_of[a]))
-        return np.array([(0, k) in touched and ((1, k) in touched or (2, k) in touched)
-                         for k in range(len(cube_of))])
+        return tuple([(0, k) in touched and ((1, k) in touched or (2, k) in touched) for k in range(len(cube_of))])
 
     # -- rendering -------------------------------------------------------------------------------
 

@@ -33,6 +33,8 @@ from types import MappingProxyType
 
 import numpy as np
 
+from sim.floats import clip
+
 FUNCTIONS = ("F", "B", "R", "L", "Rr", "Lr")
 BUTTONS = ("B1", "B2")
 _FUNCTION_SET, _BUTTON_SET = frozenset(FUNCTIONS), frozenset(BUTTONS)
@@ -255,7 +257,7 @@ class JoystickInterpreter:
         x, y, z = combined(state.deflection, self.layout.axes(self.mode, Kind.LINEAR))
         rx, ry, rz = combined(state.deflection, self.layout.axes(self.mode, Kind.ANGULAR))
         return ArmCommand(np.array([speed * x, speed * y, speed * z]), np.array([turn * rx, turn * ry, turn * rz]),
-                          float(min(max(finger, -1.0), 1.0)))
+                          float(clip(finger, -1.0, 1.0)))
 
 
 def script_states(script: Iterable[tuple[float, JoystickState]], control_hz: float) -> Iterator[JoystickState]:

@@ -32,6 +32,8 @@ class ArmKinematics:
 
     def __post_init__(self) -> None:
         self.base_rotation = self.base.rotation.copy()  # read every tick: one copy out of Pinocchio, not one a tick
+        # the tool frame's placement in Pinocchio's data: a reference, which every kinematics pass updates in place
+        self._tool_placement = self.data.oMf[self.tool_frame]
 
     def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) and rotation matrix (3, 3) of the tool frame."""
@@ -45,17 +47,14 @@ class ArmKinematics:
         return (*self._placed_tool(), jacobian)
 
     def _placed_tool(self) -> tuple[np.ndarray, np.ndarray]:
-        world = self.base * self.data.oMf[self.tool_frame]
+        world = self.base * self._tool_placement
         return world.translation.copy(), world.rotation.copy()
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian [linear; angular] of the tool point, world axes (mj_jacSite's convention)."""
         jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
-        rot = self.base_rotation
-        out = np.empty((6, jac.shape[1]))
-        np.matmul(rot, jac[:3], out=out[:3])
-        np.matmul(rot, jac[3:], out=out[3:])
-        return out
+        # the base rotation times the linear and the angular block: one matmul over the two as a stack
+        return np.matmul(self.base_rotation, jac.reshape(2, 3, -1)).reshape(jac.shape)
 
     def solve_pose(self, position: np.ndarray, rotation: np.ndarray, seed: np.ndarray,
                    iterations: int = 200, tolerance: float = 1e-8) -> np.ndarray:

@@ -34,7 +34,7 @@ from tasks.participants.participant import (Feel, ParticipantParams, VirtualPart
                                session_recording)
 from tasks.participants.receiver import Receiver
 from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, Phase,
-                           ScriptedUser, StickIntent, load_operator)
+                           ScriptedUser, StickIntent, View, load_operator)
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
@@ -548,8 +548,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
     user = operator_user(params, channel, seed)
     assistance = Assistance(assist, channel.controls.layout, channel.controls.buttons) if assist else None
-    rows: dict[str, list] = {key: [] for key in ("t", "hand", "dir", "mode", "cubes", "touching", "goal", "stage",
-                                                   "pushing")}
+    seen_ticks: list[tuple[View, StickIntent]] = []  # what the person saw and wanted, tick by tick (both immutable)
     film = _Film(sim, video, video_speedup) if video is not None else None
     seen_scale, previous = sim.dt * sim.config.control.full_speed, None
     started, started_cpu = time.perf_counter(), time.process_time()
@@ -562,15 +561,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
             state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)
             if assistance is not None:
                 state = assistance.step(view, state, sim)
-            rows["t"].append(view.t)
-            rows["hand"].append(view.hand_pos)
-            rows["dir"].append(intended_direction(view.mode, intent, sim.layout))
-            rows["mode"].append(_MODE_VALUE[view.mode])
-            rows["cubes"].append(view.cube_pos)
-            rows["touching"].append(view.touching)
-            rows["goal"].append(intent.goal.step)
-            rows["stage"].append(_STAGE_VALUE[intent.goal.phase])
-            rows["pushing"].append(bool(intent.deflection))
+            seen_ticks.append((view, intent))
             sim.step(state)
             if on_tick is not None:
                 on_tick(sim.time)
@@ -583,13 +574,18 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     finally:
         if film is not None:
             film.close()
+    views, intents = zip(*seen_ticks)
     return EpisodeLog(
         operator=operator, participant=participant, seed=seed, controls=channel.controls.label,
-        t=np.array(rows["t"]), hand_pos=np.array(rows["hand"]), intended_dir=np.array(rows["dir"]).reshape(-1, 3),
-        mode=rows["mode"], presses=sim.button_presses, cube_pos=np.array(rows["cubes"]),
-        touching=np.array(rows["touching"], dtype=bool), target_pos=task.target_pos.copy(), goals=tuple(rows["goal"]),
-        stages=tuple(rows["stage"]),
-        pushing=np.array(rows["pushing"], dtype=bool),
+        t=np.array([view.t for view in views]), hand_pos=np.array([view.hand_pos for view in views]),
+        intended_dir=np.array([intended_direction(view.mode, intent, sim.layout) for view, intent in seen_ticks]
+                              ).reshape(-1, 3),
+        mode=[_MODE_VALUE[view.mode] for view in views], presses=sim.button_presses,
+        cube_pos=np.array([view.cube_pos for view in views]),
+        touching=np.array([view.touching for view in views], dtype=bool), target_pos=task.target_pos.copy(),
+        goals=tuple(intent.goal.step for intent in intents),
+        stages=tuple(_STAGE_VALUE[intent.goal.phase] for intent in intents),
+        pushing=np.array([bool(intent.deflection) for intent in intents], dtype=bool),
         success=outcome.success, completion_time=outcome.completion_time, failure=outcome.failure,
         wall_time=time.perf_counter() - started, cpu_time=time.process_time() - started_cpu,
         assist=assist_label(frozenset(assist)),

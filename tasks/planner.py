@@ -13,12 +13,14 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field, replace
+from functools import cache
 from pathlib import Path
-from typing import Any, Callable, Mapping, Protocol
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 
 from bomi.config_files import check_table, load_toml, number, typed
+from sim.floats import clip
 from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
@@ -234,13 +236,17 @@ class Memory:
 # ---------------------------------------------------------------------------------------------
 # geometry of the task, as the person judges it
 
-def norm(v: np.ndarray) -> float:
-    """Euclidean length of a small vector: what ``np.linalg.norm`` computes for one (the square root
-    of ``v.dot(v)``, to the bit), without its generic checks (the planner takes a dozen per tick)."""
-    return math.sqrt(v.dot(v))
+def norm(v: Sequence[float]) -> float:
+    """Euclidean length of a small vector (2 or 3 elements, an array or Python floats): what
+    ``np.linalg.norm`` computes for one (the square root of ``v.dot(v)``, whose BLAS sum of so few
+    starts at 0 and adds the squares in order: the same bits), without its generic checks."""
+    squares = 0.0
+    for c in v:
+        squares += c * c
+    return math.sqrt(squares)
 
 
-def xy_distance(a: np.ndarray, b: np.ndarray) -> float:
+def xy_distance(a: Sequence[float], b: Sequence[float]) -> float:
     """``norm(a[:2] - b[:2])`` to the bit (the same differences, products and sum), without the
     arrays it makes."""
     dx, dy = a[0] - b[0], a[1] - b[1]
@@ -251,18 +257,19 @@ def placed_cubes(view: View, p: OperatorParams) -> tuple[int | None, int | None]
     the fingers touch is placed only if the hand is open (it rests there; the hand is not holding it)."""
     rest_z = view.table_z + view.cube_size / 2
     gripped = [touch and view.closure > p.open_closure for touch in view.touching]
+    cubes, target = [pos.tolist() for pos in view.cube_pos], view.target_xy.tolist()  # read as Python floats
     bottom = None
-    for k, pos in enumerate(view.cube_pos):
-        at_b = xy_distance(pos, view.target_xy) <= p.target_zone
+    for k, pos in enumerate(cubes):
+        at_b = xy_distance(pos, target) <= p.target_zone
         if at_b and abs(pos[2] - rest_z) <= p.placed and not gripped[k]:
             bottom = k
     if bottom is None:
         return None, None
-    for k, pos in enumerate(view.cube_pos):
+    for k, pos in enumerate(cubes):
         if k == bottom or gripped[k]:
             continue
-        on_top = xy_distance(pos, view.cube_pos[bottom]) <= p.placed
-        if on_top and abs(pos[2] - view.cube_pos[bottom][2] - view.cube_size) <= p.placed:
+        on_top = xy_distance(pos, cubes[bottom]) <= p.placed
+        if on_top and abs(pos[2] - cubes[bottom][2] - view.cube_size) <= p.placed:
             return bottom, k
     return bottom, None
 
@@ -275,6 +282,8 @@ def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
     touching = [k for k, touch in enumerate(view.touching) if touch]
     if not touching or view.closure <= p.open_closure:
         return None
+    if len(touching) == 1:  # (min's answer, without the distance it would work out for nothing)
+        return touching[0]
     return min(touching, key=lambda k: norm(view.cube_pos[k] - view.hand_pos))
 
 
@@ -334,12 +343,12 @@ def deflection_for(distance: float, p: OperatorParams, anticipation: float, pace
     least_time = 0.0 if pace is None else pace(distance, 2 * p.stop)
     if least_time > 0:
         coast = min(coast, distance / (p.full_speed * least_time))
-    return min(max(coast, p.fine), p.coarse)  # np.clip's result, without its overhead
+    return clip(coast, p.fine, p.coarse)  # np.clip's result, without its overhead
 
 
 def turn_deflection_for(angle: float, p: OperatorParams, anticipation: float) -> float:
     """The same rule for a wrist turn of ``angle`` rad, between fine and ``turn``."""
-    return min(max(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine), p.turn)
+    return clip(p.coast_share * angle / (p.full_turn_speed * max(anticipation, 1e-9)), p.fine, p.turn)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -363,20 +372,28 @@ class Action:
     turn: np.ndarray | None = None  # for TURN: wanted rotation about world x, y, z (rad)
 
 
+# The plan names the same few goals (and opens and closes) tick after tick: each is made once (they are immutable).
+@cache
+def _goal(step: str, phase: Phase | None = None) -> Goal:
+    return Goal(step, phase)
+
+
+@cache
 def _open(step: str) -> Action:
-    return Action(ActionKind.OPEN, Goal(step))
+    return Action(ActionKind.OPEN, _goal(step))
 
 
+@cache
 def _close(step: str) -> Action:
-    return Action(ActionKind.CLOSE, Goal(step))
+    return Action(ActionKind.CLOSE, _goal(step))
 
 
 def _move(step: str, phase: Phase | None, point: np.ndarray) -> Action:
-    return Action(ActionKind.MOVE, Goal(step, phase), point)
+    return Action(ActionKind.MOVE, _goal(step, phase), point)
 
 
 def _turn(step: str, turn: np.ndarray) -> Action:
-    return Action(ActionKind.TURN, Goal(step), turn=turn)
+    return Action(ActionKind.TURN, _goal(step), turn=turn)
 
 
 def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
@@ -417,13 +434,13 @@ def _finish(view: View, stack_top: float, open_hand: bool, p: OperatorParams) ->
 
 def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top: float, p: OperatorParams
            ) -> Action:
-    """Take the held cube over B (or onto the cube at B) and set it down."""
-    hand, cube = view.hand_pos, view.cube_pos[held]
-    grip = hand - cube  # where the hand holds the cube (it is not centred)
-    dest_xy = view.target_xy if bottom is None else view.cube_pos[bottom][:2]
+    """Take the held cube over B (or onto the cube at B) and set it down.  (The points on Python floats:
+    the array forms' elementwise sums and differences.)"""
+    hand, cube = view.hand_pos.tolist(), view.cube_pos[held].tolist()
+    grip = [h - c for h, c in zip(hand, cube)]  # where the hand holds the cube (it is not centred)
+    dest_xy = view.target_xy.tolist() if bottom is None else view.cube_pos[bottom].tolist()[:2]
     support = view.table_z if bottom is None else view.cube_pos[bottom][2] + view.cube_size / 2
-    release_xy = dest_xy + grip[:2]
-    release = np.array([release_xy[0], release_xy[1], support + view.cube_size / 2 + p.release_gap + grip[2]])
+    release = [dest_xy[0] + grip[0], dest_xy[1] + grip[1], support + view.cube_size / 2 + p.release_gap + grip[2]]
     off = xy_distance(cube, dest_xy)
     if off <= p.placed and cube[2] - view.cube_size / 2 - support <= p.release_gap + p.stop:
         return _open(f"release cube {held + 1}")
@@ -443,9 +460,10 @@ def _carry(view: View, memory: Memory, held: int, bottom: int | None, stack_top:
 
 
 def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool, p: OperatorParams) -> Action:
-    """Reach cube ``k`` with an open hand lined up with its faces, and close on it."""
-    hand, cube = view.hand_pos, view.cube_pos[k]
-    grasp = np.array([cube[0], cube[1], cube[2] + p.grasp_offset])
+    """Reach cube ``k`` with an open hand lined up with its faces, and close on it.  (The points on
+    Python floats, as in ``_carry``.)"""
+    hand, (x, y, z) = view.hand_pos.tolist(), view.cube_pos[k].tolist()
+    grasp = [x, y, z + p.grasp_offset]
     xy_off = xy_distance(hand, grasp)
     # at the bottom, the same xy tolerance as a descent under way: the closing fingers centre the cube
     at_grasp = (xy_off <= p.reach * p.align
@@ -473,7 +491,7 @@ def _take(view: View, memory: Memory, k: int, stack_top: float, open_hand: bool,
                      accepted=(min(left, p.reach * p.align), min(left, p.reach * p.stop)))
 
 
-def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorParams, step: str,
+def _approach(hand: Sequence[float], goal: Sequence[float], travel_z: float, p: OperatorParams, step: str,
               on_arrival: Action, descending: bool, stalled: bool = False,
               accepted: tuple[float, float] = (0.0, 0.0), align: float | None = None) -> Action:
     """Rise to the travel height if low and far, travel over the goal, go down, then act.
@@ -492,16 +510,19 @@ def _approach(hand: np.ndarray, goal: np.ndarray, travel_z: float, p: OperatorPa
     return on_arrival
 
 
-def hand_velocity(view: View, memory: Memory) -> np.ndarray:
-    """What the person sees the hand doing: the change since the previous glance."""
+def hand_velocity(view: View, memory: Memory) -> tuple[float, float, float]:
+    """What the person sees the hand doing: the change since the previous glance (m/s, on Python
+    floats: the array form's differences and divisions)."""
     if memory.last_seen is None or view.t <= memory.last_seen[0]:
-        return np.zeros(3)
-    return (view.hand_pos - memory.last_seen[1]) / (view.t - memory.last_seen[0])
+        return 0.0, 0.0, 0.0
+    seen_t, seen = memory.last_seen
+    elapsed, (x, y, z), (x0, y0, z0) = view.t - seen_t, view.hand_pos.tolist(), seen.tolist()
+    return (x - x0) / elapsed, (y - y0) / elapsed, (z - z0) / elapsed
 
 
 def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
          holding: Mapping[str, float] | None = None, anticipation: float | None = None,
-         pace: Pace | None = None, velocity: np.ndarray | None = None) -> tuple[StickIntent, Memory]:
+         pace: Pace | None = None, velocity: tuple[float, float, float] | None = None) -> tuple[StickIntent, Memory]:
     """Decide the stick intent for this tick.
 
     ``holding`` is the deflection currently applied per function (what the person feels in the
@@ -533,7 +554,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
                   opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
     anticipation = p.anticipation if anticipation is None else anticipation
     if action.kind is ActionKind.MOVE:
-        need, deflection, axis = _translation(view.hand_pos, velocity, anticipation, action.point, p, combine_axes,
+        error = (action.point - view.hand_pos).tolist()  # to the point, on Python floats (the array's differences)
+        need, deflection, axis = _translation(error, velocity, anticipation, p, combine_axes,
                                               memory.axis, holding or {}, memory.controls.layout, view.mode, pace)
     else:
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
@@ -543,7 +565,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     remaining = 0.0
     if action.kind is ActionKind.MOVE:
         effects = memory.controls.layout.effects[view.mode]
-        dx, dy, dz = (action.point - view.hand_pos).tolist()  # np.dot with each axis, on floats (to the bit)
+        dx, dy, dz = error  # np.dot with each axis, on floats (to the bit)
         remaining = max((abs(dx * ax + dy * ay + dz * az) for ax, ay, az in (effects[fn].axis for fn in deflection)),
                         default=0.0)
     return (StickIntent(deflection, goal=action.goal, remaining=remaining),
@@ -567,14 +589,19 @@ def _other_action(action: Action, layout: Layout, p: OperatorParams, anticipatio
 
 
 def _updated(memory: Memory, **changes) -> Memory:
-    """``dataclasses.replace(memory, **changes)`` at half its cost (``plan`` makes one or two a tick)."""
-    return Memory(**(vars(memory) | changes))
+    """``dataclasses.replace(memory, **changes)`` at a third of its cost (``plan`` makes one or two a
+    tick): the frozen fields set at once, not one ``object.__setattr__`` at a time (Memory has no
+    ``__post_init__`` to run)."""
+    updated = object.__new__(Memory)
+    updated.__dict__.update(vars(memory), **changes)
+    return updated
 
 
-def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, point: np.ndarray, p: OperatorParams,
+def _translation(error: list[float], velocity: tuple[float, float, float], anticipation: float, p: OperatorParams,
                  combine_axes: bool, axis: int | None, holding: Mapping[str, float], layout: Layout, mode: Mode,
                  pace: Pace | None = None) -> tuple[Mode, dict[str, float], int | None]:
-    """The mode, and the joystick functions (and their deflections) in it, that bring the hand to ``point``.
+    """The mode, and the joystick functions (and their deflections) in it, that take the hand the ``error``
+    (the point minus the hand, world axes) to its point.
 
     An axis being moved stops when the hand would coast (``anticipation`` seconds of its ``velocity``: the
     travel expected after letting go) to within the stop tolerance of its goal; an idle axis
@@ -583,9 +610,8 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
     in another mode (2-axis: z in the height mode), the axes of the current ``mode`` are finished
     first: a switch costs presses.
     """
-    error = point - hand
-    coast = velocity * anticipation
-    movers = [_function_along(layout, i, error[i]) for i in range(3)]  # (mode, function) per axis
+    coast = [v * anticipation for v in velocity]
+    movers = [_function_along(layout, i, error[i] >= 0) for i in range(3)]  # (mode, function) per axis
     held = {fn for fn in holding if fn in layout.axes(mode, Kind.LINEAR)}  # moving the hand now
     moving = []
     for i, (need, fn) in enumerate(movers):
@@ -597,7 +623,7 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
         if keep:
             moving.append(i)
     if not moving and not held:
-        moving = [int(np.argmax(np.abs(error)))]
+        moving = [max(range(3), key=lambda i: abs(error[i]))]  # np.argmax's: the first of the largest
     if not moving:
         return mode, {}, None
     moving = [i for i in moving if movers[i][0] is mode] or moving
@@ -611,10 +637,11 @@ def _translation(hand: np.ndarray, velocity: np.ndarray, anticipation: float, po
     return movers[moving[0]][0], {movers[i][1]: deflection_for(abs(error[i]), p, anticipation, pace) for i in moving}, axis
 
 
-def _function_along(layout: Layout, axis: int, signed: float) -> tuple[Mode, str]:
-    """The mode and the function that move the hand along world ``axis`` in the direction of ``signed``."""
+@cache  # three per tick, always the same few answers per layout
+def _function_along(layout: Layout, axis: int, positive: bool) -> tuple[Mode, str]:
+    """The mode and the function that move the hand along world ``axis``, in its ``positive`` direction or not."""
     direction = [0.0, 0.0, 0.0]
-    direction[axis] = 1.0 if signed >= 0 else -1.0
+    direction[axis] = 1.0 if positive else -1.0
     return layout.find(Kind.LINEAR, tuple(direction))
 
 
@@ -772,7 +799,7 @@ class ScriptedUser:
         self._hold = self.timing.hold(wanted, self.settle)
         return wanted
 
-    def _let_go(self, view: View, velocity: np.ndarray) -> None:
+    def _let_go(self, view: View, velocity: tuple[float, float, float]) -> None:
         self._stopped_at = view.t
         effects = self.memory.controls.layout.effects[view.mode]
         self._let_go_of = frozenset(effects[fn].kind for fn in self.current.deflection if fn in effects)
@@ -789,9 +816,8 @@ class ScriptedUser:
         stalls as well), and starts again when the hand goes lower or another move of the stick is made.
         A push shorter than the interface has needed to answer (``Timing.answered_hold``) and not
         answered says nothing of the hand: it does not count."""
-        effects = self.memory.controls.layout.effects[view.mode]
-        pushing_down = any(fn in effects and effects[fn].kind is Kind.LINEAR and effects[fn].axis[2] < 0
-                           for fn in self.current.deflection)
+        moves = self.memory.controls.layout.axes(view.mode, Kind.LINEAR)
+        pushing_down = any(fn in moves and moves[fn][2] < 0 for fn in self.current.deflection)
         descent = self.current.goal.descending and pushing_down
         # what was held since the last glance was held this long
         held = max(0.0, view.t - self._last_glance) if math.isfinite(self._last_glance) else 0.0
@@ -813,9 +839,8 @@ class ScriptedUser:
     def _watch_opening(self, view: View) -> None:
         """Fingers pushed open for ``miss_time`` without opening further are caught (on a cube set
         down askew, between the cubes): the person lifts the hand before opening on."""
-        effects = self.memory.controls.layout.effects[view.mode]
-        opening = any(fn in effects and effects[fn].kind is Kind.FINGERS and effects[fn].axis < 0
-                      for fn in self.current.deflection)
+        fingers = self.memory.controls.layout.axes(view.mode, Kind.FINGERS)
+        opening = any(fn in fingers and fingers[fn] < 0 for fn in self.current.deflection)
         since, closure = self._closure_seen
         if not opening or closure - view.closure > OPENING_PROGRESS:
             self._closure_seen = (view.t, view.closure)
@@ -852,4 +877,4 @@ def _continues(current: StickIntent, wanted: StickIntent) -> bool:
         return False
     if wanted.button is not None:
         return wanted.button == current.button
-    return bool(wanted.functions & current.functions)
+    return not wanted.deflection.keys().isdisjoint(current.deflection)

@@ -113,8 +113,8 @@ class StackingTask:
             closure=sim.finger_closure,
             mode=sim.mode,
             cube_pos=tuple(sim.cube_positions),
-            cube_yaw=tuple(cube_yaw(q) for q in sim.cube_quats.tolist()),
-            touching=tuple(sim.cube_in_grasp().tolist()),
+            cube_yaw=tuple([cube_yaw(q) for q in sim.cube_quats.tolist()]),
+            touching=sim.cube_in_grasp(),
             target_xy=self._target_xy_array,
             table_z=self.table_z,
             cube_size=self.cube_size,
@@ -141,8 +141,8 @@ class StackingTask:
         """Call once per control tick, after the step."""
         t, pos = self.sim.time, self.sim.cube_positions.tolist()
         # the fastest cube's speed since the previous tick (np.linalg.norm's per cube, on Python floats)
-        speed = max(math.sqrt((x - px) * (x - px) + (y - py) * (y - py) + (z - pz) * (z - pz))
-                    for (x, y, z), (px, py, pz) in zip(pos, self._previous)) / self.sim.dt
+        speed = max([math.sqrt((x - px) * (x - px) + (y - py) * (y - py) + (z - pz) * (z - pz))
+                     for (x, y, z), (px, py, pz) in zip(pos, self._previous)]) / self.sim.dt
         self._previous = pos
         if speed <= self.config.still_speed and self.stacked(pos):
             self._still_since = t if self._still_since is None else self._still_since

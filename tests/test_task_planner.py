@@ -8,8 +8,9 @@ import pytest
 from bomi.errors import BomiError
 from helpers import assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View, cube_to_take, deflection_for,
-                           held_cube, load_operator, mode_button, norm, placed_cubes, plan, turn_deflection_for, xy_distance)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View,
+                           _updated, cube_to_take, deflection_for, hand_velocity, held_cube, load_operator,
+                           mode_button, norm, placed_cubes, plan, turn_deflection_for, xy_distance)
 
 P = load_operator()
 TWO_AXIS_B1 = Memory(controls=Controls(TWO_AXIS, ("B1",)))  # P4, P5: four directions and one button
@@ -638,3 +639,41 @@ def test_xy_distance_is_bit_for_bit_norm_of_the_xy_difference():
         if rng.integers(4) == 0:
             b[:2] = a[:2]  # a zero difference now and then
         assert xy_distance(a, b) == norm(a[:2] - b[:2])
+
+
+def test_norm_of_floats_and_arrays_is_bit_for_bit_numpys():
+    """norm (the planner's lengths and speeds, on Python floats or small arrays) gives np.linalg.norm's
+    bits, over many scales, zeros included."""
+    rng = np.random.default_rng(5)
+    for _ in range(3000):
+        v = rng.normal(size=rng.integers(2, 4)) * 10.0 ** rng.integers(-8, 3)
+        if rng.integers(5) == 0:
+            v[rng.integers(len(v))] = 0.0
+        expected = np.linalg.norm(v)
+        assert norm(v) == expected and norm(v.tolist()) == expected and norm(tuple(v.tolist())) == expected
+
+
+def test_hand_velocity_on_floats_is_bit_for_bit_the_array_form():
+    """The seen hand velocity (on Python floats) is the array difference over the time between glances, to the bit."""
+    rng = np.random.default_rng(6)
+    for _ in range(2000):
+        before, after = rng.normal(size=3) * 0.3, rng.normal(size=3) * 0.3
+        t0 = float(rng.uniform(0, 100))
+        t1 = t0 + float(rng.choice([1 / 60, 1 / 62.5, rng.uniform(0, 1)]))
+        seen = view(hand=tuple(after), t=t1)
+        expected = (seen.hand_pos - before) / (t1 - t0)
+        assert np.array_equal(hand_velocity(seen, Memory(last_seen=(t0, before))), expected)
+    assert hand_velocity(view(t=2.0), Memory()) == (0.0, 0.0, 0.0)
+    assert hand_velocity(view(t=2.0), Memory(last_seen=(2.0, np.ones(3)))) == (0.0, 0.0, 0.0)  # no time has passed
+
+
+def test_updated_memory_is_dataclasses_replace():
+    """_updated (Memory's fields set at once) gives what dataclasses.replace gives: equal, frozen, the
+    others' fields untouched."""
+    memory = Memory(axis=2, touch_since=1.5, missed_faces=(1, 0.5), controls=Controls(TWO_AXIS, ("B1",)))
+    changes = dict(axis=0, descending=True, last_seen=(3.0, np.zeros(3)), stalled=True)
+    updated = _updated(memory, **changes)
+    assert type(updated) is Memory and vars(updated) == vars(replace(memory, **changes))
+    assert updated.axis == 0 and memory.axis == 2 and updated.controls is memory.controls
+    with pytest.raises(AttributeError):
+        updated.axis = 1
