@@ -118,6 +118,12 @@ def counter_step(previous: int, counter: int) -> int:
     return (counter - previous) % COUNTER_MODULO
 
 
+def counter_steps(previous: int, counters: np.ndarray) -> np.ndarray:
+    """``counter_step`` of each of a node's (n,) int64 ``counters`` from the one before it, the first
+    from ``previous``."""
+    return counter_step(np.concatenate(([previous], counters[:-1])), counters)
+
+
 @dataclass
 class SampleIndex:
     """Per-node sample index from the wrapping packet counters: a node's first frame counts as its
@@ -137,8 +143,7 @@ class SampleIndex:
         for node_id in np.unique(node_ids).tolist():
             mine = np.flatnonzero(node_ids == node_id)
             last = self._last.get(node_id, int(counters[mine[0]]) - 1)
-            steps = np.concatenate(([last], counters[mine]))
-            out[mine] = last + np.cumsum((steps[1:] - steps[:-1]) % COUNTER_MODULO)
+            out[mine] = last + np.cumsum(counter_steps(last, counters[mine]))
             self._last[node_id] = int(out[mine[-1]])
         return out
 
@@ -331,8 +336,7 @@ class FrameParser:
             last = self._last.get(node_id)
             if last is None or (period[mine] != last.period_ms).any():
                 return None
-            counters = np.concatenate(([last.counter], counter[mine]))
-            steps = (counters[1:] - counters[:-1]) % COUNTER_MODULO
+            steps = counter_steps(last.counter, counter[mine])
             if ((steps < 1) | (steps > self.max_counter_gap)).any():
                 return None
             nodes.append((node_id, mine, steps))

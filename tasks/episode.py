@@ -24,6 +24,7 @@ from bomi.errors import BomiError
 from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
 from sim.env import ArmSim
+from sim.floats import clip
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combined
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics
@@ -220,7 +221,7 @@ class LeanFeel:
             self.zero = self.feel.least_lean
 
     def lean_for(self, deflection: float) -> float:
-        return min(max(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean), 1.0)
+        return clip(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean, 1.0)
 
     def learn(self, lean: float, deflection: float) -> None:
         if deflection < 1.0:
@@ -229,7 +230,7 @@ class LeanFeel:
     def corrected(self, lean: float, further: bool) -> float:
         """The lean one correction of ``lean`` takes (``lean_step`` further, or less far)."""
         step = self.feel.lean_step if further else -self.feel.lean_step
-        return min(max(lean + step, self.feel.least_lean), 1.0)
+        return clip(lean + step, self.feel.least_lean, 1.0)
 
 
 @dataclass
