@@ -10,15 +10,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from operator import truediv
 
 import numpy as np
 import pinocchio as pin
-from scipy.linalg import lapack
 
+from bomi.compiled import kernel
 from sim.config import ControlConfig, WorkspaceConfig
 from sim.floats import clip
-from sim.kinematics import ArmKinematics
+from sim.kinematics import ArmKinematics, jacobian_in_world, tool_in_world
 
 
 @dataclass(frozen=True)
@@ -46,11 +45,12 @@ class Workspace:
     hand_box: np.ndarray   # (8, 3) corners in the tool frame
 
     def __post_init__(self) -> None:
-        # ``clamp`` runs every control tick: its bounds as Python floats, made once
-        lower = tuple(float(v) for v in self.lower)
-        object.__setattr__(self, "_bounds", (lower, tuple(max(lo, float(hi)) for lo, hi in zip(lower, self.upper))))
-        object.__setattr__(self, "_upper_z", float(self.upper[2]))
-        object.__setattr__(self, "_shoulder", tuple(float(v) for v in self.shoulder))
+        # what ``clamp_point`` reads every control tick, made once: the shoulder, the reach shell, the
+        # box (an upper bound below its lower bound raised to it) and the box's own top
+        lower = [float(v) for v in self.lower]
+        upper = [max(lo, float(hi)) for lo, hi in zip(lower, self.upper)]
+        object.__setattr__(self, "walls", np.array([*map(float, self.shoulder), float(self.reach_min),
+                                                    float(self.reach_max), *lower, *upper, float(self.upper[2])]))
 
     @classmethod
     def from_config(cls, config: WorkspaceConfig, shoulder: np.ndarray, table_top: float,
@@ -69,47 +69,63 @@ class Workspace:
         The box and the floor come last, so they always hold (the table is solid); where they
         disagree with the shell, the shell gives way.
         """
-        return np.array(self.clamp_xyz(*point, self.lowest_tool_height(rotation)))
-
-    def clamp_xyz(self, x: float, y: float, z: float, floor: float) -> tuple[float, float, float]:
-        """``clamp`` on Python floats (what the controller calls every tick), ``floor`` being
-        ``lowest_tool_height`` of the rotation (the controller's changes only when its target turns):
-        the same differences, products, square root and comparisons as on arrays of three, at a
-        fraction of the cost."""
-        sx, sy, sz = self._shoulder
-        ox, oy, oz = x - sx, y - sy, z - sz
-        distance = math.sqrt(ox * ox + oy * oy + oz * oz)
-        if distance > self.reach_max:
-            scale = self.reach_max / distance
-            x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
-        elif 0 < distance < self.reach_min:
-            scale = self.reach_min / distance
-            x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
-        (lx, ly, lz), (ux, uy, uz) = self._bounds
-        if floor > lz:
-            lz = floor
-            uz = max(floor, self._upper_z)
-        return clip(x, lx, ux), clip(y, ly, uy), clip(z, lz, uz)
+        x, y, z = np.asarray(point, float).tolist()
+        return np.array(clamp_point(x, y, z, self.lowest_tool_height(rotation), self.walls))
 
     def contains(self, point: np.ndarray, rotation: np.ndarray, tolerance: float = 1e-9) -> bool:
         return bool(np.allclose(self.clamp(point, rotation), point, atol=tolerance, rtol=0))
 
 
-def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping: float) -> np.ndarray:
-    """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities."""
-    jjt = jacobian @ jacobian.T  # a new C-ordered array: ravel() is a view of it
-    jjt.ravel()[::len(jjt) + 1] += damping**2  # the diagonal
-    # LAPACK's dgesv, as np.linalg.solve calls it (the same LU, bit for bit), without its wrapper's checks
-    _, _, solution, info = lapack.dgesv(jjt, twist)
-    if info > 0:
-        raise np.linalg.LinAlgError("Singular matrix")
-    return jacobian.T @ solution
+_clip = kernel(clip)  # the same function, callable from the kernels below
 
 
-def speed_scale(qd: np.ndarray | list[float], speed_limit: np.ndarray | list[float]) -> float:
+@kernel
+def clamp_point(x: float, y: float, z: float, floor: float, walls: np.ndarray) -> tuple[float, float, float]:
+    """``Workspace.clamp`` of the point (x, y, z) on floats, ``floor`` being ``lowest_tool_height`` of
+    the hand's rotation (the controller's changes only when its target turns) and ``walls`` the
+    workspace's ``walls``: the same differences, products, square root and comparisons as on arrays
+    of three."""
+    sx, sy, sz, reach_min, reach_max = walls[0], walls[1], walls[2], walls[3], walls[4]
+    ox, oy, oz = x - sx, y - sy, z - sz
+    distance = math.sqrt(ox * ox + oy * oy + oz * oz)
+    if distance > reach_max:
+        scale = reach_max / distance
+        x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
+    elif 0 < distance < reach_min:
+        scale = reach_min / distance
+        x, y, z = sx + ox * scale, sy + oy * scale, sz + oz * scale
+    lz, uz = walls[7], walls[10]
+    if floor > lz:
+        lz = floor
+        uz = walls[11] if walls[11] > floor else floor  # max(floor, the box's top)
+    return _clip(x, walls[5], walls[8]), _clip(y, walls[6], walls[9]), _clip(z, lz, uz)
+
+
+@kernel
+def damped_least_squares(jacobian: np.ndarray, twist: np.ndarray, damping_squared: float) -> np.ndarray:
+    """qd = J^T (J J^T + lambda^2 I)^-1 twist: well-behaved near singularities.  The products are
+    BLAS's and the solve LAPACK's dgesv, as numpy calls them, compiled or not: the same bits."""
+    jjt = jacobian @ jacobian.T
+    for i in range(len(jjt)):
+        jjt[i, i] += damping_squared
+    return jacobian.T @ np.linalg.solve(jjt, twist)
+
+
+@kernel
+def speed_scale(qd: np.ndarray, speed_limit: np.ndarray) -> float:
     """Largest factor <= 1 that keeps every joint within its speed limit (same factor for all)."""
-    ratio = max(map(truediv, map(abs, qd), speed_limit))  # each |qd| / limit, the largest
+    ratio = abs(qd[0]) / speed_limit[0]  # the largest |qd| / limit (the first of equals, as max())
+    for j in range(1, len(qd)):
+        r = abs(qd[j]) / speed_limit[j]
+        if r > ratio:
+            ratio = r
     return 1.0 if ratio <= 1.0 else 1.0 / ratio
+
+
+@kernel
+def vector_length(vector: np.ndarray) -> float:
+    """sqrt(v @ v), the dot product BLAS's ddot, as numpy's ``@``."""
+    return math.sqrt(vector @ vector)
 
 
 def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
@@ -118,7 +134,10 @@ def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
 
 
 class CartesianVelocityController:
-    """Turns a tool twist into joint velocities, one control tick at a time."""
+    """Turns a tool twist into joint velocities, one control tick at a time.
+
+    A tick's arithmetic runs in two compiled kernels (``advance_target``, ``solve_joint_velocities``);
+    between them, in Python, Pinocchio's C++ (the Jacobian pass, ``log3``/``exp3``)."""
 
     def __init__(self, kinematics: ArmKinematics, limits: JointLimits, workspace: Workspace,
                  config: ControlConfig, dt: float):
@@ -127,12 +146,22 @@ class CartesianVelocityController:
         self.workspace = workspace
         self.config = config
         self.dt = dt
-        self.target_position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        # the target's position (row 0) and where it was at the tick's start (row 1)
+        self._target = np.zeros((2, 3))
         self.target_rotation = np.eye(3)
-        # where a limited joint stops (a margin short of its range): the same every tick
-        self._stop_lower = (limits.lower + config.joint_limit_margin).tolist()
-        self._stop_upper = (limits.upper - config.joint_limit_margin).tolist()
-        self._speed_limit = limits.speed.tolist()
+        self._gains = np.array([dt, config.position_gain, config.max_tracking_error])
+        self._damping_squared = config.dls_damping**2
+        # where a limited joint stops (a margin short of its range), each joint's speed limit: the same every tick
+        self._joint_bounds = np.array([limits.lower + config.joint_limit_margin,
+                                       limits.upper - config.joint_limit_margin, limits.speed], dtype=float)
+        # each tick's scratch: the hand's pose, the rotation from it to the target, the twist
+        self._hand_position, self._hand_rotation = np.empty(3), np.empty((3, 3))
+        self._to_target, self._twist = np.empty((3, 3)), np.empty(6)
+
+    @property
+    def target_position(self) -> tuple[float, float, float]:
+        """Where the target is (the tool point's goal in the world)."""
+        return tuple(self._target[0].tolist())
 
     @property
     def target_rotation(self) -> np.ndarray:
@@ -150,71 +179,103 @@ class CartesianVelocityController:
     def reset(self, q: np.ndarray) -> None:
         """Hold the pose the arm is in."""
         position, self.target_rotation = self.kinematics.tool_pose(q)
-        self.target_position = self.workspace.clamp_xyz(*position.tolist(), self._floor)
+        self._target[0] = clamp_point(*position.tolist(), self._floor, self.workspace.walls)
 
     def joint_velocities(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
         """Joint velocities for one tick of the twist (linear m/s, angular rad/s, world axes).
 
-        The 3-vectors (the target's position, the command, the twist) are worked on Python floats
-        (the same elementwise operations and, for a length, the same sum of squares in the same
-        order as on arrays, so the same bits) and the 6-vectors and matrices with numpy, Pinocchio
-        and LAPACK."""
-        position, rotation, jacobian = self.kinematics.pose_and_jacobian(q)
-        previous_position, previous_rotation = self.target_position, self.target_rotation
-        wx, wy, wz = angular = np.asarray(angular, float).tolist()
-        pull, turn = self._advance_target(position.tolist(), rotation, np.asarray(linear, float).tolist(), angular)
-        gain, (ex, ey, ez) = self.config.orientation_gain, turn.tolist()
-        twist = np.array([*pull, wx + gain * ex, wy + gain * ey, wz + gain * ez])
-        qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
-        speeds = qd.tolist()
-        blocked = self._blocked_joints(q.tolist(), speeds)
-        if blocked:
-            jacobian[:, blocked] = 0.0
-            qd = damped_least_squares(jacobian, twist, self.config.dls_damping)
-            qd[blocked] = 0.0
-            speeds = qd.tolist()
-        scale = speed_scale(speeds, self._speed_limit)
-        if scale < 1.0:
-            # The arm does only this fraction of the tick's motion: so does the target, which then
-            # never runs ahead and the hand stops where it is when the command stops.
-            self.target_position = tuple(p + scale * (t - p) for p, t in zip(previous_position, self.target_position))
+        The target moves by the tick's command inside the walls, never further than
+        max_tracking_error ahead of the hand; the twist is the command plus a pull toward the
+        target; damped least squares turns it into joint velocities, with the joints at a range end
+        left out, all scaled to the joints' speed limits (the target then moves by as much)."""
+        kinematics = self.kinematics
+        jacobian = kinematics.local_jacobian(q)  # places the tool frame at q as it goes
+        previous_rotation = self.target_rotation
+        angular = np.asarray(angular, float)
+        ax, ay, az = angular.tolist()
+        if ax or ay or az:  # (no turn leaves the target's rotation as it is: exp3(0) is the identity)
+            dt = self.dt
+            self.target_rotation = pin.exp3(np.array([ax * dt, ay * dt, az * dt])) @ previous_rotation
+        hand, to_target, twist = self._hand_rotation, self._to_target, self._twist
+        advance_target(jacobian, kinematics.base_rotation, kinematics.base_homogeneous,
+                       kinematics.tool_placement.homogeneous, np.asarray(linear, float), self._target,
+                       self.target_rotation, self._floor, self.workspace.walls, self._gains, self._hand_position,
+                       hand, to_target, twist)
+        turn = pin.log3(to_target)  # the rotation error from the hand to the target, world axes
+        angle = vector_length(turn)
+        max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
+        if angle > max_angle:  # (anti-windup, as for the position)
+            self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ hand
+            turn = rotation_error(self.target_rotation, hand)
+        qd, scale = solve_joint_velocities(jacobian, twist, angular, turn, self.config.orientation_gain,
+                                           self._damping_squared, q, self._joint_bounds, self._target)
+        if scale < 1.0:  # the target's position did only this fraction of the tick's motion: so does its rotation
             self.target_rotation = pin.exp3(scale * rotation_error(self.target_rotation, previous_rotation)) \
                 @ previous_rotation
-            return qd * scale
         return qd
 
-    def _advance_target(self, position: list[float], rotation: np.ndarray, linear: list[float],
-                        angular: list[float]) -> tuple[list[float], np.ndarray]:
-        """Move the target by one tick of the command inside the walls; return the linear part of
-        the twist (the feedforward velocity plus the pull toward the target) and the rotation error
-        (``rotation_error``) from the hand's ``rotation`` to the new target."""
-        dt = self.dt
-        ax, ay, az = angular
-        if ax or ay or az:  # (no turn leaves the target's rotation as it is: exp3(0) is the identity)
-            self.target_rotation = pin.exp3(np.array([ax * dt, ay * dt, az * dt])) @ self.target_rotation
-        tx, ty, tz = self.target_position
-        lx, ly, lz = linear
-        wx, wy, wz = self.workspace.clamp_xyz(tx + lx * dt, ty + ly * dt, tz + lz * dt, self._floor)
-        fx, fy, fz = (wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt  # the feedforward velocity
-        # Anti-windup: the target never runs further ahead of the hand than max_tracking_error.
-        px, py, pz = position
-        gx, gy, gz = wx - px, wy - py, wz - pz
-        distance = math.sqrt(gx * gx + gy * gy + gz * gz)
-        if distance > self.config.max_tracking_error:
-            scale = self.config.max_tracking_error / distance
-            wx, wy, wz = px + gx * scale, py + gy * scale, pz + gz * scale
-        self.target_position = wx, wy, wz
-        turn = rotation_error(self.target_rotation, rotation)
-        angle = math.sqrt(turn @ turn)
-        max_angle = self.config.max_tracking_error / 0.1  # the same lag at 10 cm from the tool point
-        if angle > max_angle:
-            self.target_rotation = pin.exp3(turn * (max_angle / angle)) @ rotation
-            turn = rotation_error(self.target_rotation, rotation)
-        gain = self.config.position_gain
-        return [fx + gain * (wx - px), fy + gain * (wy - py), fz + gain * (wz - pz)], turn
 
-    def _blocked_joints(self, q: list[float], qd: list[float]) -> list[int]:
-        """Limited joints within the margin of a range end and moving further toward it (indices;
-        on Python floats, the same comparisons as on arrays at a fraction of the cost)."""
-        return [j for j, (a, v, lo, hi) in enumerate(zip(q, qd, self._stop_lower, self._stop_upper))
-                if (a <= lo and v < 0) or (a >= hi and v > 0)]
+@kernel
+def advance_target(jacobian: np.ndarray, base_rotation: np.ndarray, base: np.ndarray, placement: np.ndarray,
+                   linear: np.ndarray, target: np.ndarray, target_rotation: np.ndarray, floor: float,
+                   walls: np.ndarray, gains: np.ndarray, hand_position: np.ndarray, hand_rotation: np.ndarray,
+                   to_target: np.ndarray, twist: np.ndarray) -> None:
+    """A tick's first half, in place: the tool's pose (``hand_position``, ``hand_rotation``) and the
+    ``jacobian`` turned into the world's axes; the ``target``'s position (row 0; row 1 keeps where
+    it was) moved by the command ``linear`` inside the walls and held within max_tracking_error of
+    the hand (anti-windup); the twist's linear part (the feedforward velocity plus the pull toward
+    the target) and ``to_target = target_rotation @ hand_rotation.T`` (whose ``log3`` is the
+    rotation error).  ``gains``: dt, position_gain, max_tracking_error."""
+    tool_in_world(base, placement, hand_position, hand_rotation)
+    jacobian_in_world(base_rotation, jacobian)
+    dt, gain, max_tracking_error = gains[0], gains[1], gains[2]
+    tx, ty, tz = target[0, 0], target[0, 1], target[0, 2]
+    target[1] = target[0]
+    wx, wy, wz = clamp_point(tx + linear[0] * dt, ty + linear[1] * dt, tz + linear[2] * dt, floor, walls)
+    fx, fy, fz = (wx - tx) / dt, (wy - ty) / dt, (wz - tz) / dt  # the feedforward velocity
+    px, py, pz = hand_position[0], hand_position[1], hand_position[2]
+    gx, gy, gz = wx - px, wy - py, wz - pz
+    distance = math.sqrt(gx * gx + gy * gy + gz * gz)
+    if distance > max_tracking_error:
+        scale = max_tracking_error / distance
+        wx, wy, wz = px + gx * scale, py + gy * scale, pz + gz * scale
+    target[0, 0], target[0, 1], target[0, 2] = wx, wy, wz
+    twist[0], twist[1], twist[2] = fx + gain * (wx - px), fy + gain * (wy - py), fz + gain * (wz - pz)
+    to_target[:] = target_rotation @ hand_rotation.T
+
+
+@kernel
+def solve_joint_velocities(jacobian: np.ndarray, twist: np.ndarray, angular: np.ndarray, turn: np.ndarray,
+                           orientation_gain: float, damping_squared: float, q: np.ndarray,
+                           joint_bounds: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float]:
+    """A tick's second half: the twist's angular part (the command plus the pull toward the target's
+    rotation, ``turn`` its rotation error); damped least squares; the limited joints within the
+    margin of a range end and moving further toward it (``joint_bounds`` rows: where each stops
+    below, above, and its speed limit) blocked and the rest solved again without them; the whole
+    vector scaled to the speed limits and the ``target``'s position moved back by as much (the arm
+    does only this fraction of the tick's motion: so does the target, which then never runs ahead,
+    and the hand stops where it is when the command stops).  Returns the joint velocities and the
+    scale."""
+    for i in range(3):
+        twist[3 + i] = angular[i] + orientation_gain * turn[i]
+    qd = damped_least_squares(jacobian, twist, damping_squared)
+    blocked = np.zeros(len(qd), dtype=np.bool_)
+    for j in range(len(qd)):
+        a, v = q[j], qd[j]
+        blocked[j] = (a <= joint_bounds[0, j] and v < 0) or (a >= joint_bounds[1, j] and v > 0)
+    if blocked.any():
+        for j in range(len(qd)):
+            if blocked[j]:
+                jacobian[:, j] = 0.0
+        qd = damped_least_squares(jacobian, twist, damping_squared)
+        for j in range(len(qd)):
+            if blocked[j]:
+                qd[j] = 0.0
+    scale = speed_scale(qd, joint_bounds[2])
+    if scale < 1.0:
+        for i in range(3):
+            previous = target[1, i]
+            target[0, i] = previous + scale * (target[0, i] - previous)
+        for j in range(len(qd)):
+            qd[j] = qd[j] * scale
+    return qd, scale

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 from dm_control.entities.manipulators.kinova import assets_path
 
+from bomi.compiled import kernel
 from sim.scene import Scene
 
 JACO_ARM_XML = os.path.join(assets_path.KINOVA_ROOT, "jaco_arm.xml")
@@ -31,30 +32,30 @@ class ArmKinematics:
     base: pin.SE3  # arm base in the world
 
     def __post_init__(self) -> None:
-        self.base_rotation = self.base.rotation.copy()  # read every tick: one copy out of Pinocchio, not one a tick
+        # read every tick: one copy out of Pinocchio each, not one a tick
+        self.base_rotation = self.base.rotation.copy()
+        self.base_homogeneous = self.base.homogeneous
         # the tool frame's placement in Pinocchio's data: a reference, which every kinematics pass updates in place
-        self._tool_placement = self.data.oMf[self.tool_frame]
+        self.tool_placement = self.data.oMf[self.tool_frame]
 
     def tool_pose(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) and rotation matrix (3, 3) of the tool frame."""
         pin.framesForwardKinematics(self.model, self.data, q)
-        return self._placed_tool()
+        position, rotation = np.empty(3), np.empty((3, 3))
+        tool_in_world(self.base_homogeneous, self.tool_placement.homogeneous, position, rotation)
+        return position, rotation
 
-    def pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``tool_pose`` and ``jacobian`` at ``q`` from one kinematics pass: Pinocchio's
-        computeFrameJacobian places the tool frame as it goes (the same bits as framesForwardKinematics)."""
-        jacobian = self.jacobian(q)
-        return (*self._placed_tool(), jacobian)
-
-    def _placed_tool(self) -> tuple[np.ndarray, np.ndarray]:
-        world = self.base * self._tool_placement
-        return world.translation.copy(), world.rotation.copy()
+    def local_jacobian(self, q: np.ndarray) -> np.ndarray:
+        """Pinocchio's Jacobian of the tool point in the base's axes (a new array); its kinematics pass
+        places the tool frame as it goes (the same bits as framesForwardKinematics), so
+        ``tool_placement`` is then the tool's at ``q``."""
+        return pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian [linear; angular] of the tool point, world axes (mj_jacSite's convention)."""
-        jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL_WORLD_ALIGNED)
-        # the base rotation times the linear and the angular block: one matmul over the two as a stack
-        return np.matmul(self.base_rotation, jac.reshape(2, 3, -1)).reshape(jac.shape)
+        jacobian = self.local_jacobian(q)
+        jacobian_in_world(self.base_rotation, jacobian)
+        return jacobian
 
     def solve_pose(self, position: np.ndarray, rotation: np.ndarray, seed: np.ndarray,
                    iterations: int = 200, tolerance: float = 1e-8) -> np.ndarray:
@@ -70,6 +71,28 @@ class ArmKinematics:
             jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL)
             q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
         raise ValueError(f"no joint solution puts the tool at {np.round(position, 3).tolist()}")
+
+
+@kernel
+def tool_in_world(base: np.ndarray, placement: np.ndarray, position: np.ndarray, rotation: np.ndarray) -> None:
+    """The tool's world ``position`` and ``rotation`` (written into them) from the base's placement in
+    the world and the tool's on the base (4x4 homogeneous each): ``base @ placement``'s products,
+    each summed left to right.  (Pinocchio's own SE3 product sums its third row right to left, so on
+    a base turned in the world the two may differ in the last bit; on the scene's base, at the
+    world's origin and unturned, every product is exact and both give the same bits.)"""
+    for i in range(3):
+        b0, b1, b2 = base[i, 0], base[i, 1], base[i, 2]
+        for j in range(3):
+            rotation[i, j] = b0 * placement[0, j] + b1 * placement[1, j] + b2 * placement[2, j]
+        position[i] = b0 * placement[0, 3] + b1 * placement[1, 3] + b2 * placement[2, 3] + base[i, 3]
+
+
+@kernel
+def jacobian_in_world(base_rotation: np.ndarray, jacobian: np.ndarray) -> None:
+    """A Jacobian [linear; angular] in the base's axes turned, in place, into the world's: the base
+    rotation times each block (BLAS's dgemm, as numpy's ``@``: the same bits compiled or not)."""
+    jacobian[:3] = base_rotation @ jacobian[:3]
+    jacobian[3:] = base_rotation @ jacobian[3:]
 
 
 def arm_kinematics(scene: Scene) -> ArmKinematics:

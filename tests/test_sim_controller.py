@@ -32,7 +32,7 @@ def rotations():
 def test_dls_matches_the_normal_equations_form(jacobian, twist, damping):
     """J^T (J J^T + l^2 I)^-1 x == (J^T J + l^2 I)^-1 J^T x (push-through identity)."""
     expected = np.linalg.solve(jacobian.T @ jacobian + damping**2 * np.eye(6), jacobian.T @ twist)
-    np.testing.assert_allclose(damped_least_squares(jacobian.copy(), twist, damping), expected,
+    np.testing.assert_allclose(damped_least_squares(jacobian.copy(), twist, damping**2), expected,
                                rtol=1e-6, atol=1e-6)
 
 

@@ -77,8 +77,9 @@ def test_solve_pose_reaches_the_requested_pose(kinematics):
 
 @pytest.mark.parametrize("q", random_configurations(20, seed=11))
 def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
-    """The controller's Jacobian (products into one buffer) and DLS solve (LAPACK's dgesv called
-    directly) give exactly what the plain numpy forms give, and agree with a pinv-based DLS."""
+    """The controller's Jacobian (the base rotation times each block, in place) and DLS solve
+    (compiled where numba is) give exactly what the plain numpy forms give, and agree with a
+    pinv-based DLS."""
     import pinocchio as pin
     from sim.controller import damped_least_squares
 
@@ -90,18 +91,39 @@ def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
     assert np.array_equal(jacobian, naive_jacobian)
     twist = np.random.default_rng(int(1000 * q[0]) % 2**32).normal(size=6)
     damping = 0.05
-    qd = damped_least_squares(jacobian.copy(), twist, damping)
+    qd = damped_least_squares(jacobian.copy(), twist, damping**2)
     naive = naive_jacobian.T @ np.linalg.solve(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6), twist)
     assert np.array_equal(qd, naive)
     by_pinv = naive_jacobian.T @ np.linalg.pinv(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6)) @ twist
     np.testing.assert_allclose(qd, by_pinv, rtol=1e-9, atol=1e-9)
 
 
-def test_pose_and_jacobian_equals_its_two_calls_bit_for_bit(kinematics):
-    """One kinematics pass (the Jacobian's) gives the tool pose of framesForwardKinematics exactly,
-    at every configuration, never the pose of the previous call."""
+def test_the_jacobian_pass_places_the_tool_as_forward_kinematics_bit_for_bit(kinematics):
+    """The Jacobian's kinematics pass leaves the tool frame where framesForwardKinematics puts it,
+    at every configuration, never where the previous call left it."""
+    import pinocchio as pin
+
     for q in random_configurations(50, seed=11):
-        position, rotation, jacobian = kinematics.pose_and_jacobian(q)
-        expected_position, expected_rotation = kinematics.tool_pose(q)
-        assert np.array_equal(position, expected_position) and np.array_equal(rotation, expected_rotation)
-        assert np.array_equal(jacobian, kinematics.jacobian(q))
+        kinematics.local_jacobian(q)
+        placed = kinematics.tool_placement.homogeneous
+        pin.framesForwardKinematics(kinematics.model, kinematics.data, q)
+        assert np.array_equal(placed, kinematics.tool_placement.homogeneous)
+
+
+def test_tool_in_world_is_pinocchios_se3_product(kinematics):
+    """On the scene's base (the world's origin, unturned) the same bits as Pinocchio's ``base *
+    placement``; on bases turned and moved anywhere, the same to rounding."""
+    import pinocchio as pin
+
+    from sim.kinematics import tool_in_world
+
+    rng = np.random.default_rng(3)
+    for q in random_configurations(20, seed=5):
+        position, rotation = kinematics.tool_pose(q)
+        world = kinematics.base * kinematics.tool_placement
+        assert np.array_equal(position, world.translation) and np.array_equal(rotation, world.rotation)
+        base = pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3))
+        tool_in_world(base.homogeneous, kinematics.tool_placement.homogeneous, position, rotation)
+        world = base * kinematics.tool_placement
+        np.testing.assert_allclose(position, world.translation, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(rotation, world.rotation, rtol=0, atol=1e-15)
