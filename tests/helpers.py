@@ -6,6 +6,7 @@ from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import pytest
 
 from bomi.errors import BomiError
@@ -35,3 +36,16 @@ def assert_one_line_error(load: Callable[[Path], object], path: Path, content: s
         load(path)
     message = str(err.value)
     assert str(path) in message and fault in message and "\n" not in message
+
+
+def numpy_clamp(workspace, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """``Workspace.clamp`` as it was written on arrays (before it went to Python floats, then compiled)."""
+    offset = point - workspace.shoulder
+    distance = np.sqrt(offset @ offset)
+    if distance > workspace.reach_max:
+        point = workspace.shoulder + offset * (workspace.reach_max / distance)
+    elif 0 < distance < workspace.reach_min:
+        point = workspace.shoulder + offset * (workspace.reach_min / distance)
+    lower = workspace.lower.copy()
+    lower[2] = max(lower[2], workspace.lowest_tool_height(rotation))
+    return np.minimum(np.maximum(point, lower), np.maximum(lower, workspace.upper))

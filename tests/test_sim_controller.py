@@ -5,6 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from helpers import numpy_clamp
 from sim.controller import Workspace, damped_least_squares, speed_scale
 
 finite = st.floats(-3.0, 3.0, allow_nan=False)
@@ -84,19 +85,6 @@ def test_points_inside_are_left_alone():
     np.testing.assert_array_equal(WORKSPACE.clamp(point, down), point)
     assert WORKSPACE.contains(point, down)
     assert not WORKSPACE.contains(np.array([0.1, -0.4, 0.0]), down)
-
-
-def numpy_clamp(workspace: Workspace, point: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-    """The clamp as it was written on arrays (before it went to Python floats)."""
-    offset = point - workspace.shoulder
-    distance = np.sqrt(offset @ offset)
-    if distance > workspace.reach_max:
-        point = workspace.shoulder + offset * (workspace.reach_max / distance)
-    elif 0 < distance < workspace.reach_min:
-        point = workspace.shoulder + offset * (workspace.reach_min / distance)
-    lower = workspace.lower.copy()
-    lower[2] = max(lower[2], workspace.lowest_tool_height(rotation))
-    return np.minimum(np.maximum(point, lower), np.maximum(lower, workspace.upper))
 
 
 @settings(max_examples=300, deadline=None)

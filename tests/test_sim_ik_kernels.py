@@ -1,0 +1,266 @@
+"""The IK tick's compiled kernels (sim.controller, sim.kinematics): the same bits as their Python
+form, on random inputs and along real runs, and the same bits as the tick written naively on arrays."""
+import sim  # noqa: F401  -- first: sim/__init__ selects headless EGL before mujoco loads
+import dataclasses
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import sim.controller
+import sim.kinematics
+from bomi.compiled import COMPILED, interpreted
+from helpers import numpy_clamp
+from sim.config import load_config
+from sim.controller import (advance_target, clamp_point, damped_least_squares, solve_joint_velocities,
+                            speed_scale, vector_length)
+from sim.env import ArmSim
+from sim.kinematics import jacobian_in_world, tool_in_world
+
+compiled_only = pytest.mark.skipif(not COMPILED, reason="numba absent or BOMI_NO_JIT set: nothing is compiled")
+KERNEL_MODULES = (sim.controller, sim.kinematics)
+
+
+@pytest.fixture(scope="module")
+def arm():
+    arm = ArmSim()
+    yield arm
+    arm.close()
+
+
+@pytest.fixture(scope="module")
+def open_arm():
+    """Walls wide open, so that only the joint ranges stop the arm."""
+    config = load_config()
+    open_space = dataclasses.replace(config.workspace, x=(-2.0, 2.0), y=(-2.0, 2.0), z=(-1.0, 2.0),
+                                     reach_min=0.0, reach_max=3.0, table_clearance=0.0)
+    arm = ArmSim(dataclasses.replace(config, workspace=open_space))
+    yield arm
+    arm.close()
+
+
+def rotation(rng: np.random.Generator) -> np.ndarray:
+    return pin.exp3(rng.normal(size=3))
+
+
+def same(a, b) -> bool:
+    """Equal to the bit (arrays, floats or tuples of them)."""
+    return np.asarray(a).tobytes() == np.asarray(b).tobytes()
+
+
+def both(kernel, *args):
+    """``kernel`` compiled and interpreted on copies of the same arguments: (result, arguments after) each."""
+    runs = []
+    for run in (kernel, interpreted(kernel)):
+        copies = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
+        runs.append((run(*copies), copies))
+    return runs
+
+
+def assert_same_runs(kernel, *args) -> None:
+    (result, after), (expected, expected_after) = both(kernel, *args)
+    if isinstance(result, tuple):
+        assert len(result) == len(expected) and all(same(a, b) for a, b in zip(result, expected))
+    else:
+        assert same(result, expected)
+    assert all(same(a, b) for a, b in zip(after, expected_after))  # what they wrote in place, too
+
+
+@compiled_only
+def test_each_kernel_compiled_equals_its_python_form_on_random_inputs(arm):
+    rng = np.random.default_rng(12)
+    walls, bounds = arm.workspace.walls, arm.controller._joint_bounds
+    for _ in range(300):
+        jacobian = rng.normal(size=(6, 6)) * rng.uniform(0.01, 1.0, (6, 6))
+        twist, q = rng.normal(size=6), rng.uniform(-1, 7, 6)
+        point = rng.uniform(-1.2, 1.2, 3)
+        base = np.eye(4)
+        base[:3, :3], base[:3, 3] = rotation(rng), rng.normal(size=3)
+        placement = np.eye(4)
+        placement[:3, :3], placement[:3, 3] = rotation(rng), rng.normal(size=3)
+        floor = rng.uniform(-0.1, 0.3)
+        assert_same_runs(clamp_point, *point.tolist(), floor, walls)
+        assert_same_runs(damped_least_squares, jacobian, twist, rng.uniform(1e-4, 0.1))
+        assert_same_runs(speed_scale, rng.normal(size=6), rng.uniform(0.3, 1.0, 6))
+        assert_same_runs(vector_length, rng.normal(size=3) * rng.uniform(1e-6, 3))
+        assert_same_runs(tool_in_world, base, placement, np.empty(3), np.empty((3, 3)))
+        assert_same_runs(jacobian_in_world, base[:3, :3].copy(), jacobian)
+        target = np.array([point, point])
+        gains = np.array([1 / 60, rng.uniform(0, 10), rng.uniform(0.001, 0.1)])
+        assert_same_runs(advance_target, jacobian, base[:3, :3].copy(), base, placement, rng.normal(size=3) * 0.3,
+                         target, rotation(rng), floor, walls, gains, np.empty(3), np.empty((3, 3)), np.empty((3, 3)),
+                         twist)
+        assert_same_runs(solve_joint_velocities, jacobian, twist, rng.normal(size=3), rng.normal(size=3) * 0.1,
+                         rng.uniform(0, 5), rng.uniform(1e-4, 0.01), q, bounds, target)
+
+
+def scripted_twists(arm: ArmSim) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A run through every branch of the tick: holding still, moving into the walls, the table and
+    the reach shell, turning fast enough to meet the joints' speed limits, and turning and moving at once."""
+    ticks = round(arm.config.physics.control_hz)
+    still, segments = np.zeros(3), []
+    for linear, angular, seconds in (
+            (still, still, 0.5), ((0.2, 0.0, 0.0), still, 3.0), ((0.0, 0.0, -0.2), still, 2.0),
+            ((0.0, -0.3, 0.1), still, 3.0), (still, (1.2, 0.0, 0.0), 1.0), (still, (0.0, 0.0, -1.5), 1.0),
+            ((-0.1, 0.1, 0.05), (0.0, 0.8, 0.0), 1.5), (still, still, 0.5)):
+        segments += [(np.array(linear, float), np.array(angular, float))] * round(seconds * ticks)
+    return segments
+
+
+def limit_run(arm: ArmSim, joint: int, angle: float, push: float) -> tuple[list[tuple[np.ndarray, np.ndarray]],
+                                                                       np.ndarray]:
+    """Twists driving one joint outward, into its range's end, from a start near it (returned too):
+    the joint's own motion (a move and a turn), which the other joints can make up only in part."""
+    start = arm.home_q.copy()
+    start[joint] = angle
+    twist = push * 0.5 * arm.kinematics.jacobian(start)[:, joint]
+    return [(twist[:3], twist[3:])] * 120, start
+
+
+def run(arm: ArmSim, twists, start: np.ndarray | None = None) -> list[np.ndarray]:
+    """Joint velocities of each tick of ``twists`` from a reset (arm at ``start``), the physics stepped."""
+    arm.reset(arm_qpos=start)
+    solve, out = arm.controller.joint_velocities, []
+
+    def recorded(q, linear, angular):
+        out.append(solve(q, linear, angular))
+        return out[-1]
+    arm.controller.joint_velocities = recorded  # instance attribute shadows the method
+    try:
+        for linear, angular in twists:
+            arm.step_twist(linear, angular)
+    finally:
+        del arm.controller.joint_velocities
+    return out
+
+
+@compiled_only
+def test_a_real_run_gives_the_same_bits_compiled_and_interpreted(arm, open_arm, monkeypatch):
+    """Along a run through walls, speed limits and a joint's range end, every kernel compiled and
+    every kernel as its Python function give the same joint velocities, tick for tick."""
+    cases = [(arm, scripted_twists(arm), None), (open_arm, *limit_run(open_arm, 2, 5.85, 1.0))]
+    compiled = [run(a, twists, q) for a, twists, q in cases]
+    for module in KERNEL_MODULES:
+        for name, value in vars(module).copy().items():
+            if hasattr(value, "py_func"):
+                monkeypatch.setattr(module, name, value.py_func)
+    python = [run(a, twists, q) for a, twists, q in cases]
+    for a, b in zip(compiled, python):
+        assert len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+
+
+class NaiveTick:
+    """The controller's tick written on arrays the plain way (Pinocchio's SE3 product, numpy's
+    products, np.linalg.solve), an independent reference; it counts the branches it takes."""
+
+    def __init__(self, arm: ArmSim):
+        controller = arm.controller
+        self.kinematics, self.workspace, self.config, self.dt = (controller.kinematics, controller.workspace,
+                                                                  controller.config, controller.dt)
+        self.position, self.rotation = np.array(controller.target_position), controller.target_rotation.copy()
+        margin = self.config.joint_limit_margin
+        self.lower, self.upper, self.speed = arm.limits.lower + margin, arm.limits.upper - margin, arm.limits.speed
+        self.branches = dict.fromkeys(("wall", "lag", "turn_lag", "blocked", "scaled"), 0)
+
+    def step(self, q: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
+        kinematics, config, dt = self.kinematics, self.config, self.dt
+        local = pin.computeFrameJacobian(kinematics.model, kinematics.data, q, kinematics.tool_frame,
+                                         pin.LOCAL_WORLD_ALIGNED)
+        base = kinematics.base.rotation
+        jacobian = np.vstack((base @ local[:3], base @ local[3:]))
+        world = kinematics.base * kinematics.data.oMf[kinematics.tool_frame]
+        hand_position, hand = world.translation.copy(), world.rotation.copy()
+        previous_position, previous_rotation = self.position, self.rotation
+        if np.any(angular):
+            self.rotation = pin.exp3(angular * dt) @ self.rotation
+        moved = self.position + linear * dt
+        target = numpy_clamp(self.workspace, moved, self.rotation)
+        self.branches["wall"] += not np.array_equal(target, moved)
+        feedforward = (target - self.position) / dt
+        gap = target - hand_position
+        distance = np.sqrt(np.sum(gap * gap))
+        if distance > config.max_tracking_error:
+            self.branches["lag"] += 1
+            target = hand_position + gap * (config.max_tracking_error / distance)
+        self.position = target
+        turn = pin.log3(self.rotation @ hand.T)
+        angle, max_angle = np.sqrt(turn @ turn), config.max_tracking_error / 0.1
+        if angle > max_angle:
+            self.branches["turn_lag"] += 1
+            self.rotation = pin.exp3(turn * (max_angle / angle)) @ hand
+            turn = pin.log3(self.rotation @ hand.T)
+        twist = np.concatenate((feedforward + config.position_gain * (target - hand_position),
+                                angular + config.orientation_gain * turn))
+
+        def dls(j):
+            return j.T @ np.linalg.solve(j @ j.T + config.dls_damping**2 * np.eye(6), twist)
+        qd = dls(jacobian)
+        blocked = ((q <= self.lower) & (qd < 0)) | ((q >= self.upper) & (qd > 0))
+        if blocked.any():
+            self.branches["blocked"] += 1
+            jacobian[:, blocked] = 0.0
+            qd = dls(jacobian)
+            qd[blocked] = 0.0
+        ratio = np.max(np.abs(qd) / self.speed)
+        if ratio > 1.0:
+            self.branches["scaled"] += 1
+            scale = 1.0 / ratio
+            self.position = previous_position + scale * (self.position - previous_position)
+            self.rotation = pin.exp3(scale * pin.log3(self.rotation @ previous_rotation.T)) @ previous_rotation
+            qd = qd * scale
+        return qd
+
+
+def test_a_real_run_gives_the_bits_of_the_naive_tick(arm, open_arm):
+    """Tick for tick, the controller's joint velocities and target equal the naive tick's, along
+    runs that take every branch (walls, lag, the turn's lag, blocked joints, speed limits)."""
+    branches = dict.fromkeys(("wall", "lag", "turn_lag", "blocked", "scaled"), 0)
+    for a, twists, start in ((arm, scripted_twists(arm), None), (open_arm, *limit_run(open_arm, 1, 0.95, -1.0)),
+                             (open_arm, *limit_run(open_arm, 2, 5.85, 1.0))):
+        a.reset(arm_qpos=start)
+        naive = NaiveTick(a)
+        solve = a.controller.joint_velocities
+
+        def checked(q, linear, angular):
+            expected = naive.step(q.copy(), np.asarray(linear, float), np.asarray(angular, float))
+            qd = solve(q, linear, angular)
+            assert same(qd, expected)
+            assert same(a.controller.target_position, naive.position)
+            assert same(a.controller.target_rotation, naive.rotation)
+            return qd
+        a.controller.joint_velocities = checked
+        try:
+            for linear, angular in twists:
+                a.step_twist(linear, angular)
+        finally:
+            del a.controller.joint_velocities
+        branches = {k: branches[k] + naive.branches[k] for k in branches}
+    assert all(count > 0 for count in branches.values()), branches
+
+
+def joint_velocity_digest() -> str:
+    """SHA-256 of every tick's joint velocities along the scripted run (what the subprocess prints)."""
+    arm = ArmSim()
+    digest = hashlib.sha256()
+    for qd in run(arm, scripted_twists(arm)):
+        digest.update(qd.tobytes())
+    arm.close()
+    return digest.hexdigest()
+
+
+@compiled_only
+def test_no_jit_gives_the_joint_velocities_of_the_compiled_kernels():
+    """``BOMI_NO_JIT=1`` (every kernel as its Python function, in a fresh process) moves the arm
+    exactly as the compiled kernels do."""
+    code = "from test_sim_ik_kernels import joint_velocity_digest; print(joint_velocity_digest())"
+    tests = Path(__file__).resolve().parent
+    env = os.environ | {"BOMI_NO_JIT": "1", "PYTHONPATH": os.pathsep.join(
+        [str(tests), str(tests.parent), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600,
+                         cwd=tests, check=True)
+    assert out.stdout.split()[-1] == joint_velocity_digest()
