@@ -45,8 +45,9 @@ class Workspace:
     hand_box: np.ndarray   # (8, 3) corners in the tool frame
 
     def __post_init__(self) -> None:
-        # what ``clamp_point`` reads every control tick, made once: the shoulder, the reach shell, the
-        # box (an upper bound below its lower bound raised to it) and the box's own top
+        # what ``clamp_point`` reads every control tick, made once, 12 floats: the shoulder (3), the
+        # reach shell (min, max), the box's lower (3) and upper bounds (3; one below its lower bound
+        # raised to it) and the box's own top
         lower = [float(v) for v in self.lower]
         upper = [max(lo, float(hi)) for lo, hi in zip(lower, self.upper)]
         object.__setattr__(self, "walls", np.array([*map(float, self.shoulder), float(self.reach_min),
