@@ -96,7 +96,7 @@ def test_a_reader_that_goes_away_ends_the_command_quietly():
     assert err == ""
 
 
-HEAVY = ("numpy", "sklearn", "scipy", "mujoco", "pinocchio", "matplotlib", "dm_control")
+HEAVY = ("numpy", "sklearn", "scipy", "mujoco", "pinocchio", "matplotlib", "dm_control", "numba")
 
 
 def _helps(commands, preload: bool) -> dict[str, tuple[str, list[str]]]:
