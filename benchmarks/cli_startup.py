@@ -25,7 +25,7 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ROOT = Path(__file__).resolve().parent.parent
-HEAVY = ("sklearn", "scipy", "mujoco", "pinocchio", "matplotlib", "dm_control")
+HEAVY = ("sklearn", "scipy", "mujoco", "pinocchio", "matplotlib", "dm_control", "numba")
 sys.path.insert(0, str(ROOT))
 from tasks.cli import COMMANDS  # noqa: E402  (every sub-command, from the command table)
 
