@@ -190,7 +190,7 @@ class CartesianVelocityController:
         target; damped least squares turns it into joint velocities, with the joints at a range end
         left out, all scaled to the joints' speed limits (the target then moves by as much)."""
         kinematics = self.kinematics
-        jacobian = kinematics.local_jacobian(q)  # places the tool frame at q as it goes
+        jacobian = kinematics.jacobian_in_base(q)  # places the tool frame at q as it goes
         previous_rotation = self.target_rotation
         angular = np.asarray(angular, float)
         ax, ay, az = angular.tolist()

@@ -45,7 +45,7 @@ class ArmKinematics:
         tool_in_world(self.base_homogeneous, self.tool_placement.homogeneous, position, rotation)
         return position, rotation
 
-    def local_jacobian(self, q: np.ndarray) -> np.ndarray:
+    def jacobian_in_base(self, q: np.ndarray) -> np.ndarray:
         """Pinocchio's Jacobian of the tool point in the base's axes (a new array); its kinematics pass
         places the tool frame as it goes (the same bits as framesForwardKinematics), so
         ``tool_placement`` is then the tool's at ``q``."""
@@ -53,7 +53,7 @@ class ArmKinematics:
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian [linear; angular] of the tool point, world axes (mj_jacSite's convention)."""
-        jacobian = self.local_jacobian(q)
+        jacobian = self.jacobian_in_base(q)
         jacobian_in_world(self.base_rotation, jacobian)
         return jacobian
 

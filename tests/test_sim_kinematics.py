@@ -104,7 +104,7 @@ def test_the_jacobian_pass_places_the_tool_as_forward_kinematics_bit_for_bit(kin
     import pinocchio as pin
 
     for q in random_configurations(50, seed=11):
-        kinematics.local_jacobian(q)
+        kinematics.jacobian_in_base(q)
         placed = kinematics.tool_placement.homogeneous
         pin.framesForwardKinematics(kinematics.model, kinematics.data, q)
         assert np.array_equal(placed, kinematics.tool_placement.homogeneous)
