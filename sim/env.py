@@ -15,7 +15,7 @@ import pinocchio as pin
 from sim.config import MODELS_DIR, SimConfig, load_config
 from sim.controller import CartesianVelocityController, JointLimits, Workspace
 from sim.errors import SimError
-from sim.floats import clip
+from sim.kernels import clip
 from sim.joystick import THREE_AXIS, ArmCommand, JoystickInterpreter, JoystickState, Layout, Mode
 from sim.kinematics import arm_kinematics
 from sim.render import FrameRenderer, Legend

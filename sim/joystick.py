@@ -33,7 +33,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from sim.floats import clip
+from sim.kernels import clip
 
 FUNCTIONS = ("F", "B", "R", "L", "Rr", "Lr")
 BUTTONS = ("B1", "B2")

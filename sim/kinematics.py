@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 from dm_control.entities.manipulators.kinova import assets_path
 
-from bomi.compiled import kernel
+from sim.kernels import jacobian_in_world, tool_in_world
 from sim.scene import Scene
 
 JACO_ARM_XML = os.path.join(assets_path.KINOVA_ROOT, "jaco_arm.xml")
@@ -71,28 +71,6 @@ class ArmKinematics:
             jac = pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame, pin.LOCAL)
             q = q + jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), error)
         raise ValueError(f"no joint solution puts the tool at {np.round(position, 3).tolist()}")
-
-
-@kernel
-def tool_in_world(base: np.ndarray, placement: np.ndarray, position: np.ndarray, rotation: np.ndarray) -> None:
-    """The tool's world ``position`` and ``rotation`` (written into them) from the base's placement in
-    the world and the tool's on the base (4x4 homogeneous each): ``base @ placement``'s products,
-    each summed left to right.  (Pinocchio's own SE3 product sums its third row right to left, so on
-    a base turned in the world the two may differ in the last bit; on the scene's base, at the
-    world's origin and unturned, every product is exact and both give the same bits.)"""
-    for i in range(3):
-        b0, b1, b2 = base[i, 0], base[i, 1], base[i, 2]
-        for j in range(3):
-            rotation[i, j] = b0 * placement[0, j] + b1 * placement[1, j] + b2 * placement[2, j]
-        position[i] = b0 * placement[0, 3] + b1 * placement[1, 3] + b2 * placement[2, 3] + base[i, 3]
-
-
-@kernel
-def jacobian_in_world(base_rotation: np.ndarray, jacobian: np.ndarray) -> None:
-    """A Jacobian [linear; angular] in the base's axes turned, in place, into the world's: the base
-    rotation times each block (BLAS's dgemm, as numpy's ``@``: the same bits compiled or not)."""
-    jacobian[:3] = base_rotation @ jacobian[:3]
-    jacobian[3:] = base_rotation @ jacobian[3:]
 
 
 def arm_kinematics(scene: Scene) -> ArmKinematics:

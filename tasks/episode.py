@@ -24,7 +24,7 @@ from bomi.errors import BomiError
 from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
 from sim.env import ArmSim
-from sim.floats import clip
+from sim.kernels import clip
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combined
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import metrics

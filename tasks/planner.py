@@ -20,7 +20,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 import numpy as np
 
 from bomi.config_files import check_table, load_toml, number, typed
-from sim.floats import clip
+from sim.kernels import clip
 from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")

@@ -6,7 +6,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from helpers import numpy_clamp
-from sim.controller import Workspace, damped_least_squares, speed_scale
+from sim.controller import Workspace
+from sim.kernels import damped_least_squares, speed_scale
 
 finite = st.floats(-3.0, 3.0, allow_nan=False)
 vec3 = arrays(float, 3, elements=finite)

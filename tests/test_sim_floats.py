@@ -4,7 +4,7 @@ import struct
 
 import numpy as np
 
-from sim.floats import clip
+from sim.kernels import clip
 
 SPECIAL = [0.0, -0.0, 1.0, -1.0, 0.5, -0.5, math.inf, -math.inf, math.nan, 1e-300, -1e-300]
 

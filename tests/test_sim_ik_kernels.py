@@ -1,5 +1,5 @@
-"""The IK tick's compiled kernels (sim.controller, sim.kinematics): the same bits as their Python
-form, on random inputs and along real runs, and the same bits as the tick written naively on arrays."""
+"""The IK tick's compiled kernels (sim.kernels): the same bits as their Python form, on random
+inputs and along real runs, and the same bits as the tick written naively on arrays."""
 import sim  # noqa: F401  -- first: sim/__init__ selects headless EGL before mujoco loads
 import dataclasses
 import hashlib
@@ -13,17 +13,17 @@ import pinocchio as pin
 import pytest
 
 import sim.controller
+import sim.kernels
 import sim.kinematics
 from bomi.compiled import COMPILED, interpreted
 from helpers import numpy_clamp
 from sim.config import load_config
-from sim.controller import (advance_target, clamp_point, damped_least_squares, solve_joint_velocities,
-                            speed_scale, vector_length)
 from sim.env import ArmSim
-from sim.kinematics import jacobian_in_world, tool_in_world
+from sim.kernels import (advance_target, clamp_point, damped_least_squares, jacobian_in_world, solve_joint_velocities,
+                         speed_scale, tool_in_world, vector_length)
 
 compiled_only = pytest.mark.skipif(not COMPILED, reason="numba absent or BOMI_NO_JIT set: nothing is compiled")
-KERNEL_MODULES = (sim.controller, sim.kinematics)
+KERNEL_MODULES = (sim.kernels, sim.controller, sim.kinematics)  # the kernels and where they are called
 
 
 @pytest.fixture(scope="module")

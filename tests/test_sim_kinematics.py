@@ -81,7 +81,7 @@ def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
     (compiled where numba is) give exactly what the plain numpy forms give, and agree with a
     pinv-based DLS."""
     import pinocchio as pin
-    from sim.controller import damped_least_squares
+    from sim.kernels import damped_least_squares
 
     jac = pin.computeFrameJacobian(kinematics.model, kinematics.data, q, kinematics.tool_frame,
                                    pin.LOCAL_WORLD_ALIGNED)
@@ -115,7 +115,7 @@ def test_tool_in_world_is_pinocchios_se3_product(kinematics):
     placement``; on bases turned and moved anywhere, the same to rounding."""
     import pinocchio as pin
 
-    from sim.kinematics import tool_in_world
+    from sim.kernels import tool_in_world
 
     rng = np.random.default_rng(3)
     for q in random_configurations(20, seed=5):
