@@ -27,7 +27,11 @@ COMPILED = numba is not None and os.environ.get("BOMI_NO_JIT", "") in ("", "0")
 
 def kernel(function: F) -> F:
     """``function`` compiled by numba (lazily, at its first call; the machine code cached on disk
-    beside the module so the next process loads it), or ``function`` itself without numba."""
+    beside the module so the next process loads it), or ``function`` itself without numba.
+
+    A kernel that calls another must live in the same file as it: numba's cache checks only the
+    file of the cached function, so a caller cached from another file keeps running the callee's
+    old code after the callee's file is edited."""
     if not COMPILED:
         return function
     return numba.njit(cache=True, nogil=True)(function)
