@@ -83,7 +83,7 @@ def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
 class CartesianVelocityController:
     """Turns a tool twist into joint velocities, one control tick at a time.
 
-    A tick's arithmetic runs in two compiled kernels (``advance_target``, ``solve_joint_velocities``);
+    A tick's arithmetic runs in two compiled kernels (``sim.kernels.advance_target``, ``solve_joint_velocities``);
     between them, in Python, Pinocchio's C++ (the Jacobian pass, ``log3``/``exp3``)."""
 
     def __init__(self, kinematics: ArmKinematics, limits: JointLimits, workspace: Workspace,
