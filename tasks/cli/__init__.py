@@ -111,8 +111,7 @@ class OneLineParser(argparse.ArgumentParser):
 # The libraries that make a command module slow to import (seconds, together) and that no parser
 # needs: a sub-command's --help builds its parser with each replaced by an inert placeholder.
 HELP_ONLY_PLACEHOLDERS = ("numpy", "sklearn", "scipy", "matplotlib", "mujoco", "dm_control", "pinocchio", "coal",
-                          "imageio", "ray", "serial", "tqdm", "h5py", "pyarrow", "pandas", "pygame", "numba",
-                          "llvmlite")
+                          "imageio", "ray", "serial", "tqdm", "h5py", "pyarrow", "pandas", "pygame")
 
 
 class _Placeholder(types.ModuleType):
