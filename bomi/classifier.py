@@ -192,10 +192,9 @@ def model_defects(model: Model) -> list[str]:
     return defects
 
 
-def numerical_rank(features: np.ndarray) -> int:
-    """How many directions of the standardised ``features`` have a singular value above
-    RANK_TOLERANCE x the largest (at least 1)."""
-    standardised = StandardScaler().fit_transform(features)
+def numerical_rank(standardised: np.ndarray) -> int:
+    """How many directions of the ``standardised`` features (``StandardScaler``'s output, as
+    ``fit_pipeline`` fits it) have a singular value above RANK_TOLERANCE x the largest (at least 1)."""
     centred = standardised - standardised.mean(axis=0)
     # singular values as the square roots of the F x F Gram matrix's eigenvalues: one product over the
     # n windows instead of an n x F SVD (10x less work); their error (~1e-8 of the largest, from
@@ -222,16 +221,25 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     eigenvalues above RANK_TOLERANCE**2 = 1e-8 of the largest, where squaring loses no accuracy
     that matters.
 
-    BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
-    threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
+    The steps are fitted one after the other, as ``Pipeline.fit`` fits them (each step's
+    ``fit_transform`` of the previous one's output, the LDA's ``fit`` last: the same calls, so the
+    same parameters to the bit, tests/test_classifier.py), so that the rank is read from the
+    standardised features the PCA is fitted on rather than from a second standardisation of them.
+
+    BLAS runs single-threaded here, the rank's products included: on these 128 x 128 problems a busy
+    2-core machine made the threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its
+    threads waited for a core, and the threaded Gram matrix of the rank 1 s of CPU instead of 0.08 s.
     """
-    if shrinkage is None and priors is None:
-        steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd"))]
-    else:
-        steps = [("pca", PCA(n_components=numerical_rank(features), svd_solver="covariance_eigh")),
-                 ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
     with threadpool_limits(limits=1, user_api="blas"):
-        return Pipeline([("scale", StandardScaler()), *steps]).fit(features, labels)
+        scale = StandardScaler()
+        standardised = scale.fit_transform(features, labels)
+        if shrinkage is None and priors is None:
+            pca, lda = "passthrough", LinearDiscriminantAnalysis(solver="svd").fit(standardised, labels)
+        else:
+            pca = PCA(n_components=numerical_rank(standardised), svd_solver="covariance_eigh")
+            lda = LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors)
+            lda.fit(pca.fit_transform(standardised, labels), labels)
+    return Pipeline([("scale", scale), ("pca", pca), ("lda", lda)])
 
 
 def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParameters]:
