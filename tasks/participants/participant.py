@@ -667,7 +667,7 @@ def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recordi
     ids = tuple(node.node_id for node in profile.nodes)
     frames = parse_stream(stream)
     frames = frames[np.isin(frames["node_id"], ids)]
-    rows = row_positions(frames["node_id"].tolist(), ids)
+    rows = row_positions(frames["node_id"], ids)
     if not len(rows):
         raise BomiError(f"{source}: no complete row of nodes {list(profile.node_indices)} in the stream")
     nodes = {}
