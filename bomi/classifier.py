@@ -24,14 +24,16 @@ below a threshold -> the neutral class) then a majority vote over the last N dec
 from __future__ import annotations
 
 from collections import deque
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
+from functools import cache
 
 import numpy as np
 from sklearn.decomposition import PCA
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from bomi.features import FeatureSpec
 
@@ -192,6 +194,18 @@ def model_defects(model: Model) -> list[str]:
     return defects
 
 
+@cache
+def _thread_pools() -> ThreadpoolController:
+    """The thread pools of the loaded libraries, looked up once (by the first fit, after scikit-learn
+    and scipy have loaded theirs): ``threadpool_limits`` looks them up at every call, 5 ms."""
+    return ThreadpoolController()
+
+
+def single_threaded_blas() -> AbstractContextManager:
+    """A context in which BLAS runs on one thread (see ``fit_pipeline``)."""
+    return _thread_pools().limit(limits=1, user_api="blas")
+
+
 def numerical_rank(standardised: np.ndarray) -> int:
     """How many directions of the ``standardised`` features (``StandardScaler``'s output, as
     ``fit_pipeline`` fits it) have a singular value above RANK_TOLERANCE x the largest (at least 1)."""
@@ -230,7 +244,7 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     2-core machine made the threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its
     threads waited for a core, and the threaded Gram matrix of the rank 1 s of CPU instead of 0.08 s.
     """
-    with threadpool_limits(limits=1, user_api="blas"):
+    with single_threaded_blas():
         scale = StandardScaler()
         standardised = scale.fit_transform(features, labels)
         if shrinkage is None and priors is None:

@@ -33,6 +33,17 @@ def component_index(n_nodes: int, kind: str) -> np.ndarray:
     return np.array(index, dtype=np.intp)
 
 
+def feature_columns(kind: str, channels: int, which: np.ndarray) -> np.ndarray:
+    """The columns of the features of ``channels`` components that the components ``which`` alone
+    make, in the order ``features`` of those components alone gives them (FV3: each of its 8
+    statistics, [min, max, mean, absolute sum] of the first half then the second, is a block of
+    ``channels`` columns)."""
+    which = np.asarray(which, dtype=np.intp)
+    if kind != "FV3":
+        return which
+    return (np.arange(8)[:, None] * channels + which[None, :]).ravel()
+
+
 def sliding_windows(samples: np.ndarray, length: int = 8, stride: int = 1) -> np.ndarray:
     """(n, C) samples -> (m, length, C) read-only view of the windows, the k-th ending at sample
     ``length - 1 + k * stride``."""

@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -528,7 +529,8 @@ class VirtualParticipant:
         raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
         fresh = deliver(raw, index, t, self._link_rngs, self.link, not_before_s=self._last_arrival)
         # in arrival order: a node's last frame is its latest
-        self._last_arrival.update(zip(fresh.node_index.tolist(), fresh.arrival_s.tolist()))
+        nodes, last = np.unique(fresh.node_index[::-1], return_index=True)
+        self._last_arrival.update(zip(nodes.tolist(), fresh.arrival_s[len(fresh.arrival_s) - 1 - last].tolist()))
         self._pending = _merge(self._pending, fresh)
         self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
@@ -566,7 +568,7 @@ def _merge(*parts: Delivery) -> Delivery:
     parts = (Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), []),) + parts
     arrival = np.concatenate([p.arrival_s for p in parts])
     node, sample = (np.concatenate([getattr(p, name) for p in parts]) for name in ("node_index", "sample_index"))
-    frames = [frame for p in parts for frame in p.frames]
+    frames = list(chain.from_iterable(p.frames for p in parts))
     if (arrival[1:] >= arrival[:-1]).all():   # in order already (the stable sort would keep it so)
         return Delivery(arrival, node, sample, frames)
     order = np.argsort(arrival, kind="stable")
@@ -644,12 +646,14 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
     truth = vp.truth()
     keep = np.arange(len(truth.time_s)) <= int(np.floor(t / DT + 1e-9))   # the samples up to t, as generated
     truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
-    cue = np.zeros(len(truth.time_s), dtype=int)
-    for start, label in cues:
-        cue[truth.time_s >= start] = label
-    holding = np.zeros(len(truth.time_s), dtype=bool)
-    for start, stop, _ in holds:
-        holding |= (truth.time_s >= start) & (truth.time_s < stop)
+    # each sample's latest cue, and the latest hold begun by then (the holds follow one another,
+    # each ``settle`` after the previous one's end): one search over the samples, not a pass per cue
+    starts, labels = np.array(cues).T
+    latest = np.searchsorted(starts, truth.time_s, side="right") - 1
+    cue = np.where(latest >= 0, labels.astype(int)[latest], NEUTRAL_LABEL)
+    begun, ends = np.array([hold[:2] for hold in holds]).T
+    latest = np.searchsorted(begun, truth.time_s, side="right") - 1
+    holding = (latest >= 0) & (truth.time_s < ends[latest])
     return CalibrationSession(params.name, seed, delivery, truth, cue, holding, truth.time_s >= warmup_s)
 
 
