@@ -3,7 +3,7 @@
 Magnetometer hard/soft-iron correction, mounting rotation, complementary filters on pitch and roll,
 a 10 Hz low-pass on both, tilt-compensated complementary yaw. ``NodeFusion.update`` (one sample,
 the stream) and ``NodeFusion.update_many`` (n samples in a row, a whole recording: ``fuse``) are the
-same filter, the same IEEE operations in the same order, and agree bit for bit (tests/test_fusion.py).
+same filter, one compiled kernel (``fuse_samples``), and agree bit for bit (tests/test_fusion.py).
 Angles in degrees; inputs raw int16 LSB in the sensor's own axes.
 """
 from __future__ import annotations
@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from bomi.compiled import kernel
 from bomi.frames import SAMPLE_PERIOD_S, ImuFrame, imu_index, imu_node_id
 from bomi.recording import NodeData, NodeSample, Recording
 
@@ -27,9 +28,6 @@ MAG_WEIGHT = 0.01
 LOWPASS_B = 0.355   # y[n] = b x[n] + b x[n-1] + a y[n-1]: first order, 10 Hz at 62.5 Hz
 LOWPASS_A = 0.2905
 _GYRO_STEP = GYRO_DEG_PER_LSB * DT
-# ``update_many`` below this many samples calls ``update`` per sample: its array passes cost a fixed
-# ~90 us, ``update`` ~2.5 us a sample (the same bits either way)
-ARRAY_PASSES_FROM = 64
 
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
@@ -90,111 +88,81 @@ class NodeCalibration:
         return cls() if node == 1 else cls.uncalibrated()
 
 
-@dataclass
-class NodeFusion:
-    """Streaming fusion of one node; the filter states start at zero as on the original host."""
+@kernel
+def fuse_samples(state: np.ndarray, constants: np.ndarray, acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,
+                 out: np.ndarray) -> None:
+    """The filter over n samples in a row: (n, 3) raw LSB each (float64) -> ``out`` (n, 3) (pitch,
+    roll, yaw), advancing ``state`` (pitch_state, roll_state, yaw_state, pitch, roll) in place.
+    ``constants``: hard iron (3), soft iron (9, row by row), mounting (9, row by row).
 
-    calibration: NodeCalibration = field(default_factory=NodeCalibration)
-    pitch_state: float = 0.0
-    roll_state: float = 0.0
-    yaw_state: float = 0.0
-    pitch: float = 0.0
-    roll: float = 0.0
-
-    def update(self, acc, gyro, mag) -> Vector3:
-        """One sample of raw LSB (sensor axes) -> (pitch, roll, yaw) in degrees.
-
-        The matrix products (soft iron, then the mounting rotation of acc, gyro and the corrected
-        field) are written out term by term: this runs once per sample of every node."""
-        cal = self.calibration
-        (s00, s01, s02), (s10, s11, s12), (s20, s21, s22) = cal.soft_iron
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = cal.mounting
-        h0, h1, h2 = cal.hard_iron
-        x, y, z = mag[0] - h0, mag[1] - h1, -mag[2] - h2
+    hardware.md section 3 term by term: the matrix products (soft iron, then the mounting rotation
+    of acc, gyro and the corrected field) written out, the complementary filters, the low-pass and
+    the tilt-compensated yaw, on floats (a ``bomi.compiled.kernel``: one call a chunk of the stream
+    or a whole recording, the same bits compiled or not)."""
+    h0, h1, h2 = constants[0], constants[1], constants[2]
+    s00, s01, s02, s10, s11, s12, s20, s21, s22 = constants[3], constants[4], constants[5], constants[6], \
+        constants[7], constants[8], constants[9], constants[10], constants[11]
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = constants[12], constants[13], constants[14], constants[15], \
+        constants[16], constants[17], constants[18], constants[19], constants[20]
+    pitch_state, roll_state, yaw_state, pitch, roll = state[0], state[1], state[2], state[3], state[4]
+    step, keep = _GYRO_STEP, 1.0 - MAG_WEIGHT
+    for i in range(acc.shape[0]):
+        x, y, z = mag[i, 0] - h0, mag[i, 1] - h1, -mag[i, 2] - h2
         c0, c1, c2 = s00 * x + s01 * y + s02 * z, s10 * x + s11 * y + s12 * z, s20 * x + s21 * y + s22 * z
-        x, y, z = acc[0], acc[1], acc[2]
+        x, y, z = acc[i, 0], acc[i, 1], acc[i, 2]
         ax, ay, az = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
-        x, y, z = gyro[0], gyro[1], gyro[2]
+        x, y, z = gyro[i, 0], gyro[i, 1], gyro[i, 2]
         gx, gy, gz = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
         m1, m2, m3 = r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2
-        step = _GYRO_STEP
 
-        previous_pitch_state, previous_roll_state = self.pitch_state, self.roll_state
-        self.pitch_state = pitch_state = (ACC_WEIGHT * degrees(atan2(-ay, -ax))
-                                          + GYRO_WEIGHT * (previous_pitch_state - gz * step))
-        self.roll_state = roll_state = (ACC_WEIGHT * degrees(atan2(-az, -ax))
-                                        + GYRO_WEIGHT * (previous_roll_state + gy * step))
-        self.pitch = pitch = LOWPASS_B * (pitch_state + previous_pitch_state) + LOWPASS_A * self.pitch
-        self.roll = roll = LOWPASS_B * (roll_state + previous_roll_state) + LOWPASS_A * self.roll
+        previous_pitch_state, previous_roll_state = pitch_state, roll_state
+        pitch_state = ACC_WEIGHT * degrees(atan2(-ay, -ax)) + GYRO_WEIGHT * (previous_pitch_state - gz * step)
+        roll_state = ACC_WEIGHT * degrees(atan2(-az, -ax)) + GYRO_WEIGHT * (previous_roll_state + gy * step)
+        pitch = LOWPASS_B * (pitch_state + previous_pitch_state) + LOWPASS_A * pitch
+        roll = LOWPASS_B * (roll_state + previous_roll_state) + LOWPASS_A * roll
 
         p, r = radians(-pitch), radians(roll)
         c_p, s_p, c_r, s_r = cos(p), sin(p), cos(r), sin(r)
         y_h = s_p * c_r * m1 + c_p * m2 + s_p * s_r * m3
         z_h = -s_r * m1 + c_r * m3
-        self.yaw_state = yaw = (MAG_WEIGHT * degrees(atan2(-z_h, -y_h))
-                                + (1.0 - MAG_WEIGHT) * (self.yaw_state + gx * step))
+        yaw_state = MAG_WEIGHT * degrees(atan2(-z_h, -y_h)) + keep * (yaw_state + gx * step)
+        out[i, 0], out[i, 1], out[i, 2] = pitch, roll, yaw_state
+    state[0], state[1], state[2], state[3], state[4] = pitch_state, roll_state, yaw_state, pitch, roll
+
+
+@dataclass(eq=False)
+class NodeFusion:
+    """Streaming fusion of one node; the filter states start at zero as on the original host."""
+
+    calibration: NodeCalibration = field(default_factory=NodeCalibration)
+    # (pitch_state, roll_state, yaw_state, pitch, roll): what ``fuse_samples`` advances
+    state: np.ndarray = field(default_factory=lambda: np.zeros(5))
+
+    def __post_init__(self) -> None:
+        cal = self.calibration
+        self._constants = np.array([*cal.hard_iron, *(v for row in cal.soft_iron for v in row),
+                                    *(v for row in cal.mounting for v in row)], dtype=float)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, NodeFusion):
+            return NotImplemented
+        return self.calibration == other.calibration and self.state.tolist() == other.state.tolist()
+
+    def update(self, acc, gyro, mag) -> Vector3:
+        """One sample of raw LSB (sensor axes) -> (pitch, roll, yaw) in degrees."""
+        raw = np.array((acc, gyro, mag), dtype=float)
+        out = np.empty((1, 3))
+        fuse_samples(self.state, self._constants, raw[0:1], raw[1:2], raw[2:3], out)
+        pitch, roll, yaw = out[0].tolist()
         return pitch, roll, yaw
 
     def update_many(self, acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray) -> np.ndarray:
-        """``update`` of n samples in a row, (n, 3) raw LSB each -> (n, 3) (pitch, roll, yaw); the
-        state advances as n calls of ``update`` would advance it, to the bit.
-
-        The same filter with the work split by kind: the products, sums and libm functions of every
-        sample at once (numpy elementwise operations are the same IEEE operations in the same order;
-        the transcendental functions are ``math``'s, mapped, as ``update`` calls them), and only the
-        recursions (complementary filters, low-pass) as a loop over plain floats. A few samples
-        (fewer than ARRAY_PASSES_FROM: a chunk of the stream) go through ``update`` one by one."""
-        cal = self.calibration
-        (s00, s01, s02), (s10, s11, s12), (s20, s21, s22) = cal.soft_iron
-        (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = cal.mounting
-        h0, h1, h2 = cal.hard_iron
-        mag, acc, gyro = (np.asarray(v, dtype=float).reshape(-1, 3) for v in (mag, acc, gyro))
-        if len(acc) < ARRAY_PASSES_FROM:
-            return np.array([self.update(*sample) for sample in zip(acc.tolist(), gyro.tolist(), mag.tolist())],
-                            dtype=float).reshape(-1, 3)
-        x, y, z = mag[:, 0] - h0, mag[:, 1] - h1, -mag[:, 2] - h2
-        c0, c1, c2 = s00 * x + s01 * y + s02 * z, s10 * x + s11 * y + s12 * z, s20 * x + s21 * y + s22 * z
-        x, y, z = acc[:, 0], acc[:, 1], acc[:, 2]
-        ax, ay, az = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
-        x, y, z = gyro[:, 0], gyro[:, 1], gyro[:, 2]
-        gx, gy, gz = r00 * x + r01 * y + r02 * z, r10 * x + r11 * y + r12 * z, r20 * x + r21 * y + r22 * z
-        m1, m2, m3 = r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2
-        step = _GYRO_STEP
-
-        tilt_pitch = (ACC_WEIGHT * _degrees_atan2(-ay, -ax)).tolist()
-        tilt_roll = (ACC_WEIGHT * _degrees_atan2(-az, -ax)).tolist()
-        turn_pitch, turn_roll = (gz * step).tolist(), (gy * step).tolist()
-        pitch_state, roll_state, pitch, roll = self.pitch_state, self.roll_state, self.pitch, self.roll
-        pitches, rolls = [], []
-        for tp, tr, dp, dr in zip(tilt_pitch, tilt_roll, turn_pitch, turn_roll):
-            previous_pitch_state, previous_roll_state = pitch_state, roll_state
-            pitch_state = tp + GYRO_WEIGHT * (previous_pitch_state - dp)
-            roll_state = tr + GYRO_WEIGHT * (previous_roll_state + dr)
-            pitch = LOWPASS_B * (pitch_state + previous_pitch_state) + LOWPASS_A * pitch
-            roll = LOWPASS_B * (roll_state + previous_roll_state) + LOWPASS_A * roll
-            pitches.append(pitch)
-            rolls.append(roll)
-        self.pitch_state, self.roll_state, self.pitch, self.roll = pitch_state, roll_state, pitch, roll
-
-        p = np.array(list(map(radians, map(float.__neg__, pitches))))
-        r = np.array(list(map(radians, rolls)))
-        c_p, s_p = np.array(list(map(cos, p.tolist()))), np.array(list(map(sin, p.tolist())))
-        c_r, s_r = np.array(list(map(cos, r.tolist()))), np.array(list(map(sin, r.tolist())))
-        y_h = s_p * c_r * m1 + c_p * m2 + s_p * s_r * m3
-        z_h = -s_r * m1 + c_r * m3
-        heading = (MAG_WEIGHT * _degrees_atan2(-z_h, -y_h)).tolist()
-        turn_yaw = (gx * step).tolist()
-        yaw, keep, yaws = self.yaw_state, 1.0 - MAG_WEIGHT, []
-        for hd, dy in zip(heading, turn_yaw):
-            yaw = hd + keep * (yaw + dy)
-            yaws.append(yaw)
-        self.yaw_state = yaw
-        return np.column_stack([pitches, rolls, yaws]).reshape(-1, 3)
-
-
-def _degrees_atan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """math.degrees(math.atan2(y, x)) of every element (libm's, as ``NodeFusion.update`` computes it)."""
-    return np.array(list(map(degrees, map(atan2, y.tolist(), x.tolist()))), dtype=float)
+        """``update`` of n samples in a row, (n, 3) raw LSB each -> (n, 3) (pitch, roll, yaw): one
+        call of the filter over all of them."""
+        acc, gyro, mag = (np.ascontiguousarray(v, dtype=float).reshape(-1, 3) for v in (acc, gyro, mag))
+        out = np.empty((len(acc), 3))
+        fuse_samples(self.state, self._constants, acc, gyro, mag, out)
+        return out
 
 
 def fuse(acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,

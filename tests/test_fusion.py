@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bomi.fusion import HEADSET_SOFT_IRON, NodeCalibration, NodeFusion, fuse, neutral_offsets
+from bomi.compiled import interpreted
+from bomi.fusion import HEADSET_SOFT_IRON, NodeCalibration, NodeFusion, fuse, fuse_samples, neutral_offsets
 
 K_DT = 2000 / 32768 / 62.5
 # hardware.md worked example, decoded (headset, counter 42): mag, gyro, acc in raw LSB
@@ -127,9 +128,8 @@ def test_update_follows_the_documented_formulas_with_any_calibration(seed):
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.lists(st.integers(0, 300), max_size=4))
 def test_update_many_is_update_sample_by_sample_to_the_bit(seed, cuts):
-    """The batch filter (numpy for the products, math's libm mapped, loops for the recursions) against
-    the per-sample ``update`` as the naive reference, over any calibration, whole (the array passes) and cut
-    into pieces (those shorter than ARRAY_PASSES_FROM go through ``update``)."""
+    """The batch filter against the per-sample ``update``, over any calibration, whole and cut into
+    pieces (a stream's chunks) of any length, the filter state carried across the cuts."""
     rng = np.random.default_rng(seed)
     mounting = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     mounting *= np.sign(np.linalg.det(mounting))
@@ -147,4 +147,17 @@ def test_update_many_is_update_sample_by_sample_to_the_bit(seed, cuts):
     got = np.vstack(pieces)
     assert np.array_equal(got.view(np.int64), expected.view(np.int64))
     assert node == reference   # the filter state too: a stream may go on from there
+
+
+def test_the_compiled_filter_is_the_interpreted_one_to_the_bit(p1_days):
+    """``fuse_samples`` compiled by numba (where installed) and run as the Python function it is: the
+    same bits over a real day of P1's three nodes (the published raw columns) and the same state after."""
+    for index, node in p1_days[2].nodes.items():
+        cal, raw = NodeCalibration.default_for(index), [np.ascontiguousarray(v, dtype=float) for v in (node.acc, node.gyro, node.mag)]
+        compiled_fusion, interpreted_fusion = NodeFusion(cal), NodeFusion(cal)
+        out_compiled, out_interpreted = np.empty((len(raw[0]), 3)), np.empty((len(raw[0]), 3))
+        fuse_samples(compiled_fusion.state, compiled_fusion._constants, *raw, out_compiled)
+        interpreted(fuse_samples)(interpreted_fusion.state, interpreted_fusion._constants, *raw, out_interpreted)
+        assert np.array_equal(out_compiled.view(np.int64), out_interpreted.view(np.int64))
+        assert compiled_fusion == interpreted_fusion
 

@@ -1,0 +1,81 @@
+"""bomi.compiled: the chain runs without numba (interpreted kernels), to the same bits as compiled."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from bomi.compiled import COMPILED, interpreted, kernel
+
+# a process in which numba cannot be imported (as on a machine without it): prints the fused angles
+# of a fixed pseudo-random stream, and whether bomi.compiled compiled anything
+WITHOUT_NUMBA = """
+import json, sys
+sys.modules["numba"] = None  # 'import numba' raises ImportError
+import numpy as np
+import bomi.chain, bomi.compiled
+from bomi.fusion import NodeCalibration, NodeFusion
+rng = np.random.default_rng(7)
+acc, gyro, mag = (rng.integers(-20000, 20000, (500, 3)) for _ in range(3))
+angles = NodeFusion(NodeCalibration()).update_many(acc, gyro, mag)
+print(json.dumps({"compiled": bomi.compiled.COMPILED, "bits": angles.view(np.int64).tolist()}))
+"""
+
+
+def test_the_chain_imports_and_fuses_without_numba_to_the_same_bits():
+    from bomi.fusion import NodeCalibration, NodeFusion
+    env = {k: v for k, v in os.environ.items() if k != "BOMI_NO_JIT"}
+    done = subprocess.run([sys.executable, "-c", WITHOUT_NUMBA], capture_output=True, text=True, env=env, check=True)
+    result = json.loads(done.stdout)
+    assert result["compiled"] is False
+    rng = np.random.default_rng(7)
+    acc, gyro, mag = (rng.integers(-20000, 20000, (500, 3)) for _ in range(3))
+    here = NodeFusion(NodeCalibration()).update_many(acc, gyro, mag)
+    assert result["bits"] == here.view(np.int64).tolist()
+
+
+def test_a_kernel_is_compiled_at_its_first_call_where_numba_is_installed_and_keeps_its_python_function():
+    def cumulative(values: np.ndarray, out: np.ndarray) -> None:
+        total = 0.0
+        for i in range(values.shape[0]):
+            total += values[i]
+            out[i] = total
+
+    compiled = kernel(cumulative)
+    assert interpreted(compiled) is cumulative
+    values = np.random.default_rng(0).normal(size=1000)
+    out = np.empty(1000)
+    compiled(values, out)
+    assert np.array_equal(out, np.cumsum(values))  # a left-to-right sum, as np.cumsum's
+    if COMPILED:  # numba made machine code of it
+        assert compiled._call is not cumulative and compiled._call.py_func.__code__ is cumulative.__code__
+    else:
+        assert compiled._call is cumulative
+
+
+def test_importing_the_chain_does_not_import_numba():
+    """numba costs ~0.35 s to import: a command that runs no kernel must not pay it."""
+    done = subprocess.run([sys.executable, "-c", "import sys, bomi.chain, bomi.fusion; print('numba' in sys.modules)"],
+                          capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"
+
+
+@kernel
+def _square(x: float) -> float:
+    return x * x
+
+
+@kernel
+def _sum_of_squares(values: np.ndarray) -> float:
+    total = 0.0
+    for i in range(values.shape[0]):
+        total += _square(values[i])
+    return total
+
+
+def test_a_kernel_calls_another_kernel_compiled_or_not():
+    values = np.arange(10.0)
+    assert _sum_of_squares(values) == 285.0 == interpreted(_sum_of_squares)(values)
