@@ -209,11 +209,12 @@ def single_threaded_blas() -> AbstractContextManager:
 def numerical_rank(standardised: np.ndarray) -> int:
     """How many directions of the ``standardised`` features (``StandardScaler``'s output, as
     ``fit_pipeline`` fits it) have a singular value above RANK_TOLERANCE x the largest (at least 1)."""
-    centred = standardised - standardised.mean(axis=0)
     # singular values as the square roots of the F x F Gram matrix's eigenvalues: one product over the
     # n windows instead of an n x F SVD (10x less work); their error (~1e-8 of the largest, from
-    # squaring) is far below RANK_TOLERANCE, so only a value within that of the tolerance could count otherwise
-    eigenvalues = np.linalg.eigvalsh(centred.T @ centred)[::-1]
+    # squaring) is far below RANK_TOLERANCE, so only a value within that of the tolerance could count
+    # otherwise. Standardised features are centred (column means ~1e-15 of their unit spread): their
+    # Gram matrix is the centred one to round-off, without a centred copy of the n windows
+    eigenvalues = np.linalg.eigvalsh(standardised.T @ standardised)[::-1]
     singular = np.sqrt(np.clip(eigenvalues, 0.0, None))
     return max(1, int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0])))
 
