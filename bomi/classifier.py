@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from functools import cache
 
 import numpy as np
+from sklearn import config_context
 from sklearn.decomposition import PCA
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 from sklearn.pipeline import Pipeline
@@ -239,13 +240,17 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     The steps are fitted one after the other, as ``Pipeline.fit`` fits them (each step's
     ``fit_transform`` of the previous one's output, the LDA's ``fit`` last: the same calls, so the
     same parameters to the bit, tests/test_classifier.py), so that the rank is read from the
-    standardised features the PCA is fitted on rather than from a second standardisation of them.
+    standardised features the PCA is fitted on rather than from a second standardisation of them,
+    and the features are checked for NaN and infinities once rather than by every step (five passes
+    over the n windows, each step's input made by the one before).
 
     BLAS runs single-threaded here, the rank's products included: on these 128 x 128 problems a busy
     2-core machine made the threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its
     threads waited for a core, and the threaded Gram matrix of the rank 1 s of CPU instead of 0.08 s.
     """
-    with single_threaded_blas():
+    if not np.isfinite(features).all():   # checked once here: each step would check its input again
+        raise ValueError("the features hold NaN or infinite values")
+    with single_threaded_blas(), config_context(assume_finite=True):
         scale = StandardScaler()
         standardised = scale.fit_transform(features, labels)
         if shrinkage is None and priors is None:

@@ -217,3 +217,14 @@ def test_fitted_steps_are_the_plain_pipelines_to_the_bit(p1_days, p1_profile, se
         assert ours.named_steps["pca"].n_components_ < windows.features.shape[1]   # a rank-reducing projection
     test = prepare(p1_days[2], p1_profile.spec, p1_profile.neutral_samples).features
     assert np.array_equal(ours.predict_proba(test), former.predict_proba(test))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_fitting_refuses_non_finite_features_before_any_step(bad):
+    """The features are checked once, before the steps (which then skip scikit-learn's own checks)."""
+    rng = np.random.default_rng(0)
+    features, labels = rng.normal(size=(300, 6)), np.repeat([0, 1, 2], 100)
+    features[123, 4] = bad
+    for shrinkage in (None, 0.01):
+        with pytest.raises(ValueError, match="NaN or infinite"):
+            fit_pipeline(features, labels, shrinkage)
