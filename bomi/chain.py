@@ -159,7 +159,7 @@ def _with_angles(prepared: PreparedRecording, spec: FeatureSpec, slot: int, angl
     """The features of the ``windows`` (mask) of ``prepared``'s states with node ``slot``'s angles
     replaced by (n, 3) ``angles``: the recorded windows' features, the columns the angles make
     recomputed (each column is computed from its own component alone: the same bits as computing
-    every column of the changed states, tests/test_chain_batch.py)."""
+    every column of the changed states, tests/test_new_person.py)."""
     which = np.flatnonzero(spec.components // _WIDTH == slot)
     which = which[spec.components[which] % _WIDTH < 3]          # the node's angles among the components
     out = prepared.features[windows]

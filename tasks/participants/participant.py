@@ -528,9 +528,11 @@ class VirtualParticipant:
         self._last_angles = angles[-1]
         raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
         fresh = deliver(raw, index, t, self._link_rngs, self.link, not_before_s=self._last_arrival)
-        # in arrival order: a node's last frame is its latest
-        nodes, last = np.unique(fresh.node_index[::-1], return_index=True)
-        self._last_arrival.update(zip(nodes.tolist(), fresh.arrival_s[len(fresh.arrival_s) - 1 - last].tolist()))
+        backwards = fresh.node_index[::-1]   # in arrival order: a node's last frame is its latest
+        for node in self._link_rngs:
+            mine = backwards == node
+            if mine.any():
+                self._last_arrival[node] = float(fresh.arrival_s[len(mine) - 1 - int(mine.argmax())])
         self._pending = _merge(self._pending, fresh)
         self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
