@@ -20,13 +20,13 @@ from dataclasses import dataclass, field, replace
 from operator import itemgetter
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, class_amplitude,
                              classify_windows, fit_pipeline, model_defects, pipeline_parameters, posteriors,
-                             proportional, reject)
+                             proportional, reject, single_threaded_blas)
 from bomi.errors import BomiError
-from bomi.features import NODE_STATE, FeatureSpec, WindowBuffer, features, single_label_windows, window_ends
+from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_columns, features, single_label_windows,
+                           window_ends)
 from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, neutral_offsets
@@ -138,20 +138,34 @@ def rotated_about(vectors: np.ndarray, axis: np.ndarray, radians: float) -> np.n
     return vectors * c + np.cross(axis, vectors) * s + np.outer(vectors @ axis, axis) * (1.0 - c)
 
 
-def _spread_states(states: np.ndarray, labels: np.ndarray, slot: int, radians: float) -> list[np.ndarray]:
-    """Copies of ``states`` with the angles (node ``slot``) of the samples labelled by the class turned
-    by +-radians about the two axes perpendicular to the class's mean angle change."""
-    angles = slice(slot * _WIDTH, slot * _WIDTH + 3)
-    direction = states[labels, angles].mean(axis=0)
+def _spread_angles(states: np.ndarray, labels: np.ndarray, slot: int, radians: float) -> list[np.ndarray]:
+    """Copies of node ``slot``'s (n, 3) angles in ``states`` with those of the samples labelled by the
+    class turned by +-radians about the two axes perpendicular to the class's mean angle change."""
+    angles = states[:, slot * _WIDTH:slot * _WIDTH + 3]
+    direction = angles[labels].mean(axis=0)
     direction /= np.linalg.norm(direction)
     perpendicular = np.linalg.svd(direction[None])[2][1:]   # two unit axes orthogonal to it and to each other
     copies = []
     for axis in perpendicular:
         for sign in (1.0, -1.0):
-            turned = states.copy()
-            turned[labels, angles] = rotated_about(states[labels, angles], axis, sign * radians)
+            turned = angles.copy()
+            turned[labels] = rotated_about(angles[labels], axis, sign * radians)
             copies.append(turned)
     return copies
+
+
+def _with_angles(prepared: PreparedRecording, spec: FeatureSpec, slot: int, angles: np.ndarray,
+                 windows: np.ndarray) -> np.ndarray:
+    """The features of the ``windows`` (mask) of ``prepared``'s states with node ``slot``'s angles
+    replaced by (n, 3) ``angles``: the recorded windows' features, the columns the angles make
+    recomputed (each column is computed from its own component alone: the same bits as computing
+    every column of the changed states, tests/test_new_person.py)."""
+    which = np.flatnonzero(spec.components // _WIDTH == slot)
+    which = which[spec.components[which] % _WIDTH < 3]          # the node's angles among the components
+    out = prepared.features[windows]
+    out[:, feature_columns(spec.kind, len(spec.components), which)] = batch_window_features(
+        angles[:, spec.components[which] % _WIDTH], spec.kind, spec.window, spec.stride, windows)
+    return out
 
 
 def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
@@ -178,9 +192,10 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
         samples, windows = rec.labels == label, pure & (prepared.labels == label)
         if not samples.any():
             continue
-        for states in _spread_states(prepared.states, samples, spec.nodes.index(node),
-                                     np.radians(copies.spread_degrees)):
-            parts.append((window_features(states, spec, windows), prepared.labels[windows], prepared.ends[windows], False))
+        slot = spec.nodes.index(node)
+        for angles in _spread_angles(prepared.states, samples, slot, np.radians(copies.spread_degrees)):
+            parts.append((_with_angles(prepared, spec, slot, angles, windows), prepared.labels[windows],
+                          prepared.ends[windows], False))
     windows = TrainingWindows(*(np.concatenate([part[k] for part in parts]) for k in range(3)),
                               np.concatenate([np.full(len(part[1]), part[3]) for part in parts]))
     return windows, prepared
@@ -618,7 +633,7 @@ def cross_validate(recordings: Sequence[Recording], profile: Profile, spec: Feat
     re-referencing), the candidate's smaller copies and the profile's turned copies of the motions;
     windows straddling a label change or a fold boundary are left out of both sides.
     """
-    with threadpool_limits(limits=1, user_api="blas"):  # many small products: see classifier.fit_pipeline
+    with single_threaded_blas():  # many small products: see classifier.fit_pipeline
         parts = [_cross_validate(rec, profile, spec, candidates) for rec in recordings]
     classes = np.unique(np.concatenate([rec.require_labels() for rec in recordings]))
     offsets = N_FOLDS * np.cumsum([0] + [len(rec) for rec in recordings])   # unique hold ids over the recordings

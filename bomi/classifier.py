@@ -24,14 +24,17 @@ below a threshold -> the neutral class) then a majority vote over the last N dec
 from __future__ import annotations
 
 from collections import deque
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
+from functools import cache
 
 import numpy as np
+from sklearn import config_context
 from sklearn.decomposition import PCA
 from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from bomi.features import FeatureSpec
 
@@ -192,15 +195,27 @@ def model_defects(model: Model) -> list[str]:
     return defects
 
 
-def numerical_rank(features: np.ndarray) -> int:
-    """How many directions of the standardised ``features`` have a singular value above
-    RANK_TOLERANCE x the largest (at least 1)."""
-    standardised = StandardScaler().fit_transform(features)
-    centred = standardised - standardised.mean(axis=0)
+@cache
+def _thread_pools() -> ThreadpoolController:
+    """The thread pools of the loaded libraries, looked up once (by the first fit, after scikit-learn
+    and scipy have loaded theirs): ``threadpool_limits`` looks them up at every call, 5 ms."""
+    return ThreadpoolController()
+
+
+def single_threaded_blas() -> AbstractContextManager:
+    """A context in which BLAS runs on one thread (see ``fit_pipeline``)."""
+    return _thread_pools().limit(limits=1, user_api="blas")
+
+
+def numerical_rank(standardised: np.ndarray) -> int:
+    """How many directions of the ``standardised`` features (``StandardScaler``'s output, as
+    ``fit_pipeline`` fits it) have a singular value above RANK_TOLERANCE x the largest (at least 1)."""
     # singular values as the square roots of the F x F Gram matrix's eigenvalues: one product over the
     # n windows instead of an n x F SVD (10x less work); their error (~1e-8 of the largest, from
-    # squaring) is far below RANK_TOLERANCE, so only a value within that of the tolerance could count otherwise
-    eigenvalues = np.linalg.eigvalsh(centred.T @ centred)[::-1]
+    # squaring) is far below RANK_TOLERANCE, so only a value within that of the tolerance could count
+    # otherwise. Standardised features are centred (column means ~1e-15 of their unit spread): their
+    # Gram matrix is the centred one to round-off, without a centred copy of the n windows
+    eigenvalues = np.linalg.eigvalsh(standardised.T @ standardised)[::-1]
     singular = np.sqrt(np.clip(eigenvalues, 0.0, None))
     return max(1, int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0])))
 
@@ -222,16 +237,29 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     eigenvalues above RANK_TOLERANCE**2 = 1e-8 of the largest, where squaring loses no accuracy
     that matters.
 
-    BLAS runs single-threaded here: on these 128 x 128 problems a busy 2-core machine made the
-    threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its threads waited for a core.
+    The steps are fitted one after the other, as ``Pipeline.fit`` fits them (each step's
+    ``fit_transform`` of the previous one's output, the LDA's ``fit`` last: the same calls, so the
+    same parameters to the bit, tests/test_classifier.py), so that the rank is read from the
+    standardised features the PCA is fitted on rather than from a second standardisation of them,
+    and the features are checked for NaN and infinities once rather than by every step (five passes
+    over the n windows, each step's input made by the one before).
+
+    BLAS runs single-threaded here, the rank's products included: on these 128 x 128 problems a busy
+    2-core machine made the threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its
+    threads waited for a core, and the threaded Gram matrix of the rank 1 s of CPU instead of 0.08 s.
     """
-    if shrinkage is None and priors is None:
-        steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd"))]
-    else:
-        steps = [("pca", PCA(n_components=numerical_rank(features), svd_solver="covariance_eigh")),
-                 ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
-    with threadpool_limits(limits=1, user_api="blas"):
-        return Pipeline([("scale", StandardScaler()), *steps]).fit(features, labels)
+    if not np.isfinite(features).all():   # checked once here: each step would check its input again
+        raise ValueError("the features hold NaN or infinite values")
+    with single_threaded_blas(), config_context(assume_finite=True):
+        scale = StandardScaler()
+        standardised = scale.fit_transform(features, labels)
+        if shrinkage is None and priors is None:
+            pca, lda = "passthrough", LinearDiscriminantAnalysis(solver="svd").fit(standardised, labels)
+        else:
+            pca = PCA(n_components=numerical_rank(standardised), svd_solver="covariance_eigh")
+            lda = LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors)
+            lda.fit(pca.fit_transform(standardised, labels), labels)
+    return Pipeline([("scale", scale), ("pca", pca), ("lda", lda)])
 
 
 def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParameters]:

@@ -40,6 +40,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from bomi.compiled import kernel
+
 FRAME_SIZE = 32
 START_BYTE = 0x33
 END_BYTE = 0x34
@@ -499,29 +501,41 @@ class RowAssembler:
         return row
 
 
-def row_positions(node_sequence: Sequence[int], node_ids: tuple[int, ...]) -> np.ndarray:
+def row_positions(node_sequence: Sequence[int] | np.ndarray, node_ids: tuple[int, ...]) -> np.ndarray:
     """``RowAssembler`` over a whole sequence of frames at once: their node ids in arrival order ->
     (rows, len(node_ids)) positions in the sequence of the frame each row holds per node (a held
-    frame's position repeats). The same rule, kept in plain ints: tests/test_frames.py checks it
-    against the assembler frame by frame."""
-    slot = {node_id: 1 << j for j, node_id in enumerate(node_ids)}
-    index = {node_id: j for j, node_id in enumerate(node_ids)}
-    k, full = len(node_ids), (1 << len(node_ids)) - 1
-    current: list[int] = [0] * k   # the last row emitted, overwritten by the frames pending since
-    pending = 0                     # bit mask of the nodes with a frame pending
-    emitted = False                 # no row yet: RowAssembler has no frame to hold, a repeat drops the pending
-    rows = []
-    for position, node_id in enumerate(node_sequence):
-        bit = slot.get(node_id)
-        if bit is None:
+    frame's position repeats). The same rule, in a compiled loop (``_assembled_rows``):
+    tests/test_frames.py checks it against the assembler frame by frame."""
+    nodes = np.asarray(node_sequence, dtype=np.int64).reshape(-1)
+    slots = np.full(len(nodes), -1, dtype=np.int64)
+    for j, node_id in enumerate(node_ids):
+        slots[nodes == node_id] = j
+    return _assembled_rows(slots, len(node_ids))
+
+
+@kernel
+def _assembled_rows(slots: np.ndarray, k: int) -> np.ndarray:
+    """The rows of ``row_positions`` from each frame's slot among the k nodes (-1: another node)."""
+    rows = np.empty((len(slots), k), dtype=np.int64)   # a frame ends at most one row
+    current = np.zeros(k, dtype=np.int64)   # the last row emitted, overwritten by the frames pending since
+    full = (1 << k) - 1
+    pending = 0                              # bit mask of the nodes with a frame pending
+    emitted = False                          # no row yet: RowAssembler has no frame to hold, a repeat drops the pending
+    count = 0
+    for position in range(len(slots)):
+        slot = slots[position]
+        if slot < 0:
             continue
-        if pending & bit:           # the node again before the row was full: emit it with held frames
+        bit = 1 << slot
+        if pending & bit:                    # the node again before the row was full: emit it with held frames
             if emitted:
-                rows.append(current.copy())
+                rows[count, :] = current
+                count += 1
             pending = 0
-        current[index[node_id]] = position
+        current[slot] = position
         pending |= bit
         if pending == full:
-            rows.append(current.copy())
+            rows[count, :] = current
+            count += 1
             emitted, pending = True, 0
-    return np.array(rows, dtype=np.int64).reshape(-1, k)
+    return rows[:count].copy()

@@ -5,6 +5,11 @@ import json
 
 import numpy as np
 import pytest
+from sklearn.decomposition import PCA
+from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
+from threadpoolctl import threadpool_limits
 
 from bomi.chain import MotionCopies, prepare, recorded_priors, training_windows
 from bomi.classifier import (AmplitudeRange, MajorityVote, PipelineParameters, PostProcessing, amplitude_ranges, class_amplitude,
@@ -170,4 +175,56 @@ def test_numerical_rank_is_the_svd_rank_of_the_standardised_features(seed):
     standardised = (x - x.mean(axis=0)) / x.std(axis=0)
     singular = np.linalg.svd(standardised - standardised.mean(axis=0), compute_uv=False)
     expected = int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0]))
-    assert numerical_rank(x) == expected
+    assert numerical_rank(standardised) == expected
+
+
+def _former_pipeline(features, labels, shrinkage, priors):
+    """The plain scikit-learn Pipeline ``fit_pipeline`` used to fit (the rank from a second
+    standardisation of the features, the Pipeline fitting its steps): the independent reference."""
+    if shrinkage is None and priors is None:
+        steps = [("pca", "passthrough"), ("lda", LinearDiscriminantAnalysis(solver="svd"))]
+    else:
+        standardised = StandardScaler().fit_transform(features)
+        singular = np.linalg.svd(standardised - standardised.mean(axis=0), compute_uv=False)
+        rank = int(np.count_nonzero(singular > RANK_TOLERANCE * singular[0]))
+        steps = [("pca", PCA(n_components=rank, svd_solver="covariance_eigh")),
+                 ("lda", LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors))]
+    with threadpool_limits(limits=1, user_api="blas"):
+        return Pipeline([("scale", StandardScaler()), *steps]).fit(features, labels)
+
+
+@pytest.mark.parametrize("setting", ["copies and shrinkage", "plain"])
+def test_fitted_steps_are_the_plain_pipelines_to_the_bit(p1_days, p1_profile, setting):
+    """On P1's real day 1 (its profile's turned copies and shrinkage, and the plain LDA), every fitted
+    array of every step equals what scikit-learn's own ``Pipeline.fit`` gives."""
+    copies = MotionCopies.of(p1_profile) if setting != "plain" else MotionCopies()
+    windows, _ = training_windows(p1_days[1], p1_profile.spec, p1_profile.neutral_samples, copies)
+    shrinkage = p1_profile.shrinkage if setting != "plain" else None
+    priors = recorded_priors(windows.labels, windows.recorded)
+    assert (priors is None) == (setting == "plain")
+    ours = fit_pipeline(windows.features, windows.labels, shrinkage, priors)
+    former = _former_pipeline(windows.features, windows.labels, shrinkage, priors)
+    names = {"scale": ("mean_", "scale_", "var_"), "pca": ("mean_", "components_", "explained_variance_"),
+             "lda": ("coef_", "intercept_", "classes_", "means_", "priors_")}
+    for step, attributes in names.items():
+        a, b = ours.named_steps[step], former.named_steps[step]
+        if setting == "plain" and step == "pca":
+            assert a == b == "passthrough"
+            continue
+        for name in attributes:
+            assert np.array_equal(getattr(a, name), getattr(b, name)), f"{step}.{name}"
+    if setting != "plain":
+        assert ours.named_steps["pca"].n_components_ < windows.features.shape[1]   # a rank-reducing projection
+    test = prepare(p1_days[2], p1_profile.spec, p1_profile.neutral_samples).features
+    assert np.array_equal(ours.predict_proba(test), former.predict_proba(test))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_fitting_refuses_non_finite_features_before_any_step(bad):
+    """The features are checked once, before the steps (which then skip scikit-learn's own checks)."""
+    rng = np.random.default_rng(0)
+    features, labels = rng.normal(size=(300, 6)), np.repeat([0, 1, 2], 100)
+    features[123, 4] = bad
+    for shrinkage in (None, 0.01):
+        with pytest.raises(ValueError, match="NaN or infinite"):
+            fit_pipeline(features, labels, shrinkage)

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bomi.features import WindowBuffer, component_index, features, single_label_windows, sliding_windows, window_features
+from bomi.features import WindowBuffer, _half_stats, _run_stats, component_index, features, single_label_windows, sliding_windows, window_features
 
 
 def naive_components(state_row: list[float], n_nodes: int, kind: str) -> list[float]:
@@ -134,3 +134,18 @@ def test_features_of_selected_windows_are_those_windows_features_bit_for_bit(see
     select = rng.random(len(every)) < 0.4
     assert np.array_equal(window_features(samples, kind, length, stride, select).view(np.int64),
                           every[select].view(np.int64))
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 4, 5, 8, 16])
+@pytest.mark.parametrize("channels", [2, 3, 16])
+def test_run_statistics_are_each_runs_half_statistics_bit_for_bit(size, channels):
+    """``_run_stats`` (whole-column passes over a recording) = ``_half_stats`` of each run cut out
+    alone, as the stream cuts a window's halves (a contiguous copy), to the bit: signed zeros and
+    values of very different sizes, whose sums depend on their order."""
+    rng = np.random.default_rng(size * 100 + channels)
+    samples = rng.normal(size=(300, channels)) * 10.0 ** rng.integers(-8, 9, size=(300, channels))
+    samples[::4] = -0.0
+    samples[7:7 + 2 * size] = -0.0   # whole runs of negative zeros
+    runs = np.ascontiguousarray(sliding_windows(samples, size))
+    expected = np.array([_half_stats(run[None])[0] for run in runs])
+    assert np.array_equal(_run_stats(samples, size).view(np.int64), expected.view(np.int64))

@@ -8,9 +8,11 @@ import pytest
 import numpy as np
 from hypothesis import assume, given, settings, strategies as st
 
+from bomi.compiled import interpreted
 from bomi.frames import (
     FRAME_SIZE, FrameParser, ImuFrame, RowAssembler, SafetyKey, SampleIndex, counter_step, encode_imu_frame,
     encode_imu_frames, encode_safety_key_frame, imu_index, imu_node_id, parse_stream, row_positions, sample_indices,
+    _assembled_rows,
 )
 
 # hardware.md §1 worked example: headset, counter 42, period 16 ms
@@ -388,6 +390,16 @@ def test_sample_indices_are_sample_index_frame_by_frame(frames):
     nodes = np.array([f[0] for f in frames], dtype=int)
     counters = np.array([f[1] for f in frames], dtype=int)
     assert sample_indices(nodes, counters).tolist() == expected
+
+
+def test_row_positions_compiled_and_interpreted_are_the_same_rows():
+    """The kernel compiled by numba (where installed) and run as Python give the same rows on a long
+    stream of three nodes with losses, repeats and other nodes' frames."""
+    rng = np.random.default_rng(3)
+    slots = rng.choice([-1, 0, 1, 2], size=5000, p=[0.05, 0.32, 0.32, 0.31]).astype(np.int64)
+    rows = _assembled_rows(slots, 3)
+    assert rows.shape[1] == 3 and 1000 < len(rows) < 5000
+    assert np.array_equal(rows, interpreted(_assembled_rows)(slots, 3))
 
 
 @given(sequence=st.lists(st.integers(9, 13), max_size=80), k=st.integers(1, 4))

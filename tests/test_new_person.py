@@ -14,7 +14,7 @@ from sklearn.preprocessing import StandardScaler
 
 from bomi.chain import (CONSISTENCY, MIN_CLASS_WINDOWS, Candidate, HoldScores, choose_candidate, choose_threshold, N_FOLDS,
                         REQUIRED_GAIN, MotionCopies, choose_option, cross_validate, evaluate, hold_folds, prepare,
-                        select_settings, train, training_windows)
+                        select_settings, train, training_windows, window_features)
 from bomi.classifier import PostProcessing, classify_windows, fit_pipeline
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
@@ -291,6 +291,40 @@ def test_turned_copies_keep_the_size_and_turn_the_direction_by_the_spread():
     by_window = (pitch ** 2).reshape(4, -1).sum(axis=0)
     np.testing.assert_allclose(by_window, 200.0, atol=1e-9)
     np.testing.assert_allclose(windows.features[copies][:, :3], 0.0, atol=1e-12)   # node 1 untouched
+
+
+def _turned_copies_by_whole_states(rec, spec, copies, neutral_samples):
+    """The turned copies' windows as training_windows made them before (the independent reference):
+    every node state copied, the class's samples of its node's angles turned by Rodrigues' formula
+    written out here, and every feature column computed from the turned states."""
+    prepared = prepare(rec, spec, neutral_samples)
+    width, radians = 6, np.radians(copies.spread_degrees)
+    out = []
+    for label, node in copies.spread_nodes.items():
+        samples, windows = rec.labels == label, prepared.pure & (prepared.labels == label)
+        angles = slice(spec.nodes.index(node) * width, spec.nodes.index(node) * width + 3)
+        direction = prepared.states[samples, angles].mean(axis=0)
+        direction /= np.linalg.norm(direction)
+        for axis in np.linalg.svd(direction[None])[2][1:]:
+            for sign in (1.0, -1.0):
+                v, c, s = prepared.states[samples, angles], np.cos(sign * radians), np.sin(sign * radians)
+                turned = prepared.states.copy()
+                turned[samples, angles] = v * c + np.cross(axis, v) * s + np.outer(v @ axis, axis) * (1.0 - c)
+                out.append(window_features(turned, spec, windows))
+    return out
+
+
+@pytest.mark.parametrize("kind", ["FV3", "FV1", "FV2"])
+def test_turned_copies_are_the_whole_turned_states_features_to_the_bit(p1_days, p1_profile, kind):
+    """Only the carrying node's angle columns of a turned copy are recomputed: on P1's day 2 (its
+    shoulders' classes turned), every column equals the features of the whole turned states."""
+    spec, copies = replace(p1_profile.spec, kind=kind), MotionCopies.of(p1_profile)
+    assert copies.spread_nodes and copies.spread_degrees > 0
+    windows, _ = training_windows(p1_days[2], spec, p1_profile.neutral_samples, copies)
+    expected = _turned_copies_by_whole_states(p1_days[2], spec, copies, p1_profile.neutral_samples)
+    assert len(expected) == 4 * len(copies.spread_nodes)
+    ours = windows.features[~windows.recorded]
+    assert np.array_equal(ours.view(np.int64), np.concatenate(expected).view(np.int64))
 
 
 def test_turned_copies_read_a_shoulder_motion_made_in_another_direction(p1_days, p1_profile):

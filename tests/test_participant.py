@@ -10,7 +10,7 @@ import scipy.signal
 from bomi.chain import OnlineChain, train
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, RowAssembler, SafetyKey, SampleIndex, encode_safety_key_frame
-from bomi.fusion import DT, FusedRows
+from bomi.fusion import DT, WARMUP_S, FusedRows
 from bomi.profiles import load_profile
 from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
                                fir_filter, load_participant, minimum_jerk, record_stream, session_recording,
@@ -264,6 +264,25 @@ def test_calibration_protocol_layout(p1, session):
     # holding means the posture is reached: the truth sits at its target, far from neutral, for class 1
     head_pitch = session.truth.angles[held & (session.cue == 1), 0, 0] - params.neutral.posture_deg[0, 0]
     assert np.median(head_pitch) > 10.0
+
+
+def test_cue_and_holding_follow_the_protocols_timing(p1, session):
+    """Each sample's cue and whether it is held, against the protocol's timing computed here and
+    read sample by sample: cues at the end of the warm-up's first neutral and of every hold, each
+    hold starting reaction + onset after its cue (the union of the holds, the cue of the latest
+    cue at or before the sample)."""
+    params, _ = p1
+    settle = params.reaction_s + params.onset_s
+    motions = [label for _ in range(2) for label in sorted(params.classes) for _ in (1.0, 0.5)]
+    cues, holds, t = [(0.0, 0)], [(WARMUP_S, WARMUP_S + 3.0)], WARMUP_S + 3.0
+    for label in [x for m in motions for x in (m, 0)]:   # each motion then neutral, 3 s held each
+        cues.append((t, label))
+        holds.append((t + settle, t + settle + 3.0))
+        t += settle + 3.0
+    cue = [max((c for c in cues if c[0] <= time), key=lambda c: c[0])[1] for time in session.truth.time_s.tolist()]
+    holding = [any(start <= time < stop for start, stop in holds) for time in session.truth.time_s.tolist()]
+    assert session.cue.tolist() == cue and session.holding.tolist() == holding
+    assert session.holding.sum() > 0.5 * len(holding) and len(set(cue)) == len(params.classes) + 1
 
 
 def test_session_recording_fuses_back_to_the_true_angles(p1, session):

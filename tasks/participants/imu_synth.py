@@ -266,7 +266,9 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
     order = np.lexsort((nodes, indices, times))
     slots, rows, indices = slots[order], rows[order], indices[order]
     node_ids = np.array([imu_node_id(node) for node, _ in by_node])[slots]
-    values = {name: np.stack([getattr(raw, name) for _, raw in by_node])[slots, rows] for name in ("mag", "gyro", "acc")}
-    frames = encode_imu_frames(node_ids, indices % COUNTER_MODULO, values["mag"], values["gyro"], values["acc"],
+    # every node's samples as rows of one (nodes * n, 9) array: each frame's values in one gather
+    values = np.stack([np.hstack([raw.mag, raw.gyro, raw.acc]) for _, raw in by_node]).reshape(-1, 9)
+    values = values[slots * len(sample_index) + rows]
+    frames = encode_imu_frames(node_ids, indices % COUNTER_MODULO, values[:, 0:3], values[:, 3:6], values[:, 6:9],
                                period_ms)   # every node's frames in one pass, in arrival order
     return Delivery(times[order], nodes[order], indices, frames)

@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -527,8 +528,11 @@ class VirtualParticipant:
         self._last_angles = angles[-1]
         raw = {node.index: r for node, r in zip(self.profile.nodes, raws)}
         fresh = deliver(raw, index, t, self._link_rngs, self.link, not_before_s=self._last_arrival)
-        # in arrival order: a node's last frame is its latest
-        self._last_arrival.update(zip(fresh.node_index.tolist(), fresh.arrival_s.tolist()))
+        backwards = fresh.node_index[::-1]   # in arrival order: a node's last frame is its latest
+        for node in self._link_rngs:
+            mine = backwards == node
+            if mine.any():
+                self._last_arrival[node] = float(fresh.arrival_s[len(mine) - 1 - int(mine.argmax())])
         self._pending = _merge(self._pending, fresh)
         self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
@@ -566,7 +570,7 @@ def _merge(*parts: Delivery) -> Delivery:
     parts = (Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), []),) + parts
     arrival = np.concatenate([p.arrival_s for p in parts])
     node, sample = (np.concatenate([getattr(p, name) for p in parts]) for name in ("node_index", "sample_index"))
-    frames = [frame for p in parts for frame in p.frames]
+    frames = list(chain.from_iterable(p.frames for p in parts))
     if (arrival[1:] >= arrival[:-1]).all():   # in order already (the stable sort would keep it so)
         return Delivery(arrival, node, sample, frames)
     order = np.argsort(arrival, kind="stable")
@@ -644,12 +648,14 @@ def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: S
     truth = vp.truth()
     keep = np.arange(len(truth.time_s)) <= int(np.floor(t / DT + 1e-9))   # the samples up to t, as generated
     truth = Truth(truth.time_s[keep], truth.intent[keep], truth.amplitude[keep], truth.angles[keep])
-    cue = np.zeros(len(truth.time_s), dtype=int)
-    for start, label in cues:
-        cue[truth.time_s >= start] = label
-    holding = np.zeros(len(truth.time_s), dtype=bool)
-    for start, stop, _ in holds:
-        holding |= (truth.time_s >= start) & (truth.time_s < stop)
+    # each sample's latest cue, and the latest hold begun by then (the holds follow one another,
+    # each ``settle`` after the previous one's end): one search over the samples, not a pass per cue
+    starts, labels = np.array(cues).T
+    latest = np.searchsorted(starts, truth.time_s, side="right") - 1
+    cue = np.where(latest >= 0, labels.astype(int)[latest], NEUTRAL_LABEL)
+    begun, ends = np.array([hold[:2] for hold in holds]).T
+    latest = np.searchsorted(begun, truth.time_s, side="right") - 1
+    holding = (latest >= 0) & (truth.time_s < ends[latest])
     return CalibrationSession(params.name, seed, delivery, truth, cue, holding, truth.time_s >= warmup_s)
 
 
@@ -667,7 +673,7 @@ def record_stream(stream: bytes, profile: Profile, source: str) -> tuple[Recordi
     ids = tuple(node.node_id for node in profile.nodes)
     frames = parse_stream(stream)
     frames = frames[np.isin(frames["node_id"], ids)]
-    rows = row_positions(frames["node_id"].tolist(), ids)
+    rows = row_positions(frames["node_id"], ids)
     if not len(rows):
         raise BomiError(f"{source}: no complete row of nodes {list(profile.node_indices)} in the stream")
     nodes = {}
