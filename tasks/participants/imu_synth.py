@@ -83,6 +83,14 @@ class SensorNoise:
     mag_lsb: float = 25.0
 
 
+@cache
+def noise_scale(noise: SensorNoise) -> np.ndarray:
+    """The (9,) noise standard deviations of a sample's acc, gyro and mag values (read-only)."""
+    scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
+    scale.flags.writeable = False
+    return scale
+
+
 @dataclass(frozen=True)
 class RawImu:
     """Raw int16 sensor counts in the sensor's own axes, each (n, 3)."""
@@ -175,12 +183,11 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
     first = angles[:1] if previous_deg is None else np.asarray(previous_deg, dtype=float).reshape(1, k, 3)
     rotations = body_rotation(np.concatenate([first, angles]).reshape(-1, 3))    # row i * k + node
     now = rotation_rows(rotations, slice(k, None))
-    acc_body = -now.inv().apply([1.0, 0.0, 0.0]).reshape(n, k, 3)
+    acc_body = -now.apply([1.0, 0.0, 0.0], inverse=True).reshape(n, k, 3)   # (scipy: inv().apply's bits, one call)
     if linear_acc_g is not None:
         acc_body = acc_body + linear_acc_g
     rate = np.degrees((rotation_rows(rotations, slice(None, -k)).inv() * now).as_rotvec()).reshape(n, k, 3) / DT
     field_lsb = magnetometer_reading(angles.reshape(-1, 3), field).reshape(n, k, 3)
-    scale = np.repeat([noise.acc_lsb, noise.gyro_lsb, noise.mag_lsb], 3)
     if not len(cals) == len(rngs) == k:
         raise ValueError(f"angles of {k} nodes, {len(cals)} calibrations and {len(rngs)} generators")
     arrays = node_arrays(tuple(cals))
@@ -193,7 +200,7 @@ def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rn
         draws[node] = rng.standard_normal((n, 9))
     clean[..., 0:3] *= ACC_LSB_PER_G
     clean[..., 3:6] *= GYRO_LSB_PER_DEG_S
-    counts = to_int16(clean + draws * scale)
+    counts = to_int16(clean + draws * noise_scale(noise))
     return [RawImu(acc=c[:, 0:3], gyro=c[:, 3:6], mag=c[:, 6:9]) for c in counts]
 
 
@@ -254,21 +261,34 @@ def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_tim
     """
     sample_index = np.asarray(sample_index)
     by_node = sorted(raw_by_node.items())
-    draws = np.stack([rngs[node].random((len(raw), 2)) for node, raw in by_node])     # (nodes, n, 2)
+    n = len(sample_index)
+    nodes_by_slot, ids_by_slot = _node_numbers(tuple(node for node, _ in by_node))
+    draws = np.empty((len(by_node), n, 2))     # (nodes, n, 2), each node's row from its own generator
+    # every node's samples as rows of one (nodes * n, 9) array (mag, gyro, acc): each frame's values in one gather
+    values = np.empty((len(by_node), n, 9), dtype=np.int16)
+    for slot, (node, raw) in enumerate(by_node):
+        rngs[node].random(out=draws[slot])
+        values[slot, :, 0:3], values[slot, :, 3:6], values[slot, :, 6:9] = raw.mag, raw.gyro, raw.acc
     sent = sample_time_s + link.latency_s - link.jitter_s * np.log1p(-draws[..., 1])   # exponential jitter
     kept = draws[..., 0] >= link.loss_fraction
     sent[~kept] = -np.inf                      # lost frames hold nothing up
     slots, rows = np.nonzero(kept)             # per frame: its node's slot and its sample's row
     arrival = np.ceil(np.maximum.accumulate(sent, axis=1)[slots, rows] / link.burst_s) * link.burst_s
-    times = np.maximum(arrival, np.array([(not_before_s or {}).get(node, -np.inf) for node, _ in by_node])[slots])
-    nodes = np.array([node for node, _ in by_node], dtype=int)[slots]
+    if not_before_s:
+        arrival = np.maximum(arrival, np.array([not_before_s.get(node, -np.inf) for node, _ in by_node])[slots])
+    nodes = nodes_by_slot[slots]
     indices = sample_index[rows].astype(int)
-    order = np.lexsort((nodes, indices, times))
+    order = np.lexsort((nodes, indices, arrival))
     slots, rows, indices = slots[order], rows[order], indices[order]
-    node_ids = np.array([imu_node_id(node) for node, _ in by_node])[slots]
-    # every node's samples as rows of one (nodes * n, 9) array: each frame's values in one gather
-    values = np.stack([np.hstack([raw.mag, raw.gyro, raw.acc]) for _, raw in by_node]).reshape(-1, 9)
-    values = values[slots * len(sample_index) + rows]
-    frames = encode_imu_frames(node_ids, indices % COUNTER_MODULO, values[:, 0:3], values[:, 3:6], values[:, 6:9],
-                               period_ms)   # every node's frames in one pass, in arrival order
-    return Delivery(times[order], nodes[order], indices, frames)
+    values = values.reshape(-1, 9)[slots * n + rows]
+    frames = encode_imu_frames(ids_by_slot[slots], indices % COUNTER_MODULO, values[:, 0:3], values[:, 3:6],
+                               values[:, 6:9], period_ms)   # every node's frames in one pass, in arrival order
+    return Delivery(arrival[order], nodes[order], indices, frames)
+
+
+@cache
+def _node_numbers(nodes: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(k,) node indices and their node ids on the wire, as arrays (read-only): ``deliver``'s per-slot lookups."""
+    index, ids = np.array(nodes, dtype=int), np.array([imu_node_id(node) for node in nodes])
+    index.flags.writeable = ids.flags.writeable = False
+    return index, ids
