@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
+from functools import cached_property
 from itertools import chain
 from pathlib import Path
 from typing import Any
@@ -347,6 +348,12 @@ class PostureMove:
         """Posture at (n,) shares ``progress`` of the move, (n, nodes, 3)."""
         return self.start[None] + progress[:, None, None] * (self.target - self.start)[None]
 
+    @cached_property
+    def done(self) -> np.ndarray:
+        """The posture once the move is done, (nodes, 3): ``posture`` at progress 1.0, bit for bit
+        (start + (target - start), which need not be ``target``'s bits)."""
+        return self.posture(np.ones(1))[0]
+
 
 @dataclass(frozen=True)
 class Truth:
@@ -406,7 +413,8 @@ class VirtualParticipant:
         self._passed = 0                        # samples whose time has passed (``pass_time``), made or not
         self._last_angles: np.ndarray | None = None     # (nodes, 3) angles of the last sample
         self._last_arrival: dict[int, float] = {}
-        self._pending = _merge()
+        self._pending = _merge()              # generated frames in arrival order ...
+        self._returned = 0                      # ... of which those before this one were returned
         self._truth: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
 
     # -- intents
@@ -477,12 +485,15 @@ class VirtualParticipant:
             k, rows = int(which[first]), slice(first, end)
             move = self._moves[k]
             old, new = self.params.motion(self._moves[max(k - 1, 0)].label), self.params.motion(move.label)
+            label[rows], amplitude[rows] = move.label, move.amplitude
+            if (t[first] - move.t0) / move.duration >= 1.0:   # the move done: progress 1.0 from here on (t rises)
+                posture[rows], sway[rows], tremor[rows] = move.done, new.sway_std_deg, new.tremor_std_deg
+                continue                                      # (the blend's bits at 1.0: 0 * old + new)
             progress = move.progress(t[rows])
             posture[rows] = move.posture(progress)
             blend = progress[:, None, None]
             sway[rows] = (1 - blend) * old.sway_std_deg[None] + blend * new.sway_std_deg[None]
             tremor[rows] = (1 - blend) * old.tremor_std_deg[None] + blend * new.tremor_std_deg[None]
-            label[rows], amplitude[rows] = move.label, move.amplitude
         return posture, sway, tremor, label, amplitude
 
     def _spasms(self, t: np.ndarray) -> np.ndarray:
@@ -533,15 +544,23 @@ class VirtualParticipant:
             mine = backwards == node
             if mine.any():
                 self._last_arrival[node] = float(fresh.arrival_s[len(mine) - 1 - int(mine.argmax())])
-        self._pending = _merge(self._pending, fresh)
+        self._pending, self._returned = _merge(self._rows(self._returned, None), fresh), 0
         self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
+
+    def _rows(self, start: int, stop: int | None) -> Delivery:
+        """Frames ``start:stop`` of the pending ones (in arrival order)."""
+        pending, rows = self._pending, slice(start, stop)
+        return Delivery(pending.arrival_s[rows], pending.node_index[rows], pending.sample_index[rows],
+                        pending.frames[rows])
 
     def deliveries(self, t_end: float) -> Delivery:
         """The frames that reach the host by sim time ``t_end`` (and were not returned before)."""
         self._generate(t_end)
-        now, self._pending = self._pending.until(t_end)
-        return now
+        # the pending frames from ``_returned`` on have not been returned: a cursor, not a split of the rest every call
+        start = self._returned
+        self._returned = max(int(np.searchsorted(self._pending.arrival_s, t_end, side="right")), start)
+        return self._rows(start, self._returned)
 
     def advance(self, t_end: float) -> bytes:
         """The base-station bytes that arrive by sim time ``t_end`` (and were not returned before)."""
@@ -549,7 +568,8 @@ class VirtualParticipant:
 
     def flush(self) -> Delivery:
         """Every frame generated but not yet returned, whatever its arrival time (end of a session)."""
-        rest, self._pending = self._pending, _merge()
+        rest = self._rows(self._returned, None)
+        self._pending, self._returned = _merge(), 0
         return rest
 
     def truth(self) -> Truth:
