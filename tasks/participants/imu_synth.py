@@ -161,7 +161,8 @@ def distort_magnetometer(corrected_sensor: np.ndarray, arrays: NodeArrays) -> np
 
 def to_int16(values: np.ndarray) -> np.ndarray:
     """Round and saturate to the sensor's signed 16-bit range."""
-    return np.clip(np.rint(values), INT16_MIN, INT16_MAX).astype(np.int16)
+    rounded = np.rint(values)
+    return np.clip(rounded, INT16_MIN, INT16_MAX, out=rounded).astype(np.int16)
 
 
 def synthesize_nodes(angles_deg: np.ndarray, cals: Sequence[NodeCalibration], rngs: Sequence[np.random.Generator],

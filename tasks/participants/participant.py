@@ -30,6 +30,8 @@ from itertools import chain
 from pathlib import Path
 from typing import Any
 
+import math
+
 import numpy as np
 import scipy.signal
 
@@ -480,7 +482,7 @@ class VirtualParticipant:
         posture, sway, tremor = np.empty((3, len(t), self.params.n_nodes, 3))
         label, amplitude = np.empty(len(t), dtype=int), np.empty(len(t))
         which = self._move_index(t)
-        cuts = (np.flatnonzero(which[1:] != which[:-1]) + 1).tolist()
+        cuts = [] if which[0] == which[-1] else (np.flatnonzero(which[1:] != which[:-1]) + 1).tolist()  # (which rises)
         for first, end in zip([0, *cuts], [*cuts, len(t)]):
             k, rows = int(which[first]), slice(first, end)
             move = self._moves[k]
@@ -582,12 +584,14 @@ class VirtualParticipant:
 
 def _samples_until(t_end: float) -> int:
     """How many samples (sample k at time k * DT) are taken by sim time ``t_end``."""
-    return int(np.floor(t_end / DT + 1e-9)) + 1
+    return math.floor(t_end / DT + 1e-9) + 1
 
 
 def _merge(*parts: Delivery) -> Delivery:
     """Deliveries in one arrival order (stable: earlier parts first on ties); no parts: nothing."""
-    parts = (Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), []),) + parts
+    parts = tuple(part for part in parts if part.frames)
+    if len(parts) < 2:   # nothing to merge (an empty delivery, or the one part as it is)
+        return parts[0] if parts else Delivery(np.empty(0), np.empty(0, int), np.empty(0, int), [])
     arrival = np.concatenate([p.arrival_s for p in parts])
     node, sample = (np.concatenate([getattr(p, name) for p in parts]) for name in ("node_index", "sample_index"))
     frames = list(chain.from_iterable(p.frames for p in parts))
