@@ -109,6 +109,29 @@ def test_intent_moves_min_jerk_after_reaction_holds_and_returns(p1):
     assert truth.intent[-1] == 0
 
 
+def test_holding_is_the_per_sample_blend_to_the_bit(p1):
+    """The deliberate posture and the noise levels of chunks across several moves (some chunks inside a
+    move, some after it is done, some spanning two) against the formulas evaluated sample by sample."""
+    params, profile = p1
+    vp = VirtualParticipant(params, profile, seed=3)
+    for t, label, amplitude in [(0.5, 1, 0.8), (1.0, 2, 0.5), (4.0, 0, 0.0), (4.3, 3, 1.0)]:
+        vp.set_intent(label, amplitude, t)
+    chunks = [np.arange(a, b) * DT for a, b in [(0, 20), (20, 100), (100, 101), (101, 180), (180, 200), (200, 300),
+                                                (300, 500), (500, 600)]]
+    for t in chunks:
+        posture, sway, tremor, label, amplitude = vp._holding(t)
+        for i, ti in enumerate(t):
+            k = max(int(np.searchsorted([m.t0 for m in vp._moves], ti, side="right")) - 1, 0)
+            move = vp._moves[k]
+            old, new = params.motion(vp._moves[max(k - 1, 0)].label), params.motion(move.label)
+            s = min(max((ti - move.t0) / move.duration, 0.0), 1.0)
+            p = s ** 3 * (10.0 - 15.0 * s + 6.0 * s ** 2)
+            assert np.array_equal(posture[i], move.start + p * (move.target - move.start))
+            assert np.array_equal(sway[i], (1 - p) * old.sway_std_deg + p * new.sway_std_deg)
+            assert np.array_equal(tremor[i], (1 - p) * old.tremor_std_deg + p * new.tremor_std_deg)
+            assert (label[i], amplitude[i]) == (move.label, move.amplitude)
+
+
 def test_low_range_participant_reaches_only_its_max_amplitude():
     params = still(load_participant("P5"))
     vp = VirtualParticipant(params, load_profile("P5"), seed=0)
