@@ -386,6 +386,7 @@ class OnlineChain:
         self._neutral = [(0.0, 0.0, 0.0)] * len(self.nodes)
         self._window = WindowBuffer(model.spec.window, len(self._components), model.spec.stride)
         self._vote = MajorityVote(model.post.vote_length)
+        self._voting = model.post.vote_length > 1   # a vote of one is the label itself: not called per window
         self._calibration: dict[int, list] | None = None
         self.ticks = 0
 
@@ -471,9 +472,9 @@ class OnlineChain:
             states = np.empty((len(mine) + 1, _WIDTH))   # row 0: the state before these frames
             states[0] = previous[slot]
             if len(mine):
-                states[1:, :3] = self._fusion[index].update_many(acc[mine], gyro[mine], mag[mine])
+                states[1:, 3:] = gyro_mine = gyro[mine]
+                states[1:, :3] = self._fusion[index].update_many(acc[mine], gyro_mine, mag[mine])
                 states[1:, :3] -= self._neutral[slot]
-                states[1:, 3:] = gyro[mine]
                 if index not in self._seen:
                     opened = max(opened, int(mine[0]))
                     self._seen.add(index)
@@ -516,7 +517,9 @@ class OnlineChain:
         model's classes, its posterior ``confidence``) and the node states then (Python floats)."""
         threshold = self.model.post.rejection_threshold
         is_rejected = threshold is not None and confidence < threshold
-        label = self._vote.push(NEUTRAL_LABEL if is_rejected else self._labels[best])
+        label = NEUTRAL_LABEL if is_rejected else self._labels[best]
+        if self._voting:
+            label = self._vote.push(label)
         cls = self._classes[label]
         amplitude = self._amplitude.get(label)
         if amplitude is None:

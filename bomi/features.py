@@ -175,6 +175,7 @@ class WindowBuffer:
         self.stride = stride
         self._buffer = np.zeros((2 * length, channels))
         self._count = 0
+        self._offsets = np.arange(length)   # of a window's rows from its first
 
     def push(self, row: np.ndarray) -> np.ndarray | None:
         slot = self._count % self.length
@@ -188,15 +189,17 @@ class WindowBuffer:
 
     def push_many(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``push`` of (n, C) rows in order, in one pass: (the (w, length, C) windows the pushes
-        return, in order; the positions in ``rows`` of the pushes that return one). The buffer ends
-        as n pushes leave it."""
+        return, in order, as one array of their own; the positions in ``rows`` of the pushes that
+        return one). The buffer ends as n pushes leave it. The windows of a chunk are gathered with
+        one index (a copy of a few kB: cheaper than ``sliding_windows``'s view of them, built in
+        Python, and contiguous for the features)."""
         length, count, n = self.length, self._count, len(rows)
         before = min(count, length - 1)            # the rows a window ending at the first new row reaches back to
         start = (count - before) % length
         history = np.concatenate([self._buffer[start:start + before], rows])
         pushes = count + 1 + np.arange(n)          # each row's push number
         made = np.flatnonzero((pushes >= length) & ((pushes - length) % self.stride == 0))
-        windows = sliding_windows(history, length)[made + before - (length - 1)]
+        windows = history[(made + before - (length - 1))[:, None] + self._offsets]
         for k in range(max(0, n - length), n):     # the rows still in the buffer, each in its two slots
             slot = (count + k) % length
             self._buffer[slot] = self._buffer[slot + length] = rows[k]
