@@ -487,8 +487,8 @@ class OnlineChain:
         states = np.hstack([states[np.searchsorted(mine, ticking, side="right")] for mine, states in per_node])
         indices = self.ticks + np.arange(len(ticking))
         self.ticks += len(ticking)
-        windows, made = self._window.push_many(states[:, self._components])
-        return ticking[made] + first, self._decide_many(windows, states[made], indices[made].tolist())
+        vectors, made = self._window.push_many(states[:, self._components], self.model.spec.kind)
+        return ticking[made] + first, self._decide_many(vectors, states[made], indices[made].tolist())
 
     def _tick(self) -> Decision | None:
         index = self.ticks
@@ -501,12 +501,12 @@ class OnlineChain:
         best = int(prob.argmax())
         return self._decide(best, float(prob[best]), state, index)
 
-    def _decide_many(self, windows: np.ndarray, states: np.ndarray, indices: Sequence[int]) -> list[Decision]:
-        """``_decide`` of (w, window, C) full ``windows`` at node states ``states`` (w rows), in order. Each
-        window's scores a product of its own ((1, F) x (F, K), stacked as (w, 1, F)), as ``_tick``'s: one
-        product over all the windows would sum in another order (other bits). The winners and the node
-        states are read out of the arrays once, as Python numbers."""
-        prob = posteriors(self.model, features(self.model.spec.kind, windows)[:, None, :])[:, 0]
+    def _decide_many(self, vectors: np.ndarray, states: np.ndarray, indices: Sequence[int]) -> list[Decision]:
+        """``_decide`` of w full windows' (w, F) feature ``vectors`` at node states ``states`` (w rows), in
+        order. Each window's scores a product of its own ((1, F) x (F, K), stacked as (w, 1, F)), as
+        ``_tick``'s: one product over all the windows would sum in another order (other bits). The
+        winners and the node states are read out of the arrays once, as Python numbers."""
+        prob = posteriors(self.model, vectors[:, None, :])[:, 0]
         best = prob.argmax(axis=1)
         confidence = prob[np.arange(len(best)), best]
         decide = self._decide
