@@ -313,7 +313,9 @@ class MajorityVote:
         if len(history) == history.maxlen:
             counts[history[0]] -= 1   # the oldest label leaves the history
         history.append(label)
-        counts[label] = counts.get(label, 0) + 1
+        mine = counts[label] = counts.get(label, 0) + 1
+        if 2 * mine > len(history):   # more than half of the history: the most frequent label (the common case)
+            return label
         best = max(counts.values())
         if counts[label] == best:   # the most recent label is among the most frequent
             return label
