@@ -21,9 +21,9 @@ from operator import itemgetter
 
 import numpy as np
 
-from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, class_amplitude,
-                             classify_windows, fit_pipeline, model_defects, pipeline_parameters, posteriors,
-                             proportional, reject, single_threaded_blas)
+from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, classify_windows,
+                             fit_pipeline, model_defects, pipeline_parameters, posteriors, proportional, reject,
+                             sample_amplitude, single_threaded_blas)
 from bomi.errors import BomiError
 from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_columns, features, single_label_windows,
                            window_ends)
@@ -377,14 +377,16 @@ class OnlineChain:
         self._state = [0.0] * (len(self.nodes) * _WIDTH)
         self._components = model.spec.components.tolist()
         self._gather = itemgetter(*self._components)   # the window's components of the node states
-        # per class with an amplitude: (its node's slot in the states, its direction as an array or None, its range)
-        self._amplitude = {label: (self._slot[r.node] * _WIDTH, None if r.direction is None else np.asarray(r.direction), r)
+        # per class with an amplitude: (its node's slot in the states, its direction or None, its range)
+        self._amplitude = {label: (self._slot[r.node] * _WIDTH, r.direction, r)
                            for label, r in model.amplitude.items() if r.node in self._slot}
         self._classes = {cls.label: cls for cls in profile.classes}
+        self._labels = model.classes.tolist()   # the LDA's classes (posterior order) as Python ints
         self._seen: set[int] = set()
         self._neutral = [(0.0, 0.0, 0.0)] * len(self.nodes)
         self._window = WindowBuffer(model.spec.window, len(self._components), model.spec.stride)
         self._vote = MajorityVote(model.post.vote_length)
+        self._voting = model.post.vote_length > 1   # a vote of one is the label itself: not called per window
         self._calibration: dict[int, list] | None = None
         self.ticks = 0
 
@@ -470,9 +472,9 @@ class OnlineChain:
             states = np.empty((len(mine) + 1, _WIDTH))   # row 0: the state before these frames
             states[0] = previous[slot]
             if len(mine):
-                states[1:, :3] = self._fusion[index].update_many(acc[mine], gyro[mine], mag[mine])
+                states[1:, 3:] = gyro_mine = gyro[mine]
+                states[1:, :3] = self._fusion[index].update_many(acc[mine], gyro_mine, mag[mine])
                 states[1:, :3] -= self._neutral[slot]
-                states[1:, 3:] = gyro[mine]
                 if index not in self._seen:
                     opened = max(opened, int(mine[0]))
                     self._seen.add(index)
@@ -485,8 +487,8 @@ class OnlineChain:
         states = np.hstack([states[np.searchsorted(mine, ticking, side="right")] for mine, states in per_node])
         indices = self.ticks + np.arange(len(ticking))
         self.ticks += len(ticking)
-        windows, made = self._window.push_many(states[:, self._components])
-        return ticking[made] + first, self._decide_many(windows, states[made], indices[made].tolist())
+        vectors, made = self._window.push_many(states[:, self._components], self.model.spec.kind)
+        return ticking[made] + first, self._decide_many(vectors, states[made], indices[made].tolist())
 
     def _tick(self) -> Decision | None:
         index = self.ticks
@@ -495,30 +497,36 @@ class OnlineChain:
         window = self._window.push(np.array(self._gather(state), dtype=float))
         if window is None:
             return None
-        return self._decide(posteriors(self.model, features(self.model.spec.kind, window[None]))[0], state, index)
-
-    def _decide_many(self, windows: np.ndarray, states: np.ndarray, indices: Sequence[int]) -> list[Decision]:
-        """``_decide`` of (w, window, C) full ``windows`` at node states ``states`` (w rows), in order. Each
-        window's scores a product of its own ((1, F) x (F, K), stacked as (w, 1, F)), as ``_tick``'s: one
-        product over all the windows would sum in another order (other bits)."""
-        prob = posteriors(self.model, features(self.model.spec.kind, windows)[:, None, :])[:, 0]
-        return [self._decide(prob[k], states[k], index) for k, index in enumerate(indices)]
-
-    def _decide(self, prob: np.ndarray, state: Sequence[float], index: int) -> Decision:
-        """The decision of tick ``index`` from the window's (K,) posteriors and the node states then."""
-        model = self.model
+        prob = posteriors(self.model, features(self.model.spec.kind, window[None]))[0]
         best = int(prob.argmax())
-        confidence = float(prob[best])
-        threshold = model.post.rejection_threshold
+        return self._decide(best, float(prob[best]), state, index)
+
+    def _decide_many(self, vectors: np.ndarray, states: np.ndarray, indices: Sequence[int]) -> list[Decision]:
+        """``_decide`` of w full windows' (w, F) feature ``vectors`` at node states ``states`` (w rows), in
+        order. Each window's scores a product of its own ((1, F) x (F, K), stacked as (w, 1, F)), as
+        ``_tick``'s: one product over all the windows would sum in another order (other bits). The
+        winners and the node states are read out of the arrays once, as Python numbers."""
+        prob = posteriors(self.model, vectors[:, None, :])[:, 0]
+        best = prob.argmax(axis=1)
+        confidence = prob[np.arange(len(best)), best]
+        decide = self._decide
+        return [decide(*decision) for decision in zip(best.tolist(), confidence.tolist(), states.tolist(), indices)]
+
+    def _decide(self, best: int, confidence: float, state: Sequence[float], index: int) -> Decision:
+        """The decision of tick ``index`` from the window's winning class (its position ``best`` among the
+        model's classes, its posterior ``confidence``) and the node states then (Python floats)."""
+        threshold = self.model.post.rejection_threshold
         is_rejected = threshold is not None and confidence < threshold
-        label = self._vote.push(NEUTRAL_LABEL if is_rejected else int(model.classes[best]))
+        label = NEUTRAL_LABEL if is_rejected else self._labels[best]
+        if self._voting:
+            label = self._vote.push(label)
         cls = self._classes[label]
-        g, amplitude = 0.0, None
-        if label in self._amplitude:
-            base, direction, amplitude = self._amplitude[label]
-            g = float(class_amplitude(state[base:base + 3], direction))
-        return Decision(label=label, name=cls.name, function=cls.function, confidence=confidence,
-                        rejected=is_rejected, gamma=g, nu=proportional(g, amplitude), sample_index=index)
+        amplitude = self._amplitude.get(label)
+        if amplitude is None:
+            return Decision(label, cls.name, cls.function, confidence, is_rejected, 0.0, 0.0, index)
+        base, direction, calibrated = amplitude
+        g = sample_amplitude(state[base], state[base + 1], state[base + 2], direction)
+        return Decision(label, cls.name, cls.function, confidence, is_rejected, g, proportional(g, calibrated), index)
 
 
 # ---------------------------------------------------------------- settings chosen on the training data

@@ -27,6 +27,7 @@ from collections import deque
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import cache
+import math
 
 import numpy as np
 from sklearn import config_context
@@ -312,7 +313,9 @@ class MajorityVote:
         if len(history) == history.maxlen:
             counts[history[0]] -= 1   # the oldest label leaves the history
         history.append(label)
-        counts[label] = counts.get(label, 0) + 1
+        mine = counts[label] = counts.get(label, 0) + 1
+        if 2 * mine > len(history):   # more than half of the history: the most frequent label (the common case)
+            return label
         best = max(counts.values())
         if counts[label] == best:   # the most recent label is among the most frequent
             return label
@@ -358,6 +361,17 @@ def class_amplitude(angles: np.ndarray, direction: tuple[float, float, float] | 
     if direction is None:
         return gamma(angles[..., 0], angles[..., 1], angles[..., 2])
     return angles @ np.asarray(direction)
+
+
+def sample_amplitude(pitch: float, roll: float, yaw: float, direction: tuple[float, float, float] | None) -> float:
+    """``class_amplitude`` of one sample's angles, on Python floats (the streaming chain's every
+    decision), with the bits of the (3,)-array form: ``math.sqrt`` rounds correctly as ``np.sqrt``
+    does, and a (3,) . (3,) product adds its terms one after the other from 0.0 (the sum written out
+    here; tests/test_classifier.py checks both against ``class_amplitude``)."""
+    if direction is None:
+        return math.sqrt(pitch * pitch + roll * roll + yaw * yaw)
+    along_pitch, along_roll, along_yaw = direction
+    return 0.0 + pitch * along_pitch + roll * along_roll + yaw * along_yaw
 
 
 def amplitude_ranges(angles: dict[int, np.ndarray], labels: np.ndarray, class_nodes: dict[int, int],

@@ -186,22 +186,25 @@ class WindowBuffer:
         start = slot + 1
         return self._buffer[start:start + self.length]
 
-    def push_many(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``push`` of (n, C) rows in order, in one pass: (the (w, length, C) windows the pushes
-        return, in order; the positions in ``rows`` of the pushes that return one). The buffer ends
-        as n pushes leave it."""
+    def push_many(self, rows: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+        """``features(kind, window)`` of every window n ``push`` calls of (n, C) ``rows`` return, in order,
+        as (w, F); and the positions in ``rows`` of the pushes that return one. The buffer ends as n
+        pushes leave it. The features come by ``window_features`` from the rows the windows span (FV3's
+        half-window statistics once per run of samples, not per window: the same bits)."""
         length, count, n = self.length, self._count, len(rows)
         before = min(count, length - 1)            # the rows a window ending at the first new row reaches back to
         start = (count - before) % length
         history = np.concatenate([self._buffer[start:start + before], rows])
         pushes = count + 1 + np.arange(n)          # each row's push number
         made = np.flatnonzero((pushes >= length) & ((pushes - length) % self.stride == 0))
-        windows = sliding_windows(history, length)[made + before - (length - 1)]
+        # the first window's first row in ``history``: from there on, every stride-th window is one made
+        first = int(made[0]) + before - (length - 1) if len(made) else len(history)
+        out = window_features(history[first:], kind, length, self.stride)
         for k in range(max(0, n - length), n):     # the rows still in the buffer, each in its two slots
             slot = (count + k) % length
             self._buffer[slot] = self._buffer[slot + length] = rows[k]
         self._count = count + n
-        return windows, made
+        return out, made
 
     def reset(self) -> None:
         self._count = 0

@@ -142,7 +142,7 @@ class SampleIndex:
         """The indices of n frames in arrival order at once ((n,) node ids and packet counters), as n calls make them."""
         counters = np.asarray(counters, dtype=np.int64)
         out = np.empty(len(counters), dtype=np.int64)
-        for node_id in np.unique(node_ids).tolist():
+        for node_id in set(node_ids.tolist()):   # each node's indices apart: the order of the nodes does not matter
             mine = np.flatnonzero(node_ids == node_id)
             last = self._last.get(node_id, int(counters[mine[0]]) - 1)
             out[mine] = last + np.cumsum(counter_steps(last, counters[mine]))

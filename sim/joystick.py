@@ -189,6 +189,17 @@ class JoystickState:
             raise ValueError(f"unknown button(s) {sorted(set(self.pressed) - set(BUTTONS))}; expected {BUTTONS}")
         object.__setattr__(self, "pressed", frozenset(self.pressed))
 
+    @classmethod
+    def trusted(cls, deflection: dict[str, float], pressed: frozenset[str] = frozenset()) -> JoystickState:
+        """A state from internal code that guarantees what the constructor checks (known functions with
+        deflections in [0, 1], known buttons, a frozenset): without the checks, which would otherwise
+        run at every control tick of a channel (``tasks.stick.DecisionStick``). Input from a user, a
+        file or a planner goes through the constructor."""
+        state = object.__new__(cls)
+        object.__setattr__(state, "deflection", deflection)
+        object.__setattr__(state, "pressed", pressed)
+        return state
+
 
 @dataclass(frozen=True)
 class ArmCommand:

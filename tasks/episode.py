@@ -291,9 +291,9 @@ class BomiChannel:
                      if cls.function in FUNCTIONS}
         self._watched: Watched | None = None  # the proportional posture taken up last
         # what _watch reads every tick, made once: per mode, the hand axis each stick function moves along
-        # (as the arrays the speed's dot product takes), and the share of a tick in the speed's smoothing
+        # (as Python floats), and the share of a tick in the speed's smoothing
         layout = self.controls.layout
-        self._linear_axes = {mode: {function: np.array(axis, dtype=float)
+        self._linear_axes = {mode: {function: tuple(float(v) for v in axis)
                                     for function, axis in layout.axes(mode, Kind.LINEAR).items()}
                              for mode in layout.modes}
         self._smoothing = min(1.0, DT / participant.params.feel.speed_smoothing_s)
@@ -370,6 +370,8 @@ class BomiChannel:
         if made is not None:
             self.receiver.take(made)
         decided = self.receiver.until(self.clock_offset + t_end)
+        if not decided:
+            return self.answered(decided)
         self._rows += [(sample, decision.label, decision.gamma, decision.nu) for sample, decision in decided]
         return self.answered([decision for _, decision in decided])
 
@@ -428,7 +430,8 @@ class BomiChannel:
         if axis is None:
             return False
         if self.stick.function == function:
-            along = float(np.dot(seen, axis))
+            (x, y, z), (ax, ay, az) = seen.tolist(), axis
+            along = 0.0 + x * ax + y * ay + z * az   # np.dot's sum of a (3,) . (3,) product, in its order
             watched.speed += (along - watched.speed) * self._smoothing
         return True
 

@@ -36,6 +36,9 @@ def profile_layout(profile: Profile) -> Layout:
     return THREE_AXIS if profile.joystick_layout is None else LAYOUTS[profile.joystick_layout]
 
 
+_NOTHING: frozenset[str] = frozenset()
+
+
 def rising_edge(button: str | None, previous: str | None) -> frozenset[str]:
     """A button counts as pressed only on the tick it goes down."""
     return frozenset({button}) if button is not None and button != previous else frozenset()
@@ -53,10 +56,12 @@ class DecisionStick:
         self.function, self.nu = NEUTRAL_FUNCTION, 0.0
 
     def update(self, decisions: Iterable[Decision]) -> JoystickState:
-        pressed: set[str] = set()
+        pressed = _NOTHING
         for decision in decisions:
-            pressed |= rising_edge(decision.function if decision.function in BUTTONS else None, self.function)
+            if decision.function in BUTTONS:
+                pressed = pressed | rising_edge(decision.function, self.function)
             self.function, self.nu = decision.function, decision.nu
+        # a function of the stick with nu in (0, 1], buttons among BUTTONS: what the constructor checks holds
         if self.function in FUNCTIONS and self.nu > 0:
-            return JoystickState({self.function: min(1.0, self.nu)}, frozenset(pressed))
-        return JoystickState(pressed=frozenset(pressed))
+            return JoystickState.trusted({self.function: min(1.0, self.nu)}, pressed)
+        return JoystickState.trusted({}, pressed)

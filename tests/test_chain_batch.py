@@ -11,7 +11,7 @@ import pytest
 
 from bomi.chain import OnlineChain, train
 from bomi.classifier import MajorityVote, PostProcessing
-from bomi.features import WindowBuffer
+from bomi.features import WindowBuffer, features
 from bomi.frames import COUNTER_MODULO, FrameParser, SampleIndex, encode_imu_frame, ImuFrame
 from bomi.profiles import load_profile
 from tasks.participants.imu_synth import Delivery
@@ -20,16 +20,18 @@ from tasks.participants.participant import (VirtualParticipant, calibration_sess
 from tasks.participants.receiver import Receiver
 
 
-@pytest.mark.parametrize("length,stride", [(8, 1), (5, 2), (1, 1)])
-def test_window_buffer_push_many_is_push_row_by_row(length, stride):
+@pytest.mark.parametrize("length,stride,kind", [(8, 1, "FV3"), (8, 3, "FV3"), (6, 2, "FV3"), (5, 2, "FV2"),
+                                               (8, 1, "FV1"), (1, 1, "FV1")])
+def test_window_buffer_push_many_is_push_row_by_row(length, stride, kind):
+    """The features of the windows ``push_many`` makes are those of the windows ``push`` returns, to the bit."""
     rng = np.random.default_rng(0)
     one, many = WindowBuffer(length, 4, stride), WindowBuffer(length, 4, stride)
-    for size in [0, 3, 1, 12, 2, 7, 30]:
+    for size in [0, 3, 1, 12, 2, 7, 30, 5]:
         rows = rng.standard_normal((size, 4))
-        expected = [(k, w.copy()) for k in range(size) if (w := one.push(rows[k])) is not None]
-        windows, made = many.push_many(rows)
-        assert made.tolist() == [k for k, _ in expected]
-        assert all(np.array_equal(w, e) for w, (_, e) in zip(windows, expected)) and len(windows) == len(expected)
+        expected = [(k, features(kind, w[None])[0]) for k in range(size) if (w := one.push(rows[k])) is not None]
+        got, made = many.push_many(rows, kind)
+        assert made.tolist() == [k for k, _ in expected] and len(got) == len(expected)
+        assert all(np.array_equal(g, e) for g, (_, e) in zip(got, expected))
 
 
 def test_sample_index_many_is_one_call_per_frame():

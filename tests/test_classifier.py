@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 from bomi.chain import MotionCopies, prepare, recorded_priors, training_windows
 from bomi.classifier import (AmplitudeRange, MajorityVote, PipelineParameters, PostProcessing, amplitude_ranges, class_amplitude,
                              RANK_TOLERANCE, classify_windows, fit_pipeline, gamma, majority_vote, numerical_rank, posteriors,
-                             proportional, reject)
+                             proportional, reject, sample_amplitude)
 from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.model_io import FORMAT_VERSION, load_model, save_model
@@ -98,6 +98,25 @@ def test_amplitude_along_the_class_direction_by_hand():
     assert proportional(float(class_amplitude(np.array([4.5, 6.0, 0.0]), r.direction)), r) == pytest.approx(0.5)
     with pytest.raises(ValueError, match="amplitude kind"):
         amplitude_ranges(angles, labels, {1: 1}, kind="norm")
+
+
+def test_a_samples_amplitude_on_floats_is_the_arrays_bit_for_bit():
+    """The streaming chain's ``sample_amplitude`` (Python floats) gives the bits ``class_amplitude``
+    gives on the sample's (3,) array: gamma and the component along a unit direction, on angles of
+    every size and sign, signed zeros included; by hand on the 3-4-5 sample."""
+    assert sample_amplitude(3.0, 4.0, 0.0, None) == 5.0
+    assert sample_amplitude(3.0, 4.0, 0.0, (0.6, 0.8, 0.0)) == 0.6 * 3.0 + 0.8 * 4.0
+    rng = np.random.default_rng(11)
+    angles = rng.normal(size=(20000, 3)) * rng.choice([1e-3, 1.0, 30.0, 170.0], size=(20000, 1))
+    angles[:50] = np.where(rng.uniform(size=(50, 3)) < 0.5, -0.0, 0.0)
+    directions = rng.normal(size=(40, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    for direction in [None, *(tuple(d) for d in directions.tolist())]:
+        for row in angles[rng.choice(len(angles), 2000)].tolist() + angles[:50].tolist():
+            expected = float(class_amplitude(np.array(row), direction))
+            got = sample_amplitude(*row, direction)
+            assert type(got) is float
+            assert got == expected and np.signbit(got) == np.signbit(expected), (row, direction)
 
 
 def test_post_processing_validation():

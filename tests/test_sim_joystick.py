@@ -93,6 +93,19 @@ def test_invalid_states_are_rejected(bad):
         JoystickState(**bad)
 
 
+def test_a_trusted_state_is_the_checked_one_and_the_constructor_still_checks():
+    """``JoystickState.trusted`` (internal code's states, unchecked) makes the state the constructor
+    makes; a user's state still goes through the constructor's checks."""
+    for deflection, pressed in [({"F": 0.25}, frozenset({"B1"})), ({}, frozenset()), ({"Lr": 1.0}, frozenset())]:
+        trusted = JoystickState.trusted(dict(deflection), pressed)
+        assert trusted == JoystickState(dict(deflection), pressed) and type(trusted.pressed) is frozenset
+    assert JoystickState.trusted({}) == JoystickState()
+    with pytest.raises(ValueError, match="deflection must be in"):
+        JoystickState({"F": 1.5})
+    with pytest.raises(ValueError, match="unknown button"):
+        JoystickState(pressed={"B3"})
+
+
 def test_combine_and_layout_tables_equal_the_naive_forms():
     """combine() on floats equals the sum of numpy axis arrays bit for bit; axes() and find() from
     their tables equal a search through the layout's effects."""
