@@ -29,7 +29,7 @@ from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_column
                            window_ends)
 from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
-from bomi.fusion import NodeFusion, neutral_offsets
+from bomi.fusion import NodeFusion, neutral_offsets, load_filter
 from bomi.profiles import SELECT, Profile
 from bomi.recording import Recording, Signal
 
@@ -374,6 +374,7 @@ class OnlineChain:
         self._slot = {node: k for k, node in enumerate(self.nodes)}
         calibrations = {n.index: n.calibration for n in profile.nodes}
         self._fusion = {node: NodeFusion(calibrations[node]) for node in self.nodes}
+        load_filter()   # before any frame: a stream must not wait for it between two samples
         self._state = [0.0] * (len(self.nodes) * _WIDTH)
         self._components = model.spec.components.tolist()
         self._gather = itemgetter(*self._components)   # the window's components of the node states

@@ -165,6 +165,13 @@ class NodeFusion:
         return out
 
 
+def load_filter() -> None:
+    """Run the filter once on a scratch state: its first call in a process imports numba and loads
+    the compiled ``fuse_samples`` (~0.5 s), which a paced stream (``bomi live``) must not spend
+    between two samples; afterwards a call costs microseconds."""
+    NodeFusion().update((0, 0, -16384), (0, 0, 0), (100, 0, 0))
+
+
 def fuse(acc: np.ndarray, gyro: np.ndarray, mag: np.ndarray,
          cal: NodeCalibration | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Batch fusion of a whole recording of one node: (n, 3) arrays -> pitch, roll, yaw arrays (n,)."""

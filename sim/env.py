@@ -81,6 +81,11 @@ class ArmSim:
         self._tool_xmat = self.data.site_xmat[self.scene.tool_site]
         self._finger_lower = self.scene.finger_range[:, 0].tolist()
         self._renderer: FrameRenderer | None = None
+        # the tick's compiled kernels loaded now: a kernel's first call imports numba and loads its
+        # machine code (~0.5 s), which a paced loop (bomi live) must not spend between two ticks;
+        # reset() below puts the controller back
+        self.controller.reset(self.home_q)
+        self.controller.joint_velocities(self.home_q, np.zeros(3), np.zeros(3))
         self.reset()
 
     def _check_frame_size(self) -> None:
