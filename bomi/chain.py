@@ -29,7 +29,7 @@ from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_column
                            window_ends)
 from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
-from bomi.fusion import NodeFusion, neutral_offsets, load_filter
+from bomi.fusion import NodeFusion, load_filter, neutral_offsets
 from bomi.profiles import SELECT, Profile
 from bomi.recording import Recording, Signal
 

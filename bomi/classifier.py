@@ -23,11 +23,11 @@ below a threshold -> the neutral class) then a majority vote over the last N dec
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import cache
-import math
 
 import numpy as np
 from sklearn import config_context

@@ -22,6 +22,7 @@ matrix of (pitch, roll, yaw).
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -29,8 +30,6 @@ from functools import cached_property
 from itertools import chain
 from pathlib import Path
 from typing import Any
-
-import math
 
 import numpy as np
 import scipy.signal
