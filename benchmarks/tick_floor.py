@@ -1,0 +1,196 @@
+"""What an episode would cost with its layers taken away, against the physics-only limit: the
+floor each layer leaves, and so which layers a share-of-the-limit bar (issue 30) needs compiled.
+
+    python benchmarks/tick_floor.py [--seeds 975 976 977] [--repeats 3] [--physics-s 20]
+
+Each seed's joystick and BoMI episodes of virtual P1 (``bomi run-task``'s ``run_job``) run once
+whole, their arm's every tick taped (the joystick state it was given, the twist its joystick made
+of it, the actuator controls the tick set); then the same task seed is replayed on the same arm
+from its reset, layer by layer, each replay checked to end in the recorded episode's final state to
+the bit (the same simulation, not a similar one):
+
+- **physics**: each tick's recorded controls written to ``data.ctrl``, ``mj_step`` of the tick's
+  substeps (the episode's own physics, nothing else);
+- **+ IK**: ``ArmSim.step_twist`` of the recorded twist (the differential IK, Pinocchio, the finger
+  servo, then the physics);
+- **+ joystick**: ``ArmSim.step`` of the recorded joystick state (the arm's joystick: modes,
+  buttons, speeds);
+- **+ task**: the task's ``view`` before and ``outcome`` after each such step, as the loop calls them;
+- **episode**: the whole ``run_job`` (for the BoMI, calibration and training included): the above
+  plus the scripted user's planner, the channel (for the BoMI, the participant's synthesis, frames,
+  chain) and the loop's own work.
+
+Charged as ``benchmarks/side_by_side.py`` charges its kinds: CPU seconds, one process pinned to one
+core, after one untimed episode of each kind, the limit its ``physics_alone`` (the scene at rest).
+Each run of a layer comes just after a run of the limit and is compared with it: a run of 0.3-7 s
+is easily slowed by other work on a shared machine (the limit read 45-69x within minutes), and
+the pair sees the same machine. The share of the limit a layer reaches is the best an episode
+could reach were everything it leaves out free. Writes
+benchmarks/results/tick_floor.md and .json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from side_by_side import BARS, BOMI, JOY, physics_alone
+from sim.env import ArmSim
+from sim.joystick import JoystickState
+from tasks.cli.task import EpisodeJob, run_job
+from tasks.stacking import StackingTask, TaskConfig
+
+RESULTS = Path(__file__).resolve().parent / "results"
+LAYERS = ("physics", "+ IK", "+ joystick", "+ task", "episode")
+KINDS = {"joystick": JOY, "bomi": BOMI}
+
+
+class Tape:
+    """Every ``ArmSim.step`` of an episode: the state, the twist its joystick made, the controls set."""
+
+    def __init__(self) -> None:
+        self.states: list[JoystickState] = []
+        self.twists: list[tuple[list[float], list[float], float]] = []
+        self.ctrl: list[np.ndarray] = []
+        self.arm: ArmSim | None = None
+        self._step = ArmSim.step
+
+    def __enter__(self) -> Tape:
+        step, tape = self._step, self
+
+        def taped(arm: ArmSim, state: JoystickState):
+            command = step(arm, state)
+            tape.arm = arm
+            tape.states.append(state)
+            tape.twists.append((list(command.linear), list(command.angular), command.finger))
+            tape.ctrl.append(arm.data.ctrl.copy())
+            return command
+
+        ArmSim.step = taped
+        return self
+
+    def __exit__(self, *exc) -> None:
+        ArmSim.step = self._step
+
+
+def replay(tape: Tape, seed: int, layer: str, final_qpos: np.ndarray) -> float:
+    """CPU seconds of ``layer`` over the taped ticks, from the task's reset; checks the end state."""
+    arm = tape.arm
+    task = StackingTask(arm, TaskConfig())
+    task.reset(seed)
+    model, data, substeps = arm.model, arm.data, arm.config.physics.substeps
+    loops: dict[str, Callable[[], None]] = {
+        "physics": lambda: [(data.ctrl.__setitem__(slice(None), c), mujoco.mj_step(model, data, nstep=substeps))
+                            for c in tape.ctrl],
+        "+ IK": lambda: [arm.step_twist(*twist) for twist in tape.twists],
+        "+ joystick": lambda: [arm.step(state) for state in tape.states],
+        "+ task": lambda: [(task.view(), arm.step(state), task.outcome()) for state in tape.states],
+    }
+    cpu = time.process_time()
+    loops[layer]()
+    spent = time.process_time() - cpu
+    if not np.array_equal(data.qpos, final_qpos):
+        raise RuntimeError(f"seed {seed}: the '{layer}' replay did not end where the episode did")
+    return spent
+
+
+def measure(operator: str, seed: int, repeats: int, limit: Callable[[], float]) -> dict:
+    """Each of LAYERS run ``repeats`` times for one episode, each run just after a run of the limit:
+    their CPU seconds and the limit's x real time beside them."""
+    with Tape() as tape:  # taped once, untimed (the tape's copies would be charged to the episode)
+        run_job(EpisodeJob(operator, "P1", seed))
+    final_qpos = tape.arm.data.qpos.copy()
+
+    def episode() -> float:
+        cpu = time.process_time()
+        run_job(EpisodeJob(operator, "P1", seed))
+        return time.process_time() - cpu
+
+    runs: dict[str, list[tuple[float, float]]] = {layer: [] for layer in LAYERS}
+    for _ in range(repeats):
+        for layer in LAYERS:
+            limit_x = limit()
+            cpu = episode() if layer == "episode" else replay(tape, seed, layer, final_qpos)
+            runs[layer].append((cpu, limit_x))
+    return {"runs": runs, "sim_s": len(tape.states) * tape.arm.dt, "ticks": len(tape.states)}
+
+
+def shares(run: dict, layer: str) -> list[float]:
+    """The layer's share of the limit in each of its runs (against the limit's run just before it)."""
+    return [run["sim_s"] / cpu / limit_x for cpu, limit_x in run["runs"][layer]]
+
+
+def markdown(record: dict) -> str:
+    args = record["args"]
+    lines = [f"# The floor each layer leaves (seeds {', '.join(map(str, args['seeds']))}, one process on one core)", "",
+             f"`python benchmarks/tick_floor.py --seeds {' '.join(map(str, args['seeds']))} --repeats {args['repeats']}` "
+             f"at commit {record['commit']}; 1-min load average {record['load_before']:.2f} before, "
+             f"{record['load_after']:.2f} after. Each layer is a replay of the recorded episode, on the same arm from the "
+             "task's reset, ending in its final state to the bit (see the script's docstring). Every run of a layer "
+             f"({args['repeats']} a seed) comes just after a run of the limit (the scene's physics alone at rest, "
+             f"{args['physics_s']:g} s simulated), and its share of the limit is formed against that run, so that the "
+             "machine's changing speed (the limit read 45-69x within minutes here) loads both alike. Share: the median "
+             "over seeds and runs (and per seed); x real time and us/tick: the least CPU of a seed's runs (its floor), "
+             "median over seeds; adds: what the layer adds to the one above it, per control tick.", ""]
+    for operator, kind in KINDS.items():
+        lines += [f"## {kind} (bar: >= {BARS[kind][0]} of the limit)", "",
+                  "| layer | share of the limit | per seed (median share) | x real time (CPU, floor) | us/tick (floor) | adds (us/tick) |",
+                  "|---|---|---|---|---|---|"]
+        runs, above = record["runs"][operator], None
+        for layer in LAYERS:
+            per_tick = [1e6 * min(cpu for cpu, _ in r["runs"][layer]) / r["ticks"] for r in runs]
+            xs = [r["sim_s"] / min(cpu for cpu, _ in r["runs"][layer]) for r in runs]
+            adds = "" if above is None else f"{statistics.median(a - b for a, b in zip(per_tick, above)):.0f}"
+            lines.append(f"| {layer} | {statistics.median(x for r in runs for x in shares(r, layer)):.2f} | "
+                         + ", ".join(f"{statistics.median(shares(r, layer)):.2f}" for r in runs)
+                         + f" | {statistics.median(xs):.1f} | {statistics.median(per_tick):.0f} | {adds} |")
+            above = per_tick
+        lines.append("")
+    limits = [x for op in KINDS for r in record["runs"][op] for layer in LAYERS for _, x in r["runs"][layer]]
+    lines += [f"The limit's runs: {min(limits):.1f}-{max(limits):.1f}x real time (median {statistics.median(limits):.1f}).", ""]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[975, 976, 977], help="task seeds (development: 0-999)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs of each layer a seed")
+    parser.add_argument("--physics-s", type=float, default=20.0, help="simulated seconds of each run of the limit")
+    parser.add_argument("--out", default="tick_floor", help="results file name (benchmarks/results/OUT.md, .json)")
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    load_before = os.getloadavg()[0]
+    arm = ArmSim()
+
+    def limit() -> float:
+        run = physics_alone(arm, args.physics_s, 1)
+        return run["sim_s"] / run["cpu_s"]
+
+    for operator in KINDS:  # steady state: files parsed, scene compiled, kernels loaded
+        measure(operator, args.seeds[0], 1, limit)
+    runs: dict[str, list[dict]] = {operator: [] for operator in KINDS}
+    for seed in args.seeds:
+        for operator in KINDS:
+            runs[operator].append(measure(operator, seed, args.repeats, limit))
+        print(f"seed {seed}: " + "; ".join(f"{op} " + ", ".join(
+            f"{layer} {statistics.median(shares(runs[op][-1], layer)):.2f}" for layer in LAYERS) for op in KINDS), flush=True)
+    commit = os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
+    record = {"args": vars(args), "commit": commit, "load_before": load_before, "load_after": os.getloadavg()[0],
+              "runs": runs}
+    RESULTS.mkdir(exist_ok=True)
+    text = markdown(record)
+    (RESULTS / f"{args.out}.md").write_text(text, encoding="utf-8")
+    (RESULTS / f"{args.out}.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+"""benchmarks/tick_floor.py replays a taped episode layer by layer: each replay must be the same
+simulation as the episode (its claim that a layer's cost is the floor of that episode rests on it)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tasks.cli.task import EpisodeJob, run_job
+from tests.helpers import benchmark_script
+
+SEED = 3  # development seed
+
+
+@pytest.fixture(scope="module")
+def floor():
+    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.syspath_prepend(benchmarks)  # tick_floor imports side_by_side beside it
+        yield benchmark_script("tick_floor")
+
+
+@pytest.fixture(scope="module")
+def taped(floor):
+    with floor.Tape() as tape:
+        log = run_job(EpisodeJob("joystick", "P1", SEED))
+    return tape, log, tape.arm.data.qpos.copy()
+
+
+def test_the_tape_holds_every_tick_of_the_episode(taped):
+    tape, log, _ = taped
+    assert len(tape.states) == len(tape.twists) == len(tape.ctrl) == len(log.t)
+
+
+@pytest.mark.parametrize("layer", ["physics", "+ IK", "+ joystick", "+ task"])
+def test_every_layer_replays_the_episode_to_its_final_state_bit_for_bit(floor, taped, layer):
+    tape, _, final = taped
+    assert floor.replay(tape, SEED, layer, final) > 0
+
+
+def test_a_replay_that_leaves_the_episode_is_refused(floor, taped):
+    tape, _, final = taped
+    twists = list(tape.twists)
+    tape.twists[len(twists) // 2] = ([0.05, 0.0, 0.0], [0.0, 0.0, 0.0], 0.0)  # one tick pushed another way
+    try:
+        with pytest.raises(RuntimeError, match="did not end where the episode did"):
+            floor.replay(tape, SEED, "+ IK", final)
+    finally:
+        tape.twists[:] = twists
