@@ -129,32 +129,37 @@ def shares(run: dict, layer: str) -> list[float]:
 
 def markdown(record: dict) -> str:
     args = record["args"]
+    limits = [x for op in KINDS for r in record["runs"][op] for layer in LAYERS for _, x in r["runs"][layer]]
+    limit_tick_us = 1e6 * record["tick_s"] / statistics.median(limits)  # a control tick of the limit, at its median speed
     lines = [f"# The floor each layer leaves (seeds {', '.join(map(str, args['seeds']))}, one process on one core)", "",
              f"`python benchmarks/tick_floor.py --seeds {' '.join(map(str, args['seeds']))} --repeats {args['repeats']}` "
              f"at commit {record['commit']}; 1-min load average {record['load_before']:.2f} before, "
              f"{record['load_after']:.2f} after. Each layer is a replay of the recorded episode, on the same arm from the "
              "task's reset, ending in its final state to the bit (see the script's docstring). Every run of a layer "
              f"({args['repeats']} a seed) comes just after a run of the limit (the scene's physics alone at rest, "
-             f"{args['physics_s']:g} s simulated), and its share of the limit is formed against that run, so that the "
-             "machine's changing speed (the limit read 45-69x within minutes here) loads both alike. Share: the median "
-             "over seeds and runs (and per seed); x real time and us/tick: the least CPU of a seed's runs (its floor), "
-             "median over seeds; adds: what the layer adds to the one above it, per control tick.", ""]
+             f"{args['physics_s']:g} s simulated) and its share is formed against that run: the limit's runs read "
+             f"{min(limits):.1f}-{max(limits):.1f}x real time (median {statistics.median(limits):.1f}), the machine's "
+             "speed changing within minutes. Share: the median over seeds and runs (per seed: the median of its runs). "
+             f"A tick costs: a control tick ({record['tick_s'] * 1e3:.1f} ms simulated) at the limit's median speed ({limit_tick_us:.0f} us a tick "
+             "for the scene at rest) divided by the share; adds: what the layer adds to the one above it.", ""]
     for operator, kind in KINDS.items():
-        lines += [f"## {kind} (bar: >= {BARS[kind][0]} of the limit)", "",
-                  "| layer | share of the limit | per seed (median share) | x real time (CPU, floor) | us/tick (floor) | adds (us/tick) |",
-                  "|---|---|---|---|---|---|"]
+        bar = BARS[kind][0]
+        lines += [f"## {kind} (bar: >= {bar} of the limit)", "",
+                  "| layer | share of the limit | per seed | a tick costs (us) | adds (us/tick) |", "|---|---|---|---|---|"]
         runs, above = record["runs"][operator], None
+        cost = {}
         for layer in LAYERS:
-            per_tick = [1e6 * min(cpu for cpu, _ in r["runs"][layer]) / r["ticks"] for r in runs]
-            xs = [r["sim_s"] / min(cpu for cpu, _ in r["runs"][layer]) for r in runs]
-            adds = "" if above is None else f"{statistics.median(a - b for a, b in zip(per_tick, above)):.0f}"
-            lines.append(f"| {layer} | {statistics.median(x for r in runs for x in shares(r, layer)):.2f} | "
-                         + ", ".join(f"{statistics.median(shares(r, layer)):.2f}" for r in runs)
-                         + f" | {statistics.median(xs):.1f} | {statistics.median(per_tick):.0f} | {adds} |")
-            above = per_tick
-        lines.append("")
-    limits = [x for op in KINDS for r in record["runs"][op] for layer in LAYERS for _, x in r["runs"][layer]]
-    lines += [f"The limit's runs: {min(limits):.1f}-{max(limits):.1f}x real time (median {statistics.median(limits):.1f}).", ""]
+            share = statistics.median(x for r in runs for x in shares(r, layer))
+            cost[layer] = limit_tick_us / share
+            adds = "" if above is None else f"{cost[layer] - above:.0f}"
+            lines.append(f"| {layer} | {share:.2f} | " + ", ".join(f"{statistics.median(shares(r, layer)):.2f}" for r in runs)
+                         + f" | {cost[layer]:.0f} | {adds} |")
+            above = cost[layer]
+        allowed = limit_tick_us / bar - cost["+ task"]
+        spent = cost["episode"] - cost["+ task"]
+        lines += ["", f"The bar allows a tick {limit_tick_us / bar:.0f} us: {allowed:.0f} us for what the '+ task' layer "
+                  f"leaves out (the scripted user's planner, the channel, the loop{', the set-up' if operator == 'bomi' else ''}), "
+                  f"which costs {spent:.0f} us now: {'a cut of ' + format(1 - allowed / spent, '.0%') if allowed < spent else 'met'}.", ""]
     return "\n".join(lines)
 
 
@@ -184,7 +189,7 @@ def main() -> None:
             f"{layer} {statistics.median(shares(runs[op][-1], layer)):.2f}" for layer in LAYERS) for op in KINDS), flush=True)
     commit = os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
     record = {"args": vars(args), "commit": commit, "load_before": load_before, "load_after": os.getloadavg()[0],
-              "runs": runs}
+              "tick_s": arm.dt, "runs": runs}
     RESULTS.mkdir(exist_ok=True)
     text = markdown(record)
     (RESULTS / f"{args.out}.md").write_text(text, encoding="utf-8")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from helpers import benchmark_script
 from tasks.cli.task import EpisodeJob, run_job
-from tests.helpers import benchmark_script
 
 SEED = 3  # development seed
 
