@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from helpers import benchmark_script
+from sim.env import ArmSim
 from tasks.cli.task import EpisodeJob, run_job
 
 SEED = 3  # development seed
@@ -18,6 +19,11 @@ def floor():
     with pytest.MonkeyPatch.context() as patch:
         patch.syspath_prepend(benchmarks)  # tick_floor imports side_by_side beside it
         yield benchmark_script("tick_floor")
+
+
+@pytest.fixture
+def limit(floor):
+    return floor.InterleavedLimit(ArmSim(), every=30, physics_s=20.0)
 
 
 @pytest.fixture(scope="module")
@@ -33,17 +39,20 @@ def test_the_tape_holds_every_tick_of_the_episode(taped):
 
 
 @pytest.mark.parametrize("layer", ["physics", "+ IK", "+ joystick", "+ task"])
-def test_every_layer_replays_the_episode_to_its_final_state_bit_for_bit(floor, taped, layer):
+def test_every_layer_replays_the_episode_to_its_final_state_bit_for_bit(floor, taped, limit, layer):
     tape, _, final = taped
-    assert floor.replay(tape, SEED, layer, final) > 0
+    assert floor.replay(tape, SEED, layer, final, limit) > 0
+    # the limit ran between the layer's ticks: a chunk after every 30 of them, 30 ticks of physics each
+    assert limit.sim_s == pytest.approx(len(tape.states) // 30 * 30 * tape.arm.dt)
+    assert 0 < limit.cpu <= limit.excluded
 
 
-def test_a_replay_that_leaves_the_episode_is_refused(floor, taped):
+def test_a_replay_that_leaves_the_episode_is_refused(floor, taped, limit):
     tape, _, final = taped
     twists = list(tape.twists)
     tape.twists[len(twists) // 2] = ([0.05, 0.0, 0.0], [0.0, 0.0, 0.0], 0.0)  # one tick pushed another way
     try:
         with pytest.raises(RuntimeError, match="did not end where the episode did"):
-            floor.replay(tape, SEED, "+ IK", final)
+            floor.replay(tape, SEED, "+ IK", final, limit)
     finally:
         tape.twists[:] = twists
