@@ -21,15 +21,20 @@ def floor():
         yield benchmark_script("tick_floor")
 
 
+@pytest.fixture(scope="module")
+def limit_arm():
+    return ArmSim()
+
+
 @pytest.fixture
-def limit(floor):
-    return floor.InterleavedLimit(ArmSim(), every=30, physics_s=20.0)
+def limit(floor, limit_arm):
+    return floor.InterleavedLimit(limit_arm, every=30, physics_s=20.0)
 
 
 @pytest.fixture(scope="module")
 def taped(floor):
-    with floor.Tape() as tape:
-        log = run_job(EpisodeJob("joystick", "P1", SEED))
+    with floor.Tape() as tape:  # the episode's first 6 s (ended by the time limit): enough to replay, and quick
+        log = run_job(EpisodeJob("joystick", "P1", SEED, time_limit=6.0))
     return tape, log, tape.arm.data.qpos.copy()
 
 
