@@ -4,6 +4,7 @@ import hashlib
 import json
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -227,10 +228,19 @@ def test_two_sweeps_started_together_run_each_episode_once(tmp_path):
     assert len(keys) == len(set(keys)) == 3
 
 
-@pytest.mark.parametrize("planted", ["summary.md", RESULTS_FILE, "completion_time.png", LOCK_FILE])
-def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, planted):
-    grid, out = grid_file(tmp_path, ONE_SECOND % 1), tmp_path / "out"
+@pytest.fixture(scope="module")
+def one_episode_sweep(tmp_path_factory):
+    """(grid, directory) of a finished one-episode sweep, made once for the module (copy before changing)."""
+    where = tmp_path_factory.mktemp("one_episode_sweep")
+    grid, out = grid_file(where, ONE_SECOND % 1), where / "out"
     sweep(grid, out, check=0)
+    return grid, out
+
+
+@pytest.mark.parametrize("planted", ["summary.md", RESULTS_FILE, "completion_time.png", LOCK_FILE])
+def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, one_episode_sweep, planted):
+    grid, finished = one_episode_sweep
+    out = Path(shutil.copytree(finished, tmp_path / "out"))
     victim = tmp_path / "precious.txt"
     victim.write_text("keep me")
     (out / planted).unlink()
