@@ -242,11 +242,15 @@ class Delivery:
     def stream(self) -> bytes:
         return b"".join(self.frames)
 
+    def rows(self, start: int, stop: int | None = None) -> Delivery:
+        """Frames ``start:stop`` (in arrival order)."""
+        rows = slice(start, stop)
+        return Delivery(self.arrival_s[rows], self.node_index[rows], self.sample_index[rows], self.frames[rows])
+
     def until(self, t_end: float) -> tuple[Delivery, Delivery]:
         """Split into what has arrived by ``t_end`` and the rest."""
         k = int(np.searchsorted(self.arrival_s, t_end, side="right"))
-        return (Delivery(self.arrival_s[:k], self.node_index[:k], self.sample_index[:k], self.frames[:k]),
-                Delivery(self.arrival_s[k:], self.node_index[k:], self.sample_index[k:], self.frames[k:]))
+        return self.rows(0, k), self.rows(k)
 
 
 def deliver(raw_by_node: dict[int, RawImu], sample_index: np.ndarray, sample_time_s: np.ndarray,

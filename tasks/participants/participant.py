@@ -545,15 +545,9 @@ class VirtualParticipant:
             mine = backwards == node
             if mine.any():
                 self._last_arrival[node] = float(fresh.arrival_s[len(mine) - 1 - int(mine.argmax())])
-        self._pending, self._returned = _merge(self._rows(self._returned, None), fresh), 0
+        self._pending, self._returned = _merge(self._pending.rows(self._returned), fresh), 0
         self._truth.append((t, label, amplitude, angles))
         self._generated = n_total
-
-    def _rows(self, start: int, stop: int | None) -> Delivery:
-        """Frames ``start:stop`` of the pending ones (in arrival order)."""
-        pending, rows = self._pending, slice(start, stop)
-        return Delivery(pending.arrival_s[rows], pending.node_index[rows], pending.sample_index[rows],
-                        pending.frames[rows])
 
     def deliveries(self, t_end: float) -> Delivery:
         """The frames that reach the host by sim time ``t_end`` (and were not returned before)."""
@@ -561,7 +555,7 @@ class VirtualParticipant:
         # the pending frames from ``_returned`` on have not been returned: a cursor, not a split of the rest every call
         start = self._returned
         self._returned = max(int(np.searchsorted(self._pending.arrival_s, t_end, side="right")), start)
-        return self._rows(start, self._returned)
+        return self._pending.rows(start, self._returned)
 
     def advance(self, t_end: float) -> bytes:
         """The base-station bytes that arrive by sim time ``t_end`` (and were not returned before)."""
@@ -569,7 +563,7 @@ class VirtualParticipant:
 
     def flush(self) -> Delivery:
         """Every frame generated but not yet returned, whatever its arrival time (end of a session)."""
-        rest = self._rows(self._returned, None)
+        rest = self._pending.rows(self._returned)
         self._pending, self._returned = _merge(), 0
         return rest
 
