@@ -299,6 +299,26 @@ def instrumented_episode(operator: str, seed: int) -> dict:
             "setup_cpu_s": setup_s}
 
 
+# ------------------------------------------------------------------------ running a benchmark
+def pin_to_one_core() -> None:
+    """This process on one core (the bars are per core), where the platform allows it."""
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+
+
+def checkout_commit() -> str:
+    """The short commit of this checkout (what a results file was made at)."""
+    return os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
+
+
+def write_results(name: str, record: dict, text: str) -> None:
+    """``record`` as benchmarks/results/NAME.json and its table ``text`` as NAME.md; the table printed."""
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{name}.md").write_text(text, encoding="utf-8")
+    (RESULTS / f"{name}.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    print(text)
+
+
 # ---------------------------------------------------------------------------------------- main
 def ratios(rounds: list[dict[str, dict]], clock: str) -> dict[str, dict[str, float]]:
     """Per kind: median over rounds of (its x real time / the limit's) and (/ dm_control's), same round."""
@@ -408,8 +428,7 @@ def main() -> None:
     parser.add_argument("--no-profile", action="store_true", help="skip the cProfile tables")
     parser.add_argument("--out", default="side_by_side", help="results file name (benchmarks/results/OUT.md, .json)")
     args = parser.parse_args()
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    pin_to_one_core()
     load_before = os.getloadavg()[0]
     arm = ArmSim()
     built = time.perf_counter()
@@ -430,20 +449,15 @@ def main() -> None:
                                          for kind, r in rounds[-1].items()), flush=True)
     profile = None if args.no_profile else {op: profile_episode(op, args.profile_seed) | {
         "instrumented": instrumented_episode(op, args.profile_seed)} for op in ("bomi", "joystick")}
-    commit = os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
     record = {
-        "args": vars(args), "commit": commit,
+        "args": vars(args), "commit": checkout_commit(),
         "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
                     "python": platform.python_version(), "load_before": load_before, "load_after": os.getloadavg()[0]},
         "versions": {name: version(name) for name in ("mujoco", "dm-control", "pin", "numpy")},
         "dm_control_build_s": build_s, "rounds": rounds,
         "ratios": {clock: ratios(rounds, clock) for clock in ("wall", "cpu")}, "profile": profile,
     }
-    RESULTS.mkdir(exist_ok=True)
-    text = markdown(record)
-    (RESULTS / f"{args.out}.md").write_text(text, encoding="utf-8")
-    (RESULTS / f"{args.out}.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
-    print(text)
+    write_results(args.out, record, markdown(record))
 
 
 if __name__ == "__main__":

@@ -34,23 +34,20 @@ benchmarks/results/tick_floor.md and .json.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from side_by_side import BARS, BOMI, JOY
+from side_by_side import BARS, BOMI, JOY, checkout_commit, pin_to_one_core, write_results
 from sim.env import ArmSim
 from sim.joystick import JoystickState
 from tasks.cli.task import EpisodeJob, run_job
 from tasks.stacking import StackingTask, TaskConfig
 
-RESULTS = Path(__file__).resolve().parent / "results"
 LAYERS = ("physics", "+ IK", "+ joystick", "+ task", "episode")
 KINDS = {"joystick": JOY, "bomi": BOMI}
 
@@ -235,8 +232,7 @@ def main() -> None:
                         help="simulated seconds of the limit's scene at rest before it is reset")
     parser.add_argument("--out", default="tick_floor", help="results file name (benchmarks/results/OUT.md, .json)")
     args = parser.parse_args()
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    pin_to_one_core()
     load_before = os.getloadavg()[0]
     limit_arm = ArmSim()
     for operator in KINDS:  # steady state: files parsed, scene compiled, kernels loaded
@@ -247,14 +243,9 @@ def main() -> None:
             runs[operator].append(measure(operator, seed, args.repeats, limit_arm, args.every, args.physics_s))
         print(f"seed {seed}: " + "; ".join(f"{op} " + ", ".join(
             f"{layer} {statistics.median(shares(runs[op][-1], layer)):.2f}" for layer in LAYERS) for op in KINDS), flush=True)
-    commit = os.popen(f"git -C {Path(__file__).resolve().parent} rev-parse --short HEAD").read().strip()
-    record = {"args": vars(args), "commit": commit, "load_before": load_before, "load_after": os.getloadavg()[0],
-              "tick_s": limit_arm.dt, "runs": runs}
-    RESULTS.mkdir(exist_ok=True)
-    text = markdown(record)
-    (RESULTS / f"{args.out}.md").write_text(text, encoding="utf-8")
-    (RESULTS / f"{args.out}.json").write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
-    print(text)
+    record = {"args": vars(args), "commit": checkout_commit(), "load_before": load_before,
+              "load_after": os.getloadavg()[0], "tick_s": limit_arm.dt, "runs": runs}
+    write_results(args.out, record, markdown(record))
 
 
 if __name__ == "__main__":
