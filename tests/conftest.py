@@ -18,6 +18,15 @@ from bomi.profiles import load_profile
 from bomi.recording import read_recording
 
 
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``real_time`` (a stream paced on the wall clock: an emulator into a pty or socket,
+    a window) run one after another on one worker of pytest-xdist (``--dist loadgroup``): two of them
+    side by side would compete for the CPU their timing assumes, while the rest spread over the others."""
+    for item in items:
+        if item.get_closest_marker("real_time"):
+            item.add_marker(pytest.mark.xdist_group("real-time"))
+
+
 @pytest.fixture(scope="session")
 def shared_data():
     """The directory of the published P1 recordings (days 1..5); skips the test when they are absent."""

@@ -376,15 +376,24 @@ def test_a_full_disk_while_writing_is_one_line_and_leaves_nothing(base, tmp_path
     assert "cannot be written (File too large)" in line
 
 
-def test_an_unwritable_directory_is_one_line(base, tmp_path, capsys):
-    if os.geteuid() == 0:
-        pytest.skip("root writes anywhere")
+def test_an_unwritable_directory_is_one_line(base, tmp_path):
+    """A directory the process may not write into: without write bits for a user; for root (whom
+    permission bits do not stop: CI runs as root), a read-only file system mounted over it in a mount
+    namespace of the command's own (``unshare -m``)."""
     (tmp_path / "tiny.csv").write_bytes(base["tiny.csv"])
     locked = tmp_path / "locked"
-    locked.mkdir(mode=0o500)
-    assert main(["fuse", str(tmp_path / "tiny.csv"), "--out", str(locked / "o.csv")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "not writable" in err
+    locked.mkdir()
+    fuse = [sys.executable, "-m", "tasks.cli", "fuse", str(tmp_path / "tiny.csv"), "--out", str(locked / "o.csv")]
+    if os.geteuid() == 0:
+        mounted = 'mount -t tmpfs -o ro tmpfs "$1" && shift && exec "$@"'
+        command = ["unshare", "-m", "sh", "-c", mounted, "sh", str(locked), *fuse]
+    else:
+        locked.chmod(0o500)
+        command = fuse
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr == f"bomi: error: {locked / 'o.csv'}: directory {locked} is not writable\n"
+    assert list(locked.iterdir()) == []
 
 
 # ------------------------------------------------------------------------------------- outputs
@@ -495,6 +504,7 @@ def test_garbage_on_a_socket_is_not_a_recording(tmp_path, capsys, nodes):
     assert "nothing recorded" in err[-1] and not out.exists()
 
 
+@pytest.mark.real_time
 def test_capture_ends_within_its_duration_when_the_stream_is_lost_and_says_the_file_is_partial(tmp_path, capsys):
     def stream_then_vanish(client):
         time.sleep(0.35)

@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -183,14 +184,39 @@ def test_evaluate_twice_in_one_directory_replaces_its_own_confusion_png_but_not_
     assert sorted(p.name for p in tmp_path.iterdir()) == ["confusion.png", "link.png", "r.csv"]
 
 
-def test_demo_twice_in_one_directory_replaces_demo_out(tmp_path, monkeypatch, capsys):
+def test_demo_writes_its_figure_film_and_record_and_replaces_only_its_own_directory(tmp_path, monkeypatch, capsys):
+    """`bomi demo` as a newcomer runs it (its default directory; a short time limit keeps it quick: the
+    episodes stop unfinished, everything is still written); run again it replaces demo_out (the second
+    run's episodes are the first run's logs: what is tested is the replacing, not the simulation);
+    demo_out named with --out is refused without --force."""
+    import tasks.cli.task as task_cli
+
     monkeypatch.chdir(tmp_path)
-    assert main(["demo", "--time-limit", "1"]) == 0
-    (tmp_path / "demo_out" / "demo.json").write_text("stale")
-    assert main(["demo", "--time-limit", "1"]) == 0
-    assert json.loads((tmp_path / "demo_out" / "demo.json").read_text())["episodes"]
-    assert sorted(p.name for p in (tmp_path / "demo_out").iterdir()) == ["bomi_episode.mp4", "demo.json",
-                                                                         "timeline.png"]
+    logs, simulate = {}, task_cli.run_job
+
+    def kept(job, **options):
+        logs[job.operator] = simulate(job, **options)
+        return logs[job.operator]
+    monkeypatch.setattr(task_cli, "run_job", kept)
+    assert main(["demo", "--time-limit", "3"]) == 0
+    out = tmp_path / "demo_out"
+    assert (out / "timeline.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    film = (out / "bomi_episode.mp4").read_bytes()
+    assert len(film) > 1000
+    joystick, bomi = json.loads((out / "demo.json").read_text())["episodes"]
+    assert (joystick["operator"], bomi["operator"]) == ("joystick", "bomi")
+    assert bomi["failure"].startswith("time limit 3") and bomi["decisions"] > 100
+    assert any(line.split()[:3] == ["P1", "bomi", "0/1"] for line in capsys.readouterr().out.splitlines() if line.strip())
+
+    def replayed(job, video=None, **options):
+        if video is not None:
+            Path(video).write_bytes(film)
+        return logs[job.operator]
+    monkeypatch.setattr(task_cli, "run_job", replayed)
+    (out / "demo.json").write_text("stale")
+    assert main(["demo", "--time-limit", "3"]) == 0
+    assert json.loads((out / "demo.json").read_text())["episodes"]
+    assert sorted(p.name for p in out.iterdir()) == ["bomi_episode.mp4", "demo.json", "timeline.png"]
     capsys.readouterr()
     assert main(["demo", "--time-limit", "1", "--out", "demo_out"]) == 2  # a directory the user names: --force
     assert "file exists" in capsys.readouterr().err

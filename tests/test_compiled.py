@@ -1,4 +1,5 @@
-"""bomi.compiled: the chain runs without numba (interpreted kernels), to the same bits as compiled."""
+"""bomi.compiled: the chain runs without numba (interpreted kernels), to the results of the compiled ones
+(to a tolerance: the two forms may round differently where libm's code paths differ)."""
 from __future__ import annotations
 
 import json
@@ -9,6 +10,7 @@ import sys
 import numpy as np
 
 from bomi.compiled import COMPILED, interpreted, kernel
+from helpers import assert_same_angles
 
 # a process in which numba cannot be imported (as on a machine without it): prints the fused angles
 # of a fixed pseudo-random stream, and whether bomi.compiled compiled anything
@@ -21,11 +23,11 @@ from bomi.fusion import NodeCalibration, NodeFusion
 rng = np.random.default_rng(7)
 acc, gyro, mag = (rng.integers(-20000, 20000, (500, 3)) for _ in range(3))
 angles = NodeFusion(NodeCalibration()).update_many(acc, gyro, mag)
-print(json.dumps({"compiled": bomi.compiled.COMPILED, "bits": angles.view(np.int64).tolist()}))
+print(json.dumps({"compiled": bomi.compiled.COMPILED, "angles": angles.tolist()}))
 """
 
 
-def test_the_chain_imports_and_fuses_without_numba_to_the_same_bits():
+def test_the_chain_imports_and_fuses_without_numba_as_compiled():
     from bomi.fusion import NodeCalibration, NodeFusion
     env = {k: v for k, v in os.environ.items() if k != "BOMI_NO_JIT"}
     done = subprocess.run([sys.executable, "-c", WITHOUT_NUMBA], capture_output=True, text=True, env=env, check=True)
@@ -34,7 +36,7 @@ def test_the_chain_imports_and_fuses_without_numba_to_the_same_bits():
     rng = np.random.default_rng(7)
     acc, gyro, mag = (rng.integers(-20000, 20000, (500, 3)) for _ in range(3))
     here = NodeFusion(NodeCalibration()).update_many(acc, gyro, mag)
-    assert result["bits"] == here.view(np.int64).tolist()
+    assert_same_angles(result["angles"], here)   # floats through JSON: repr, exact
 
 
 def test_a_kernel_is_compiled_at_its_first_call_where_numba_is_installed_and_keeps_its_python_function():

@@ -325,6 +325,7 @@ def read_log(path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines()]
 
 
+@pytest.mark.real_time
 def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_path, p1_model_file, capsys):
     """Seed 0 faces 18 deg: nothing is decided until the filter has settled (status: warming up); then the
     neutral is taken and live decides as the chain fed the same samples offline."""
@@ -372,6 +373,7 @@ def test_emulate_participant_to_pty_then_live_decides_as_the_offline_chain(tmp_p
     assert max(np.linalg.norm(tick["linear"]) for tick in ticks) > 0.5 * FULL_SPEED
 
 
+@pytest.mark.real_time
 def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_file, capsys, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -9,6 +9,7 @@ import json
 import math
 import os
 import queue
+import threading
 import time
 
 import numpy as np
@@ -267,19 +268,28 @@ def test_a_full_disk_gives_one_warning_and_control_goes_on():
 
 
 def test_filming_never_waits_a_film_frame_is_dropped_instead():
+    """A film frame due on every tick (1000 fps, a tick every 2 ms of the loop's clock) and a queue of
+    one that nobody empties: the first frame is queued, the other 49 dropped, and no tick waits (a
+    blocking put would never return: the ticks run in a thread given 10 s)."""
     film = VideoDisplay.__new__(VideoDisplay)
     film.arm = type("A", (), {"data": type("D", (), {"qpos": np.zeros(3)})()})()
-    film.clock, film.fps, film._next, film.frames, film.dropped = time.monotonic, 1000.0, None, 0, 0
+    clock = FakeClock()
+    film.clock, film.fps, film._next, film.frames, film.dropped = clock, 1000.0, None, 0, 0
     film._frames = queue.Queue(1)
-    start = time.monotonic()
-    for _ in range(50):
-        film.sync(lambda: "a | b | c | d | e | f")
-        time.sleep(0.002)
-    assert time.monotonic() - start < 0.5
-    assert film.frames == 1 and film.dropped >= 40
+
+    def ticks():
+        for _ in range(50):
+            film.sync(lambda: "a | b | c | d | e | f")
+            clock.sleep(0.002)
+    ticking = threading.Thread(target=ticks, daemon=True)
+    ticking.start()
+    ticking.join(10.0)
+    assert not ticking.is_alive()
+    assert film.frames == 1 and film.dropped == 49
     assert json.dumps(film._frames.get_nowait()[2])   # the caption: two lines of the status
 
 
+@pytest.mark.real_time
 def test_a_real_film_process_receives_the_arms_layout_and_writes_a_playable_film(tmp_path):
     """The film's own (spawned) process gets the real arm's layout and writes the MP4: the layout must
     pickle (its per-tick tables once did not, and `bomi live --video` stopped with an internal error)."""
@@ -294,7 +304,10 @@ def test_a_real_film_process_receives_the_arms_layout_and_writes_a_playable_film
         time.sleep(1.0 / film.fps)
     film.close()
     sim.close()
-    assert film.frames >= 3 and iio.imread(tmp_path / "film.mp4").shape[0] >= film.frames
+    # a frame the busy film process had not taken yet is dropped (never waited for): on a loaded
+    # machine fewer than 5 arrive, but every one that did is in the film
+    assert film.frames + film.dropped == 5 and film.frames >= 1
+    assert iio.imread(tmp_path / "film.mp4").shape[0] >= film.frames
 
 
 def test_a_poll_parses_the_newest_bytes_only_and_counts_the_rest():

@@ -25,6 +25,8 @@ from bomi.recording import NodeData, Recording, read_recording, write_recording
 from bomi.serial_source import RetryPolicy, SerialSource
 from tasks.stick import arm_profile
 
+pytestmark = pytest.mark.real_time  # emulators and recorders paced on the wall clock
+
 FAST_RETRY = RetryPolicy(attempts=2, first_delay_s=0.01, max_delay_s=0.01)
 
 

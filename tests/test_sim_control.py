@@ -125,7 +125,10 @@ def test_a_virtual_wall_stops_the_hand_without_jitter(sim):
     samples = hold(sim, JoystickState({"L": 1.0}), 3.5)  # x+ at 0.2 m/s until the x = 0.45 wall
     positions = np.array([p for _, p, _, _, _ in samples])
     wall = sim.config.workspace.x[1]
-    assert positions[:, 0].max() <= wall + 0.002
+    # the target stops at the wall; the hand, a control period behind its target, can carry on for at
+    # most one period at full speed (0.2 m/s / 60 Hz = 3.3 mm; 1.9-2.1 mm seen on two CPUs)
+    overshoot = sim.config.control.full_speed * sim.dt
+    assert positions[:, 0].max() <= wall + overshoot
     last_half_second = positions[-30:]
     assert last_half_second[:, 0].min() > wall - 0.003
     assert np.ptp(last_half_second, axis=0).max() < 0.0005  # standing still at the wall

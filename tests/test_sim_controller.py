@@ -5,7 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from helpers import numpy_clamp
+from helpers import assert_agree, numpy_clamp
 from sim.controller import Workspace
 from sim.kernels import damped_least_squares, speed_scale
 
@@ -90,6 +90,7 @@ def test_points_inside_are_left_alone():
 
 @settings(max_examples=300, deadline=None)
 @given(arrays(float, 3, elements=st.floats(-1.2, 1.2, allow_nan=False)), rotations())
-def test_clamp_on_floats_is_bit_for_bit_the_array_form(point, rotation):
-    """Inside and outside the shell, the box and the floor: the same bits as on arrays."""
-    assert WORKSPACE.clamp(point, rotation).tobytes() == numpy_clamp(WORKSPACE, point, rotation).tobytes()
+def test_clamp_on_floats_agrees_with_the_array_form(point, rotation):
+    """Inside and outside the shell, the box and the floor: what the array form gives, to 4 ulps (its
+    distance is a BLAS dot product, which the CPU may fuse, the float form's three products and sums)."""
+    assert_agree(WORKSPACE.clamp(point, rotation), numpy_clamp(WORKSPACE, point, rotation))

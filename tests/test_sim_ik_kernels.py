@@ -1,8 +1,10 @@
-"""The IK tick's compiled kernels (sim.kernels): the same bits as their Python form, on random
-inputs and along real runs, and the same bits as the tick written naively on arrays."""
+"""The IK tick's compiled kernels (sim.kernels): their Python form's results on random inputs and
+along real runs, and the tick written naively on arrays, each to a tolerance the operation justifies
+(``helpers.disagreement``: libm, numpy and BLAS pick their code paths by the CPU, so only the same
+form on the same machine gives the same bits)."""
 import sim  # noqa: F401  -- first: sim/__init__ selects headless EGL before mujoco loads
 import dataclasses
-import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -16,7 +18,7 @@ import sim.controller
 import sim.kernels
 import sim.kinematics
 from bomi.compiled import COMPILED, interpreted
-from helpers import numpy_clamp
+from helpers import disagreement, numpy_clamp
 from sim.config import load_config
 from sim.env import ArmSim
 from sim.kernels import (advance_target, clamp_point, damped_least_squares, jacobian_in_world, solve_joint_velocities,
@@ -48,9 +50,23 @@ def rotation(rng: np.random.Generator) -> np.ndarray:
     return pin.exp3(rng.normal(size=3))
 
 
-def same(a, b) -> bool:
-    """Equal to the bit (arrays, floats or tuples of them)."""
-    return np.asarray(a).tobytes() == np.asarray(b).tobytes()
+# A tick's joint velocities are a damped solve (condition at most (1 + damping^2) / damping^2, ~400 for
+# the controller's 0.05 and a unit-scale Jacobian) followed by a few products: 1e-9 of their largest
+# magnitude (~4e6 ulps) bounds the rounding of either form with room for the closed loop's accumulation
+# over a run, and is far below any branch the tick takes (a wall, a blocked joint, a speed limit).
+RUN_TOLERANCE = 1e-9
+
+
+def same(a, b, ulps: float = 4.0) -> bool:
+    """Equal to ``ulps`` units in the last place of the largest magnitude (arrays, floats or tuples)."""
+    return disagreement(np.asarray(a, dtype=float), np.asarray(b, dtype=float), ulps) is None
+
+
+def close(a, b) -> bool:
+    """Equal to RUN_TOLERANCE relative to the largest magnitude (at least 1)."""
+    b = np.asarray(b, dtype=float)
+    return disagreement(a, b, scale=max(1.0, float(np.max(np.abs(b), initial=0.0))),
+                        ulps=RUN_TOLERANCE / np.finfo(float).eps) is None
 
 
 def both(kernel, *args):
@@ -62,13 +78,14 @@ def both(kernel, *args):
     return runs
 
 
-def assert_same_runs(kernel, *args) -> None:
+def assert_same_runs(kernel, *args, ulps: float = 4.0) -> None:
+    """Compiled and interpreted agree to ``ulps`` (results, and what they wrote in place)."""
     (result, after), (expected, expected_after) = both(kernel, *args)
     if isinstance(result, tuple):
-        assert len(result) == len(expected) and all(same(a, b) for a, b in zip(result, expected))
+        assert len(result) == len(expected) and all(same(a, b, ulps) for a, b in zip(result, expected))
     else:
-        assert same(result, expected)
-    assert all(same(a, b) for a, b in zip(after, expected_after))  # what they wrote in place, too
+        assert same(result, expected, ulps)
+    assert all(same(a, b, ulps) for a, b in zip(after, expected_after))
 
 
 @compiled_only
@@ -84,8 +101,11 @@ def test_each_kernel_compiled_equals_its_python_form_on_random_inputs(arm):
         placement = np.eye(4)
         placement[:3, :3], placement[:3, 3] = rotation(rng), rng.normal(size=3)
         floor = rng.uniform(-0.1, 0.3)
+        damping = rng.uniform(1e-4, 0.1)
+        # a solve's rounding grows with its condition: 8 ulps of it (the damped normal matrix's)
+        solve_ulps = 8 * np.linalg.cond(jacobian @ jacobian.T + damping * np.eye(6))
         assert_same_runs(clamp_point, *point.tolist(), floor, walls)
-        assert_same_runs(damped_least_squares, jacobian, twist, rng.uniform(1e-4, 0.1))
+        assert_same_runs(damped_least_squares, jacobian, twist, damping, ulps=solve_ulps)
         assert_same_runs(speed_scale, rng.normal(size=6), rng.uniform(0.3, 1.0, 6))
         assert_same_runs(vector_length, rng.normal(size=3) * rng.uniform(1e-6, 3))
         assert_same_runs(tool_in_world, base, placement, np.empty(3), np.empty((3, 3)))
@@ -96,7 +116,8 @@ def test_each_kernel_compiled_equals_its_python_form_on_random_inputs(arm):
                          target, rotation(rng), floor, walls, gains, np.empty(3), np.empty((3, 3)), np.empty((3, 3)),
                          twist)
         assert_same_runs(solve_joint_velocities, jacobian, twist, rng.normal(size=3), rng.normal(size=3) * 0.1,
-                         rng.uniform(0, 5), rng.uniform(1e-4, 0.01), q, bounds, target)
+                         rng.uniform(0, 5), damping_squared := rng.uniform(1e-4, 0.01), q, bounds, target,
+                         ulps=8 * np.linalg.cond(jacobian @ jacobian.T + damping_squared * np.eye(6)))
 
 
 def scripted_twists(arm: ArmSim) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -140,9 +161,9 @@ def run(arm: ArmSim, twists, start: np.ndarray | None = None) -> list[np.ndarray
 
 
 @compiled_only
-def test_a_real_run_gives_the_same_bits_compiled_and_interpreted(arm, open_arm, monkeypatch):
+def test_a_real_run_compiled_and_interpreted_agree(arm, open_arm, monkeypatch):
     """Along a run through walls, speed limits and a joint's range end, every kernel compiled and
-    every kernel as its Python function give the same joint velocities, tick for tick."""
+    every kernel as its Python function give the same joint velocities, tick for tick, to RUN_TOLERANCE."""
     cases = [(arm, scripted_twists(arm), None), (open_arm, *limit_run(open_arm, 2, 5.85, 1.0))]
     compiled = [run(a, twists, q) for a, twists, q in cases]
     for module in KERNEL_MODULES:
@@ -151,7 +172,7 @@ def test_a_real_run_gives_the_same_bits_compiled_and_interpreted(arm, open_arm, 
                 monkeypatch.setattr(module, name, value.py_func)
     python = [run(a, twists, q) for a, twists, q in cases]
     for a, b in zip(compiled, python):
-        assert len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+        assert len(a) == len(b) and all(close(x, y) for x, y in zip(a, b))
 
 
 class NaiveTick:
@@ -216,9 +237,10 @@ class NaiveTick:
         return qd
 
 
-def test_a_real_run_gives_the_bits_of_the_naive_tick(arm, open_arm):
-    """Tick for tick, the controller's joint velocities and target equal the naive tick's, along
-    runs that take every branch (walls, lag, the turn's lag, blocked joints, speed limits)."""
+def test_a_real_run_agrees_with_the_naive_tick(arm, open_arm):
+    """Tick for tick, the controller's joint velocities and target equal the naive tick's to
+    RUN_TOLERANCE, along runs that take every branch (walls, lag, the turn's lag, blocked joints,
+    speed limits)."""
     branches = dict.fromkeys(("wall", "lag", "turn_lag", "blocked", "scaled"), 0)
     for a, twists, start in ((arm, scripted_twists(arm), None), (open_arm, *limit_run(open_arm, 1, 0.95, -1.0)),
                              (open_arm, *limit_run(open_arm, 2, 5.85, 1.0))):
@@ -229,9 +251,9 @@ def test_a_real_run_gives_the_bits_of_the_naive_tick(arm, open_arm):
         def checked(q, linear, angular):
             expected = naive.step(q.copy(), np.asarray(linear, float), np.asarray(angular, float))
             qd = solve(q, linear, angular)
-            assert same(qd, expected)
-            assert same(a.controller.target_position, naive.position)
-            assert same(a.controller.target_rotation, naive.rotation)
+            assert close(qd, expected)
+            assert close(a.controller.target_position, naive.position)
+            assert close(a.controller.target_rotation, naive.rotation)
             return qd
         a.controller.joint_velocities = checked
         try:
@@ -243,24 +265,24 @@ def test_a_real_run_gives_the_bits_of_the_naive_tick(arm, open_arm):
     assert all(count > 0 for count in branches.values()), branches
 
 
-def joint_velocity_digest() -> str:
-    """SHA-256 of every tick's joint velocities along the scripted run (what the subprocess prints)."""
+def joint_velocities() -> list[list[float]]:
+    """Every tick's joint velocities along the scripted run (what the subprocess prints)."""
     arm = ArmSim()
-    digest = hashlib.sha256()
-    for qd in run(arm, scripted_twists(arm)):
-        digest.update(qd.tobytes())
+    out = [qd.tolist() for qd in run(arm, scripted_twists(arm))]
     arm.close()
-    return digest.hexdigest()
+    return out
 
 
 @compiled_only
-def test_no_jit_gives_the_joint_velocities_of_the_compiled_kernels():
-    """``BOMI_NO_JIT=1`` (every kernel as its Python function, in a fresh process) moves the arm
-    exactly as the compiled kernels do."""
-    code = "from test_sim_ik_kernels import joint_velocity_digest; print(joint_velocity_digest())"
+def test_no_jit_moves_the_arm_as_the_compiled_kernels_do():
+    """``BOMI_NO_JIT=1`` (every kernel as its Python function, in a fresh process) moves the arm as
+    the compiled kernels do, tick for tick, to RUN_TOLERANCE (floats printed by repr: exact)."""
+    code = "import json; from test_sim_ik_kernels import joint_velocities; print(json.dumps(joint_velocities()))"
     tests = Path(__file__).resolve().parent
     env = os.environ | {"BOMI_NO_JIT": "1", "PYTHONPATH": os.pathsep.join(
         [str(tests), str(tests.parent), os.environ.get("PYTHONPATH", "")])}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600,
                          cwd=tests, check=True)
-    assert out.stdout.split()[-1] == joint_velocity_digest()
+    interpreted_run, compiled_run = json.loads(out.stdout.splitlines()[-1]), joint_velocities()
+    assert len(interpreted_run) == len(compiled_run) > 500
+    assert all(close(a, b) for a, b in zip(interpreted_run, compiled_run))

@@ -4,6 +4,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from helpers import assert_agree
 from sim.config import load_config
 from sim.env import HAND_DOWN
 from sim.kinematics import arm_kinematics
@@ -76,10 +77,10 @@ def test_solve_pose_reaches_the_requested_pose(kinematics):
 
 
 @pytest.mark.parametrize("q", random_configurations(20, seed=11))
-def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
+def test_ik_step_agrees_with_the_naive_forms(kinematics, q):
     """The controller's Jacobian (the base rotation times each block, in place) and DLS solve
-    (compiled where numba is) give exactly what the plain numpy forms give, and agree with a
-    pinv-based DLS."""
+    (compiled where numba is) give what the plain numpy forms give, to a few ulps (the solve's grown
+    by its condition), and agree with a pinv-based DLS."""
     import pinocchio as pin
     from sim.kernels import damped_least_squares
 
@@ -88,12 +89,13 @@ def test_ik_step_equals_the_naive_forms_bit_for_bit(kinematics, q):
     rot = kinematics.base.rotation
     naive_jacobian = np.vstack((rot @ jac[:3], rot @ jac[3:]))
     jacobian = kinematics.jacobian(q)
-    assert np.array_equal(jacobian, naive_jacobian)
+    assert_agree(jacobian, naive_jacobian)       # 3x3 times 3x6 products: a few roundings each
     twist = np.random.default_rng(int(1000 * q[0]) % 2**32).normal(size=6)
     damping = 0.05
     qd = damped_least_squares(jacobian.copy(), twist, damping**2)
-    naive = naive_jacobian.T @ np.linalg.solve(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6), twist)
-    assert np.array_equal(qd, naive)
+    normal = naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6)
+    naive = naive_jacobian.T @ np.linalg.solve(normal, twist)
+    assert_agree(qd, naive, ulps=8 * np.linalg.cond(normal))
     by_pinv = naive_jacobian.T @ np.linalg.pinv(naive_jacobian @ naive_jacobian.T + damping**2 * np.eye(6)) @ twist
     np.testing.assert_allclose(qd, by_pinv, rtol=1e-9, atol=1e-9)
 

@@ -9,7 +9,7 @@ import pytest
 from tasks.cli import main
 from bomi.errors import BomiError
 from bomi.profiles import PROFILE_DIR, load_profile
-from helpers import edited_copy
+from helpers import assert_agree, edited_copy
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
 from tasks.cli.task import aggregate, benchmark_jobs, comparison
@@ -219,8 +219,9 @@ def test_p4_bomi_episode_moves_the_hand_down_in_height_mode():
     assert np.abs(dz[~height]).sum() < 0.02  # translation moves the hand in xy only
 
 
-def test_levelling_rotation_is_bit_for_bit_the_one_made_with_numpy_cross():
-    """The written-out cross product (a speed-up) changes no bit, zeros' signs included."""
+def test_levelling_rotation_agrees_with_the_one_made_with_numpy_cross():
+    """The written-out cross product (a speed-up) gives numpy's rotation to 8 ulps (a norm, an atan2
+    and a division, each rounded by whichever libm or BLAS path the CPU picks), zeros as zeros."""
     rng = np.random.default_rng(5)
     down = np.array([0.0, 0.0, -1.0])
     for _ in range(2000):
@@ -231,7 +232,8 @@ def test_levelling_rotation_is_bit_for_bit_the_one_made_with_numpy_cross():
         sin, cos = float(np.linalg.norm(axis)), float(np.dot(tool_z, down))
         expected = np.zeros(2) if sin < 1e-12 else (axis * math.atan2(sin, cos) / sin)[:2]
         got = levelling_rotation(tool_z)
-        assert got.tobytes() == expected.tobytes(), tool_z
+        assert_agree(got, expected, ulps=8)
+        assert np.array_equal(got == 0.0, expected == 0.0), tool_z
 
 
 def test_an_episode_on_the_process_s_reused_arm_is_the_episode_on_a_fresh_arm():
@@ -250,8 +252,10 @@ def test_an_episode_on_the_process_s_reused_arm_is_the_episode_on_a_fresh_arm():
 
 
 def test_view_and_outcome_equal_their_naive_forms_along_the_demo_carry(sim):
-    """The task's view and its off-table and tilt tests, written on Python floats, give exactly what
-    the numpy formulations give (np.cross, np.linalg.norm, np.any per axis), tick by tick."""
+    """The task's view and its off-table and tilt tests, written on Python floats, give what the numpy
+    formulations give (np.cross, np.linalg.norm, np.any per axis), tick by tick: positions and the
+    off-table test exactly (copies and comparisons), the angles to a few ulps (libm's or numpy's acos
+    and atan2, whichever path the CPU takes)."""
     from sim.joystick import script_states
     from tasks.cli.sim import DEMO_SCRIPT
 
@@ -273,7 +277,7 @@ def test_view_and_outcome_equal_their_naive_forms_along_the_demo_carry(sim):
             w, x, y, z = quat
             naive = np.degrees(np.arccos(min(1.0, np.max(np.abs(
                 [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])))))
-            assert cube_tilt_deg(quat.tolist()) == naive
+            assert_agree(cube_tilt_deg(quat.tolist()), naive)
         off = (pos[:, 2] < task.table_z - task.cube_size) | np.any(pos[:, :2] < table_lo, axis=1) \
             | np.any(pos[:, :2] > table_hi, axis=1)
         assert task.outcome().failure == (f"cube {int(np.flatnonzero(off)[0]) + 1} knocked off the table"

@@ -252,6 +252,7 @@ def test_a_controller_never_ready_ends_the_session_without_a_trial():
     assert np.linalg.norm(sim.tool_position - home) < 1e-3
 
 
+@pytest.mark.real_time
 def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_session(bomi_dir, tmp_path, capsys):
     """A person's session on a pty (`bomi emulate`'s virtual participant, real time, in its own
     process) whose base station goes away 20 s in: the trial running then fails ("stream lost"), the

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 XVFB = shutil.which("Xvfb")
-pytestmark = pytest.mark.skipif(XVFB is None, reason="Xvfb is not installed (Debian package xvfb; .ci/run installs it)")
+pytestmark = [pytest.mark.real_time, pytest.mark.skipif(XVFB is None, reason="Xvfb is not installed (Debian package xvfb; .ci/run installs it)")]
 SCREEN = (1280, 800)
 
 
