@@ -81,7 +81,8 @@ def session_columns(session: Session, intents: tuple[np.ndarray, np.ndarray]) ->
         "goal": np.array([t.get("goal", "") for t in ticks], dtype=object),
         "stage": np.array([t.get("stage", "") for t in ticks], dtype=object),
     }
-    for flag, dtype in (("stale", bool), ("standby", bool), ("calibrating", bool), ("lost", np.int64),
+    for flag, dtype in (("stale", bool), ("standby", bool), ("calibrating", bool), ("reconnected", bool),
+                        ("lost", np.int64),
                         ("dropped", np.int32), ("skipped", np.int32), ("loop_hz", float), ("overruns", np.int64)):
         tick_cols[flag] = np.array([t.get(flag, 0) for t in ticks], dtype=dtype)
     tick_cols["hold"] = np.array([t.get("hold", "") for t in ticks], dtype=object)

@@ -70,13 +70,14 @@ def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
 
     loop = LiveLoop(chain, arm, on_neutral=arm.ready)
     parser, seen = FrameParser(), 0
-    for t, chunk in zip(data.ticks["t"].tolist(), data.tick_bytes()):
+    reconnected = data.ticks.get("reconnected", np.zeros(len(data.ticks["t"]), dtype=bool)).tolist()
+    for t, chunk, again in zip(data.ticks["t"].tolist(), data.tick_bytes(), reconnected):
         if arm.finished:
             return
         frames = parser.feed(chunk, t)
         events = parser.safety_events[seen:]
         seen += len(events)
-        loop.tick(t, frames, events)
+        loop.tick(t, frames, events, again)
 
 
 def session_plan(data: SessionData) -> TrialPlan:
