@@ -1,5 +1,9 @@
-"""The trial dataset: one HDF5 file per controller session (``bomi.h5``, ``joystick.h5``), written
-with h5py and readable by any HDF5 reader (docs/trials.md describes every group and column).
+"""The trial dataset: one HDF5 file per controller session (``bomi.h5``, ``joystick.h5``; a session
+resumed after an interruption goes on in ``bomi.2.h5``, ...), written with h5py and readable by any
+HDF5 reader (docs/trials.md describes every group and column).
+
+Every file is written whole and replaced atomically (``replace_atomically``: a temporary file beside
+it, fsync, rename, the directory fsync-ed), so a kill at any instant leaves the last complete version.
 
 Groups: ``ticks`` (one row per control tick), ``stream`` (the bytes the source delivered, cut per
 tick by ``ticks/byte_end``), ``frames`` (one row per IMU frame parsed), ``decisions`` (one row per
@@ -9,6 +13,8 @@ the file is (``format``, ``version``) and how the session ran.
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib.metadata import version
 from pathlib import Path
@@ -110,31 +116,88 @@ def session_columns(session: Session, intents: tuple[np.ndarray, np.ndarray]) ->
     return {"ticks": tick_cols, "frames": frame_cols, "decisions": decision_cols, "trials": trial_cols}
 
 
-def write_session(path: Path, session: Session, attrs: dict) -> None:
-    """Write ``session`` (and the JSON-able ``attrs``) to a new HDF5 file at ``path``."""
-    recorder = session.recorder
-    groups = session_columns(session, (recorder.frame_intents(), recorder.decision_intents()))
+def sync_directory(directory: Path) -> None:
+    """Make the renames in ``directory`` durable."""
+    fd = os.open(directory, os.O_RDONLY)
     try:
-        with h5py.File(path, "w-") as f:
-            f.attrs.update({"format": FORMAT, "version": VERSION, "written_by": f"bomi-jaco {version('bomi-jaco')}",
-                            "controller": session.controller.value, "clock": session.clock_kind,
-                            "stick_columns": json.dumps(FUNCTIONS), "pressed_columns": json.dumps(BUTTONS),
-                            "phases": json.dumps({int(phase): phase.name.lower() for phase in Phase}),
-                            "dt": session.arm.dt, "neutral": json.dumps(recorder.neutral and
-                                                                      {str(k): v for k, v in recorder.neutral.items()}),
-                            **{k: json.dumps(v) if isinstance(v, (dict, list, tuple)) or v is None else v
-                               for k, v in attrs.items()}})
-            for name, columns in groups.items():
-                group = f.create_group(name)
-                for key, values in columns.items():
-                    if values.dtype == object:
-                        group.create_dataset(key, data=values.astype(str).astype(object), dtype=STR)
-                    else:
-                        group.create_dataset(key, data=values, compression="gzip" if values.size > 4096 else None)
-            f.create_dataset("stream/bytes", data=np.frombuffer(b"".join(recorder.chunks), dtype=np.uint8),
-                             compression="gzip")
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def replace_atomically(path: Path, write: Callable[[Path], None]) -> None:
+    """``write`` a temporary file beside ``path``, fsync it and rename it over ``path``: readers see the old
+    file or the new one, never a part (the temporary file is removed if anything fails)."""
+    partial = path.with_name(f".{path.stem}.partial{path.suffix}")
+    try:
+        partial.unlink(missing_ok=True)
+        write(partial)
+        fd = os.open(partial, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(partial, path)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    sync_directory(path.parent)
+
+
+def write_session(path: Path, session: Session, attrs: dict) -> None:
+    """Write ``session`` (and the JSON-able ``attrs``) to the HDF5 file ``path``, replacing it atomically."""
+    try:
+        replace_atomically(path, lambda partial: _write_h5(partial, session, attrs))
     except (OSError, ValueError) as exc:
         raise BomiError(f"{path}: cannot write the trial data ({' '.join(str(exc).split())})") from None
+
+
+def session_files(directory: Path, controller: str) -> list[Path]:
+    """A controller's session files in ``directory``, in session order (``bomi.h5``, ``bomi.2.h5``, ...)."""
+    files, part = [], 1
+    while (path := directory / part_name(controller, part)).exists():
+        files.append(path)
+        part += 1
+    return files
+
+
+def part_name(controller: str, part: int) -> str:
+    return f"{controller}.h5" if part == 1 else f"{controller}.{part}.h5"
+
+
+def trial_file(directory: Path, controller: str, number: int) -> Path:
+    """The session file of ``directory`` that holds trial ``number`` of ``controller``."""
+    for path in session_files(directory, controller):
+        try:
+            with h5py.File(path, "r") as f:
+                if "trials/number" in f and number in f["trials/number"][()].tolist():
+                    return path
+        except OSError as exc:
+            raise BomiError(f"{path}: cannot read the trial data ({' '.join(str(exc).split())})") from None
+    raise BomiError(f"{directory}: no {controller} session file holds trial {number}")
+
+
+def _write_h5(path: Path, session: Session, attrs: dict) -> None:
+    recorder = session.recorder
+    groups = session_columns(session, (recorder.frame_intents(), recorder.decision_intents()))
+    with h5py.File(path, "w-") as f:
+        f.attrs.update({"format": FORMAT, "version": VERSION, "written_by": f"bomi-jaco {version('bomi-jaco')}",
+                        "controller": session.controller.value, "clock": session.clock_kind,
+                        "stick_columns": json.dumps(FUNCTIONS), "pressed_columns": json.dumps(BUTTONS),
+                        "phases": json.dumps({int(phase): phase.name.lower() for phase in Phase}),
+                        "dt": session.arm.dt, "neutral": json.dumps(recorder.neutral and
+                                                                  {str(k): v for k, v in recorder.neutral.items()}),
+                        **{k: json.dumps(v) if isinstance(v, (dict, list, tuple)) or v is None else v
+                           for k, v in attrs.items()}})
+        for name, columns in groups.items():
+            group = f.create_group(name)
+            for key, values in columns.items():
+                if values.dtype == object:
+                    group.create_dataset(key, data=values.astype(str).astype(object), dtype=STR)
+                else:
+                    group.create_dataset(key, data=values, compression="gzip" if values.size > 4096 else None)
+        f.create_dataset("stream/bytes", data=np.frombuffer(b"".join(recorder.chunks), dtype=np.uint8),
+                         compression="gzip")
 
 
 def read_session(path: Path) -> SessionData:
