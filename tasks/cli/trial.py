@@ -338,21 +338,28 @@ def cmd_trial(args: argparse.Namespace) -> int:
         check_model_for(model, profile, args.model)
     operator = load_operator(check_input(args.operator_file, "--operator-file")) if standin is not None else None
     device = stream = None
-    lock = _lock(out)  # before calibration: a second session on this directory is refused here
+    if Controller.JOYSTICK in args.controller and standin is None:
+        device = _person_stick(args.gamepad, args.headless)
+    if bomi and args.port is not None:  # a bad port fails before anything is written
+        stream = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries),
+                                           parser=TappedParser()))
+        try:
+            stream.start()  # read from now on, so that the sender never waits (what arrives before the loop: dropped)
+        except BaseException:
+            if device is not None:
+                device.close()
+            raise
+    try:
+        lock = _lock(out)  # before calibration: a second session on this directory is refused here
+    except BomiError:
+        if device is not None:
+            device.close()
+        if stream is not None:
+            stream.stop()
+        raise
     # --force over a session: written beside it until the new session has a finished trial
     target = out / f".new-{os.getpid()}" if args.resume is None and _holds_session(out) else out
     try:
-        if Controller.JOYSTICK in args.controller and standin is None:
-            device = _person_stick(args.gamepad, args.headless)
-        if bomi and args.port is not None:  # a bad port fails before anything is written
-            stream = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries),
-                                               parser=TappedParser()))
-            try:
-                stream.start()  # read from now on, so that the sender never waits (what arrives before the loop: dropped)
-            except BaseException:
-                if device is not None:
-                    device.close()
-                raise
         if args.resume is None:
             target.mkdir(exist_ok=True)
             settings = json.dumps({"argv": _settings_argv(args)}, indent=1) + "\n"
