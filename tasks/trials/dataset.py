@@ -12,6 +12,7 @@ the file is (``format``, ``version``) and how the session ran.
 """
 from __future__ import annotations
 
+import io
 import json
 import os
 from collections.abc import Callable
@@ -178,9 +179,12 @@ def trial_file(directory: Path, controller: str, number: int) -> Path:
 
 
 def _write_h5(path: Path, session: Session, attrs: dict) -> None:
+    """The file made in memory, then written by Python: a full disk or a file-size limit is then an
+    OSError (ENOSPC, EFBIG) here, not a failure inside HDF5's own writes (which crashed the process)."""
     recorder = session.recorder
     groups = session_columns(session, (recorder.frame_intents(), recorder.decision_intents()))
-    with h5py.File(path, "w-") as f:
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
         f.attrs.update({"format": FORMAT, "version": VERSION, "written_by": f"bomi-jaco {version('bomi-jaco')}",
                         "controller": session.controller.value, "clock": session.clock_kind,
                         "stick_columns": json.dumps(FUNCTIONS), "pressed_columns": json.dumps(BUTTONS),
@@ -198,6 +202,8 @@ def _write_h5(path: Path, session: Session, attrs: dict) -> None:
                     group.create_dataset(key, data=values, compression="gzip" if values.size > 4096 else None)
         f.create_dataset("stream/bytes", data=np.frombuffer(b"".join(recorder.chunks), dtype=np.uint8),
                          compression="gzip")
+    with open(path, "xb") as out:
+        out.write(buffer.getbuffer())
 
 
 def read_session(path: Path) -> SessionData:
