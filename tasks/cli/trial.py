@@ -366,17 +366,9 @@ def _predictions(args) -> list[tuple[dict, object]]:
 
 # ---------------------------------------------------------------------------------- bomi replay
 def cmd_replay(args: argparse.Namespace) -> int:
-    from tasks.trials.dataset import read_session
-    from tasks.trials.replay import replay_trial, rescore_trial, trial_controller
-    directory: Path = args.dir
-    if not directory.is_dir():
-        raise BomiError(f"{directory}: not a directory (a `bomi trial` output directory)")
-    controller = trial_controller(directory, args.trial)
-    data = read_session(check_input(directory / f"{controller}.h5", "trial data"))
-    profile = model = None
-    if controller == Controller.BOMI.value:
-        profile = arm_profile(check_input(directory / "profile.toml", "profile"))
-        model = load_model(check_input(directory / "model.json", "model"))
+    from tasks.trials.replay import load_trial, replay_trial, rescore_trial
+    logged = load_trial(args.dir, args.trial)
+    data, profile, model, controller = logged.data, logged.profile, logged.model, logged.controller.value
     if args.model is not None:
         if profile is None:
             raise BomiError(f"--model: trial {args.trial} was a joystick trial: there are no decisions to re-score")
