@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from bomi.config_files import check_table, load_toml, number
+from bomi.config_files import beside, check_table, config_path, load_toml, number
 from bomi.errors import BomiError
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT, WARMUP_S, NodeFusion
@@ -137,11 +137,7 @@ def load_participant(path_or_name: str | Path, overrides: Mapping[str, Any] | No
     """Load and validate a participant file, or a shipped one by name (P1, P4, P5); ``overrides``:
     dotted keys set before validation (``{"spasm.rate_per_s": 0.2}``)."""
     params = load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse, overrides)
-    if Path(params.profile).suffix.lower() == ".toml":  # a profile file beside the participant file
-        path, shipped = Path(path_or_name), PARTICIPANT_DIR / f"{path_or_name}.toml"
-        path = shipped if not path.suffix and shipped.is_file() else path
-        params = replace(params, profile=str((path.parent / params.profile).resolve()))
-    return params
+    return replace(params, profile=beside(params.profile, config_path(path_or_name, PARTICIPANT_DIR)))
 
 
 def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative: bool) -> np.ndarray:
