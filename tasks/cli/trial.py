@@ -17,7 +17,7 @@ from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, Str
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
-from tasks.cli.options import add_force, non_negative_int, non_negative_seconds, positive_int, seconds
+from tasks.cli.options import add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.cli.task import _simulated_time, _stage
 from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.stick import arm_profile, profile_layout
@@ -77,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="seconds of countdown before each trial, the arm held (default %(default)s)")
     trial.add_argument("--time-limit", type=seconds, default=DEFAULT_TIME_LIMIT_S,
                        help="seconds from the go before a trial fails (default %(default)s)")
-    trial.add_argument("--seed", type=non_negative_int, default=0,
+    trial.add_argument("--seed", type=seed, default=0,
                        help="cube placements (k-th trial: seed + k - 1) and the stand-in's body and noise "
                             "(default %(default)s)")
     trial.add_argument("--predict", metavar="PARTICIPANT",

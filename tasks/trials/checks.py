@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -150,7 +151,8 @@ def check_columns(groups: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
     rows = {}
     for group, columns in GROUPS.items():
         found = groups.get(group, {})
-        n = None
+        lengths = Counter(len(found[name]) for name in columns if name in found and np.ndim(found[name]))
+        n = lengths.most_common(1)[0][0] if lengths else 0
         for name, column in columns.items():
             field = f"{group}/{name}"
             if name not in found:
@@ -161,13 +163,11 @@ def check_columns(groups: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
                 shape = "x".join(["n", *("any" if w is None else str(w) for w in column.row)])
                 raise Fault(field, f"a {values.dtype} array of shape {values.shape}, expected {shape} "
                                    f"({'numbers' if 'f' in column.kinds else 'booleans' if column.kinds == 'b' else 'integers' if 'i' in column.kinds else 'text'})")
-            if n is None:
-                n = len(values)
-            elif len(values) != n:
-                raise Fault(field, f"{len(values)} rows, {group}/{next(iter(columns))} has {n}")
+            if len(values) != n:
+                raise Fault(field, f"{len(values)} rows, the other columns of {group} have {n}")
             if values.dtype.kind == "f" and name not in ("completion_time",) and not np.isfinite(values).all():
                 raise Fault(field, "holds a value that is not a finite number")
-        rows[group] = n or 0
+        rows[group] = n
     return rows
 
 
@@ -323,3 +323,7 @@ def check_logged_model(path: Path, attrs: dict, profile: Profile, model: Model, 
         raise BomiError(f"{profile.source}: layout {profile_layout(profile).name}, the session ran {attrs['layout']} "
                         f"({path})")
     check_model_for(model, profile, model_path)
+    neutral = check_neutral(json.loads(attrs["neutral"]))
+    if neutral is not None and sorted(neutral) != sorted(profile.node_indices):
+        raise BomiError(f"{path}: attribute neutral: nodes {sorted(neutral)}, profile {profile.name}'s are "
+                        f"{sorted(profile.node_indices)}")

@@ -154,9 +154,6 @@ def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model
         raise BomiError(f"{data.path}: the session never took its neutral posture: nothing to re-score")
     go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
     chain = OnlineChain(model, profile)
-    if sorted(int(node) for node in neutral) != sorted(chain.nodes):
-        raise BomiError(f"{data.path}: attribute neutral: nodes {sorted(int(n) for n in neutral)}, the profile's "
-                        f"are {sorted(chain.nodes)}")
     chain.set_neutral({int(node): offset for node, offset in neutral.items()})
     f = data.frames
     made: dict[int, int] = {}  # frame row -> the other model's decision
