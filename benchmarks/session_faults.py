@@ -30,6 +30,7 @@ import shutil
 import signal
 import sys
 import tempfile
+import threading
 import time
 import traceback
 from collections import Counter
@@ -60,44 +61,54 @@ class Ran:
 
 def bomi(argv: list[str], cwd: Path, timeout: float, *, fsize: int | None = None,
          signal_at: tuple[str, int] | None = None) -> Ran:
-    """``tasks.cli.main(argv)`` in a forked child in ``cwd``; ``fsize``: its file-size limit in bytes
-    (a full disk); ``signal_at``: (text, signal) sends the signal once stderr shows the text."""
+    """``tasks.cli.main(argv)`` in a forked child in ``cwd``, its stderr through a pipe (no file-size
+    limit applies to it); ``fsize``: its file-size limit in bytes (a full disk); ``signal_at``:
+    (text, signal) sends the signal to its process group once stderr shows the text."""
     from tasks.cli import main as bomi_main
     start = time.monotonic()
-    with tempfile.TemporaryFile() as out, tempfile.NamedTemporaryFile() as err:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        pid = os.fork()
-        if pid == 0:
-            code = 1
-            try:
-                os.setpgid(0, 0)  # its own group: the signal reaches its workers too
-                os.chdir(cwd)
-                os.dup2(out.fileno(), 1)
-                os.dup2(err.fileno(), 2)
-                if fsize is not None:
-                    resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
-                code = bomi_main(argv)
-            except BaseException:
-                traceback.print_exc()
-            finally:
-                sys.stdout.flush()
-                sys.stderr.flush()
-                os._exit(code if isinstance(code, int) else 1)
-        sent = signal_at is None
-        while True:
-            done, status = os.waitpid(pid, os.WNOHANG)
-            if done:
-                break
-            if not sent and signal_at[0] in Path(err.name).read_text(errors="replace"):
-                os.killpg(pid, signal_at[1])
-                sent = True
-            if time.monotonic() - start > timeout:
-                os.killpg(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
-                return Ran(None, Path(err.name).read_text(errors="replace"), time.monotonic() - start)
-            time.sleep(0.02)
-        return Ran(os.waitstatus_to_exitcode(status), Path(err.name).read_text(errors="replace"), time.monotonic() - start)
+    read_end, write_end = os.pipe()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            os.close(read_end)
+            os.setpgid(0, 0)  # its own group: the signal reaches its workers too
+            os.chdir(cwd)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 1)
+            os.dup2(write_end, 2)
+            if fsize is not None:
+                resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+            code = bomi_main(argv)
+        except BaseException:
+            traceback.print_exc()
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code if isinstance(code, int) else 1)
+    os.close(write_end)
+    chunks: list[bytes] = []
+    reader = threading.Thread(target=lambda: chunks.extend(iter(lambda: os.read(read_end, 65536), b"")), daemon=True)
+    reader.start()
+    sent, code = signal_at is None, None
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            code = os.waitstatus_to_exitcode(status)
+            break
+        if not sent and signal_at[0].encode() in b"".join(chunks):
+            os.killpg(pid, signal_at[1])
+            sent = True
+        if time.monotonic() - start > timeout:
+            os.killpg(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            break
+        time.sleep(0.02)
+    reader.join(timeout=5)
+    os.close(read_end)
+    return Ran(code, b"".join(chunks).decode(errors="replace"), time.monotonic() - start)
 
 
 def clean_refusal(ran: Ran) -> bool:
@@ -433,19 +444,18 @@ def resume_after_kill(work: Path, bases: Bases, timeout: float) -> dict:
 
 
 def second_session_same_out(work: Path, bases: Bases, timeout: float) -> dict:
-    """A second session into the same new --out while the first runs: refused by the first's lock."""
+    """A second session into the same new --out 2 s after the first: refused (the first's lock), and
+    the first then finishes whole (every trial replayable)."""
     out = work / "o"
     pid = os.fork()
-    if pid == 0:  # the first session, killed when the second has answered
-        bomi([*THREE_TRIALS, "--out", str(out)], work, timeout)
-        os._exit(0)
-    deadline = time.monotonic() + 60
-    while not out.exists() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    second = bomi([*THREE_TRIALS, "--out", str(out), "--force"], work, timeout)
-    os.kill(pid, signal.SIGKILL)
-    os.waitpid(pid, 0)
-    return outcome_of([second], "refuse")
+    if pid == 0:  # the first session
+        os._exit(bomi([*THREE_TRIALS, "--out", str(out)], work, timeout).code or 0)
+    time.sleep(2.0)
+    second = bomi([*THREE_TRIALS, "--out", str(out)], work, timeout)
+    _, status = os.waitpid(pid, 0)
+    replays = [replayable(out, k, work, timeout) for k in (1, 2, 3)]
+    first_ok = os.waitstatus_to_exitcode(status) == 0 and all(r.code == 0 for r in replays)
+    return outcome_of([*replays, second], "refuse", lost=not first_ok)
 
 
 def trial_full_disk(work: Path, bases: Bases, timeout: float) -> dict:

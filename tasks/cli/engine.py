@@ -158,7 +158,8 @@ def check_ray_address(address: str, timeout_s: float = RAY_CONNECT_TIMEOUT_S) ->
         socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
     except OSError as exc:
         why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or type(exc).__name__)
-        raise BomiError(f"--address {address}: no Ray cluster answers there ({why} within {timeout_s:g} s)") from None
+        raise BomiError(f"--address {address}: no Ray cluster answers there ({why}; waited at most {timeout_s:g} s)"
+                        ) from None
 
 
 def import_ray():
