@@ -22,7 +22,7 @@ from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, Str
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
-from tasks.cli.options import add_force, non_negative_int, non_negative_seconds, positive_int, seconds
+from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.cli.task import _simulated_time, _stage
 from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.stick import arm_profile, profile_layout
@@ -34,17 +34,9 @@ from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEF
 
 SETTINGS_FILE = "session.json"   # the session's settings, what --resume continues with
 LOCK_FILE = ".lock"               # held (flock) by the one bomi trial writing to the directory
-MAX_SEED = 2 ** 31 - 1
 # the options a session is run with, as session.json keeps them (--out, --force, --resume aside)
 SETTINGS = ("stand_in", "port", "controller", "profile", "model", "gamepad", "trials", "countdown", "time_limit",
             "seed", "predict", "operator_file", "headless", "baud", "retries")
-
-
-def _seed(text: str) -> int:
-    seed = non_negative_int(text)
-    if seed > MAX_SEED:
-        raise argparse.ArgumentTypeError(f"at most {MAX_SEED}, got {text}")
-    return seed
 
 
 def _say(line: str) -> None:
@@ -93,7 +85,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="seconds of countdown before each trial, the arm held (default %(default)s)")
     trial.add_argument("--time-limit", type=seconds, default=DEFAULT_TIME_LIMIT_S,
                        help="seconds from the go before a trial fails (default %(default)s)")
-    trial.add_argument("--seed", type=_seed, default=0,
+    trial.add_argument("--seed", type=seed, default=0,
                        help="cube placements (k-th trial: seed + k - 1) and the stand-in's body and noise "
                             "(default %(default)s)")
     trial.add_argument("--predict", metavar="PARTICIPANT",
@@ -305,6 +297,9 @@ def cmd_trial(args: argparse.Namespace) -> int:
             raise BomiError(f"{args.resume}: not a directory (a `bomi trial` output directory)")
         args, previous = _resumed(args.resume)
     out: Path = args.out
+    if args.seed + args.trials - 1 > MAX_SEED:      # each controller's k-th trial: seed + k - 1
+        raise BomiError(f"--seed: the session's last trial would have seed {args.seed + args.trials - 1}, "
+                        f"above {MAX_SEED}")
     if args.resume is None:
         _check_out(out, args.force)
     for signum in (signal.SIGTERM, signal.SIGHUP):   # a closed terminal, a session manager: as Ctrl-C
@@ -557,17 +552,9 @@ def _predictions(args) -> list[tuple[dict, object]]:
 
 # ---------------------------------------------------------------------------------- bomi replay
 def cmd_replay(args: argparse.Namespace) -> int:
-    from tasks.trials.dataset import read_session, trial_file
-    from tasks.trials.replay import replay_trial, rescore_trial, trial_controller
-    directory: Path = args.dir
-    if not directory.is_dir():
-        raise BomiError(f"{directory}: not a directory (a `bomi trial` output directory)")
-    controller = trial_controller(directory, args.trial)
-    data = read_session(trial_file(directory, controller, args.trial))
-    profile = model = None
-    if controller == Controller.BOMI.value:
-        profile = arm_profile(check_input(directory / "profile.toml", "profile"))
-        model = load_model(check_input(directory / "model.json", "model"))
+    from tasks.trials.replay import load_trial, replay_trial, rescore_trial
+    logged = load_trial(args.dir, args.trial)
+    data, profile, model, controller = logged.data, logged.profile, logged.model, logged.controller.value
     if args.model is not None:
         if profile is None:
             raise BomiError(f"--model: trial {args.trial} was a joystick trial: there are no decisions to re-score")

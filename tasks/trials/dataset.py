@@ -25,6 +25,7 @@ import numpy as np
 
 from bomi.errors import BomiError
 from sim.joystick import BUTTONS, FUNCTIONS
+from tasks.trials.checks import check_session
 from tasks.trials.session import Phase, Session
 
 FORMAT = "bomi-trials"
@@ -210,20 +211,30 @@ def read_session(path: Path) -> SessionData:
     """A session file, checked to be one of ours at a version this code reads."""
     try:
         with h5py.File(path, "r") as f:
-            attrs = {k: (v.item() if hasattr(v, "item") else v) for k, v in f.attrs.items()}
+            attrs = {k: (v.item() if np.size(v) == 1 and hasattr(v, "item") else v) for k, v in f.attrs.items()}
             if attrs.get("format") != FORMAT:
                 raise BomiError(f"{path}: not a bomi trial file (format {attrs.get('format')!r})")
             if attrs.get("version") != VERSION:
                 raise BomiError(f"{path}: trial file version {attrs.get('version')}, this bomi reads version {VERSION}")
-            groups = {name: {key: _read(f[name][key]) for key in f[name] if key != "bytes"}
+            groups = {name: {key: _read(dataset) for key, dataset in _group(f, name, path).items()
+                             if isinstance(dataset, h5py.Dataset)}
                       for name in ("ticks", "frames", "decisions", "trials")}
-            stream = f["stream/bytes"][()].tobytes()
+            stream = f.get("stream/bytes")
+            if not isinstance(stream, h5py.Dataset) or stream.dtype != np.uint8 or stream.ndim != 1:
+                raise BomiError(f"{path}: stream/bytes: missing, or not a column of bytes")
+            stream = stream[()].tobytes()
     except OSError as exc:
         raise BomiError(f"{path}: cannot read the trial data ({' '.join(str(exc).split())})") from None
-    except KeyError as exc:
-        raise BomiError(f"{path}: trial file without {exc}") from None
+    check_session(Path(path), attrs, groups, len(stream))
     return SessionData(Path(path), attrs, groups["ticks"], stream, groups["frames"], groups["decisions"],
                        groups["trials"])
+
+
+def _group(f: h5py.File, name: str, path: Path) -> h5py.Group:
+    group = f.get(name)
+    if not isinstance(group, h5py.Group):
+        raise BomiError(f"{path}: {name}: missing, or not a group of columns")
+    return group
 
 
 def _read(dataset: h5py.Dataset) -> np.ndarray:
