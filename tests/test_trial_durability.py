@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from tasks.cli import main
+from tasks.cli.options import MAX_SEED
 
 
 def trial_args(model: Path, out: Path, trials: int = 2) -> list[str]:
@@ -124,5 +125,8 @@ def test_a_seed_out_of_range_is_refused_before_anything_runs(p1_model_file, tmp_
     args = trial_args(p1_model_file, tmp_path / "session")
     args[args.index("--seed") + 1] = "99999999999999999999"
     assert main(args) == 2
-    assert capsys.readouterr().err.startswith("bomi: error: argument --seed: at most 2147483647")
+    assert capsys.readouterr().err.startswith(f"bomi: error: argument --seed: at most {MAX_SEED}")
+    args[args.index("--seed") + 1] = str(MAX_SEED)                  # the second trial's seed would pass it
+    assert main(args) == 2
+    assert capsys.readouterr().err.startswith(f"bomi: error: --seed: the session's last trial would have seed {MAX_SEED + 1}")
     assert not (tmp_path / "session").exists()
