@@ -23,10 +23,7 @@ def load_toml(path_or_name: str | Path, shipped_dir: Path, kind: str, parse: Cal
     ``parse(data, source)`` raises ValueError for invalid content; every failure becomes a one-line
     BomiError that names the file (and the overrides, when there are any).
     """
-    path = Path(path_or_name)
-    shipped = shipped_dir / f"{path_or_name}.toml"
-    if not path.suffix and shipped.is_file():
-        path = shipped
+    path = config_path(path_or_name, shipped_dir)
     if not path.exists():
         names = ", ".join(sorted(p.stem for p in shipped_dir.glob("*.toml")))
         raise BomiError(f"{path}: no such {kind} file (shipped: {names})")
@@ -38,6 +35,23 @@ def load_toml(path_or_name: str | Path, shipped_dir: Path, kind: str, parse: Cal
         return parse(data, source)
     except ValueError as exc:
         raise BomiError(f"{source}: {exc}") from None
+
+
+def config_path(path_or_name: str | Path, shipped_dir: Path) -> Path:
+    """The file a configuration is read from: a shipped one by bare name (``"P1"`` ->
+    ``shipped_dir/P1.toml``), else the path as given."""
+    path = Path(path_or_name)
+    shipped = shipped_dir / f"{path_or_name}.toml"
+    return shipped if not path.suffix and shipped.is_file() else path
+
+
+def beside(reference: str, config: Path) -> str:
+    """A file named inside the configuration file ``config`` (a TOML file, by its suffix) resolved
+    against ``config``'s directory, not the working directory; any other reference (a shipped
+    name) as it is."""
+    if Path(reference).suffix.lower() != ".toml":
+        return reference
+    return str((config.parent / reference).resolve())
 
 
 # Tables and arrays nested deeper than this are no configuration of this project (the deepest

@@ -33,13 +33,22 @@ A node is trusted once its orientation filter has **settled** and while its samp
 - Plausible: no sensor vector all zero (acc and mag cannot read 0, 0, 0 on a node at rest or
   moving; a gyroscope can), no value at the int16 limits (-32768, 32767: saturation), no fused
   angle moving more than ``max_rate_deg_s`` between samples (600 deg/s: fast voluntary head turns
-  peak near 400 deg/s), packet counters one to ``max_counter_step`` apart (neither repeated nor
-  jumping), and no more frames than the node's announced period allows (``flood_factor`` x the
-  rate over the last second, plus one window of burst).
+  peak near 400 deg/s), no backlog (frames the loop kept from the filter: it lags them), and no
+  more frames than the node's announced period allows (``flood_factor`` x the rate over the last
+  second, plus one window of burst).
 - Fresh: a frame of the node within ``stale_s`` (100 ms) of now.
 
-After an implausible sample (or a silence longer than ``resettle_gap_s``) the node must settle
-again: a full window of plausible samples that passes the settle test, and ``resume_s`` (1.6 s)
+A **break** in a node's stream makes it untrusted from scratch, since what follows may come from
+another sitting (another neutral posture, another heading, another person on the same base station):
+a silence of ``break_gap_s`` (1 s: the sender's frames are never that late while its counters stay
+in step, and the one-byte counter wraps every 4.1 s, so only time tells a long gap), a packet counter
+repeated or jumping by more than ``max_counter_step`` (the parser delivers such a frame only once two
+more follow it in step: a stream that started again), or a reconnection of the source (the loop says
+so). ``NodeGate.restart`` then forgets everything the node was trusted for, and the caller starts its
+orientation filter again: the warm-up (with the 12 s floor) is rerun, and the neutral retaken
+(``tasks.live.LiveLoop``).
+
+After an implausible sample the node must settle again: a full window of plausible samples that passes the settle test, and ``resume_s`` (1.6 s)
 of wall time since the last implausible frame arrived (a burst can bring a whole window at
 once), i.e. the signal has been plausible and steady for 1.6 s before control resumes. An implausible
 frame is not given to the fusion (``NodeGate.check_raw`` says so before fusing), so a zero or
@@ -79,7 +88,7 @@ class GateConfig:
     max_rate_deg_s: float = 600.0
     max_counter_step: int = 16            # as the parser's phantom guard (bomi.frames.MAX_COUNTER_GAP)
     stale_s: float = 0.1
-    resettle_gap_s: float = 1.0           # a silence this long (a reconnection) means settling again
+    break_gap_s: float = 1.0              # a silence this long is a break: the node is untrusted from scratch
     flood_factor: float = 1.5
     rate_hz: float = SAMPLE_RATE_HZ
 
@@ -137,12 +146,17 @@ class NodeGate:
         self._angles.clear()
         self._last_angles = None
 
-    def arrived(self, now: float, frames: int) -> None:
-        """``frames`` frames of the node arrived at ``now``; too many for its rate is a flood."""
-        if self._last_arrival is not None and now - self._last_arrival >= self.config.resettle_gap_s:
-            self.settled = False
-            self._angles.clear()
-            self._last_angles = None
+    def restart(self, counter: int | None = None) -> None:
+        """Untrusted from scratch after a break (module docstring): the filter's age, the settle window and
+        every verdict forgotten (the samples lost so far are kept); ``counter``: the frame that showed it."""
+        self.settled, self.defect, self.last_defect, self.fused_samples = False, None, None, 0
+        self._angles.clear()
+        self._last_angles, self._last_counter, self._step, self._defect_at = None, counter, 1, None
+
+    def arrived(self, now: float, frames: int) -> str | None:
+        """``frames`` frames of the node arrived at ``now``; too many for its rate is a flood. Returns the
+        break a silence of ``break_gap_s`` or more before them is (None if none)."""
+        gap = None if self._last_arrival is None else now - self._last_arrival
         self._last_arrival = now
         self._arrivals.append((now, frames))
         while self._arrivals[0][0] <= now - 1.0:
@@ -151,21 +165,33 @@ class NodeGate:
         allowed = self.config.flood_factor * self.config.rate_hz + self.config.settle_samples // 2
         if count > allowed:
             self._implausible(f"more frames than its rate allows ({count} in 1 s)")
+        if gap is not None and gap >= self.config.break_gap_s:
+            return f"a {gap:.1f} s gap in its frames"
+        return None
 
-    def check_raw(self, counter: int, mag, gyro, acc) -> bool:
-        """A frame before fusion: False (and the node held) if it must not reach the filter."""
+    def count(self, counter: int) -> str | None:
+        """A frame's packet counter (fused or not): the break a repeated or jumping counter is, else None
+        (the samples it says were lost are counted)."""
         step = 1 if self._last_counter is None else counter_step(self._last_counter, counter)
         self._last_counter = counter
+        if step == 0 or step > self.config.max_counter_step:
+            return f"a packet-counter jump (a step of {step})"
+        self.lost += step - 1
+        self._step = step
+        return None
+
+    def backlog(self, frames: int) -> None:
+        """``frames`` frames of a backlog were kept from the filter: it lags, so the node settles again."""
+        self._implausible(f"a backlog ({frames} frames not fused)")
+
+    def check_raw(self, mag, gyro, acc) -> bool:
+        """A frame before fusion (its counter already ``count``-ed): False (and the node held) if it must not
+        reach the filter."""
         defect = raw_defect(mag, gyro, acc)
         if defect is not None:
             self._implausible(defect)
             return False
-        self._step = step
-        if step == 0 or step > self.config.max_counter_step:
-            self._implausible(f"packet counter out of step (a step of {step})")
-        else:
-            self.lost += step - 1
-        return True    # after a counter gap the filter still takes the frame; the node settles again
+        return True
 
     def fused(self, angles: Sequence[float]) -> None:
         """The node's fused (pitch, roll, yaw) for the frame ``check_raw`` let through."""
@@ -225,10 +251,13 @@ class Gate:
     def lost(self) -> int:
         return sum(gate.lost for gate in self.node.values())
 
-    def arrivals(self, now: float, counts: Mapping[int, int]) -> None:
+    def arrivals(self, now: float, counts: Mapping[int, int]) -> dict[int, str]:
+        """Frames per node arrived at ``now``: the breaks they end (node -> cause; ``NodeGate.arrived``)."""
+        breaks = {}
         for index, count in counts.items():
-            if index in self.node and count:
-                self.node[index].arrived(now, count)
+            if index in self.node and count and (cause := self.node[index].arrived(now, count)) is not None:
+                breaks[index] = cause
+        return breaks
 
     def verdict(self, now: float) -> str | None:
         """The first reason (node order) to hold the arm at ``now``; None when every node is trusted."""

@@ -179,6 +179,12 @@ class StreamReader:
     def parser(self) -> FrameParser:
         return self.source.parser
 
+    @property
+    def reconnections(self) -> int:
+        """Times the source has reconnected; read after ``poll``, it counts every reconnection that came
+        before the frames that poll returned (the thread counts one before it reads the new stream)."""
+        return self.source.reconnections
+
     def start(self) -> StreamReader:
         self.source.open()
         self._thread.start()

@@ -17,6 +17,12 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   of step, more frames than the node's rate allows) or a node without frames for 100 ms holds the
   arm, and control resumes only after the node's signal has been plausible and steady for one
   settle window (1.6 s). Implausible frames never reach the fusion;
+- a break in a node's stream (a reconnection of the source, a silence of 1 s, a packet counter that
+  repeats or jumps: ``bomi.gate``) may bring another sitting, so no calibration is trusted across it:
+  the node's orientation filter is started again, its warm-up rerun and then the neutral posture
+  retaken from the stream, also when fixed offsets were given (``--neutral-from``: they belong to
+  the sitting they were taken in, and so do the ones taken here), with the arm at rest until the new
+  neutral holds (hold: "node k untrusted after reconnect: retaking warm-up and neutral");
 - no frame at all for ``Watchdog.timeout_s`` (100 ms): the command is zero on every tick, and the
   last decision is forgotten, so the arm moves again only on decisions made from fresh frames. Both
   the watchdog and the gate judge a tick 1.5 periods ahead (the next tick's time, plus half a period
@@ -35,7 +41,8 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   is given up with one warning, and control goes on.
 
 Log (``--log L``, JSON lines, one object per control tick):
-``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``skipped``
+``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``reconnected``
+(the source reconnected since the last tick), ``skipped``
 (frames of a backlog kept from the chain this tick), ``lost`` (samples lost so far, from the
 packet counters), ``stale`` (no frames: the watchdog held the arm), ``standby`` (the safety key
 held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
@@ -167,10 +174,12 @@ class Tick:
     loop_hz: float = 0.0
     overruns: int = 0
     imu: Sequence[ImuFrame] = ()
+    reconnected: bool = False
 
     def record(self) -> dict:
         """The tick as one JSON-ready log object (columns in the module docstring)."""
-        out = {"tick": self.tick, "t": self.t, "frames": self.frames, "skipped": self.skipped, "lost": self.lost,
+        out = {"tick": self.tick, "t": self.t, "frames": self.frames, "reconnected": self.reconnected,
+               "skipped": self.skipped, "lost": self.lost,
                "stale": self.stale, "standby": self.standby, "hold": self.hold, "calibrating": self.calibrating,
                "loop_hz": self.loop_hz, "overruns": self.overruns,
                "decisions": [asdict(d) for d in self.decisions],
@@ -199,6 +208,7 @@ class Source(Protocol):
 
     parser: FrameParser
     error: BomiError | None   # set once the source has given up
+    reconnections: int        # times the source has reconnected (read after ``poll``)
 
     def poll(self) -> tuple[list[ImuFrame], list[SafetyKeyEvent]]: ...
 
@@ -518,7 +528,8 @@ class LiveLoop:
         profile = chain.profile
         self.functions = {cls.label: cls.function for cls in profile.classes}
         self.gate = Gate(chain.nodes, gate or GateConfig())
-        self.fusion = {n.index: NodeFusion(n.calibration) for n in profile.nodes if n.index in chain.nodes}
+        self._calibration = {n.index: n.calibration for n in profile.nodes if n.index in chain.nodes}
+        self.fusion = {index: NodeFusion(calibration) for index, calibration in self._calibration.items()}
         self.watchdog = watchdog or Watchdog()
         self.stick, self.safety = DecisionStick(), SafetySwitch()
         self.buttons = ButtonEvidence(max(1, math.ceil(profile.button_hold_s / DT - 1e-9)),
@@ -530,6 +541,17 @@ class LiveLoop:
         self.streaming = False        # every node settled once: frames go to the chain from then on
         self._neutral = None if neutral is None else {int(k): tuple(v) for k, v in neutral.items()}
         self._recalibrate = False
+        self.untrusted: dict[int, str] = {}   # node -> why, after a break, until the neutral is retaken
+
+    def _untrust(self, node: int, cause: str, counter: int | None = None) -> None:
+        """A break in ``node``'s stream (``bomi.gate``): its filter started again, its warm-up rerun, nothing to
+        the chain until every node has settled, and the neutral then retaken from the stream."""
+        self.gate.node[node].restart(counter)
+        self.fusion[node] = NodeFusion(self._calibration[node])
+        # the first break says why (a reconnection is then also a gap in the node's frames)
+        self.untrusted.setdefault(node, f"node {node} untrusted after {cause}: retaking warm-up and neutral")
+        self.streaming, self._neutral, self._recalibrate = False, None, False
+        self.summary.neutral = None
 
     def _start_streaming(self) -> None:
         self.streaming = True
@@ -552,10 +574,14 @@ class LiveLoop:
             if gate is None:
                 continue
             seen[node] += 1
+            if (cause := gate.count(frame.counter)) is not None:
+                self._untrust(node, cause, frame.counter)
             if seen[node] <= keep_from[node]:
                 skipped += 1
+                if seen[node] == keep_from[node]:
+                    gate.backlog(keep_from[node])
                 continue
-            if not gate.check_raw(frame.counter, frame.mag, frame.gyro, frame.acc):
+            if not gate.check_raw(frame.mag, frame.gyro, frame.acc):
                 continue
             angles = self.fusion[node].update(frame.acc, frame.gyro, frame.mag)
             gate.fused(angles)
@@ -565,11 +591,17 @@ class LiveLoop:
                 decisions.append(made)
         return decisions, skipped
 
-    def tick(self, now: float, frames: Sequence[ImuFrame], key_events: Sequence[SafetyKeyEvent] = ()) -> Tick:
-        """One control tick (see the class docstring); returns it after telling the observers."""
+    def tick(self, now: float, frames: Sequence[ImuFrame], key_events: Sequence[SafetyKeyEvent] = (),
+             reconnected: bool = False) -> Tick:
+        """One control tick (see the class docstring); returns it after telling the observers.
+        ``reconnected``: the source reconnected since the last tick (every node's stream broke)."""
         chain, summary = self.chain, self.summary
         nodes = Counter(imu_index(frame.node_id) for frame in frames)
-        self.gate.arrivals(now, nodes)
+        breaks = self.gate.arrivals(now, nodes)
+        if reconnected:
+            breaks = dict.fromkeys(self.gate.node, "reconnect")
+        for node, cause in breaks.items():
+            self._untrust(node, cause)
         made, skipped = self._frames_to_chain(frames)
         decisions, dropped = [], []
         for decision in made:
@@ -588,7 +620,8 @@ class LiveLoop:
         ahead = now + LOOKAHEAD_TICKS * self.arm.dt
         stale = self.watchdog.expired(ahead)
         gate = self.gate.verdict(ahead)
-        hold = "no frames" if stale else "standby" if self.safety.standby else gate
+        retaking = next(iter(self.untrusted.values()), None)
+        hold = "no frames" if stale else "standby" if self.safety.standby else retaking or gate
         if chain.calibrating and gate is not None:
             self._recalibrate = True      # the neutral posture is taken from trusted samples only
         elif self._recalibrate and gate is None:
@@ -603,10 +636,11 @@ class LiveLoop:
         new_neutral = None
         if summary.neutral is None and self.streaming and not chain.calibrating:
             new_neutral = summary.neutral = chain.neutral
+            self.untrusted.clear()      # the neutral of the sitting now streaming holds
             self.on_neutral(new_neutral)
         tick = Tick(summary.ticks, now, len(frames), self.gate.lost, stale, self.safety.standby, chain.calibrating,
                     decisions, dropped, state, self.arm.mode.value, command, new_neutral, hold, skipped,
-                    self.rate.hz, self.rate.overruns, tuple(frames))
+                    self.rate.hz, self.rate.overruns, tuple(frames), reconnected)
         summary.count(tick)
         summary.watchdog_trips = self.watchdog.trips
         for observer in self.observers:
@@ -629,13 +663,15 @@ class LiveLoop:
         """Tick every ``arm.dt`` on ``clock`` with what ``source`` has, until ``duration_s`` (kept
         whatever the source does), the display closes, or (without a duration) the source gives up."""
         last_decision: Decision | None = None
+        reconnections = source.reconnections
         start = clock()
         for now, due in paced_ticks(self.arm.dt, display, clock, sleep, start, duration_s):
             if duration_s is None and source.error is not None:
                 break
             frames, events = source.poll()
+            reconnected, reconnections = source.reconnections != reconnections, source.reconnections
             self.rate.ticked(now, due)
-            tick = self.tick(now - start, frames, events)
+            tick = self.tick(now - start, frames, events, reconnected)
             if log is not None:
                 log.write(tick.record())
             last_decision = tick.decisions[-1] if tick.decisions else last_decision

@@ -19,7 +19,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from bomi.config_files import check_table, load_toml, number, typed
+from bomi.config_files import beside, check_table, config_path, load_toml, number, typed
 from sim.kernels import clip
 from sim.joystick import BUTTONS, THREE_AXIS, Kind, Layout, Mode
 
@@ -87,7 +87,9 @@ def load_operator(path: Path | str = DEFAULT_OPERATOR_FILE, overrides: Mapping[s
     """Read and validate an operator TOML file (a path, or a shipped one by name), with ``overrides``
     (dotted keys, ``{"timing.reaction_time": 0.4}``) set before validation; raise BomiError naming
     the file and the fault."""
-    return load_toml(path, DEFAULT_OPERATOR_FILE.parent, "operator", _parse_operator, overrides)
+    params = load_toml(path, DEFAULT_OPERATOR_FILE.parent, "operator", _parse_operator, overrides)
+    # [human] model: a file relative to this operator file, not to the working directory
+    return replace(params, human_model=beside(params.human_model, config_path(path, DEFAULT_OPERATOR_FILE.parent)))
 
 
 def _parse_operator(data: dict, source: str) -> OperatorParams:

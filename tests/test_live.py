@@ -170,6 +170,7 @@ class ScriptedSource:
     def __init__(self, frames_per_tick: list[int], key_bytes: dict[int, bytes] | None = None):
         self.parser = FrameParser()
         self.error = None
+        self.reconnections = 0
         self._script = iter(enumerate(frames_per_tick))
         self._keys = key_bytes or {}
         self._counter = 0

@@ -91,7 +91,7 @@ def test_raw_defects_zero_and_saturated_values():
 
 def _plausible_samples(gate: NodeGate, n: int, counter: int, now: float) -> int:
     for k in range(n):
-        assert gate.check_raw(counter + k, STILL.mag, STILL.gyro, STILL.acc)
+        assert gate.count(counter + k) is None and gate.check_raw(STILL.mag, STILL.gyro, STILL.acc)
         gate.fused((0.0, 0.0, 0.0))
         gate.arrived(now, 1)
     return counter + n
@@ -102,7 +102,7 @@ def test_an_implausible_frame_holds_the_node_until_a_full_window_is_plausible_an
     gate = NodeGate(2, config)
     counter = _plausible_samples(gate, 10, 0, 0.0)
     assert gate.verdict(0.0) is None
-    assert not gate.check_raw(counter, STILL.mag, STILL.gyro, (0, 0, 0))          # never reaches the filter
+    assert not gate.check_raw(STILL.mag, STILL.gyro, (0, 0, 0))                    # never reaches the filter
     assert gate.verdict(0.0) == "node 2: accelerometer all zero"
     counter = _plausible_samples(gate, 9, counter + 1, 0.0)
     assert gate.verdict(0.0) == "node 2: accelerometer all zero"                    # 9 of 10: still held
@@ -113,22 +113,26 @@ def test_an_implausible_frame_holds_the_node_until_a_full_window_is_plausible_an
     assert gate.verdict(config.resume_s + 0.1) == "no frames from node 2"            # 100 ms: missing
 
 
-def test_angle_jumps_counters_out_of_step_and_floods_are_implausible():
+def test_angle_jumps_and_floods_are_implausible_counters_out_of_step_and_gaps_are_breaks():
     config = GateConfig(settle_samples=4, filter_age_samples=0)
     gate = NodeGate(1, config)
     counter = _plausible_samples(gate, 4, 0, 0.0)
-    gate.check_raw(counter, STILL.mag, STILL.gyro, STILL.acc)
+    gate.count(counter)
     gate.fused((0.0, 0.0, 9.5))                                                      # 594 deg/s: a person can
     assert gate.verdict(0.0) is None
-    gate.check_raw(counter + 1, STILL.mag, STILL.gyro, STILL.acc)
+    gate.count(counter + 1)
     gate.fused((0.0, 0.0, 19.2))                                                     # 606 deg/s: no one can
     assert gate.verdict(0.0) == "node 1: angle jump in one sample (10 deg)"
     gate = NodeGate(1, config)
     counter = _plausible_samples(gate, 4, 0, 0.0)
-    gate.check_raw(counter + 2, STILL.mag, STILL.gyro, STILL.acc)                    # 2 lost: fine
+    assert gate.count(counter + 2) is None                                           # 2 lost: fine
     assert gate.lost == 2 and gate.settled
-    gate.check_raw(counter + 2, STILL.mag, STILL.gyro, STILL.acc)                    # repeated
-    assert gate.verdict(0.0) == "node 1: packet counter out of step (a step of 0)"
+    assert gate.count(counter + 2) == "a packet-counter jump (a step of 0)"          # repeated: a new stream
+    assert gate.count(counter + 2 + 17) == "a packet-counter jump (a step of 17)"    # 256 ms lost at once
+    gate.restart(counter + 19)
+    assert gate.lost == 2 and not gate.settled and gate.fused_samples == 0
+    assert gate.verdict(0.0) == "warming up (node 1)"
+    assert gate.arrived(0.99, 1) is None and gate.arrived(2.0, 1) == "a 1.0 s gap in its frames"
     gate = NodeGate(1, config)
     _plausible_samples(gate, 4, 0, 0.0)
     gate.arrived(0.5, 100)                                                           # 104 in 1 s > 1.5 x 62.5 + 2
@@ -196,7 +200,7 @@ def test_a_backlog_is_not_replayed_only_the_newest_window_reaches_the_chain():
     tick = loop.tick(6 * DT, [still_frame(6 + j) for j in range(100)])               # 1.6 s of frames at once
     assert chain.pushed - pushed == 8                                                  # the newest window
     assert tick.skipped == 92 + 7 and not arm.states[-1].pressed                       # no B1 from the backlog
-    assert tick.hold == "node 1: packet counter out of step (a step of 93)"            # 92 frames never fused
+    assert tick.hold == "node 1: a backlog (92 frames not fused)"                      # the filter lags them
     # held while the burst is within the last second, then for resume_s more
     later = [loop.tick((7 + j) * DT, [still_frame(106 + j)]) for j in range(int((1 + QUICK_GATE.resume_s) / DT) + 3)]
     released = next(t.t for t in later if t.hold is None)
@@ -251,7 +255,7 @@ def test_a_full_disk_gives_one_warning_and_control_goes_on():
     clock = FakeClock()
 
     class Frames:
-        parser, error, k = None, None, 0
+        parser, error, k, reconnections = None, None, 0, 0
 
         def poll(self):
             self.k += 1

@@ -19,6 +19,7 @@ from tasks.cli.engine import ProcessPool
 from tasks.cli.sweep import (FIGURE_METRICS, LOCK_FILE, RESULTS_FILE, cells, job_key, load_grid, read_results,
                              run_sweep)
 from tasks.cli.task import aggregate
+from tasks.participants.participant import PARTICIPANT_DIR
 
 SHORT = 2.0  # s of simulated time: a joystick episode that short costs well under a second
 
@@ -54,7 +55,8 @@ time_limit = [{SHORT}, 2.5]
      "not one of [vary]"),
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[figure]\nmetric = "colour"\n', "'colour' is not one of"),
     # faults only the files the cells edit can tell: checked before any episode runs too
-    ('participants = ["P9"]\noperators = ["bomi"]\nseeds = [0]\n', "no such participant file"),
+    ('participants = ["P9"]\noperators = ["bomi"]\nseeds = [0]\n', "neither a shipped participant"),
+    ('participants = ["../../../tmp/x"]\noperators = ["bomi"]\nseeds = [0]\n', "neither a shipped participant"),
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nprofile.post_processing.rejection_threshold '
      '= [0.9, 1.5]\n', "rejection threshold must be in (0, 1)"),
     ('participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n[vary]\noperator.timing.reaction_tim = [0.3]\n',
@@ -94,8 +96,9 @@ def test_an_episode_key_is_a_hash_of_its_settings_whatever_the_grid_order(tmp_pa
     b = load_grid(grid_file(tmp_path, 'participants = ["P1"]\noperators = ["bomi"]\nseeds = [4]\n[vary]\n'
                                       'operator.timing.reaction_time = [0.2]\nvote_length = [3]\n', "b.toml"))
     job_a, job_b = cells(a)[0].job(4), cells(b)[0].job(4)
-    settings = {"participant": "P1", "operator": "bomi", "seed": 4, "time_limit": 600.0, "vote_length": 3,
-                "operator.timing.reaction_time": 0.2}
+    p1 = hashlib.sha256((PARTICIPANT_DIR / "P1.toml").read_bytes()).hexdigest()
+    settings = {"participant": f"sha256:{p1}", "operator": "bomi", "seed": 4, "time_limit": 600.0,
+                "vote_length": 3, "operator.timing.reaction_time": 0.2}
     expected = hashlib.sha256(json.dumps(settings, sort_keys=True, separators=(",", ":")).encode()).hexdigest()[:20]
     assert job_key(job_a) == job_key(job_b) == expected
     assert job_key(cells(a)[0].job(5)) != expected

@@ -138,7 +138,7 @@ def test_bad_input_is_one_line(bomi_dir, tmp_path, capsys):
     text = (bomi_dir / "model.json").read_text()
     other.write_text(text.replace('"name": "P1"', '"name": "P4"', 1))
     cases = [
-        ([*BOMI_ARGS, "--out", str(bomi_dir)], "directory exists"),
+        ([*BOMI_ARGS, "--out", str(bomi_dir)], "directory holds a session"),
         ([*BOMI_ARGS, "--model", str(other), "--out", str(tmp_path / "x")], "model trained for profile P4"),
         (["trial", "--port", str(tmp_path / "no-such-port"), "--profile", "P1", "--model",
           str(bomi_dir / "model.json"), "--controller", "bomi", "--headless", "--out", str(tmp_path / "y")],

@@ -11,6 +11,7 @@ import argparse
 import ctypes
 import os
 import signal
+import socket
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -23,6 +24,9 @@ from bomi.errors import BomiError
 from tasks.cli.options import positive_int
 
 RAY_INSTALL = 'pip install -e ".[ray]"'
+RAY_CONNECT_TIMEOUT_S = 10.0  # a Ray address that accepts no connection by then is refused
+LOCAL_RAY_IP = "127.0.0.1"    # a local Ray binds its node here (not every interface)
+MAX_JOBS = os.cpu_count() or 1  # more local processes than CPUs only slow every episode down
 
 
 class EngineKind(str, Enum):
@@ -52,6 +56,8 @@ def _worker_init(driver: int) -> None:
     """In each pool worker: Ctrl-C is the driver's to handle (it stops the workers), and the worker
     is killed by the kernel when the driver dies, however it dies (kill -9 included)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for sig in (signal.SIGTERM, signal.SIGHUP):  # not the driver's handler (a KeyboardInterrupt traceback)
+        signal.signal(sig, signal.SIG_DFL)         # when the driver stops the pool: ended quietly
     if sys.platform.startswith("linux"):
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
     if os.getppid() != driver:  # the driver died before the line above took effect
@@ -98,12 +104,20 @@ class RayCluster:
         ray = import_ray()
         started_here = not ray.is_initialized()
         if started_here:  # a local Ray's workers at normal priority, as the pool's (Ray's default is nice 15)
-            local = {} if self.address else {"num_cpus": self.cpus, "_system_config": {"worker_niceness": 0}}
+            # a local Ray's node listens on this machine's loopback only, not on every interface
+            local = {} if self.address else {"num_cpus": self.cpus, "_node_ip_address": LOCAL_RAY_IP,
+                                              "_system_config": {"worker_niceness": 0}}
             # Ray's start-up replaces the driver's SIGTERM handling with its own (abort); the
             # caller's (a sweep keeps what finished, then shuts Ray down) is put back
             handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
-            ray.init(address=self.address, include_dashboard=False, log_to_driver=False, logging_level="warning",
-                     **local)
+            if self.address is not None:
+                check_ray_address(self.address)
+            try:
+                ray.init(address=self.address, include_dashboard=False, log_to_driver=False,
+                         logging_level="warning", **local)
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                where = f"--address {self.address}" if self.address else "--engine ray"
+                raise BomiError(f"{where}: Ray did not start ({' '.join(str(exc).split())[:300]})") from None
             for sig, handler in handlers.items():
                 if handler is not None:
                     signal.signal(sig, handler)
@@ -131,6 +145,23 @@ class RayCluster:
                     ray.cancel(ref, force=True)
 
 
+def check_ray_address(address: str, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """A one-line BomiError unless something accepts a connection at the Ray address ``address``
+    (HOST:PORT, ray://HOST:PORT) within ``timeout_s``: Ray itself retries a dead address forever.
+    "auto" (the cluster this machine runs) is left to Ray, which fails at once without one."""
+    if address == "auto":
+        return
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise BomiError(f"--address {address}: expected HOST:PORT (e.g. 10.0.0.5:6379), ray://HOST:PORT or auto")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        why = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or type(exc).__name__)
+        raise BomiError(f"--address {address}: no Ray cluster answers there ({why}; waited at most {timeout_s:g} s)"
+                        ) from None
+
+
 def import_ray():
     """The ray module, or a one-line error saying how to install it."""
     try:
@@ -154,6 +185,9 @@ def engine_from_args(args: argparse.Namespace) -> Engine:
     """The engine the options ask for; bad options (or Ray missing) fail before any work."""
     if args.jobs < 1:
         raise BomiError(f"--jobs must be at least 1, got {args.jobs}")
+    if args.jobs > MAX_JOBS and not (args.engine == EngineKind.RAY.value and args.address is not None):
+        raise BomiError(f"--jobs {args.jobs}: at most {MAX_JOBS}, this machine's CPUs (more processes only slow "
+                        f"each episode down)")
     if args.engine == EngineKind.RAY.value:
         import_ray()
         return RayCluster(args.address, args.jobs)

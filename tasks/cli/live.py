@@ -31,7 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "--neutral-from gives a recording. The arm stays at rest when no frame arrives for 100 ms, "
                     "when a node's signal is implausible (until it has been plausible again for 1.6 s), and "
                     "during a backlog; a button class acts only once held for the profile's [live] "
-                    "button_hold_s. See tasks/live.py.")
+                    "button_hold_s. After a break in the stream (a reconnection, 1 s without a node's frames, a packet counter "
+                    "that jumps) the stream may come from another sitting: the warm-up and the neutral are retaken "
+                    "(also over --neutral-from), the arm at rest until then. See tasks/live.py.")
     live.add_argument("--port", required=True, metavar="PORT_OR_URL",
                       help="serial port, pty path or pyserial URL (socket://, loop://)")
     live.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")
@@ -45,7 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument("--log", type=Path, help="JSON-lines log of every control tick (must not exist; default: none)")
     live.add_argument("--neutral-from", type=Path, metavar="RECORDING",
                       help="take the neutral offsets from the first samples of this recording "
-                           "(default: from the stream's first samples, hold still)")
+                           "(default: from the stream's first samples, hold still); they hold until the first "
+                           "break in the stream, after which the neutral is taken from the stream")
     live.add_argument("--baud", type=positive_int, default=BASE_STATION_BAUD,
                       help="baud rate of a real port (default %(default)s)")
     live.add_argument("--retries", type=non_negative_int, default=RetryPolicy.attempts,

@@ -52,7 +52,7 @@ from typing import Any
 from tqdm import tqdm
 
 from bomi.classifier import MAX_VOTE_LENGTH
-from bomi.config_files import check_table, parse_toml
+from bomi.config_files import beside, check_table, config_path, parse_toml
 from bomi.errors import BomiError
 from bomi.files import atomic_output, write_text
 from tasks.cli import add_command
@@ -63,7 +63,7 @@ from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, MIN_EPISODES_FOR_INTER
                             EpisodeJob, aggregate, aligned_table, episode_record, markdown_table, row_cells,
                             terminal_cells)
 from tasks.episode import OPERATORS, profile_controls
-from tasks.participants.participant import load_participant
+from tasks.participants.participant import PARTICIPANT_DIR, load_participant
 from tasks.planner import load_operator
 from tasks.stick import arm_profile
 
@@ -123,9 +123,12 @@ def load_grid(path: Path) -> Grid:
         grid = _parse_grid(data, str(path))
     except ValueError as exc:
         raise BomiError(f"{path}: {exc}") from None
-    files = tuple(str(Path(path).parent / name) if Path(name).suffix.lower() == ".toml" and not Path(name).is_absolute()
-                  else name for name in grid.participants)
-    return replace(grid, participants=files)
+    shipped = sorted(p.stem for p in PARTICIPANT_DIR.glob("*.toml"))
+    odd = [name for name in grid.participants if name not in shipped and Path(name).suffix.lower() != ".toml"]
+    if odd:
+        raise BomiError(f"{path}: participants: {odd[0]!r} is neither a shipped participant ({', '.join(shipped)}) "
+                        f"nor a participant .toml file (named relative to the grid file)")
+    return replace(grid, participants=tuple(beside(name, Path(path)) for name in grid.participants))
 
 
 def _names(data: dict, key: str) -> tuple[str, ...]:
@@ -253,10 +256,28 @@ def job_settings(job: EpisodeJob) -> dict[str, Any]:
     return settings | dict(job.overrides)
 
 
-def job_key(job: EpisodeJob) -> str:
-    """A stable name of the episode: the same settings give the same key on any machine, any day."""
-    canonical = json.dumps(job_settings(job), sort_keys=True, separators=(",", ":"))
+def job_key(job: EpisodeJob, content: str | None = None) -> str:
+    """A stable name of the episode: the same settings give the same key on any machine, any day,
+    from any directory; a participant by its content (``participant_content``), never its path, so
+    an edited participant file runs again and a moved one does not (``content``: its
+    ``participant_content``, computed when not given)."""
+    settings = job_settings(job) | {"participant": content or participant_content(job.participant)}
+    canonical = json.dumps(settings, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(canonical.encode()).hexdigest()[:20]
+
+
+def participant_content(participant: str) -> str:
+    """What a participant file holds, as text that names it: the SHA-256 of its bytes, and of its
+    profile's file when it names one (a twin's derived profile) rather than a shipped profile."""
+    path = config_path(participant, PARTICIPANT_DIR)
+    try:
+        digest = hashlib.sha256(path.read_bytes())
+        profile = load_participant(participant).profile
+        if Path(profile).suffix.lower() == ".toml":
+            digest.update(Path(profile).read_bytes())
+    except OSError as exc:
+        raise BomiError(f"{path}: cannot be read ({exc.strerror})") from None
+    return f"sha256:{digest.hexdigest()}"
 
 
 # ------------------------------------------------------------------------------------ the directory
@@ -433,20 +454,21 @@ def run_sweep(grid: Grid, out: Path, engine: Engine, summarize: bool = True) -> 
     except OSError as exc:
         raise BomiError(f"--out {out}: cannot be made ({exc.strerror})") from None
     jobs = [cell.job(seed) for cell in cell_list for seed in grid.seeds]
-    keys = [job_key(job) for job in jobs]
+    contents = {name: participant_content(name) for name in grid.participants}  # read once, before any episode
+    keys = [job_key(job, contents[job.participant]) for job in jobs]
     with locked(out), signals_interrupt():
         check_directory(out, output_names(grid))  # again, now that no other sweep can change it
         path = out / RESULTS_FILE
         results = read_results(path)
         done = results.records
-        todo = [job for job, key in zip(jobs, keys) if key not in done]
+        todo = [(job, key) for job, key in zip(jobs, keys) if key not in done]
         interrupted = False
         file = ResultsFile(path, results)
         try:
             with tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="episodes", unit="ep") as bar:
-                for i, record in engine.run(episode_record, todo):
-                    key = job_key(todo[i])
-                    done[key] = {"key": key, "settings": job_settings(todo[i]), **record}
+                for i, record in engine.run(episode_record, [job for job, _ in todo]):
+                    job, key = todo[i]
+                    done[key] = {"key": key, "settings": job_settings(job), **record}
                     file.append(done[key])
                     bar.update(1)
         except KeyboardInterrupt:

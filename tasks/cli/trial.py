@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import os
+import shutil
+import signal
 import sys
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from bomi.chain import OnlineChain
@@ -17,18 +22,21 @@ from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, Str
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
-from tasks.cli.options import add_force, non_negative_int, non_negative_seconds, positive_int, seconds
+from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.cli.task import _simulated_time, _stage
 from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.stick import arm_profile, profile_layout
+from tasks.trials.dataset import part_name, replace_atomically, session_files, sync_directory, write_session
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
                                   TrialStatusLine,
                                   episode_log, node1_id, run_bomi, run_joystick, trial_record)
 
-# what a session writes into its directory (--force replaces these, and only these)
-FILES = ("trials.jsonl", "bomi.h5", "joystick.h5", "model.json", "profile.toml", "report.md", "trial_times.png",
-         "timeline_bomi.png", "timeline_joystick.png")
+SETTINGS_FILE = "session.json"   # the session's settings, what --resume continues with
+LOCK_FILE = ".lock"               # held (flock) by the one bomi trial writing to the directory
+# the options a session is run with, as session.json keeps them (--out, --force, --resume aside)
+SETTINGS = ("stand_in", "port", "controller", "profile", "model", "gamepad", "trials", "countdown", "time_limit",
+            "seed", "predict", "operator_file", "headless", "baud", "retries")
 
 
 def _say(line: str) -> None:
@@ -77,7 +85,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="seconds of countdown before each trial, the arm held (default %(default)s)")
     trial.add_argument("--time-limit", type=seconds, default=DEFAULT_TIME_LIMIT_S,
                        help="seconds from the go before a trial fails (default %(default)s)")
-    trial.add_argument("--seed", type=non_negative_int, default=0,
+    trial.add_argument("--seed", type=seed, default=0,
                        help="cube placements (k-th trial: seed + k - 1) and the stand-in's body and noise "
                             "(default %(default)s)")
     trial.add_argument("--predict", metavar="PARTICIPANT",
@@ -91,7 +99,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="baud rate of a real port (default %(default)s)")
     trial.add_argument("--retries", type=non_negative_int, default=RetryPolicy.attempts,
                        help="reconnection attempts after the stream is lost (default %(default)s)")
-    trial.add_argument("--out", type=Path, required=True, help="output directory (must not exist unless --force)")
+    where = trial.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, help="output directory (must not hold a session unless --force: the "
+                                                "earlier session is then moved aside to DIR.old-TIME once this "
+                                                "one has a finished trial)")
+    where.add_argument("--resume", type=Path, metavar="DIR",
+                       help="continue the interrupted session in DIR from its next trial, with its settings "
+                            "(DIR/session.json; no other option)")
     add_force(trial)
     trial.set_defaults(func=cmd_trial)
 
@@ -107,11 +121,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 # ---------------------------------------------------------------------------------- bomi trial
+def _holds_session(out: Path) -> bool:
+    """Whether ``out`` holds anything but this command's hidden files (its lock, a staging directory)."""
+    return out.is_dir() and any(not entry.name.startswith(".") for entry in out.iterdir())
+
+
 def _check_out(out: Path, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise BomiError(f"{out}: --out must be a directory, this is a file")
-    if out.exists() and not force:
-        raise BomiError(f"{out}: directory exists, not writing into it (--force replaces a session's files in it)")
+    if _holds_session(out) and not force:
+        raise BomiError(f"{out}: directory holds a session, not writing into it (--resume {out} continues it, "
+                        f"--force moves it aside once a new session has a finished trial)")
     if not out.parent.is_dir():
         raise BomiError(f"{out}: directory {out.parent} does not exist")
     if not os.access(out.parent, os.W_OK):
@@ -128,9 +148,163 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
+def _lock(out: Path) -> int:
+    """The directory's lock (flock on DIR/.lock), held until the process ends; refused if another holds it."""
+    out.mkdir(exist_ok=True)
+    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise BomiError(f"{out}: another bomi trial is writing to this directory (it holds {out / LOCK_FILE})") from None
+    return fd
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _settings_argv(args: argparse.Namespace) -> list[str]:
+    """The session's options as a command line (paths made absolute, so that a resume from elsewhere reads them)."""
+    argv = []
+    for name in SETTINGS:
+        value = getattr(args, name)
+        if value is None or value is False:
+            continue
+        option = "--" + name.replace("_", "-")
+        if value is True:
+            argv.append(option)
+            continue
+        if name == "controller":
+            value = ",".join(c.value for c in value)
+        elif isinstance(value, Path) or (name == "profile" and Path(value).is_file()):
+            value = Path(value).resolve()
+        argv += [option, str(value)]
+    return argv
+
+
+def _resumed(directory: Path) -> tuple[argparse.Namespace, list[dict]]:
+    """The settings of the session in ``directory`` (checked as its command line is) and its trial records."""
+    from tasks.cli import build_parser
+    path = check_input(directory / SETTINGS_FILE, "--resume session settings")
+    try:
+        argv = json.loads(path.read_text(encoding="utf-8"))["argv"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise BomiError(f"{path}: not a session's settings ({exc})") from None
+    if not isinstance(argv, list) or not all(isinstance(arg, str) for arg in argv):
+        raise BomiError(f"{path}: argv: not a list of strings")
+    args = build_parser([__name__]).parse_args(["trial", *argv, "--out", str(directory)])
+    args.resume = directory
+    if (directory / "model.json").is_file():   # the BoMI's model and profile as the session used them
+        args.model, args.profile = directory / "model.json", str(directory / "profile.toml")
+    records = []
+    jsonl = directory / "trials.jsonl"
+    if jsonl.exists():
+        for n, line in enumerate(jsonl.read_text(encoding="utf-8").splitlines(), start=1):
+            try:
+                record = json.loads(line)
+                records.append(record if isinstance(record["trial"], int) else {}["trial"])
+            except (ValueError, KeyError, TypeError):
+                raise BomiError(f"{jsonl}: line {n}: not a trial record") from None
+    return args, records
+
+
+def _plans(args: argparse.Namespace, done: int) -> list[tuple[Controller, TrialPlan]]:
+    """Each controller's trials still to run after the first ``done`` trials of the session (numbered from 1
+    in session order; the k-th trial of a controller keeps the cube placement of seed + k - 1)."""
+    plans = []
+    for k, controller in enumerate(args.controller):
+        first = 1 + k * args.trials
+        start = max(first, done + 1)
+        if start <= first + args.trials - 1:
+            plans.append((controller, TrialPlan(first + args.trials - start, args.countdown, args.time_limit,
+                                                args.seed + start - first, start)))
+    return plans
+
+
+@dataclass
+class Committer:
+    """Every trial written as it finishes: the session files (HDF5), the model and profile, then the
+    records (trials.jsonl) last, each replaced atomically (``tasks.trials.dataset.replace_atomically``),
+    so a kill at any instant leaves every finished trial whole. Under --force the session is written
+    to a staging directory inside DIR until its first trial has finished; the earlier session is then
+    moved aside (DIR.old-TIME) and the new one into DIR."""
+
+    final: Path                      # --out
+    target: Path                     # where the files go now (a staging directory, or --out)
+    sessions: list
+    profile: object
+    model: object
+    intent_known: bool
+    previous: list[dict] = field(default_factory=list)   # the records of a resumed session
+    committed: int = 0
+    failed: bool = False
+    aside: Path | None = None
+
+    def finished(self) -> int:
+        return sum(len(session.finished) for session, _ in self.sessions)
+
+    def after_tick(self, *_) -> None:
+        if self.finished() > self.committed:
+            self.commit()
+
+    def commit(self) -> tuple[list[dict], dict]:
+        """Write what has finished; the records and episode logs of this run's trials."""
+        records, logs = _score(self.sessions, self.intent_known)
+        if self.failed or self.finished() == self.committed:
+            return records, logs
+        try:
+            if self.model is not None and any(s.controller is Controller.BOMI for s, _ in self.sessions):
+                for name, save in (("model.json", save_model), ("profile.toml", save_profile)):
+                    what = self.model if name == "model.json" else self.profile
+                    replace_atomically(self.target / name, lambda partial: save(partial, what))
+            for session, meta in self.sessions:
+                if session.finished:
+                    write_session(self.target / meta["file"], session, meta["attrs"])
+            lines = "".join(json.dumps(record) + "\n" for record in self.previous + records)
+            replace_atomically(self.target / "trials.jsonl", lambda partial: partial.write_text(lines, "utf-8"))
+        except (BomiError, OSError) as exc:
+            self.failed = True
+            why = str(exc) if isinstance(exc, BomiError) else f"{exc.filename}: {exc.strerror}"
+            kept = f"trials up to {self.committed} kept" if self.committed else "no trial had finished"
+            raise BomiError(f"{why}; the session stops, {kept}") from None
+        self.committed = self.finished()
+        if self.target != self.final:
+            self._swap()
+        return records, logs
+
+    def _swap(self) -> None:
+        self.aside = self.final.with_name(f"{self.final.name}.old-{time.strftime('%Y%m%d-%H%M%S')}")
+        self.aside.mkdir()
+        for entry in list(self.final.iterdir()):
+            if entry.name != LOCK_FILE and entry != self.target:
+                entry.rename(self.aside / entry.name)
+        for entry in list(self.target.iterdir()):
+            entry.rename(self.final / entry.name)
+        self.target.rmdir()
+        self.target = self.final
+        sync_directory(self.final)
+        sync_directory(self.final.parent)
+        _say(f"the earlier session in {self.final} is now in {self.aside}")
+
+
 def cmd_trial(args: argparse.Namespace) -> int:
+    previous: list[dict] = []
+    if args.resume is not None:
+        if args.force:
+            raise BomiError("--force: --resume continues a session, it replaces nothing")
+        if not args.resume.is_dir():
+            raise BomiError(f"{args.resume}: not a directory (a `bomi trial` output directory)")
+        args, previous = _resumed(args.resume)
     out: Path = args.out
-    _check_out(out, args.force)
+    if args.seed + args.trials - 1 > MAX_SEED:      # each controller's k-th trial: seed + k - 1
+        raise BomiError(f"--seed: the session's last trial would have seed {args.seed + args.trials - 1}, "
+                        f"above {MAX_SEED}")
+    if args.resume is None:
+        _check_out(out, args.force)
+    for signum in (signal.SIGTERM, signal.SIGHUP):   # a closed terminal, a session manager: as Ctrl-C
+        signal.signal(signum, _interrupt)
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # a file-size limit: EFBIG (one line), not a dead process
     from tasks.participants.participant import check_against_profile, load_participant
     standin = load_participant(args.stand_in) if args.stand_in is not None else None
     if args.predict is not None:
@@ -144,6 +318,9 @@ def cmd_trial(args: argparse.Namespace) -> int:
     if bomi and args.port is not None and args.model is None:
         raise BomiError("--model: a person's BoMI needs a model trained for the profile (bomi record / bomi train)")
     profile = arm_profile(profile_name) if profile_name is not None else None
+    plans = _plans(args, len(previous))
+    if not plans:
+        raise BomiError(f"{out}: every trial of this session has finished; nothing to resume")
     if standin is not None and profile is not None:
         check_against_profile(standin, profile)
     if args.model is not None and profile is None:
@@ -167,45 +344,62 @@ def cmd_trial(args: argparse.Namespace) -> int:
             if device is not None:
                 device.close()
             raise
-    if bomi and model is None:
-        from tasks.episode import calibrated_model
-        with _stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
-                    f"record does, then bomi train)", progress=True):
-            model = calibrated_model(standin, profile, args.seed)
-    out.mkdir(exist_ok=True)
-    for name in FILES:  # --force: no file of an earlier session stays beside this one's
-        (out / name).unlink(missing_ok=True)
-    sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
-    first = 1
     try:
-        for controller in args.controller:
-            plan = TrialPlan(args.trials, args.countdown, args.time_limit, args.seed, first)
-            if controller is Controller.BOMI:
-                _bomi_session(args, plan, profile, model, standin, operator, stream, sessions)
-            else:
-                _joystick_session(args, plan, standin, operator, device, sessions)
-            first += args.trials
-            if sessions and sessions[-1][0].stopped:
-                break  # the person closed the viewer: the session ends here
-    finally:
+        lock = _lock(out)  # before calibration: a second session on this directory is refused here
+    except BomiError:
         if device is not None:
             device.close()
         if stream is not None:
             stream.stop()
-        records, logs = _score(sessions, standin is not None)
-        _write(out, records, sessions, profile, model)
-    predictions = _predictions(args) if args.predict is not None else []
-    from tasks.trials.report import write_report
-    note = (f"Stand-in {standin.name} (seed {args.seed}), simulated clock." if standin is not None
-            else f"A person; stream {args.port}.")
-    written = write_report(out, records, logs, predictions, note)
-    for r in records:
-        verdict = f"{r['completion_time']:.2f} s" if r["success"] else f"failed ({r['failure']})"
-        acc = r.get("accuracy_all_decisions")
-        print(f"trial {r['trial']} {r['operator']}: {verdict}, {r['mode_switches']} mode switches"
-              + (f", accuracy {100 * acc:.1f} %" if acc is not None else ""))
-    print(f"wrote {out / 'trials.jsonl'}, " + ", ".join(str(p) for p in written))
-    return 0
+        raise
+    # --force over a session: written beside it until the new session has a finished trial
+    target = out / f".new-{os.getpid()}" if args.resume is None and _holds_session(out) else out
+    try:
+        if args.resume is None:
+            target.mkdir(exist_ok=True)
+            settings = json.dumps({"argv": _settings_argv(args)}, indent=1) + "\n"
+            replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
+        if bomi and model is None:
+            from tasks.episode import calibrated_model
+            with _stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
+                        f"record does, then bomi train)", progress=True):
+                model = calibrated_model(standin, profile, args.seed)
+        sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
+        writer = Committer(out, target, sessions, profile, model, standin is not None, previous)
+        try:
+            for controller, plan in plans:
+                part = len(session_files(out, controller.value)) + 1
+                meta = {"file": part_name(controller.value, part)}
+                if controller is Controller.BOMI:
+                    _bomi_session(args, plan, profile, model, standin, operator, stream, sessions, meta, writer.after_tick)
+                else:
+                    _joystick_session(args, plan, standin, operator, device, sessions, meta, writer.after_tick)
+                if sessions and sessions[-1][0].stopped:
+                    break  # the person closed the viewer: the session ends here
+        finally:
+            if device is not None:
+                device.close()
+            if stream is not None:
+                stream.stop()
+            records, logs = writer.commit()  # a trial cut short by a lost input is written too
+        records = previous + records
+        predictions = _predictions(args) if args.predict is not None else []
+        from tasks.trials.report import write_report
+        note = (f"Stand-in {standin.name} (seed {args.seed}), simulated clock." if standin is not None
+                else f"A person; stream {args.port}.")
+        written = write_report(out, records, logs, predictions, note)
+        for r in records:
+            verdict = f"{r['completion_time']:.2f} s" if r["success"] else f"failed ({r['failure']})"
+            acc = r.get("accuracy_all_decisions")
+            print(f"trial {r['trial']} {r['operator']}: {verdict}, {r['mode_switches']} mode switches"
+                  + (f", accuracy {100 * acc:.1f} %" if acc is not None else ""))
+        print(f"wrote {out / 'trials.jsonl'}, " + ", ".join(str(p) for p in written))
+        return 0
+    finally:
+        if target != out and target.exists():  # no trial finished: the earlier session stays as it was
+            shutil.rmtree(target, ignore_errors=True)
+            _say(f"no trial finished: the earlier session in {out} is kept as it was")
+        os.close(lock)
 
 
 def _score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[list[dict], dict]:
@@ -219,31 +413,19 @@ def _score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[li
     return records, logs
 
 
-def _write(out: Path, records, sessions, profile, model) -> None:
-    """Everything recorded so far (also after a lost input)."""
-    from tasks.trials.dataset import write_session
-    with open(out / "trials.jsonl", "w", encoding="utf-8") as f:
-        for record in records:
-            f.write(json.dumps(record) + "\n")
-    for session, meta in sessions:
-        write_session(out / f"{session.controller.value}.h5", session, meta["attrs"])
-    if model is not None and any(s.controller is Controller.BOMI for s, _ in sessions):
-        save_model(out / "model.json", model, overwrite=True)
-        save_profile(out / "profile.toml", profile, overwrite=True)
-
-
-def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source, sessions) -> None:
+def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source, sessions, meta: dict,
+                  after_tick) -> None:
     from tasks.live import Headless, StatusLine
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
     arm = TrialArm(sim, plan)
     who = standin.name if standin is not None else "person"
-    meta = {"log": {"operator": "bomi", "participant": who, "controls": _controls_label(profile),
-                    "class_names": tuple(c.function for c in sorted(profile.classes, key=lambda c: c.label)),
-                    "neutral": 0, "amplitude": profile.amplitude},
-            "attrs": {"profile": profile.name, "participant": who, "layout": sim.layout.name,
-                      "classes": {str(c.label): f"{c.function} ({c.name})" for c in profile.classes},
-                      "plan": vars(plan), "seed": args.seed}}
+    meta.update({"log": {"operator": "bomi", "participant": who, "controls": _controls_label(profile),
+                         "class_names": tuple(c.function for c in sorted(profile.classes, key=lambda c: c.label)),
+                         "neutral": 0, "amplitude": profile.amplitude},
+                 "attrs": {"profile": profile.name, "participant": who, "layout": sim.layout.name,
+                           "classes": {str(c.label): f"{c.function} ({c.name})" for c in profile.classes},
+                           "plan": vars(plan), "seed": args.seed}})
     try:
         if standin is not None:
             from tasks.trials.standin import BomiStandIn, StandInSource
@@ -258,6 +440,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                 def on_tick(tick) -> None:
                     person.heard(tick.decisions)
                     progress(clock.now)
+                    after_tick()
                 run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say), on_tick=on_tick,
                          clock=clock, sleep=clock.sleep)
             if arm.not_ready is not None:
@@ -269,7 +452,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, _say)
             try:
                 source.discard()  # what arrived while getting ready is old: never acted upon, nor logged
-                run_bomi(session, source, chain, display=display, status=status)
+                run_bomi(session, source, chain, display=display, status=status, on_tick=after_tick)
             finally:
                 source.stop()
                 status.close()
@@ -287,12 +470,12 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
         sim.close()
 
 
-def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions) -> None:
+def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions, meta: dict, after_tick) -> None:
     sim = ArmSim(layout=THREE_AXIS)
     arm = TrialArm(sim, plan, ready=True)
     who = standin.name if standin is not None else "person"
-    meta = {"log": {"operator": "joystick", "participant": who, "controls": Controls().label},  # the JACO's stick
-            "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}}
+    meta.update({"log": {"operator": "joystick", "participant": who, "controls": Controls().label},  # the JACO's
+                 "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}})
     try:
         if standin is not None:
             from tasks.live import Headless
@@ -302,8 +485,11 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
             sessions.append((session, meta))
             with _simulated_time(f"{standin.name} joystick session", progress=True) as progress:
+                def on_tick(now: float) -> None:
+                    progress(now)
+                    after_tick()
                 run_joystick(session, person, display=TrialDisplay(Headless(), arm, _say), clock=clock,
-                             sleep=clock.sleep, on_tick=progress)
+                             sleep=clock.sleep, on_tick=on_tick)
         else:
             from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")
@@ -311,7 +497,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             keys = device if isinstance(device, ViewerKeys) else None
             display = TrialDisplay(_viewer(args.headless, sim, keys), arm, _say)
             try:
-                run_joystick(session, device, display=display)
+                run_joystick(session, device, display=display, on_tick=after_tick)
             except BomiError:
                 session.cut_short("input lost")
                 _say(f"the joystick was lost: the session stops here, the running trial fails; what was "
@@ -366,17 +552,9 @@ def _predictions(args) -> list[tuple[dict, object]]:
 
 # ---------------------------------------------------------------------------------- bomi replay
 def cmd_replay(args: argparse.Namespace) -> int:
-    from tasks.trials.dataset import read_session
-    from tasks.trials.replay import replay_trial, rescore_trial, trial_controller
-    directory: Path = args.dir
-    if not directory.is_dir():
-        raise BomiError(f"{directory}: not a directory (a `bomi trial` output directory)")
-    controller = trial_controller(directory, args.trial)
-    data = read_session(check_input(directory / f"{controller}.h5", "trial data"))
-    profile = model = None
-    if controller == Controller.BOMI.value:
-        profile = arm_profile(check_input(directory / "profile.toml", "profile"))
-        model = load_model(check_input(directory / "model.json", "model"))
+    from tasks.trials.replay import load_trial, replay_trial, rescore_trial
+    logged = load_trial(args.dir, args.trial)
+    data, profile, model, controller = logged.data, logged.profile, logged.model, logged.controller.value
     if args.model is not None:
         if profile is None:
             raise BomiError(f"--model: trial {args.trial} was a joystick trial: there are no decisions to re-score")

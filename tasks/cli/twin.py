@@ -15,8 +15,10 @@ from bomi.recording import Recording, write_recording
 from tasks.cli import add_command
 from tasks.cli.chain import read
 from tasks.cli.options import add_force, check_outputs, non_negative_int
-from tasks.participants.participant import (Protocol, load_participant, protocol_session, session_recording)
-from tasks.participants.twin import fit_twin, twin_toml
+from bomi.errors import BomiError
+from tasks.participants.participant import (Protocol, load_participant, parse_participant_text, protocol_session,
+                                            session_recording)
+from tasks.participants.twin import fit_twin, same_person, twin_toml
 from tasks.stick import arm_profile
 
 PROFILE_SUFFIX = ".profile.toml"   # a derived profile is written beside the twin: P.toml -> P.profile.toml
@@ -41,6 +43,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                  f"'{NO_PRIOR}': everything must be measurable (timing is assumed)")
     p.add_argument("--name", help="the participant's name (default: the --out file's stem)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
+    p.add_argument("--same-person", action="store_true",
+                   help="the recordings are one person's even though their nodes or classes differ (default: "
+                        "recordings that differ are refused as two people)")
     add_force(p)
     p.set_defaults(func=twin_command)
 
@@ -76,6 +81,8 @@ def twin_command(args: argparse.Namespace) -> int:
         check_input(path, "recording")
     prior = None if args.prior == NO_PRIOR else load_participant(args.prior)
     recordings = [read(path, args.verbose) for path in args.recordings]
+    if not args.same_person:
+        same_person(recordings)
     derived = outputs["derived profile"]
     profile, reference = _profile_for(args, recordings, derived)
     name = args.name or args.out.name.removesuffix(".toml")
@@ -84,6 +91,11 @@ def twin_command(args: argparse.Namespace) -> int:
         print(f"not measurable, prior used: {line}")
     sources = ", ".join(Path(r.source).name for r in recordings)
     text = twin_toml(twin, f"Twin fitted on {sources} (profile {profile.name if derived is None else reference}).")
+    try:  # the validator `bomi synth` reads it with: every twin written is a participant
+        parse_participant_text(text, str(outputs["--out"]))
+    except ValueError as exc:
+        raise BomiError(f"{sources}: the twin fitted is no participant `bomi synth` accepts ({exc}); nothing "
+                        "written") from None
     if derived is not None:
         save_profile(derived, replace(profile, name=name), overwrite=args.force)
         print(f"profile derived from the recordings: wrote {derived}")

@@ -23,6 +23,7 @@ matrix of (pitch, roll, yaw).
 from __future__ import annotations
 
 import math
+import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import IntEnum
@@ -34,7 +35,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
-from bomi.config_files import check_table, load_toml, number
+from bomi.config_files import beside, check_numbers, check_table, config_path, load_toml, number
 from bomi.errors import BomiError
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT, WARMUP_S, NodeFusion
@@ -47,6 +48,8 @@ from tasks.participants.imu_synth import Delivery, LinkModel, SensorNoise, deliv
 PARTICIPANT_DIR = Path(__file__).resolve().parent
 SWAY_CUTOFF_HZ = 1.0          # sway below, tremor above: the split used by the P1 fit
 SPASM_DRAW_S = 10.0           # spasm onsets are drawn this far ahead at a time
+MAX_ANGLE_DEG = 180.0         # a posture or a neutral angle (pitch, roll, yaw) is within +-180 deg
+MAX_STD_DEG = 90.0            # a spread of a posture beyond this is no posture held
 
 _TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "max_amplitude", "tremor", "neutral",
              "classes", "spasm", "feel", "provenance", "protocol"}
@@ -137,11 +140,19 @@ def load_participant(path_or_name: str | Path, overrides: Mapping[str, Any] | No
     """Load and validate a participant file, or a shipped one by name (P1, P4, P5); ``overrides``:
     dotted keys set before validation (``{"spasm.rate_per_s": 0.2}``)."""
     params = load_toml(path_or_name, PARTICIPANT_DIR, "participant", _parse, overrides)
-    if Path(params.profile).suffix.lower() == ".toml":  # a profile file beside the participant file
-        path, shipped = Path(path_or_name), PARTICIPANT_DIR / f"{path_or_name}.toml"
-        path = shipped if not path.suffix and shipped.is_file() else path
-        params = replace(params, profile=str((path.parent / params.profile).resolve()))
-    return params
+    return replace(params, profile=beside(params.profile, config_path(path_or_name, PARTICIPANT_DIR)))
+
+
+def parse_participant_text(text: str, source: str) -> ParticipantParams:
+    """A participant file's text, validated as ``load_participant`` validates a file (`bomi twin`
+    checks what it is about to write with it, so `bomi synth` accepts every twin written); a fault
+    is a ValueError."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"not valid TOML ({exc})") from None
+    check_numbers(data)
+    return _parse(data, source)
 
 
 def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative: bool) -> np.ndarray:
@@ -154,6 +165,11 @@ def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative:
         raise ValueError(f"{where}: '{key}' must be a {nodes} x 3 matrix of numbers (pitch, roll, yaw per node)")
     if nonnegative and (m < 0).any():
         raise ValueError(f"{where}: '{key}' holds standard deviations, they cannot be negative")
+    limit = MAX_STD_DEG if nonnegative else MAX_ANGLE_DEG
+    if (np.abs(m) > limit).any():
+        what = "a standard deviation" if nonnegative else "an angle"
+        raise ValueError(f"{where}: '{key}' holds {np.abs(m).max():g} deg, beyond the {limit:g} deg {what} of a "
+                         f"body's posture can be")
     return m
 
 

@@ -48,6 +48,7 @@ MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows
 WELCH_SEGMENT = 128            # samples per Welch segment of the tremor spectrum (0.49 Hz bins)
 SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where it falls below this share of the peak
 MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
+SATURATED_SHARE = 0.1          # a channel at its extreme value for more of the samples is clipped, not a body
 MIN_CLASS_SAMPLES = 31         # 0.5 s: fewer held samples of a class and its posture is not measurable (error)
 MIN_TRANSITIONS = 3            # fewer measurable transitions and onset/reaction come from the prior
 MIN_TRANSITION_DEG = 3.0       # a transition smaller than this (all angles) is not timed
@@ -246,12 +247,58 @@ def read_pass(rec: Recording, day: int, profile: Profile) -> Pass:
     if NEUTRAL_LABEL not in labels:
         raise BomiError(f"{rec.source}: no neutral posture (label {NEUTRAL_LABEL}): a twin measures every posture "
                         "from the neutral")
+    check_sensors_alive(rec, nodes)
+    if rec.time is not None and np.any(np.diff(rec.time) < 0):
+        row = int(np.flatnonzero(np.diff(rec.time) < 0)[0]) + 1
+        raise BomiError(f"{rec.source}: Time goes back at row {row} ({rec.time[row - 1]:g} then "
+                        f"{rec.time[row]:g} s): a twin times the protocol from it")
     angles = stacked_angles(rec, nodes)
     blocks = hold_blocks(labels, day)
     flat = angles.reshape(len(angles), -1)
     time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
     moves = [transition(flat, time, a, b) for a, b in zip(blocks[:-1], blocks[1:])]
     return Pass(rec.source, angles, time, blocks, [t for t in moves if t is not None])
+
+
+def dead_channels(rec: Recording, nodes: Sequence[int]) -> list[str]:
+    """The channels of ``nodes`` that show no body: constant (zero included) over the whole
+    recording, or saturated (more than SATURATED_SHARE of the samples at the channel's extreme value)."""
+    dead = []
+    for node in nodes:
+        data = rec.nodes[node]
+        for signal in data.signals:
+            values = getattr(data, signal.value)
+            for axis in range(values.shape[1]):
+                x = values[:, axis]
+                name = f"node {node} {signal.value}[{axis}]"
+                if np.ptp(x) == 0:
+                    dead.append(f"{name} constant at {x[0]:g}")
+                elif max(np.mean(x == x.max()), np.mean(x == x.min())) > SATURATED_SHARE:
+                    dead.append(f"{name} saturated")
+    return dead
+
+
+def check_sensors_alive(rec: Recording, nodes: Sequence[int]) -> None:
+    """One line naming the recording and its dead channels, if any: a twin of them would be
+    postures of zero (or of a clipped sensor), not of a person."""
+    dead = dead_channels(rec, nodes)
+    if dead:
+        more = f" and {len(dead) - 3} more" if len(dead) > 3 else ""
+        raise BomiError(f"{rec.source}: dead sensor channel(s): {', '.join(dead[:3])}{more}; a twin needs a "
+                        "recording of live sensors")
+
+
+def same_person(recordings: Sequence[Recording]) -> None:
+    """The recordings of one `bomi twin` are one person's passes: the same nodes and the same classes.
+    One line naming the first that differs from the first recording."""
+    first = recordings[0]
+    shape = (first.node_indices, sorted(set(first.require_labels().tolist())))
+    for rec in recordings[1:]:
+        other = (rec.node_indices, sorted(set(rec.require_labels().tolist())))
+        if other != shape:
+            raise BomiError(f"{rec.source}: nodes {list(other[0])}, classes {other[1]}; {first.source} has nodes "
+                            f"{list(shape[0])}, classes {shape[1]}: not passes of one person (--same-person: they "
+                            "are, fit them together)")
 
 
 def check_class_samples(passes: Sequence[Pass], profile: Profile) -> None:

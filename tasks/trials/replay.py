@@ -10,6 +10,7 @@ performed. Those decisions never reach an arm: with them the arm's path would ha
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +25,8 @@ from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState
 from tasks import metrics
 from tasks.live import Headless
+from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_model, inside,
+                                 read_records)
 from tasks.trials.dataset import SessionData
 from tasks.trials.session import (UNKNOWN, Controller, Session, SimulatedClock, TickRecorder, TrialArm, TrialDisplay,
                                   TrialPlan, run_joystick)
@@ -70,13 +73,14 @@ def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
 
     loop = LiveLoop(chain, arm, on_neutral=arm.ready)
     parser, seen = FrameParser(), 0
-    for t, chunk in zip(data.ticks["t"].tolist(), data.tick_bytes()):
+    reconnected = data.ticks.get("reconnected", np.zeros(len(data.ticks["t"]), dtype=bool)).tolist()
+    for t, chunk, again in zip(data.ticks["t"].tolist(), data.tick_bytes(), reconnected):
         if arm.finished:
             return
         frames = parser.feed(chunk, t)
         events = parser.safety_events[seen:]
         seen += len(events)
-        loop.tick(t, frames, events)
+        loop.tick(t, frames, events, again)
 
 
 def session_plan(data: SessionData) -> TrialPlan:
@@ -90,6 +94,10 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
         raise BomiError(f"{data.path}: no trial {number} in this session")
     go, end = int(data.trials["go_tick"][row]), int(data.trials["end_tick"][row])
     sim = ArmSim(layout=LAYOUTS[data.attrs["layout"]])
+    if not math.isclose(sim.dt, data.attrs["dt"], rel_tol=1e-9):
+        sim.close()
+        raise BomiError(f"{data.path}: attribute dt: logged at {data.attrs['dt']:g} s a tick, this simulated arm "
+                        f"steps {sim.dt:g} s: not replayable here")
     try:
         controller = Controller(data.attrs["controller"])
         arm = TrialArm(sim, session_plan(data), ready=controller is Controller.JOYSTICK, last_trial=number)
@@ -105,7 +113,10 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
                 pass  # a trial cut short: replayed up to where its log ends
     finally:
         sim.close()
-    result = next(r for r in arm.results if r.number == number)
+    result = next((r for r in arm.results if r.number == number), None)
+    if result is None:
+        raise BomiError(f"{data.path}: trial {number} never started when replayed: the log does not hold the ticks "
+                        f"before its go_tick {go}")
     stop = result.end_tick if result.end_tick >= 0 else len(arm.rows)  # cut short: the log's end
     replayed = np.array([r["hand_pos"] for r in arm.rows[result.go_tick:stop]])
     logged = data.ticks["hand_pos"][go:end]
@@ -172,19 +183,43 @@ def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model
                     metrics.accuracy_excused_transitions(d["intended"][span], logged_labels, allowance))
 
 
-def trial_controller(out: Path, number: int) -> str:
-    """Which controller's session holds trial ``number`` of the session directory ``out``."""
-    path = out / "trials.jsonl"
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except OSError as exc:
-        raise BomiError(f"{path}: cannot read it ({exc.strerror}); is {out} a `bomi trial` directory?") from None
-    for k, line in enumerate(lines, start=1):
-        try:
-            record = json.loads(line)
-        except json.JSONDecodeError:
-            raise BomiError(f"{path}: line {k} is not JSON") from None
-        if record.get("trial") == number:
-            return record["operator"]
-    raise BomiError(f"{path}: no trial {number} (there are {len(lines)})")
+@dataclass(frozen=True)
+class LoggedTrial:
+    """A trial of a session directory, every file it needs read and checked: its session file, and
+    for the BoMI the logged profile and the model, which must be the ones the session ran."""
 
+    number: int
+    controller: Controller
+    data: SessionData
+    profile: Profile | None = None
+    model: Model | None = None
+
+
+def load_trial(directory: Path, number: int) -> LoggedTrial:
+    """Trial ``number`` of the `bomi trial` directory ``directory``, checked before use (one line per fault)."""
+    from bomi.files import check_input
+    from bomi.model_io import load_model
+    from tasks.stick import arm_profile
+    from tasks.trials.dataset import read_session, trial_file
+    if not directory.is_dir():
+        raise BomiError(f"{directory}: not a directory (a `bomi trial` output directory)")
+    records = read_records(directory)
+    if number not in records:
+        raise BomiError(f"{directory / RECORDS_FILE}: no trial {number} (there are {len(records)})")
+    record = records[number]
+    path = inside(directory, trial_file(directory, record.controller.value, number).name)  # a resumed session: several
+    data = read_session(check_input(path, "trial data"))
+    if data.attrs["controller"] != record.controller.value:
+        raise BomiError(f"{path}: a {data.attrs['controller']} session, trials.jsonl says trial {number} was "
+                        f"{record.controller.value}")
+    row = data.trial_row(number)
+    if row is None:
+        raise BomiError(f"{path}: no trial {number} in this session (trials.jsonl lists it)")
+    check_against_record(path, record, data.trials, row)
+    if record.controller is not Controller.BOMI:
+        return LoggedTrial(number, record.controller, data)
+    profile_path, model_path = inside(directory, "profile.toml"), inside(directory, "model.json")
+    profile = arm_profile(check_input(profile_path, "profile"))
+    model = load_model(check_input(model_path, "model"))
+    check_logged_model(path, data.attrs, profile, model, model_path)
+    return LoggedTrial(number, record.controller, data, profile, model)

@@ -89,6 +89,10 @@ def write_report(out: Path, records: Sequence[dict], logs: dict[int, EpisodeLog]
         if best is None:
             figures.append(f"No {controller} trial succeeded: no timeline figure.")
             continue
+        if best["trial"] not in logs:   # run before the session was resumed: its ticks are in its session file
+            figures.append(f"{controller}: the best trial, trial {best['trial']}, ran before the session was resumed: "
+                           f"no timeline figure (`bomi replay` re-runs it).")
+            continue
         predicted = {id(r): log for r, log in predictions if r["operator"] == controller}
         twin = best_trial([r for r, _ in predictions if r["operator"] == controller])
         shown = [logs[best["trial"]]] + ([predicted[id(twin)]] if twin is not None else [])

@@ -280,6 +280,7 @@ class TickRecorder:
         """``tasks.live.run_live``'s observer: one live tick."""
         self.record(tick.t, tick.state, tick.command, tick.decisions,
                     {"stale": tick.stale, "standby": tick.standby, "calibrating": tick.calibrating,
+                     "reconnected": tick.reconnected,
                      "lost": tick.lost, "dropped": len(tick.dropped), "skipped": tick.skipped,
                      "hold": tick.hold or "", "loop_hz": tick.loop_hz, "overruns": tick.overruns})
         if tick.neutral is not None:

@@ -123,6 +123,7 @@ class StandInSource:
     clock: each poll, the stand-in looks at the arm and sends what has arrived by now."""
 
     error = None  # a stand-in never goes away
+    reconnections = 0
 
     def __init__(self, standin: BomiStandIn, clock: Callable[[], float]):
         self.standin, self.clock, self.parser = standin, clock, TappedParser()
