@@ -152,7 +152,8 @@ def resolve(name: str, what: str) -> str:
 
 
 def describe(sha: str) -> str:
-    return git("log", "-1", "--format=%h (%ad, %s)", "--date=short", sha)
+    sha_date, subject = git("log", "-1", "--format=%h (%ad)%n%s", "--date=short", sha).split("\n", 1)
+    return f"{sha_date} {subject[:90]}{'...' if len(subject) > 90 else ''}"
 
 
 def working_tree() -> Side:
@@ -382,6 +383,9 @@ def main(argv: list[str] | None = None) -> int:
     except BomiError as exc:
         print(f"bomi: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # the worktrees are removed by then
+        print("bomi: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
