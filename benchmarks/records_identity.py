@@ -30,8 +30,9 @@ rate (Fisher's exact test) and the completion time of the successful episodes (M
 both two-sided at the 5 % level, with benchmarks/physics_outcomes.py's ``compare``; it writes
 benchmarks/results/records_identity_no_jit.md and exits 1 if either test rejects.
 
-Bad input (not a git checkout, an unknown commit, a commit whose code cannot run these episodes,
---seeds outside 1-1000) is one ``bomi: error:`` line and exit 2, before any episode runs.
+Bad input (not a git checkout, an unknown commit, a commit whose code does not import what the
+episodes need, --seeds outside 1-1000) is one ``bomi: error:`` line and exit 2, before any episode
+runs; an episode that fails later is one such line too.  Ctrl-C: "bomi: interrupted", exit 130.
 """
 from __future__ import annotations
 
