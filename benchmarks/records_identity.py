@@ -1,38 +1,86 @@
-"""Speed never changes results silently: the records of a fixed set of development episodes,
-written once and compared field for field after every speed-up.
+"""Did a change alter the task's episodes?  Two commits run the same development episodes on this
+machine, in one run, and their records are compared field for field.
 
-    python benchmarks/records_identity.py --write before.json     # at the commit before the change
-    python benchmarks/records_identity.py --compare before.json   # after it: every field equal?
+    python benchmarks/records_identity.py BEFORE [AFTER] [--seeds N]   # AFTER: this working tree
+    python benchmarks/records_identity.py --no-jit [COMMIT] [--seeds N]
 
-The episodes: virtual P1 and P4, joystick and BoMI (calibration, LDA training and task), task
-seeds 0-3 (development seeds; a fixed set, chosen before any speed-up).  A record is what ``bomi
-benchmark``/``bomi sweep`` store for an episode (``tasks.cli.task.episode_record``) without its
-four timing fields, plus a SHA-256 of every array the episode logged (hand and cube trajectories,
-modes, the BoMI's decisions with their gamma and nu): equal digests mean bit-identical
-trajectories, not just equal summaries.  ``--compare`` lists every differing field and exits 1
-if any differ.  Writes benchmarks/results/records_identity.md.
+BEFORE (and AFTER, when given) is checked out into a temporary ``git worktree`` (removed
+afterwards, on error and on Ctrl-C too); without AFTER the other side is this working tree as it
+is, uncommitted changes included.  Each side runs in its own subprocess, cwd and PYTHONPATH its
+tree (so each side's own code runs; the subprocess checks that bomi, sim and tasks come from
+there), with the same Python environment, one BLAS thread, one side after the other.  The
+episodes: virtual P1, P4 and P5, joystick and BoMI (calibration, LDA training and task), task
+seeds 0..N-1 (development seeds; N=2 by default: 12 episodes a side).  A record is what
+``bomi benchmark`` stores for an episode (``tasks.episode.summarize``) without its four timing
+fields, plus a SHA-256 of every array the episode logged (hand and cube trajectories, modes,
+goals, the BoMI's decisions with their gamma and nu): equal digests mean bit-identical
+trajectories, not just equal summaries.  Writes benchmarks/results/records_identity.md (the two
+commits, the machine, "identical: yes/NO" and every differing field); exits 1 if any differ.
+
+What "identical" means.  The same build on the same machine (same CPU features, the same glibc
+libm, the same numpy and BLAS code paths) gives bit-identical records: that is what this script
+checks between two commits, and what tests/test_reproducibility.py checks within one.  It does
+not hold across machines: glibc's libm, numpy and OpenBLAS choose FMA, AVX2 or AVX-512 code
+paths at run time by the CPU, so the last bit of a sin, an exp or a dot product depends on the
+CPU; nor between the numba kernels and their Python forms (``BOMI_NO_JIT=1``), whose operations
+are rounded in another order.  The stacking task is chaotic (one last bit becomes another
+episode), so there only distributions hold: ``--no-jit`` runs COMMIT (default: this working tree)
+compiled and with ``BOMI_NO_JIT=1`` and compares, per operator over all its episodes, the success
+rate (Fisher's exact test) and the completion time of the successful episodes (Mann-Whitney U),
+both two-sided at the 5 % level, with benchmarks/physics_outcomes.py's ``compare``; it writes
+benchmarks/results/records_identity_no_jit.md and exits 1 if either test rejects.
+
+Bad input (not a git checkout, an unknown commit, a commit whose code does not import what the
+episodes need, --seeds outside 1-1000) is one ``bomi: error:`` line and exit 2, before any episode
+runs; an episode that fails later is one such line too.  Ctrl-C: "bomi: interrupted", exit 130.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
+import os
+import platform
+import signal
+import subprocess
 import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from importlib.metadata import version
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from tqdm import tqdm
 
-from tasks.cli.task import EpisodeJob, run_job
-from tasks.episode import summarize
+from bomi.errors import BomiError
 
-RESULTS = Path(__file__).resolve().parent / "results"
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results"
 TIMING_FIELDS = ("wall_time", "cpu_time", "realtime_factor", "realtime_factor_cpu")
-SEEDS = range(4)
-JOBS = [EpisodeJob(operator, participant, seed) for participant in ("P1", "P4") for operator in ("joystick", "bomi")
-        for seed in SEEDS]
+PARTICIPANTS = ("P1", "P4", "P5")
+OPERATORS = ("joystick", "bomi")
+DEVELOPMENT_SEEDS = 1000  # task seeds 0-999; the seeds above are held out
+ALPHA = 0.05  # the --no-jit tests' level (two-sided)
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
+class Episode(NamedTuple):
+    participant: str
+    operator: str
+    seed: int
+
+    def __str__(self) -> str:
+        return f"{self.participant} {self.operator} seed {self.seed}"
+
+
+def episodes(seeds: int) -> list[Episode]:
+    return [Episode(p, op, s) for p in PARTICIPANTS for op in OPERATORS for s in range(seeds)]
+
+
+# ------------------------------------------------------------------ in the subprocess of one tree
 def log_digest(log) -> str:
     """SHA-256 over every array and sequence the episode logged, in a fixed order."""
     digest = hashlib.sha256()
@@ -47,48 +95,298 @@ def log_digest(log) -> str:
     return digest.hexdigest()
 
 
-def record(job: EpisodeJob) -> dict:
-    log = run_job(job)
-    out = {k: v for k, v in summarize(log).items() if k not in TIMING_FIELDS}
-    return json.loads(json.dumps(out | {"log_sha256": log_digest(log)}))  # as stored: JSON round trip
+def worker(seeds: int, check_only: bool) -> int:
+    """Run the episodes with the code of the current directory; one JSON line each on stdout."""
+    out = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)  # whatever the episode code prints goes to stderr, not into the records
+    import bomi
+    import sim
+    import tasks
+    from tasks.cli.task import EpisodeJob, run_job
+    from tasks.episode import summarize
+
+    here = Path.cwd().resolve()
+    for module in (bomi, sim, tasks):
+        if here not in Path(module.__file__).resolve().parents:
+            print(f"{module.__name__} imported from {module.__file__}, not from {here}", file=sys.stderr)
+            return 3
+    if check_only:
+        return 0
+    for episode in episodes(seeds):
+        log = run_job(EpisodeJob(episode.operator, episode.participant, episode.seed))
+        summary = {k: v for k, v in summarize(log).items() if k not in TIMING_FIELDS}
+        out.write(json.dumps({"episode": str(episode), "record": summary | {"log_sha256": log_digest(log)}}) + "\n")
+    return 0
 
 
-def differences(before: dict, after: dict) -> list[str]:
+# ------------------------------------------------------------------------------ the two trees
+class Side(NamedTuple):
+    """The code one side runs: its name in the tables, what it is, its tree, its environment additions."""
+
+    name: str
+    label: str
+    path: Path
+    env: tuple[tuple[str, str], ...] = ()
+
+
+def git(*args: str) -> str:
+    done = subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+    if done.returncode != 0:
+        raise BomiError(done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"git {args[0]} failed")
+    return done.stdout.strip()
+
+
+def check_git_checkout() -> None:
+    try:
+        git("rev-parse", "--show-toplevel")
+    except (BomiError, FileNotFoundError) as exc:
+        raise BomiError(f"{ROOT}: not a git checkout (records_identity checks commits out with git "
+                        f"worktree): {exc}") from None
+
+
+def resolve(name: str, what: str) -> str:
+    """The full hash of commit ``name``."""
+    try:
+        return git("rev-parse", "--verify", "--quiet", f"{name}^{{commit}}")
+    except BomiError:
+        raise BomiError(f"{what}: {name!r} is not a commit of {ROOT}") from None
+
+
+def describe(sha: str) -> str:
+    sha_date, subject = git("log", "-1", "--format=%h (%ad)%n%s", "--date=short", sha).split("\n", 1)
+    return f"{sha_date} {subject[:90]}{'...' if len(subject) > 90 else ''}"
+
+
+def working_tree() -> Side:
+    changed = ", with uncommitted changes" if git("status", "--porcelain", "--untracked-files=no") else ""
+    return Side("after", f"working tree at {describe('HEAD')}{changed}", ROOT)
+
+
+@contextlib.contextmanager
+def checked_out(name: str, sha: str) -> Iterator[Side]:
+    """Commit ``sha`` in a temporary detached worktree, removed on the way out whatever happens."""
+    with tempfile.TemporaryDirectory(prefix="records_identity_") as tmp:
+        path = Path(tmp) / sha[:12]
+        git("worktree", "add", "--detach", "--quiet", str(path), sha)
+        try:
+            yield Side(name, describe(sha), path)
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)], capture_output=True)
+
+
+def worker_command(side: Side, seeds: int, check_only: bool) -> tuple[list[str], dict[str, str]]:
+    env = os.environ | ONE_THREAD | dict(side.env) | {"PYTHONPATH": str(side.path)}
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", "--seeds", str(seeds)]
+    return command + (["--check"] if check_only else []), env
+
+
+def check_side(side: Side, seeds: int) -> None:
+    """The side's code imports from its tree and has what the episodes need (before any episode)."""
+    command, env = worker_command(side, seeds, check_only=True)
+    done = subprocess.run(command, env=env, cwd=side.path, capture_output=True, text=True)
+    if done.returncode != 0:
+        last = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"
+        raise BomiError(f"{side.label}: its code cannot run these episodes: {last}")
+
+
+def run_side(side: Side, seeds: int, bar: tqdm) -> dict[str, dict]:
+    """The records of one side, episode by episode, from its subprocess."""
+    command, env = worker_command(side, seeds, check_only=False)
+    records = {}
+    with tempfile.TemporaryFile("w+") as errors:
+        proc = subprocess.Popen(command, env=env, cwd=side.path, stdout=subprocess.PIPE, stderr=errors, text=True)
+        try:
+            for line in proc.stdout:
+                item = json.loads(line)
+                records[item["episode"]] = item["record"]
+                bar.set_postfix_str(f"{side.name}: {item['episode']}")
+                bar.update()
+            proc.wait()
+        except BaseException:
+            proc.kill()
+            proc.wait()
+            raise
+        if proc.returncode != 0:
+            errors.seek(0)
+            raise BomiError(f"{side.label}: an episode failed (exit {proc.returncode}): "
+                            f"{(errors.read().strip().splitlines() or [''])[-1]}")
+    return records
+
+
+def run_sides(sides: list[Side], seeds: int) -> list[dict[str, dict]]:
+    for side in sides:
+        check_side(side, seeds)
+    with tqdm(total=len(sides) * len(episodes(seeds)), desc="episodes", unit="episode", file=sys.stderr) as bar:
+        return [run_side(side, seeds, bar) for side in sides]
+
+
+# -------------------------------------------------------------------------------- comparing
+def canonical(value) -> str:
+    """A field as its JSON text (NaN equals NaN; 1 and 1.0 differ, as they would in a results file)."""
+    return json.dumps(value, sort_keys=True)
+
+
+def differences(before: dict[str, dict], after: dict[str, dict]) -> list[str]:
+    """``episode: field: before -> after`` for every field that differs or is on one side only."""
     lines = []
     for key in sorted(before.keys() | after.keys()):
-        a, b = before.get(key), after.get(key)
-        for field in sorted((a or {}).keys() | (b or {}).keys()):
-            if (a or {}).get(field) != (b or {}).get(field):
-                lines.append(f"{key}: {field}: {(a or {}).get(field)!r} -> {(b or {}).get(field)!r}")
+        if key not in before or key not in after:
+            lines.append(f"{key}: run {'before' if key in before else 'after'} only")
+            continue
+        a, b = before[key], after[key]
+        for field in sorted(a.keys() | b.keys()):
+            if field not in a or field not in b or canonical(a[field]) != canonical(b[field]):
+                lines.append(f"{key}: {field}: {a.get(field, '(absent)')!r} -> {b.get(field, '(absent)')!r}")
     return lines
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    what = parser.add_mutually_exclusive_group(required=True)
-    what.add_argument("--write", type=Path, help="write the records to this JSON file")
-    what.add_argument("--compare", type=Path, help="compare the records with this JSON file")
-    args = parser.parse_args()
-    if args.compare is not None and not args.compare.is_file():
-        print(f"bomi: error: --compare: {args.compare}: no such file", file=sys.stderr)
-        return 2
-    if args.write is not None and args.write.exists():
-        print(f"bomi: error: --write: {args.write} exists (not overwritten)", file=sys.stderr)
-        return 2
-    records = {str(job): record(job) for job in tqdm(JOBS, desc="episodes", unit="episode", file=sys.stderr)}
-    if args.write is not None:
-        args.write.write_text(json.dumps(records, indent=1) + "\n", encoding="utf-8")
-        return 0
-    before = json.loads(args.compare.read_text(encoding="utf-8"))
-    diff = differences(before, records)
-    text = "\n".join([f"# Records before and after (`python benchmarks/records_identity.py --compare {args.compare}`)",
-                      "", f"{len(records)} episodes: P1 and P4, joystick and BoMI, seeds {SEEDS.start}-{SEEDS.stop - 1}; "
-                      "every field of each record but the four timing ones, and a SHA-256 of every logged array.", "",
-                      f"Identical, field for field: {'yes' if not diff else 'NO'}.", *(f"- {d}" for d in diff)]) + "\n"
+def same_episode(key: str, records: list[dict[str, dict]]) -> bool:
+    return not differences(*({key: r[key]} if key in r else {} for r in records))
+
+
+def machine() -> str:
+    """The CPU and the run-time code paths that decide the last bits: libm, numpy SIMD, BLAS kernel."""
+    from numpy._core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
+    from threadpoolctl import threadpool_info
+
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                   if line.startswith("model name"))
+    found = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
+    missing = [f for f in __cpu_dispatch__ if not __cpu_features__.get(f)]
+    flags = ", ".join(f"{f} {'yes' if __cpu_features__.get(f) else 'no'}" for f in ("FMA3", "AVX2", "AVX512F"))
+    blas = "; ".join(f"{lib['internal_api']} {lib['version']} (kernel {lib.get('architecture', '?')})"
+                     for lib in threadpool_info() if lib["user_api"] == "blas")
+    libc = " ".join(platform.libc_ver()) or "?"
+    return (f"{cpu} ({platform.machine()}, {os.cpu_count()} CPUs), {platform.system()} {platform.release()}, "
+            f"libc {libc}; numpy {np.__version__} SIMD baseline {' '.join(__cpu_baseline__)}, dispatch found "
+            f"{' '.join(found) or 'none'}, not found {' '.join(missing) or 'none'} ({flags}); BLAS {blas}; "
+            f"numba {version('numba')}, mujoco {version('mujoco')}, Python {platform.python_version()}")
+
+
+def episode_table(sides: list[Side], records: list[dict[str, dict]]) -> list[str]:
+    lines = [f"| episode | success ({sides[0].name} / {sides[1].name}) | completion time s | decisions | same |",
+             "|---|---|---|---|---|"]
+    for key in records[0]:
+        a, b = records[0][key], records[1].get(key, {})
+        times = " / ".join(f"{r['completion_time']:.2f}" if r.get("completion_time") is not None else "-"
+                           for r in (a, b))
+        decisions = " / ".join(str(r.get("decisions", "-")) for r in (a, b))
+        same = "yes" if same_episode(key, records) else "NO"
+        lines.append(f"| {key} | {a.get('success')} / {b.get('success')} | {times} | {decisions} | {same} |")
+    return lines
+
+
+def scope(seeds: int) -> str:
+    return (f"{len(episodes(seeds))} episodes a side: {', '.join(PARTICIPANTS)}, joystick and BoMI, task seeds "
+            f"0-{seeds - 1}; every field of each record but the four timing ones, and a SHA-256 of every logged "
+            f"array.")
+
+
+def identity_report(sides: list[Side], records: list[dict[str, dict]], seeds: int, command: str,
+                    minutes: float) -> tuple[str, bool]:
+    diff = differences(*records)
+    text = "\n".join([
+        "# Records of two commits, run on one machine", "", f"`{command}` ({minutes:.1f} min)", "",
+        f"- before: {sides[0].label}", f"- after: {sides[1].label}", f"- machine: {machine()}",
+        f"- {scope(seeds)}", "",
+        f"**Identical: {'yes' if not diff else 'NO'}** ({len(diff)} differing fields).", "",
+        *(f"- {d}" for d in diff), *([""] if diff else []),
+        *episode_table(sides, records), "",
+        "Identical means bit-identical on this machine with this build (see the script's docstring): on "
+        "another CPU both commits may give other episodes, identical or not between themselves."]) + "\n"
+    return text, not diff
+
+
+def no_jit_report(sides: list[Side], records: list[dict[str, dict]], seeds: int, command: str,
+                  minutes: float) -> tuple[str, bool]:
+    from physics_outcomes import compare  # beside this script; imports scipy and matplotlib
+
+    rows, held = [], True
+    for operator in OPERATORS:
+        keys = [k for k in records[0] if records[0][k]["operator"] == operator]
+        compiled, interpreted = ({i: r[k] for i, k in enumerate(keys)} for r in records)
+        if not all(any(e["success"] for e in side.values()) for side in (compiled, interpreted)):
+            rows.append(f"| {operator} | {len(keys)} | no success on one side: not compared | | | | |")
+            held = False
+            continue
+        r = compare(compiled, interpreted)
+        ok = r["success_p_fisher"] >= ALPHA and r["time_p_mannwhitney"] >= ALPHA
+        held &= ok
+        rows.append(f"| {operator} | {r['n']} | {r['successes'][0]} / {r['successes'][1]} | "
+                    f"{r['success_p_fisher']:.2f} | {r['time_median'][0]:.2f} / {r['time_median'][1]:.2f} | "
+                    f"{r['time_p_mannwhitney']:.2f} | {'same distribution not rejected' if ok else 'REJECTED'} |")
+    same = sum(same_episode(key, records) for key in records[0])
+    text = "\n".join([
+        "# Compiled kernels against BOMI_NO_JIT=1, as distributions", "", f"`{command}` ({minutes:.1f} min)", "",
+        f"- code: {sides[0].label}", f"- machine: {machine()}", f"- {scope(seeds)}", "",
+        f"Per operator over its episodes (participants pooled, paired by participant and seed): success rate by "
+        f"Fisher's exact test, completion time of the successful episodes by Mann-Whitney U, both two-sided at "
+        f"the {ALPHA:.0%} level (benchmarks/physics_outcomes.py's `compare`). Bit-identical episodes: "
+        f"{same} of {len(records[0])} (not required: the two forms round in another order).", "",
+        "| operator | episodes | successes (compiled / no JIT) | Fisher p | completion time median s | "
+        "Mann-Whitney p | verdict |", "|---|---|---|---|---|---|---|", *rows, "",
+        f"**Same distributions: {'yes' if held else 'NO'}** (a test with this few episodes detects only large "
+        f"differences).", "", *episode_table(sides, records)]) + "\n"
+    return text, held
+
+
+# ------------------------------------------------------------------------------------- main
+def parse(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("commits", nargs="*", metavar="COMMIT",
+                        help="BEFORE [AFTER] (AFTER: this working tree); with --no-jit, [COMMIT]")
+    parser.add_argument("--seeds", type=int, default=2, help="task seeds 0..N-1 per cell (default 2; at most 1000)")
+    parser.add_argument("--no-jit", action="store_true",
+                        help="compare compiled and BOMI_NO_JIT=1 episodes of one commit, as distributions")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--check", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if not 1 <= args.seeds <= DEVELOPMENT_SEEDS:
+        raise BomiError(f"--seeds: {args.seeds}: give 1-{DEVELOPMENT_SEEDS} (development task seeds 0-999)")
+    if not args.worker and not (0 if args.no_jit else 1) <= len(args.commits) <= (1 if args.no_jit else 2):
+        raise BomiError(f"COMMIT: {' '.join(args.commits) or 'none'}: give "
+                        f"{'at most one commit with --no-jit' if args.no_jit else 'BEFORE [AFTER]'}")
+    return args
+
+
+def compare_commits(args: argparse.Namespace, command: str) -> int:
+    check_git_checkout()
+    names = ("COMMIT",) if args.no_jit else ("BEFORE", "AFTER")
+    shas = [resolve(commit, name) for commit, name in zip(args.commits, names)]
+    start = time.monotonic()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the worktrees are removed on kill too
+    with contextlib.ExitStack() as stack:
+        trees = [stack.enter_context(checked_out(name.lower(), sha)) for name, sha in zip(names, shas)]
+        if args.no_jit:
+            tree = trees[0] if trees else working_tree()
+            sides = [Side("compiled", tree.label, tree.path), Side("no JIT", tree.label, tree.path,
+                                                                   (("BOMI_NO_JIT", "1"),))]
+        else:
+            sides = trees if len(trees) == 2 else [trees[0], working_tree()]
+        records = run_sides(sides, args.seeds)
+    report = no_jit_report if args.no_jit else identity_report
+    text, held = report(sides, records, args.seeds, command, (time.monotonic() - start) / 60)
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "records_identity.md").write_text(text, encoding="utf-8")
+    (RESULTS / f"records_identity{'_no_jit' if args.no_jit else ''}.md").write_text(text, encoding="utf-8")
     print(text)
-    return 1 if diff else 0
+    return 0 if held else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    command = "python benchmarks/records_identity.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    try:
+        args = parse(argv)
+        if args.worker:
+            return worker(args.seeds, args.check)
+        return compare_commits(args, command)
+    except BomiError as exc:
+        print(f"bomi: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:  # the worktrees are removed by then
+        print("bomi: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
