@@ -213,6 +213,12 @@ class FusedRows:
             last = self._last[node_id] = (frame, self._fusion[node_id].update(frame.acc, frame.gyro, frame.mag))
         return last[1]
 
+    def restart(self, index: int) -> None:
+        """Node ``index``'s filter started again (after a break in its stream: ``bomi.gate``)."""
+        node_id = imu_node_id(index)
+        self._fusion[node_id] = NodeFusion(self.calibrations[index])
+        self._last.pop(node_id, None)
+
 
 def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) -> Recording:
     """The recording with every node's angles recomputed from its raw ACC/GYRO/MAG columns."""

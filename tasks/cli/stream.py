@@ -330,10 +330,17 @@ def _wait_until_settled(batches: Iterator[tuple[float, list[ImuFrame]]], gate: G
         while True:
             elapsed, frames = next(batches)    # the stream's batches end only by StreamLost
             nodes = [imu_index(frame.node_id) for frame in frames]
-            gate.arrivals(elapsed, Counter(nodes))
+            for node in gate.arrivals(elapsed, Counter(nodes)):   # a break: its warm-up from scratch
+                gate.node[node].restart()
+                rows.restart(node)
             for frame, node in zip(frames, nodes):
                 node_gate = gate.node.get(node)
-                if node_gate is not None and node_gate.check_raw(frame.counter, frame.mag, frame.gyro, frame.acc):
+                if node_gate is None:
+                    continue
+                if node_gate.count(frame.counter) is not None:
+                    node_gate.restart(frame.counter)
+                    rows.restart(node)
+                if node_gate.check_raw(frame.mag, frame.gyro, frame.acc):
                     node_gate.fused(rows.angles(frame))
                     assembler.push(frame)
             reason = gate.verdict(elapsed)
