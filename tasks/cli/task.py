@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from bomi import paper
 from bomi.errors import BomiError
-from tasks import metrics
+from tasks import failures, metrics
 from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option, profile_assist
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
@@ -295,6 +295,28 @@ def terminal_comparison(rows: list[dict]) -> str:
           f"{c['paper_longest_error_run_ms']:.0f}"] for c in comparison(rows)])
 
 
+# The mechanism table's short column names (within 100 columns), in ``failures.Mechanism``'s order
+MECHANISM_COLUMNS = {failures.Mechanism.CUBE_LOST: "cube lost", failures.Mechanism.ARM_AT_LIMIT: "at limit",
+                     failures.Mechanism.CLASSIFIER_STUCK: "clf stuck", failures.Mechanism.MODE_SWITCH_STORM: "storm",
+                     failures.Mechanism.PLANNER_STUCK: "planner", failures.Mechanism.MISREAD_MOTION: "misread"}
+
+
+def terminal_mechanisms(records: list[dict]) -> str:
+    """Why episodes failed or were slow (more than ``failures.SLOW_FACTOR`` x their median time): per
+    participant and operator (and a sweep's settings), how many each mechanism explains."""
+    rows = failures.mechanism_rows(records)
+    settings = any(r["settings"] for r in rows)
+    unrecorded = any(r["mechanisms"].get(failures.NOT_RECORDED) for r in rows)
+    header = ["participant", "operator", *(["settings"] if settings else []), "failed", "slow",
+              *MECHANISM_COLUMNS.values(), *([failures.NOT_RECORDED] if unrecorded else [])]
+    cells = [[r["participant"], r["operator"], *([json.dumps(r["settings"])] if settings else []),
+              f"{r['failed']}/{r['episodes']}", f"{r['slow']}/{r['episodes']}",
+              *(str(len(r["mechanisms"][m.value])) for m in MECHANISM_COLUMNS),
+              *([str(len(r["mechanisms"].get(failures.NOT_RECORDED, [])))] if unrecorded else [])] for r in rows]
+    return (f"why episodes failed or took over {failures.SLOW_FACTOR:g}x their median (docs/task.md):\n"
+            + aligned_table(header, cells))
+
+
 def row_cells(r: dict) -> list[str]:
     """A row of ``aggregate`` as the texts of ROW_COLUMNS."""
     excused = "-" if r.get("accuracy_excused_transitions") is None else (
@@ -428,11 +450,13 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     print(terminal_table(rows))
     if comparison(rows):
         print("\n" + terminal_comparison(rows))
+    print("\n" + terminal_mechanisms(records))
     if not outputs["--json"]:
         print("(every column, the episodes and the comparison in full: --json FILE)")
     if outputs["--json"]:
         write_json(outputs["--json"], {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows),
-                                       "episodes": records}, overwrite=args.force)
+                                       "mechanisms": failures.mechanism_rows(records), "episodes": records},
+                   overwrite=args.force)
     return 0
 
 
