@@ -55,7 +55,7 @@ class Rules:
     blocked_min_s: float = 5.0  # ... adding up to at least this long
     neutral_run_s: float = 10.0  # classifier stuck: a run of motion read as neutral at least this long ...
     neutral_share: float = 0.5  # ... or at least this share of the span's motion decisions read as neutral
-    storm_per_min: float = 12.0  # mode-switch storm: at least this many user mode switches a minute
+    storm_per_min: float = 20.0  # mode-switch storm: at least this many user mode switches a minute
     planner_accuracy: float = 0.8  # planner stuck: at least this share of the span's decisions right
 
 

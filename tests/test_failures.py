@@ -64,7 +64,8 @@ def evidence(**changes) -> dict:
     ({"blocked_share": 0.6, "blocked_s": 4.0}, None, Mechanism.PLANNER_STUCK),  # blocked too briefly
     ({"neutral_run_s": 10.0, "switches_per_min": 30.0}, None, Mechanism.CLASSIFIER_STUCK),
     ({"neutral_share": 0.5, "accuracy": 0.4}, None, Mechanism.CLASSIFIER_STUCK),
-    ({"switches_per_min": 12.0}, None, Mechanism.MODE_SWITCH_STORM),
+    ({"switches_per_min": 20.0}, None, Mechanism.MODE_SWITCH_STORM),
+    ({"switches_per_min": 19.0}, None, Mechanism.PLANNER_STUCK),  # P4 switches up to 17 a minute working
     ({"accuracy": None}, None, Mechanism.PLANNER_STUCK),  # no classifier: the joystick
     ({"accuracy": 0.79}, None, Mechanism.MISREAD_MOTION),
 ])
