@@ -34,8 +34,9 @@ from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.participants.receiver import Receiver
-from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, Phase,
-                           ScriptedUser, StickIntent, View, load_operator)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, NO_RECOVERY, Controls, Memory, OperatorParams,
+                           Phase, ScriptedUser, StickIntent, View, load_operator)
+from tasks.recovery import RecoveryEvent, Supervisor
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
@@ -91,6 +92,8 @@ class EpisodeLog:
     automatic: tuple[AutomaticSwitch, ...] = ()  # the mode switches the assistance made
     grasp_helps: int = 0  # closes the grasp help started
     commanded: np.ndarray | None = None  # (N, 3) hand velocity the stick commanded the arm (m/s, world)
+    recovery: str = NO_RECOVERY  # the recovery actions on (RecoveryParams.label)
+    recoveries: tuple[RecoveryEvent, ...] = ()  # the recovery actions taken (tasks.recovery)
 
 
 # allowances (s) at which the excused accuracy is also given: its curve shows what excusing buys
@@ -126,6 +129,8 @@ def summarize(log: EpisodeLog) -> dict:
         "unintended_displacement_mm": metrics.unintended_displacement_mm(log.hand_pos, log.intended_dir),
         "cube_drops": metrics.cube_drops(log.cube_pos[:, :, 2], log.touching),
         "stuck": failures.summary(log),  # the longest span without progress and its mechanism
+        "recovery": log.recovery,
+        "recoveries": [{"action": e.action.value, "start_s": e.start_s, "end_s": e.end_s} for e in log.recoveries],
     }
     d = log.decisions
     if d is None:
@@ -179,6 +184,13 @@ class OperatorChannel(Protocol):
     def log_fields(self) -> dict:
         """Extra ``EpisodeLog`` fields the channel recorded (the BoMI's decisions)."""
 
+    def begin_rezero(self) -> None:
+        """Take the neutral posture anew from the samples to come (``tasks.recovery``; a stick: nothing)."""
+
+    @property
+    def rezeroing(self) -> bool:
+        """The neutral posture asked for is still being taken."""
+
     def caption(self) -> str | None:
         """A line for the film about what happens between the person and the stick (None: nothing)."""
 
@@ -203,6 +215,11 @@ class JoystickChannel:
 
     def log_fields(self) -> dict:
         return {}
+
+    def begin_rezero(self) -> None:
+        """A stick has no neutral posture to take anew."""
+
+    rezeroing = False
 
     def caption(self) -> None:
         """Nothing between the person and the stick to show."""
@@ -406,6 +423,14 @@ class BomiChannel:
                 self.feel[label].learn(lean, wanted)
         self._learn_from_overshoot(label)
 
+    def begin_rezero(self) -> None:
+        """The chain takes the neutral posture anew from the next samples (the person holds still)."""
+        self.chain.begin_neutral_calibration()
+
+    @property
+    def rezeroing(self) -> bool:
+        return self.chain.calibrating
+
     def caption(self) -> str:
         """The class the participant performs and the class the chain decided last (for the film)."""
         intended, decided = self.participant.intent[0], self._decided
@@ -565,6 +590,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     task.reset(seed)
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
     user = operator_user(params, channel, seed)
+    supervisor = Supervisor(params.recovery, user, channel, task.target_pos) if params.recovery.actions else None
     assistance = Assistance(assist, channel.controls.layout, channel.controls.buttons) if assist else None
     seen_ticks: list[tuple[View, StickIntent]] = []  # what the person saw and wanted, tick by tick (both immutable)
     film = _Film(sim, video, video_speedup) if video is not None else None
@@ -574,12 +600,14 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     try:
         while True:
             view = task.view()
-            intent = user.stick_intent(view)
+            intent = user.stick_intent(view) if supervisor is None else supervisor.intent(view)
             seen = None if previous is None else (view.hand_pos - previous) / seen_scale
             previous = view.hand_pos
             state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)
             if assistance is not None:
                 state = assistance.step(view, state, sim)
+            if supervisor is not None:
+                state = supervisor.state(intent, state)
             seen_ticks.append((view, intent))
             commanded.append(sim.step(state).linear)
             if on_tick is not None:
@@ -610,7 +638,8 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         assist=assist_label(frozenset(assist)),
         automatic=tuple(assistance.switches) if assistance is not None else (),
         grasp_helps=assistance.grasp_helps if assistance is not None else 0,
-        commanded=np.array(commanded).reshape(-1, 3), **channel.log_fields())
+        commanded=np.array(commanded).reshape(-1, 3), recovery=params.recovery.label,
+        recoveries=tuple(supervisor.events) if supervisor is not None else (), **channel.log_fields())
 
 
 class _Film:

@@ -22,12 +22,13 @@ import enum
 import json
 import statistics
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tasks import metrics
+from tasks.planner import NO_RECOVERY
 
 if TYPE_CHECKING:
     from tasks.episode import EpisodeLog
@@ -108,26 +109,46 @@ def phase_distance(phase: str, hand_pos: np.ndarray, cube_pos: np.ndarray, targe
     return float(np.linalg.norm(cube_pos[k] - np.array([target_pos[0], target_pos[1], goal_z])))
 
 
+@dataclass
+class ProgressWatch:
+    """Progress tick by tick (the definition of the module docstring), for a record read back
+    (``progress_ticks``) or an episode under way (``tasks.recovery``)."""
+
+    progress_m: float
+    phase: str | None = None
+    best: float | None = None
+    seen: set[str] = field(default_factory=set)
+
+    def update(self, phase: str, distance: float | None) -> bool:
+        """Whether a tick in ``phase`` at ``distance`` from its target (None: a phase without one) is
+        progress: a phase reached for the first time (not the first tick's), or a new best distance by
+        ``progress_m`` within a run of the phase (a new run starts from its first distance)."""
+        progress = False
+        if phase != self.phase:
+            progress = self.phase is not None and phase not in self.seen
+            self.phase, self.best = phase, None
+            self.seen.add(phase)
+        if distance is None:
+            return progress
+        if self.best is None:
+            self.best = distance
+        elif distance < self.best - self.progress_m:
+            self.best, progress = distance, True
+        return progress
+
+
 def progress_ticks(goals: Sequence[str], hand_pos: np.ndarray, cube_pos: np.ndarray, target_pos: np.ndarray,
                    progress_m: float) -> np.ndarray:
-    """The ticks that made progress: a task phase reached for the first time, or a new best distance
-    to the phase's target by ``progress_m`` within a run of the phase (the first tick counts)."""
-    progress, seen = [0], set()
+    """The ticks that made progress (``ProgressWatch``; the first tick counts)."""
+    watch, progress = ProgressWatch(progress_m), [0]
     rest_z = float(np.asarray(cube_pos)[0, :, 2].min())  # the cubes start on the table
     for start, end, phase in metrics.task_phases(goals):
-        if phase not in seen and start > 0:
-            progress.append(start)
-        seen.add(phase)
-        best = None
         for i in range(start, end):
             d = phase_distance(phase, hand_pos[i], cube_pos[i], target_pos, rest_z)
+            if watch.update(phase, d):
+                progress.append(i)
             if d is None:
                 break
-            if best is None:
-                best = d
-            elif d < best - progress_m:
-                best = d
-                progress.append(i)
     return np.unique(progress)
 
 
@@ -235,19 +256,21 @@ NOT_RECORDED = "not recorded"  # a record written before the mechanisms were (a 
 
 
 def mechanism_rows(records: list[dict]) -> list[dict]:
-    """Per participant, operator and (a sweep's) settings: the episodes, how many failed or were
+    """Per participant, operator, (a sweep's) settings and recovery: the episodes, how many failed or were
     slow, and the seeds each mechanism explains among those."""
     groups: dict[str, list[dict]] = {}
     for r in records:
-        groups.setdefault(json.dumps([r["participant"], r["operator"], r.get("settings", {})]), []).append(r)
+        key = [r["participant"], r["operator"], r.get("settings", {}), r.get("recovery", NO_RECOVERY)]
+        groups.setdefault(json.dumps(key), []).append(r)
     rows = []
     for key, rs in groups.items():
-        participant, operator, settings = json.loads(key)
+        participant, operator, settings, recovery = json.loads(key)
         explained = [r for r, needed in zip(rs, needs_mechanism(rs)) if needed]
         seeds: dict[str, list[int]] = {m.value: [] for m in Mechanism}
         for r in explained:
             seeds.setdefault((r.get("stuck") or {}).get("mechanism", NOT_RECORDED), []).append(r["seed"])
-        rows.append({"participant": participant, "operator": operator, "settings": settings, "episodes": len(rs),
+        rows.append({"participant": participant, "operator": operator, "settings": settings, "recovery": recovery,
+                     "episodes": len(rs),
                      "failed": sum(not r["success"] for r in rs), "slow": sum(r["success"] for r in explained),
                      "mechanisms": seeds})
     return rows
