@@ -47,7 +47,7 @@ class RecoveryParams:
     """The operator file's optional ``[recovery]`` table (absent: no recovery, the paper's comparison)."""
 
     actions: frozenset[RecoveryAction] = frozenset()
-    stuck_s: float = 60.0  # s without progress before the person acts
+    stuck_s: float = 90.0  # s without progress before the person acts
     obeyed_share: float = 0.5  # the arm answered at least this share of the stick moves asked: the interface works
     settle_s: float = 2.0  # rezero: s held still before the neutral is taken
     pause_s: float = 30.0  # pause: s of rest

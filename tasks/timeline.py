@@ -101,9 +101,10 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
                   **LEGEND)
     if bomi_log is not None:
         _decision_panels(axes[len(logs):], bomi_log)
-    for ax, log in zip(axes, logs):  # a failed episode's stuck period, over its panel (and the decisions')
+    for ax, log in zip(axes, logs):  # a failed episode's stuck period, over its panel (and the decisions'); recoveries
         if not log.success:
             _mark_stuck([ax, *axes[len(logs):]] if log is bomi_log else [ax], failures.stuck_period(log))
+        _mark_recoveries(ax, log)
     axes[-1].set_xlabel("time (s)")
     fig.tight_layout()
     for ax, spans in phases:
@@ -115,6 +116,18 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
 
 
 STUCK_COLOUR = "tab:red"
+RECOVERY_COLOUR = "tab:purple"
+
+
+def _mark_recoveries(ax, log: "EpisodeLog") -> None:
+    """Each recovery action (tasks/recovery.py): a line where it started, named, and the time the arm
+    stood still for it shaded."""
+    for event in log.recoveries:
+        ax.axvline(event.start_s, color=RECOVERY_COLOUR, lw=1.0, ls="--")
+        if event.end_s > event.start_s:
+            ax.axvspan(event.start_s, event.end_s, color=RECOVERY_COLOUR, alpha=0.15, lw=0)
+        ax.text(event.start_s, 0.98, f" {event.action.value}", transform=ax.get_xaxis_transform(), ha="left",
+                va="top", fontsize=7, color=RECOVERY_COLOUR)
 
 
 def _mark_stuck(axes, period: "failures.StuckPeriod | None") -> None:

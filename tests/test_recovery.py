@@ -9,7 +9,8 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import JoystickState, Mode
-from tasks.cli.task import recovery_option
+from tasks.cli.task import aggregate, comparison, recovery_option, terminal_table
+from tasks.failures import mechanism_rows
 from tasks.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View, load_operator
 from tasks.recovery import StuckClock, Supervisor, choose
 
@@ -129,3 +130,21 @@ def test_recovery_table_and_option():
     assert recovery_option("none") == "none"
     with pytest.raises(argparse.ArgumentTypeError, match="--recovery"):
         recovery_option("")
+
+
+def test_benchmark_rows_and_mechanisms_are_per_recovery_and_the_paper_comparison_without():
+    def record(operator, recovery, seed, time):
+        return {"participant": "P4", "operator": operator, "layout": "2-axis, B1", "seed": seed,
+                "success": time is not None, "completion_time": time, "failure": None if time else "time limit 600 s",
+                "mode_switches": 1, "unintended_displacement_mm": 0.0, "cube_drops": 0, "realtime_factor": 10.0,
+                "recovery": recovery, "stuck": {"mechanism": "planner stuck"}}
+    records = [record("joystick", "none", 0, 50.0), record("bomi", "none", 0, 200.0), record("bomi", "none", 1, None),
+               record("bomi", "backoff", 0, 200.0), record("bomi", "backoff", 1, 260.0)]
+    rows = aggregate(records)
+    assert [(r["operator"], r["recovery"], r["successes"]) for r in rows] == [
+        ("bomi", "backoff", 2), ("bomi", "none", 1), ("joystick", "none", 1)]
+    assert [c["time_ratio"] for c in comparison(rows)] == [4.0]  # 200 / 50: the rows without recovery
+    assert "recovery" in terminal_table(rows).splitlines()[0]
+    mechanisms = {r["recovery"]: (r["failed"], r["mechanisms"]["planner stuck"])
+                  for r in mechanism_rows(records) if r["operator"] == "bomi"}
+    assert mechanisms == {"none": (1, [1]), "backoff": (0, [])}  # 260 s is not over twice the median 230 s
