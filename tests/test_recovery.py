@@ -9,7 +9,8 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import JoystickState, Mode
-from tasks.cli.task import aggregate, comparison, recovery_option, terminal_table
+from tasks.cli.task import EpisodeJob, aggregate, comparison, recovery_option, run_job, terminal_table
+from tasks.episode import summarize
 from tasks.failures import mechanism_rows
 from tasks.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View, load_operator
 from tasks.recovery import StuckClock, Supervisor, choose
@@ -148,3 +149,17 @@ def test_benchmark_rows_and_mechanisms_are_per_recovery_and_the_paper_comparison
     mechanisms = {r["recovery"]: (r["failed"], r["mechanisms"]["planner stuck"])
                   for r in mechanism_rows(records) if r["operator"] == "bomi"}
     assert mechanisms == {"none": (1, [1]), "backoff": (0, [])}  # 260 s is not over twice the median 230 s
+
+
+def test_an_episode_pauses_with_the_arm_stopped_and_the_clock_running():
+    """The one episode (joystick, 6 s of task): a pause after 1 s without progress."""
+    overrides = (("operator.recovery.actions", "pause"), ("operator.recovery.stuck_s", 1.0),
+                 ("operator.recovery.pause_s", 1.0))
+    log = run_job(EpisodeJob("joystick", "P1", 0, time_limit=6.0, overrides=overrides))
+    record = summarize(log)
+    assert record["recovery"] == "pause" and len(record["recoveries"]) == len(log.recoveries) >= 1
+    for event in log.recoveries:
+        assert event.action is PAUSE and event.end_s - event.start_s == pytest.approx(1.0, abs=1 / 60)
+        inside = (log.t >= event.start_s) & (log.t < event.end_s)
+        assert not log.commanded[inside].any() and set(np.array(log.goals)[inside]) == {"pause"}
+    assert log.t[-1] >= 5.9  # the pauses took task time: the episode ran to its limit
