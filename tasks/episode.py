@@ -130,7 +130,8 @@ def summarize(log: EpisodeLog) -> dict:
         "cube_drops": metrics.cube_drops(log.cube_pos[:, :, 2], log.touching),
         "stuck": failures.summary(log),  # the longest span without progress and its mechanism
         "recovery": log.recovery,
-        "recoveries": [{"action": e.action.value, "start_s": e.start_s, "end_s": e.end_s} for e in log.recoveries],
+        "recoveries": [{"action": e.action.value, "start_s": e.start_s, "end_s": e.end_s, "obeyed": e.obeyed}
+                       for e in log.recoveries],
     }
     d = log.decisions
     if d is None:

@@ -48,7 +48,7 @@ class RecoveryParams:
 
     actions: frozenset[RecoveryAction] = frozenset()
     stuck_s: float = 90.0  # s without progress before the person acts
-    obeyed_share: float = 0.5  # the arm answered at least this share of the stick moves asked: the interface works
+    obeyed_share: float = 0.8  # the arm answered at least this share of the stick moves asked: the interface works
     settle_s: float = 2.0  # rezero: s held still before the neutral is taken
     pause_s: float = 30.0  # pause: s of rest
 

@@ -41,6 +41,7 @@ class RecoveryEvent:
     action: RecoveryAction
     start_s: float
     end_s: float
+    obeyed: float | None = None  # the share of the stick moves asked that the arm answered before it (None: none asked)
 
 
 class Rezeroable(Protocol):
@@ -65,24 +66,36 @@ def choose(actions: frozenset[RecoveryAction], obeyed: float | None, obeyed_shar
 @dataclass
 class StuckClock:
     """How long the task has gone without progress (since the last progress, or the end of the last
-    recovery), and what the arm answered in that time."""
+    recovery), and how many of the stick moves asked in that time the arm answered: a move (a run of
+    ticks pushing the same functions) is answered when the stick gives one of its functions at any
+    time while it is held (a person judges whether the arm does what they ask, late or not)."""
 
     stuck_s: float
     since: float = 0.0
-    asked: int = 0  # ticks the person asked for a stick move
-    answered: int = 0  # ... and the stick gave one of the functions asked
+    asked: int = 0  # stick moves asked for
+    answered: int = 0  # ... that the stick gave
     retry: bool = False  # a recovery has been made since the last progress
+    _move: frozenset[str] = frozenset()  # the functions of the move held now
+    _answered: bool = False  # ... and whether the stick has given one of them yet
 
     def progress(self, t: float) -> None:
-        self.since, self.asked, self.answered, self.retry = t, 0, 0, False
+        self._restart(t, retry=False)
 
     def recovered(self, t: float) -> None:
-        self.since, self.asked, self.answered, self.retry = t, 0, 0, True
+        self._restart(t, retry=True)
+
+    def _restart(self, t: float, retry: bool) -> None:
+        """A new span: the move held now counts as one asked in it."""
+        self.since, self.asked, self.answered, self.retry, self._move = t, 0, 0, retry, frozenset()
 
     def saw(self, intent: StickIntent, state: JoystickState) -> None:
-        if intent.deflection:
-            self.asked += 1
-            self.answered += not intent.deflection.keys().isdisjoint(state.deflection)
+        functions = intent.functions
+        if functions != self._move:
+            self._move, self._answered = functions, False
+            self.asked += bool(functions)
+        if functions and not self._answered and not functions.isdisjoint(state.deflection):
+            self._answered = True
+            self.answered += 1
 
     def due(self, t: float) -> bool:
         return t - self.since >= self.stuck_s - 1e-9
@@ -102,6 +115,7 @@ class Supervisor:
         self.watch, self.clock = failures.ProgressWatch(progress_m), StuckClock(params.stuck_s)
         self.phase: str | None = None  # the task phase (metrics.task_phase), carried over goals that interrupt it
         self.queue: list[RecoveryAction] = []
+        self.obeyed: float | None = None  # what the person saw of the arm when the actions queued were chosen
         self.acting: tuple[RecoveryAction, float, bool] | None = None  # (action, since, the neutral asked for)
         self.events: list[RecoveryEvent] = []
 
@@ -111,8 +125,8 @@ class Supervisor:
             self._watch(view, intent)
             if not self.clock.due(view.t):
                 return intent
-            self.queue = list(choose(self.params.actions, self.clock.obeyed, self.params.obeyed_share,
-                                     self.clock.retry))
+            self.obeyed = self.clock.obeyed
+            self.queue = list(choose(self.params.actions, self.obeyed, self.params.obeyed_share, self.clock.retry))
             if not self.queue:
                 self.clock.recovered(view.t)
                 return intent
@@ -157,7 +171,7 @@ class Supervisor:
 
     def _done(self, action: RecoveryAction, start: float, view: View) -> None:
         """An action is over; after the last one queued, the person takes the task up again."""
-        self.events.append(RecoveryEvent(action, start, view.t))
+        self.events.append(RecoveryEvent(action, start, view.t, self.obeyed))
         self.acting = None
         if not self.queue:
             self.clock.recovered(view.t)

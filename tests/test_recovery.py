@@ -32,11 +32,14 @@ def test_choose_by_what_the_arm_answered():
 
 def test_stuck_clock_counts_from_the_last_progress_and_the_moves_answered():
     clock = StuckClock(stuck_s=60.0)
-    push = StickIntent({"F": 1.0})
-    for answered in (True, False, False, True):
-        clock.saw(push, JoystickState({"F": 0.5} if answered else {"L": 0.5}))
-    clock.saw(StickIntent(button="B1"), JoystickState())  # a press is no stick move asked
-    assert clock.obeyed == 0.5
+    forward, right = StickIntent({"F": 1.0}), StickIntent({"R": 0.5})
+    ticks = [(forward, {"L": 0.5}), (forward, {"F": 0.5}), (forward, {}),  # answered late: answered
+             (StickIntent(button="B1"), {}),  # a press is no stick move asked
+             (right, {}), (right, {"L": 1.0}),  # never answered
+             (forward, {}), (forward, {}), (forward, {"F": 1.0})]  # a new move of F, answered at its end
+    for intent, deflection in ticks:
+        clock.saw(intent, JoystickState(deflection))
+    assert (clock.asked, clock.answered) == (3, 2)
     clock.progress(10.0)
     assert clock.obeyed is None and not clock.due(69.5) and clock.due(70.0) and not clock.retry
     clock.recovered(80.0)
@@ -105,7 +108,7 @@ def test_no_trigger_while_the_hand_keeps_getting_closer():
 
 def test_stuck_with_the_arm_answering_backs_off_at_once():
     supervisor, user, stopped = _run(ALL, lambda t: 0.5, answered=True, seconds=100)
-    assert [(e.action, e.start_s, e.end_s) for e in supervisor.events] == [(BACKOFF, 60.0, 60.0)]
+    assert [(e.action, e.start_s, e.end_s, e.obeyed) for e in supervisor.events] == [(BACKOFF, 60.0, 60.0, 1.0)]
     assert user.calls == [("back off", 60.0)] and stopped == []  # the lift is the user's own move
 
 
