@@ -59,15 +59,15 @@ class RecoveryParams:
 
 
 def parse_recovery_actions(text: str, where: str) -> frozenset[RecoveryAction]:
-    """``none`` or a comma list of actions (``rezero,backoff``); ValueError names ``where`` and the fault."""
+    """``none`` or a comma list of actions (``rezero,backoff``); ValueError names ``where`` (if any) and the fault."""
     names = [n.strip() for n in text.split(",") if n.strip()]
     if names == [NO_RECOVERY]:
         return frozenset()
     known = {a.value: a for a in RecoveryAction}
     bad = [n for n in names if n not in known]
     if not names or bad:
-        raise ValueError(f"{where}: {', '.join(bad) or 'empty'} is not {NO_RECOVERY} or a comma list of "
-                         f"{', '.join(known)}")
+        raise ValueError(f"{where + ': ' if where else ''}{', '.join(bad) or 'an empty list'} is not {NO_RECOVERY} "
+                         f"or a comma list of {', '.join(known)}")
     return frozenset(known[n] for n in names)
 
 

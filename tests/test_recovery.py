@@ -132,7 +132,7 @@ def test_recovery_table_and_option():
         with pytest.raises(BomiError, match="recovery"):
             load_operator(overrides={f"recovery.{key}": value})
     assert recovery_option("none") == "none"
-    with pytest.raises(argparse.ArgumentTypeError, match="--recovery"):
+    with pytest.raises(argparse.ArgumentTypeError, match="an empty list is not none"):
         recovery_option("")
 
 

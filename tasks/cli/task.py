@@ -47,7 +47,7 @@ RECOVERY_HELP = (f"what the scripted user does after a while without progress (d
 def recovery_option(text: str) -> str:
     """``--recovery`` for argparse: the actions, checked, as given."""
     try:
-        parse_recovery_actions(text, "--recovery")
+        parse_recovery_actions(text, "")
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
