@@ -27,15 +27,16 @@ from sim.env import ArmSim
 from sim.kernels import clip
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combined
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
-from tasks import metrics
+from tasks import failures, metrics
 from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label
 from tasks.human import HumanOperator, load_human
 from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.participants.receiver import Receiver
-from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, Controls, Memory, OperatorParams, Phase,
-                           ScriptedUser, StickIntent, View, load_operator)
+from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, NO_RECOVERY, Controls, Memory, OperatorParams,
+                           Phase, ScriptedUser, StickIntent, View, load_operator)
+from tasks.recovery import RecoveryEvent, Supervisor
 from tasks.stacking import StackingTask, TaskConfig
 from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
@@ -53,6 +54,8 @@ class DecisionTrace:
     decided: np.ndarray  # class label the chain output
     gamma: np.ndarray
     nu: np.ndarray
+    lean: np.ndarray | None = None  # the participant's intended lean (0-1 of their range; 0 at neutral)
+    body_deg: np.ndarray | None = None  # the body's true angle from the neutral the chain calibrated (deg)
 
 
 @dataclass
@@ -88,6 +91,9 @@ class EpisodeLog:
     assist: str = NONE  # the assistances on (tasks.assist.assist_label)
     automatic: tuple[AutomaticSwitch, ...] = ()  # the mode switches the assistance made
     grasp_helps: int = 0  # closes the grasp help started
+    commanded: np.ndarray | None = None  # (N, 3) hand velocity the stick commanded the arm (m/s, world)
+    recovery: str = NO_RECOVERY  # the recovery actions on (RecoveryParams.label)
+    recoveries: tuple[RecoveryEvent, ...] = ()  # the recovery actions taken (tasks.recovery)
 
 
 # allowances (s) at which the excused accuracy is also given: its curve shows what excusing buys
@@ -122,6 +128,10 @@ def summarize(log: EpisodeLog) -> dict:
         "button_presses": log.presses,
         "unintended_displacement_mm": metrics.unintended_displacement_mm(log.hand_pos, log.intended_dir),
         "cube_drops": metrics.cube_drops(log.cube_pos[:, :, 2], log.touching),
+        "stuck": failures.summary(log),  # the longest span without progress and its mechanism
+        "recovery": log.recovery,
+        "recoveries": [{"action": e.action.value, "start_s": e.start_s, "end_s": e.end_s, "obeyed": e.obeyed}
+                       for e in log.recoveries],
     }
     d = log.decisions
     if d is None:
@@ -175,6 +185,13 @@ class OperatorChannel(Protocol):
     def log_fields(self) -> dict:
         """Extra ``EpisodeLog`` fields the channel recorded (the BoMI's decisions)."""
 
+    def begin_rezero(self) -> None:
+        """Take the neutral posture anew from the samples to come (``tasks.recovery``; a stick: nothing)."""
+
+    @property
+    def rezeroing(self) -> bool:
+        """The neutral posture asked for is still being taken."""
+
     def caption(self) -> str | None:
         """A line for the film about what happens between the person and the stick (None: nothing)."""
 
@@ -199,6 +216,11 @@ class JoystickChannel:
 
     def log_fields(self) -> dict:
         return {}
+
+    def begin_rezero(self) -> None:
+        """A stick has no neutral posture to take anew."""
+
+    rezeroing = False
 
     def caption(self) -> None:
         """Nothing between the person and the stick to show."""
@@ -402,6 +424,14 @@ class BomiChannel:
                 self.feel[label].learn(lean, wanted)
         self._learn_from_overshoot(label)
 
+    def begin_rezero(self) -> None:
+        """The chain takes the neutral posture anew from the next samples (the person holds still)."""
+        self.chain.begin_neutral_calibration()
+
+    @property
+    def rezeroing(self) -> bool:
+        return self.chain.calibrating
+
     def caption(self) -> str:
         """The class the participant performs and the class the chain decided last (for the film)."""
         intended, decided = self.participant.intent[0], self._decided
@@ -466,10 +496,20 @@ class BomiChannel:
         rows = np.array(self._rows, dtype=float).reshape(-1, 4)
         samples = rows[:, 0].astype(int)
         trace = DecisionTrace(t=samples * DT - self.clock_offset, intended=truth.intent[samples].astype(int),
-                              decided=rows[:, 1].astype(int), gamma=rows[:, 2], nu=rows[:, 3])
+                              decided=rows[:, 1].astype(int), gamma=rows[:, 2], nu=rows[:, 3],
+                              lean=truth.amplitude[samples], body_deg=self._body_deg(truth, samples))
         names = tuple(cls.function for cls in sorted(self.profile.classes, key=lambda c: c.label))
         return {"decisions": trace, "class_names": names, "neutral": NEUTRAL_LABEL,
                 "allowance": self.transition_samples, "sample_period": DT, "amplitude": self.profile.amplitude}
+
+    def _body_deg(self, truth, samples: np.ndarray) -> np.ndarray:
+        """At each of ``samples``: how far the body's true angles are from their mean over the neutral
+        calibration (norm over the nodes' angles, deg): the body's true move from the neutral the chain took."""
+        calibration = (truth.time_s >= WARMUP_S) & (truth.time_s < self.clock_offset)
+        if not calibration.any():  # calibrated elsewhere (a live loop): no neutral known here
+            return np.full(len(samples), np.nan)
+        neutral = truth.angles[calibration].mean(axis=0)
+        return np.linalg.norm((truth.angles[samples] - neutral).reshape(len(samples), -1), axis=1)
 
     @property
     def transition_samples(self) -> int:
@@ -551,22 +591,26 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     task.reset(seed)
     params = operator_file if isinstance(operator_file, OperatorParams) else load_operator(operator_file)
     user = operator_user(params, channel, seed)
+    supervisor = Supervisor(params.recovery, user, channel, task.target_pos) if params.recovery.actions else None
     assistance = Assistance(assist, channel.controls.layout, channel.controls.buttons) if assist else None
     seen_ticks: list[tuple[View, StickIntent]] = []  # what the person saw and wanted, tick by tick (both immutable)
     film = _Film(sim, video, video_speedup) if video is not None else None
     seen_scale, previous = sim.dt * sim.config.control.full_speed, None
+    commanded: list[np.ndarray] = []  # the hand velocity each tick's stick commanded
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
         while True:
             view = task.view()
-            intent = user.stick_intent(view)
+            intent = user.stick_intent(view) if supervisor is None else supervisor.intent(view)
             seen = None if previous is None else (view.hand_pos - previous) / seen_scale
             previous = view.hand_pos
             state = channel.command(intent, view.t, view.t + sim.dt, seen, view.mode)
             if assistance is not None:
                 state = assistance.step(view, state, sim)
+            if supervisor is not None:
+                state = supervisor.state(intent, state)
             seen_ticks.append((view, intent))
-            sim.step(state)
+            commanded.append(sim.step(state).linear)
             if on_tick is not None:
                 on_tick(sim.time)
             if film is not None:
@@ -595,7 +639,8 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
         assist=assist_label(frozenset(assist)),
         automatic=tuple(assistance.switches) if assistance is not None else (),
         grasp_helps=assistance.grasp_helps if assistance is not None else 0,
-        **channel.log_fields())
+        commanded=np.array(commanded).reshape(-1, 3), recovery=params.recovery.label,
+        recoveries=tuple(supervisor.events) if supervisor is not None else (), **channel.log_fields())
 
 
 class _Film:

@@ -363,6 +363,17 @@ class HumanOperator:
         self.intent = intent
         return intent
 
+    def resume(self, view: View) -> None:
+        """Take the task up again after a recovery (``ScriptedUser.resume``), from rest and a new look."""
+        self.user.resume(view)
+        self.intent, self.slip = REST, None
+        self.eyes.rejudge()
+
+    def back_off(self, view: View) -> None:
+        """Lift the hand and plan afresh (``ScriptedUser.back_off``), from a new look."""
+        self.user.back_off(view)
+        self.resume(view)
+
     def _noticed(self, seen: View) -> bool:
         """The arm did something the person did not expect, or nothing for ``notice_timeout``."""
         s, p = self.slip, self.params

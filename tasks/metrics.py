@@ -11,6 +11,7 @@ entry per 60 Hz control tick.  docs/task.md defines every metric.
 from __future__ import annotations
 
 import enum
+import re
 from collections.abc import Sequence
 
 import numpy as np
@@ -251,3 +252,39 @@ def mode_switch_time(mode: list[str], pushing: np.ndarray, dt: float, until: int
         stop = after[0] if len(after) else len(pushing)
         spent[start:stop] = True
     return float(spent.sum() * dt)
+
+
+_CUBE = re.compile(r"cube (\d+)")
+
+
+def task_phase(goal: str) -> str | None:
+    """The phase of the task a step of the scripted user (``tasks.planner.Goal.step``) belongs to: "reach k" until cube k is
+    held, "carry k" while it is carried and set down, "finish" once both are stacked; None for a
+    goal that only interrupts a phase (opening the hand, levelling it, resting)."""
+    if goal.startswith(("release cube", "carry cube")):
+        return f"carry {_CUBE.search(goal).group(1)}"
+    found = _CUBE.search(goal)
+    if found:
+        return f"reach {found.group(1)}"
+    if goal.startswith(("release", "retreat", "done")):
+        return "finish"
+    return None
+
+
+def task_phases(goals: Sequence[str]) -> list[tuple[int, int, str]]:
+    """(first tick, tick after the last, phase) for each run of ticks in one phase; a goal that only
+    interrupts a phase stays in the phase it interrupts (at the start: the first phase)."""
+    phases = [task_phase(goal) for goal in goals]
+    known = [p for p in phases if p is not None]
+    current = known[0] if known else "task"
+    filled = []
+    for phase in phases:
+        current = phase or current
+        filled.append(current)
+    runs = []
+    for k, phase in enumerate(filled):
+        if runs and runs[-1][2] == phase:
+            runs[-1] = (runs[-1][0], k + 1, phase)
+        else:
+            runs.append((k, k + 1, phase))
+    return runs

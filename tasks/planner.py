@@ -30,6 +30,47 @@ NO_HUMAN_MODEL = "none"  # [human] model: the fixed timing of [timing] alone
 OPENING_PROGRESS = 0.02  # closure the fingers must lose to be seen opening (0 open .. 1 closed)
 
 
+class RecoveryAction(str, enum.Enum):
+    """What the person (or whoever runs the session) does after a while without progress
+    (``tasks.recovery``; docs/task.md, "Recovery")."""
+
+    REZERO = "rezero"  # hold still while the chain takes the neutral posture anew
+    BACKOFF = "backoff"  # lift the hand and make the plan afresh
+    PAUSE = "pause"  # stop the arm and rest
+
+
+NO_RECOVERY = "none"
+
+
+@dataclass(frozen=True)
+class RecoveryParams:
+    """The operator file's optional ``[recovery]`` table (absent: no recovery, the paper's comparison)."""
+
+    actions: frozenset[RecoveryAction] = frozenset()
+    stuck_s: float = 90.0  # s without progress before the person acts
+    obeyed_share: float = 0.8  # the arm answered at least this share of the stick moves asked: the interface works
+    settle_s: float = 2.0  # rezero: s held still before the neutral is taken
+    pause_s: float = 30.0  # pause: s of rest
+
+    @property
+    def label(self) -> str:
+        """The actions as a results row names them ("none", "backoff+rezero")."""
+        return "+".join(sorted(a.value for a in self.actions)) or NO_RECOVERY
+
+
+def parse_recovery_actions(text: str, where: str) -> frozenset[RecoveryAction]:
+    """``none`` or a comma list of actions (``rezero,backoff``); ValueError names ``where`` (if any) and the fault."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if names == [NO_RECOVERY]:
+        return frozenset()
+    known = {a.value: a for a in RecoveryAction}
+    bad = [n for n in names if n not in known]
+    if not names or bad:
+        raise ValueError(f"{where + ': ' if where else ''}{', '.join(bad) or 'an empty list'} is not {NO_RECOVERY} "
+                         f"or a comma list of {', '.join(known)}")
+    return frozenset(known[n] for n in names)
+
+
 @dataclass(frozen=True)
 class OperatorParams:
     reaction_time: float
@@ -69,6 +110,7 @@ class OperatorParams:
     coasting_min_speed: float
     stall_time: float
     human_model: str = NO_HUMAN_MODEL  # a human-model TOML (tasks.human) around this user, or none
+    recovery: RecoveryParams = RecoveryParams()
 
 
 _SECTIONS = {
@@ -99,7 +141,7 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
         table = check_table(data.get(section), f"[{section}]", keys)
         for key in keys:
             values[key] = number(table, key, f"[{section}]", -math.inf if key in _MAY_BE_NEGATIVE else 0.0)
-    check_table(data, "operator", (*_SECTIONS, "human"))
+    check_table(data, "operator", (*_SECTIONS, "human", "recovery"))
     human = check_table(data.get("human", {"model": NO_HUMAN_MODEL}), "[human]", ("model",), ("model",))
     model = typed(human, "model", str, "[human]")
     if not model:
@@ -118,7 +160,23 @@ def _parse_operator(data: dict, source: str) -> OperatorParams:
         raise ValueError("[learning] learning_rate must lie in (0, 1]")
     if values["settled_share"] <= 0:
         raise ValueError("[planner] settled_share must be positive")
-    return OperatorParams(**values, human_model=model)
+    return OperatorParams(**values, human_model=model, recovery=_parse_recovery(data.get("recovery")))
+
+
+def _parse_recovery(table: dict | None) -> RecoveryParams:
+    """The ``[recovery]`` table (every key optional; absent: no recovery)."""
+    if table is None:
+        return RecoveryParams()
+    check_table(table, "[recovery]", ("actions", "stuck_s", "obeyed_share", "settle_s", "pause_s"))
+    d = RecoveryParams()
+    actions = typed(table, "actions", str, "[recovery]", NO_RECOVERY)
+    stuck_s = number(table, "stuck_s", "[recovery]", 0.0, default=d.stuck_s)
+    if stuck_s <= 0:
+        raise ValueError("[recovery] stuck_s must be positive")
+    return RecoveryParams(parse_recovery_actions(actions, "[recovery] actions"), stuck_s,
+                          number(table, "obeyed_share", "[recovery]", 0.0, 1.0, d.obeyed_share),
+                          number(table, "settle_s", "[recovery]", 0.0, default=d.settle_s),
+                          number(table, "pause_s", "[recovery]", 0.0, default=d.pause_s))
 
 
 @dataclass(frozen=True)
@@ -233,6 +291,7 @@ class Memory:
     # m: how far the hand has been seen to go for the pulses the arm answered (Timing.pulse_step): an error of less
     # than half of it cannot be made smaller by a push, and is left where the grasp or the place tolerates it
     pulse_step: float = 0.0
+    backoff_z: float | None = None  # backing off after a while without progress: lift the hand to this height first
 
 
 # ---------------------------------------------------------------------------------------------
@@ -405,6 +464,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     bottom, top = placed_cubes(view, p)
     stack_top = view.table_z + view.cube_size * (int(bottom is not None) + int(top is not None))
     open_hand = view.closure <= p.open_closure
+    if memory.backoff_z is not None:  # stuck for a while: lift clear, then take the task up afresh
+        return _move("back off", Phase.RISE, np.array([view.hand_pos[0], view.hand_pos[1], memory.backoff_z]))
     if memory.fingers_blocked is not None and not open_hand:  # the fingers are caught: lift them clear first
         return _move("free the fingers", Phase.RISE, np.array([view.hand_pos[0], view.hand_pos[1],
                                                                memory.fingers_blocked + p.hover]))
@@ -552,6 +613,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
                   missed=(memory.missed or missed) and not touching and view.closure > p.open_closure,
                   missed_faces=_missed_faces(view, p) if missed else None if touching else memory.missed_faces,
                   fingers_blocked=None if freed else memory.fingers_blocked,
+                  backoff_z=None if memory.backoff_z is None or view.hand_pos[2] >= memory.backoff_z - p.stop
+                  else memory.backoff_z,
                   closing_since=(view.t if memory.closing_since is None else memory.closing_since) if closing else None,
                   opening=action.kind is ActionKind.OPEN and view.mode is finger_mode and opening_fn in (holding or {}))
     anticipation = p.anticipation if anticipation is None else anticipation
@@ -800,6 +863,17 @@ class ScriptedUser:
         self.current, self._waiting_since, self._started, self._mode_at_start = wanted, None, view.t, view.mode
         self._hold = self.timing.hold(wanted, self.settle)
         return wanted
+
+    def resume(self, view: View) -> None:
+        """Take the task up again after a recovery (``tasks.recovery``): from rest, with a new reaction."""
+        self.current, self._waiting_since, self._stopped_at, self._hold = REST, None, view.t, math.inf
+
+    def back_off(self, view: View) -> None:
+        """Give up the plan under way: lift the hand ``hover`` above where it is, then plan afresh
+        (what was learnt of the arm is kept; what the plan remembered of this attempt is not)."""
+        self.memory = Memory(controls=self.memory.controls, pulse_step=self.memory.pulse_step,
+                             backoff_z=float(view.hand_pos[2]) + self.params.hover)
+        self.resume(view)
 
     def _let_go(self, view: View, velocity: tuple[float, float, float]) -> None:
         self._stopped_at = view.t

@@ -5,7 +5,6 @@ from misclassified ones), the amplitude the profile uses and nu(t). Legends sit 
 panels, never over the data."""
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -17,7 +16,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from tasks import metrics  # noqa: E402
+from tasks import failures, metrics  # noqa: E402
+from tasks.metrics import task_phases  # noqa: E402
 
 if TYPE_CHECKING:
     from tasks.episode import EpisodeLog
@@ -34,40 +34,6 @@ MODE_COLOURS = {"translation": "#4c72b0", "height": "#8172b2", "wrist": "#dd8452
 AMPLITUDE_LABELS = {"gamma": "gamma: angle change\nfrom neutral (deg)",
                     "along_class": "amplitude along\nthe class (deg)"}
 LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.005, 1.0), "fontsize": 7, "borderaxespad": 0.0}
-_CUBE = re.compile(r"cube (\d+)")
-
-
-def task_phase(goal: str) -> str | None:
-    """The phase of the task a step of the scripted user (``tasks.planner.Goal.step``) belongs to: "reach k" until cube k is
-    held, "carry k" while it is carried and set down, "finish" once both are stacked; None for a
-    goal that only interrupts a phase (opening the hand, levelling it, resting)."""
-    if goal.startswith(("release cube", "carry cube")):
-        return f"carry {_CUBE.search(goal).group(1)}"
-    found = _CUBE.search(goal)
-    if found:
-        return f"reach {found.group(1)}"
-    if goal.startswith(("release", "retreat", "done")):
-        return "finish"
-    return None
-
-
-def task_phases(goals: Sequence[str]) -> list[tuple[int, int, str]]:
-    """(first tick, tick after the last, phase) for each run of ticks in one phase; a goal that only
-    interrupts a phase stays in the phase it interrupts (at the start: the first phase)."""
-    phases = [task_phase(goal) for goal in goals]
-    known = [p for p in phases if p is not None]
-    current = known[0] if known else "task"
-    filled = []
-    for phase in phases:
-        current = phase or current
-        filled.append(current)
-    runs = []
-    for k, phase in enumerate(filled):
-        if runs and runs[-1][2] == phase:
-            runs[-1] = (runs[-1][0], k + 1, phase)
-        else:
-            runs.append((k, k + 1, phase))
-    return runs
 
 
 def _shade_phases(ax, log: "EpisodeLog") -> list[tuple[float, float, str]]:
@@ -135,6 +101,10 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
                   **LEGEND)
     if bomi_log is not None:
         _decision_panels(axes[len(logs):], bomi_log)
+    for ax, log in zip(axes, logs):  # a failed episode's stuck period, over its panel (and the decisions'); recoveries
+        if not log.success:
+            _mark_stuck([ax, *axes[len(logs):]] if log is bomi_log else [ax], failures.stuck_period(log))
+        _mark_recoveries(ax, log)
     axes[-1].set_xlabel("time (s)")
     fig.tight_layout()
     for ax, spans in phases:
@@ -143,6 +113,38 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+STUCK_COLOUR = "tab:red"
+RECOVERY_COLOUR = "tab:purple"
+
+
+def _mark_recoveries(ax, log: "EpisodeLog") -> None:
+    """Each recovery action (tasks/recovery.py): a line where it started, named, and the time the arm
+    stood still for it shaded."""
+    for event in log.recoveries:
+        ax.axvline(event.start_s, color=RECOVERY_COLOUR, lw=1.0, ls="--")
+        if event.end_s > event.start_s:
+            ax.axvspan(event.start_s, event.end_s, color=RECOVERY_COLOUR, alpha=0.15, lw=0)
+        ax.text(event.start_s, 0.98, f" {event.action.value}", transform=ax.get_xaxis_transform(), ha="left",
+                va="top", fontsize=7, color=RECOVERY_COLOUR)
+
+
+def _mark_stuck(axes, period: "failures.StuckPeriod | None") -> None:
+    """The stuck period (the longest span without progress) hatched on ``axes``, named with its
+    mechanism and evidence on the first (tasks/failures.py)."""
+    if period is None:
+        return
+    for ax in axes:
+        ax.axvspan(period.start_s, period.end_s, facecolor="none", edgecolor=STUCK_COLOUR, hatch="//", lw=0.8,
+                   alpha=0.35, zorder=0)
+    evidence = [f"{period.mode_switches} mode switches"]
+    if period.neutral_share is not None:
+        evidence.append(f"{100 * period.neutral_share:.0f} % of motion read as neutral "
+                        f"(longest {period.neutral_run_s:.0f} s)")
+    axes[0].text(period.start_s, 0.1, f" stuck {period.duration_s:.0f} s: {period.mechanism.value}; "
+                 + ", ".join(evidence), transform=axes[0].get_xaxis_transform(), ha="left", va="bottom",
+                 fontsize=7, color=STUCK_COLOUR, bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
 
 
 def decision_kinds(intended: np.ndarray, decided: np.ndarray, allowance: int

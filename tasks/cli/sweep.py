@@ -61,7 +61,7 @@ from tasks.cli.figures import completion_time_figure, metric_figure
 from tasks.cli.options import MAX_SECONDS, MAX_SEED, MAX_SEEDS, MIN_TIME_LIMIT_S
 from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,
                             EpisodeJob, aggregate, aligned_table, episode_record, markdown_table, row_cells,
-                            terminal_cells)
+                            terminal_cells, terminal_mechanisms)
 from tasks.episode import OPERATORS, profile_controls
 from tasks.participants.participant import PARTICIPANT_DIR, load_participant
 from tasks.planner import load_operator
@@ -563,6 +563,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     result = run_sweep(grid, args.out, engine)
     if result.table is not None:
         print(result.table)
+        print(terminal_mechanisms(result.records))
         print(f"wrote {args.out / 'summary.md'} (every column), {args.out / 'summary.json'} and figures in {args.out}")
     if result.interrupted:
         report(f"bomi: interrupted: {len(result.records)} of the grid's {result.total} episodes are saved in "

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from bomi import paper
 from bomi.errors import BomiError
-from tasks import metrics
+from tasks import failures, metrics
 from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option, profile_assist
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
@@ -26,7 +26,7 @@ from tasks.cli.options import seed as seed_option
 from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participants.participant import load_participant
-from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.planner import DEFAULT_OPERATOR_FILE, NO_RECOVERY, RecoveryAction, load_operator, parse_recovery_actions
 from tasks.stacking import TaskConfig
 from tasks.stick import arm_profile
 from tasks.timeline import timeline_figure
@@ -37,6 +37,26 @@ DEFAULT_VOTE = 5
 # The demo's MP4 plays this many times faster than simulated time: a long BoMI episode stays a
 # short film (and quick to render).
 DEMO_VIDEO_SPEEDUP = 8.0
+
+RECOVERY_KEY = "operator.recovery.actions"  # the override --recovery sets (a grid may vary it too)
+RECOVERY_HELP = (f"what the scripted user does after a while without progress (docs/task.md, Recovery): "
+                 f"{NO_RECOVERY}, or a comma list of {', '.join(a.value for a in RecoveryAction)} "
+                 f"(default: the operator file's [recovery] actions, shipped: {NO_RECOVERY})")
+
+
+def recovery_option(text: str) -> str:
+    """``--recovery`` for argparse: the actions, checked, as given."""
+    try:
+        parse_recovery_actions(text, "")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def with_recovery(job: "EpisodeJob", recovery: str | None) -> "EpisodeJob":
+    """``job`` with the recovery actions ``recovery`` (None: as the operator file says)."""
+    return job if recovery is None else replace(job, overrides=(*job.overrides, (RECOVERY_KEY, recovery)))
+
 
 # The configuration files an episode reads, each of which a job may edit (``EpisodeJob.overrides``).
 EDITABLE_FILES = ("profile", "participant", "operator")
@@ -155,14 +175,17 @@ def aggregate(records: list[dict]) -> list[dict]:
     for r in records:  # the joystick needs no body: its rows are per layout, for anyone
         who = JOYSTICK_ANYONE if r["operator"] == "joystick" else r["participant"]
         # records written before the assistance existed had none
-        groups.setdefault((who, r["operator"], r["layout"], r.get("assist", NONE)), []).append(r)
+        # (and before the recovery existed, none)
+        groups.setdefault((who, r["operator"], r["layout"], r.get("assist", NONE), r.get("recovery", NO_RECOVERY)),
+                          []).append(r)
     rows = []
-    for (participant, operator, layout, assist), rs in sorted(groups.items()):
+    for (participant, operator, layout, assist, recovery), rs in sorted(groups.items()):
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
         ci = metrics.mean_ci95(times)
         row = {
-            "participant": participant, "operator": operator, "layout": layout, "assist": assist, "episodes": len(rs),
+            "participant": participant, "operator": operator, "layout": layout, "assist": assist,
+            "recovery": recovery, "episodes": len(rs),
             "seeds": [r["seed"] for r in rs], "successes": len(done),
             "success_rate": len(done) / len(rs), "success_ci95": list(metrics.success_ci95(len(done), len(rs))),
             "completion_time_mean": _mean(times),
@@ -202,11 +225,12 @@ def aggregate(records: list[dict]) -> list[dict]:
 
 
 def comparison(rows: list[dict]) -> list[dict]:
-    """Per participant: our BoMI/joystick time ratio and decision figures beside the paper's.  The
+    """Per participant (without recovery): our BoMI/joystick time ratio and decision figures beside the paper's.  The
     paper's real-time accuracy counts the outputs that were not irrelevant: ``relevant_share``
     is ours in that sense; the two accuracies say how often the output was the intended class."""
-    bomis = {(r["participant"], r["assist"]): r for r in rows if r["operator"] == "bomi"}
-    sticks = {(r["layout"], r["assist"]): r for r in rows if r["operator"] == "joystick"}
+    paper_like = [r for r in rows if r["recovery"] == NO_RECOVERY]  # the paper's sessions: no recovery modelled
+    bomis = {(r["participant"], r["assist"]): r for r in paper_like if r["operator"] == "bomi"}
+    sticks = {(r["layout"], r["assist"]): r for r in paper_like if r["operator"] == "joystick"}
     out = []
     for (participant, assist), bomi in sorted(bomis.items()):
         joy = sticks.get((bomi["layout"], assist))  # with the same assistance
@@ -278,9 +302,9 @@ def aligned_table(header: list[str], rows: list[list[str]]) -> str:
 def terminal_table(rows: list[dict]) -> str:
     """The benchmark rows within 100 columns (acc. all: accuracy over every decision; acc. exc.: with
     the transitions excused; err. run ms: the longest run of misclassified outputs)."""
-    assist = any(r["assist"] != NONE for r in rows)
-    return aligned_table(["participant", "operator", *(["assist"] if assist else []), *TERMINAL_COLUMNS],
-                         [[r["participant"], r["operator"], *([r["assist"]] if assist else []), *terminal_cells(r)]
+    extra = [key for key, off in (("assist", NONE), ("recovery", NO_RECOVERY)) if any(r[key] != off for r in rows)]
+    return aligned_table(["participant", "operator", *extra, *TERMINAL_COLUMNS],
+                         [[r["participant"], r["operator"], *(r[key] for key in extra), *terminal_cells(r)]
                           for r in rows])
 
 
@@ -293,6 +317,30 @@ def terminal_comparison(rows: list[dict]) -> str:
           _pct(c["accuracy_all_decisions"]), _pct(c["accuracy_excused_transitions"]),
           _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
           f"{c['paper_longest_error_run_ms']:.0f}"] for c in comparison(rows)])
+
+
+# The mechanism table's short column names (within 100 columns), in ``failures.Mechanism``'s order
+MECHANISM_COLUMNS = {failures.Mechanism.CUBE_LOST: "cube lost", failures.Mechanism.ARM_AT_LIMIT: "at limit",
+                     failures.Mechanism.CLASSIFIER_STUCK: "clf stuck", failures.Mechanism.MODE_SWITCH_STORM: "storm",
+                     failures.Mechanism.PLANNER_STUCK: "planner", failures.Mechanism.MISREAD_MOTION: "misread"}
+
+
+def terminal_mechanisms(records: list[dict]) -> str:
+    """Why episodes failed or were slow (more than ``failures.SLOW_FACTOR`` x their median time): per
+    participant and operator (and a sweep's settings), how many each mechanism explains."""
+    rows = failures.mechanism_rows(records)
+    settings = any(r["settings"] for r in rows)
+    recovery = any(r["recovery"] != NO_RECOVERY for r in rows)
+    unrecorded = any(r["mechanisms"].get(failures.NOT_RECORDED) for r in rows)
+    header = ["participant", "operator", *(["settings"] if settings else []), *(["recovery"] if recovery else []),
+              "failed", "slow", *MECHANISM_COLUMNS.values(), *([failures.NOT_RECORDED] if unrecorded else [])]
+    cells = [[r["participant"], r["operator"], *([json.dumps(r["settings"])] if settings else []),
+              *([r["recovery"]] if recovery else []),
+              f"{r['failed']}/{r['episodes']}", f"{r['slow']}/{r['episodes']}",
+              *(str(len(r["mechanisms"][m.value])) for m in MECHANISM_COLUMNS),
+              *([str(len(r["mechanisms"].get(failures.NOT_RECORDED, [])))] if unrecorded else [])] for r in rows]
+    return (f"why episodes failed or took over {failures.SLOW_FACTOR:g}x their median (docs/task.md):\n"
+            + aligned_table(header, cells))
 
 
 def row_cells(r: dict) -> list[str]:
@@ -382,8 +430,8 @@ def cmd_run_task(args: argparse.Namespace) -> int:
                              "--json": (args.json, (".json",))}, force=args.force)
     load_operator(args.operator_file)  # a bad file fails before any simulation
     load_participant(args.participant)  # for the joystick too: a typo is not silently ignored
-    job = EpisodeJob(args.operator, args.participant, args.seed, args.time_limit, str(args.operator_file),
-                     args.vote, assist=args.assist)
+    job = with_recovery(EpisodeJob(args.operator, args.participant, args.seed, args.time_limit,
+                                   str(args.operator_file), args.vote, assist=args.assist), args.recovery)
     job_assist(job, arm_profile(load_participant(job.participant).profile))  # a bad profile fails before simulating
     participant_controls(job.participant)  # so does one without the task's controls (a twin's derived profile)
     if outputs["--video"]:
@@ -420,6 +468,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     jobs = benchmark_jobs(participants, _names(args.operators, OPERATORS, "operators"),
                           args.seeds, args.time_limit, str(args.operator_file), args.vote, args.first_seed,
                           args.assist)
+    jobs = [with_recovery(job, recovery) for recovery in args.recovery or [None] for job in jobs]
     for job in {(j.participant, j.operator): j for j in jobs}.values():  # a bad profile fails before simulating
         job_assist(job, arm_profile(load_participant(job.participant).profile))
         participant_controls(job.participant)
@@ -428,11 +477,13 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     print(terminal_table(rows))
     if comparison(rows):
         print("\n" + terminal_comparison(rows))
+    print("\n" + terminal_mechanisms(records))
     if not outputs["--json"]:
         print("(every column, the episodes and the comparison in full: --json FILE)")
     if outputs["--json"]:
         write_json(outputs["--json"], {"paper": paper.TASK, "rows": rows, "comparison": comparison(rows),
-                                       "episodes": records}, overwrite=args.force)
+                                       "mechanisms": failures.mechanism_rows(records), "episodes": records},
+                   overwrite=args.force)
     return 0
 
 
@@ -482,6 +533,7 @@ def register(subparsers) -> None:
     run.add_argument("--seed", type=seed_option, default=0,
                      help="task seed: cube placement, the participant's body and noise (default %(default)s)")
     _episode_options(run)
+    run.add_argument("--recovery", type=recovery_option, help=RECOVERY_HELP)
     run.add_argument("--video", type=Path, help="also film the episode to this MP4 (4x speed)")
     run.add_argument("--plot", type=Path, help="also write the timeline figure (PNG) here")
     run.add_argument("--json", type=Path, help="also write the episode's metrics (JSON) here")
@@ -499,6 +551,9 @@ def register(subparsers) -> None:
     bench.add_argument("--first-seed", type=seed_option, default=0, help="the first seed (default %(default)s)")
     add_engine_arguments(bench)
     _episode_options(bench)
+    bench.add_argument("--recovery", type=recovery_option, action="append",
+                       help=RECOVERY_HELP + "; given more than once, the episodes are run under each, "
+                            "e.g. --recovery none --recovery rezero,backoff,pause")
     bench.add_argument("--json", type=Path, help="also write the table and every episode's metrics (JSON) here")
     add_force(bench)
     bench.set_defaults(func=cmd_benchmark)
