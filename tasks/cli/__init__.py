@@ -45,6 +45,9 @@ COMMANDS: dict[str, Command] = {
                         "drawn (rows: the true class, normalised per row)."),
     "reproduce": Command("tasks.cli.chain", "the paper's reliability-over-days table beside ours (P1 data)"),
     "fuse": Command("tasks.cli.chain", "recompute Pitch/Roll/Yaw columns from the raw ACC/GYRO/MAG columns"),
+    "split": Command("tasks.cli.chain", "write each pass of the protocol a recording holds as a recording of its own",
+                     "Passes are found by the pauses (or restarts) of the Time clock, as every command that reads "
+                     "a recording finds them (bomi/passes.py)."),
     "emulate": Command("tasks.cli.stream", "play a recording or a virtual participant as base-station frames "
                                            "onto a pty, socket or port"),
     "capture": Command("tasks.cli.stream", "record what a base-station stream carries, without prompts"),

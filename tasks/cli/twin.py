@@ -13,7 +13,7 @@ from bomi.profiles import Profile, save_profile
 from bomi.protocol import protocol_order
 from bomi.recording import Recording, write_recording
 from tasks.cli import add_command
-from tasks.cli.chain import read
+from tasks.cli.chain import read_all_passes
 from tasks.cli.options import add_force, check_outputs, non_negative_int
 from tasks.participants.participant import (Protocol, load_participant, protocol_session, session_recording)
 from tasks.participants.twin import fit_twin, twin_toml
@@ -27,12 +27,13 @@ NO_PRIOR = "none"
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "twin", description=(
-        "Fit a virtual participant to a person's calibration recording(s) (one pass each): posture, "
+        "Fit a virtual participant to a person's calibration recording(s) (a file holding several passes "
+        "of the protocol, found by the pauses of its Time clock, counts as several): posture, "
         "repetition spread, sway and tremor of every class, onset and reaction time where the recording "
         "keeps the transitions, drift between passes where there are several; the rest from a prior "
         "participant. The file says per parameter what it was measured from, or which prior it took."))
-    p.add_argument("recordings", nargs="+", metavar="REC", help="labelled .mat or .csv recordings, one per pass "
-                                                                "(day or session)")
+    p.add_argument("recordings", nargs="+", metavar="REC", help="labelled .mat or .csv recordings: their passes "
+                                                                "(days or sessions) are found in each")
     p.add_argument("--out", required=True, type=Path, help="participant TOML to write")
     p.add_argument("--profile", help="profile name (P1, P4, P5) or TOML file (default: derived from the recordings "
                                      f"as `bomi train` derives it, written beside --out as *{PROFILE_SUFFIX})")
@@ -75,7 +76,7 @@ def twin_command(args: argparse.Namespace) -> int:
     for path in args.recordings:
         check_input(path, "recording")
     prior = None if args.prior == NO_PRIOR else load_participant(args.prior)
-    recordings = [read(path, args.verbose) for path in args.recordings]
+    recordings = read_all_passes(args.recordings, args.verbose)
     derived = outputs["derived profile"]
     profile, reference = _profile_for(args, recordings, derived)
     name = args.name or args.out.name.removesuffix(".toml")
