@@ -2,7 +2,8 @@
 
 What the recording holds decides: its nodes (those with angles in every recording), the feature
 vector (FV3 when every such node has its gyroscope, else FV1), its labels (c0 is the neutral
-posture, c1, c2, ... take the paper's joystick functions F, B, R, L, Rr, Lr, B1, B2 in label order),
+posture; the motions c1, c2, ... take, in label order, the functions of the joystick layout their
+number allows, ``derived_layout``: the stacking task needs translation, wrist and fingers),
 and the node that carries each motion (the one whose mean angle change from neutral is largest
 over the class's samples). Classifier settings are left to the person's own data
 (``shrinkage = "select"``, ``rejection_threshold = "select"``): the plain setting unless the
@@ -13,6 +14,7 @@ multiple-amplitude training), and rejection (``bomi.chain.select_settings``, doc
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,6 +27,41 @@ from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, NEUTRAL_FUNCTION, SELECT, Cla
 from bomi.recording import Recording, Signal
 
 DERIVED_AMPLITUDE_SCALES = (0.75, 0.5)
+THREE_AXIS, TWO_AXIS = "3-axis", "2-axis"   # the layouts' names (sim/joystick.py LAYOUTS; docs/sim.md)
+AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
+_DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L")}
+
+
+@dataclass(frozen=True)
+class DerivedLayout:
+    """How a person's motions drive the arm: the layout, each motion's function in label order, the
+    assistances on, and why."""
+
+    layout: str
+    functions: tuple[str, ...]
+    assist: tuple[str, ...]
+    reason: str
+
+
+def derived_layout(motions: int) -> DerivedLayout:
+    """The layout that reaches translation, wrist and fingers with ``motions`` classes (3..8): every
+    direction of the layout is a motion, and the mode changes are buttons made of the others (B1
+    forward, B2 back); the 3-axis layout (one mode fewer, the wrist's turns in one mode) when the
+    motions cover its six directions and a button, else the 2-axis layout (Kinova's for a 2-axis
+    input: four directions, four modes). With fewer than five motions no button is left after the
+    four directions: the modes change by themselves (automatic mode switching, tasks/assist.py)."""
+    if motions >= len(_DIRECTIONS[THREE_AXIS]) + 1:
+        buttons = ("B1", "B2")[:motions - len(_DIRECTIONS[THREE_AXIS])]
+        return DerivedLayout(THREE_AXIS, _DIRECTIONS[THREE_AXIS] + buttons, (),
+                             f"{motions} motions: the 3-axis layout's six directions and {' and '.join(buttons)}")
+    if motions >= len(_DIRECTIONS[TWO_AXIS]) + 1:
+        buttons = ("B1", "B2")[:motions - len(_DIRECTIONS[TWO_AXIS])]
+        return DerivedLayout(TWO_AXIS, _DIRECTIONS[TWO_AXIS] + buttons, (),
+                             f"{motions} motions: too few for the 3-axis layout's six directions and a mode button; "
+                             f"the 2-axis layout's four directions and {' and '.join(buttons)}")
+    return DerivedLayout(TWO_AXIS, _DIRECTIONS[TWO_AXIS][:motions], (AUTO_MODE,),
+                         f"{motions} motions: no class left for a mode button after the 2-axis layout's directions; "
+                         "the modes are switched automatically (--assist auto-mode)")
 _BASE_STATION_FIRST_IMU = 10   # node index i is base-station id 10 + i - 1 (hardware.md)
 
 
@@ -49,10 +86,13 @@ def derive_profile(recordings: Sequence[Recording]) -> Profile:
                             "neutral-offset calibration")
     gyro = all(rec.nodes[i].gyro is not None for rec in recordings for i in nodes)
     carriers = _carrying_nodes(recordings, nodes, motions)
+    layout = derived_layout(len(motions))
     classes = (ClassConfig(NEUTRAL_LABEL, "c0", NEUTRAL_FUNCTION, None),) + tuple(
-        ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, CLASS_FUNCTIONS))
+        ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, layout.functions))
     return Profile(
-        name="derived", description="derived from the recording: its nodes, its labels, generic class names",
+        name="derived", description=f"derived from the recording: its nodes, its labels, generic class names; "
+                                    f"layout {layout.layout}: {layout.reason}",
+        joystick_layout=layout.layout, assist=layout.assist,
         nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", NodeCalibration.default_for(i))
                     for i in nodes),
         classes=classes, spec=FeatureSpec("FV3" if gyro else "FV1", tuple(nodes)), shrinkage=SELECT,
@@ -81,7 +121,9 @@ def describe(profile: Profile) -> str:
     classes = ", ".join(f"c{c.label} {c.function}" + ("" if c.node is None else f" (node {c.node})")
                         for c in profile.classes)
     scales = ", ".join(f"{s:g}" for s in profile.amplitude_scales)
+    layout = derived_layout(sum(c.function != NEUTRAL_FUNCTION for c in profile.classes))
     return (f"no --profile: {profile.source}: node(s) {list(profile.node_indices)}, {kind} "
             f"({'angles + GYRO' if kind != 'FV1' else 'angles: the recording has no GYRO'}), classes {classes}; "
+            f"layout {layout.layout}{' + ' + ', '.join(layout.assist) if layout.assist else ''} ({layout.reason}); "
             f"classifier plain unless the cross-validation on the training recording earns an extra its place "
             f"(shrinkage, motions also trained at {scales} of their size, rejection)")

@@ -62,7 +62,7 @@ def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_day
     printed = capsys.readouterr().out
     assert f"{day1}: ignored 3 variable(s): Commands, Gain, Who" in printed
     assert (f"no --profile: derived from {day1}: node(s) [1], FV3 (angles + GYRO), classes c0 neutral, c1 F (node 1), "
-            "c2 B (node 1), c3 R (node 1), c4 L (node 1), c5 Rr (node 1), c6 Lr (node 1)") in printed
+            "c2 B (node 1), c3 R (node 1), c4 L (node 1), c5 B1 (node 1), c6 B2 (node 1); layout 2-axis (6 motions") in printed
     assert "settings chosen on the training recording: " in printed
     assert "how good is this classifier: cross-validated accuracy " in printed
     model = load_model(model_path)

@@ -11,6 +11,7 @@ from bomi.fusion import DT
 from bomi.profiles import load_profile
 from bomi.recording import Recording, read_recording, write_recording
 from tasks.cli import main
+from tasks.episode import profile_controls
 from tasks.participants import twin as twin_module
 from tasks.participants.participant import (PARTICIPANT_DIR, VirtualParticipant, calibration_session, load_participant,
                                             session_recording)
@@ -183,9 +184,10 @@ def test_a_twin_without_a_profile_derives_it_and_is_a_participant_everywhere(tmp
     profile = arm_profile(params.profile)            # the derived profile beside the twin, whatever the cwd
     assert profile.node_indices == (1, 2) and sorted(params.classes) == [1, 2, 3, 4, 5]
     VirtualParticipant(params, profile, seed=0)       # nodes and classes match
-    # five motions: F, B, R, L, Rr and no mode button: the stacking task says so in one line
-    code, _, err = bomi(capsys, "run-task", "--operator", "bomi", "--participant", out, "--time-limit", 2)
-    assert code == 2 and err.startswith("bomi: error: ") and "no class for Lr, B1" in err and err.count("\n") == 1
+    # five motions: the 2-axis layout's F, B, R, L and the mode button B1, which the stacking user needs
+    controls = profile_controls(profile)
+    assert controls.layout.name == "2-axis" and controls.buttons == ("B1",)
+    assert [cls.function for cls in profile.classes] == ["neutral", "F", "B", "R", "L", "B1"]
 
 
 def test_run_task_takes_a_twin_file(tmp_path, shared_data, capsys):
@@ -214,7 +216,7 @@ def test_too_few_samples_of_a_class_is_one_error_line(tmp_path, continuous_csv, 
     write_recording(path, Recording(nodes={i: dataclasses.replace(d, **{s.value: getattr(d, s.value)[keep]
                                                                       for s in d.signals})
                                            for i, d in rec.nodes.items()},
-                                    labels=labels[keep], time=rec.time[keep]))
+                                    labels=labels[keep], time=rec.time[:keep.sum()]))   # a clock without pauses: one pass
     code, _, err = bomi(capsys, "twin", path, "--profile", "P4", "--out", tmp_path / "t.toml")
     assert code == 2 and err.startswith("bomi: error: ") and "class c3" in err and "20 labelled samples" in err
     assert err.count("\n") == 1

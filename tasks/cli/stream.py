@@ -22,7 +22,7 @@ from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamLost
 from tasks.cli import add_command
-from tasks.cli.chain import class_listing, fit_model
+from tasks.cli.chain import class_listing, fit_and_report, read_all_passes
 from tasks.cli.options import (add_force, check_outputs, non_negative_int, non_negative_seconds, positive_float,
                                positive_int, probability, seconds)
 from tasks.stick import arm_profile
@@ -423,7 +423,7 @@ def run_record(args: argparse.Namespace) -> int:
                 raise _unfinished(exc, writer) from None
     print(f"{args.out}: {writer.rows_written} labelled rows, {len(segments)} segments; {source.parser.summary()}")
     if args.train is not None:
-        model = fit_model([read_recording(args.out)], profile, profile.spec)
+        model = fit_and_report(read_all_passes([args.out], verbose=False), profile, profile.spec)
         save_model(args.train, model, overwrite=args.force)
         print(f"{args.train}: model of profile {profile.name}; {class_listing(profile, model.classes.tolist())}")
     return 0
