@@ -362,15 +362,15 @@ class PassOut:
 
 def leave_one_pass_out(passes: Sequence[Recording], profile: Profile, model: Model) -> PassOut | None:
     """``model``'s settings (shrinkage, copies, post-processing) trained on all passes but one and tested
-    on it, for every pass: how the classifier does on a pass it has not seen. None for one pass."""
+    on it, for every pass: how the classifier does on a pass it has not seen. None for one pass; a
+    BomiError when the passes but one cannot train every class."""
     if len(passes) < 2:
         return None
     fixed = replace(profile, amplitude_scales=model.amplitude_scales)
     evaluations = []
     for k, held_out in enumerate(passes):
         others = [p for j, p in enumerate(passes) if j != k]
-        fold = train(others, fixed, model.spec, shrinkage=model.shrinkage, post=model.post,
-                     allow_missing_classes=True)
+        fold = train(others, fixed, model.spec, shrinkage=model.shrinkage, post=model.post)
         evaluations.append(evaluate(fold, held_out, profile.neutral_samples, model.post))
     return PassOut(tuple(evaluations))
 

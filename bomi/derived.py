@@ -14,19 +14,21 @@ multiple-amplitude training), and rejection (``bomi.chain.select_settings``, doc
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
-from bomi.fusion import NodeCalibration, neutral_offsets
+from bomi.fusion import (MOUNTING_AGREE_DEG, NodeCalibration, agreeing_mounting, angle_disagreement, fuse,
+                         neutral_offsets)
 from bomi.paper import CLASS_FUNCTIONS
 from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, NEUTRAL_FUNCTION, SELECT, ClassConfig, NodeConfig, Profile
-from bomi.recording import Recording, Signal
+from bomi.recording import NodeData, Recording, Signal
 
 DERIVED_AMPLITUDE_SCALES = (0.75, 0.5)
+MOUNTING_ROWS = 20_000   # at most the rows a node's mounting is checked on (5 min: the protocol's motions disambiguate it)
 THREE_AXIS, TWO_AXIS = "3-axis", "2-axis"   # the layouts' names (sim/joystick.py LAYOUTS; docs/sim.md)
 AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
 _DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L")}
@@ -89,16 +91,35 @@ def derive_profile(recordings: Sequence[Recording]) -> Profile:
     layout = derived_layout(len(motions))
     classes = (ClassConfig(NEUTRAL_LABEL, "c0", NEUTRAL_FUNCTION, None),) + tuple(
         ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, layout.functions))
+    calibrations = {i: node_calibration(first, i) for i in nodes}
+    mounted = [f"node {i} mounting {calibrations[i].mounting} (the one its own angle columns agree with)"
+               for i in nodes if calibrations[i] != NodeCalibration.default_for(i)]
     return Profile(
         name="derived", description=f"derived from the recording: its nodes, its labels, generic class names; "
-                                    f"layout {layout.layout}: {layout.reason}",
+                                    + "".join(f"{m}; " for m in mounted) + f"layout {layout.layout}: {layout.reason}",
         joystick_layout=layout.layout, assist=layout.assist,
-        nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", NodeCalibration.default_for(i))
-                    for i in nodes),
+        nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", calibrations[i]) for i in nodes),
         classes=classes, spec=FeatureSpec("FV3" if gyro else "FV1", tuple(nodes)), shrinkage=SELECT,
         neutral_samples=DEFAULT_NEUTRAL_SAMPLES, post=PostProcessing(), source=f"derived from {first.source}",
         amplitude="along_class",
         select_rejection=True, amplitude_scales=DERIVED_AMPLITUDE_SCALES)
+
+
+def node_calibration(rec: Recording, node: int) -> NodeCalibration:
+    """The node's default calibration (the headset's for node 1), with the axis mounting its own angle
+    columns agree with when they disagree with the default's by more than MOUNTING_AGREE_DEG and the
+    recording has the raw signals to tell (``bomi.fusion.agreeing_mounting``): live, the angles are
+    fused from the raw signals, and must be those the model was trained on."""
+    default = NodeCalibration.default_for(node)
+    signals = (Signal.ACC, Signal.GYRO, Signal.MAG, Signal.ANGLES)
+    if any(getattr(rec.nodes[node], s.value) is None for s in signals):
+        return default
+    data = NodeData(**{s.value: getattr(rec.nodes[node], s.value)[:MOUNTING_ROWS] for s in signals})
+    pitch, roll, yaw = fuse(data.acc, data.gyro, data.mag, default)
+    if angle_disagreement(data.angles, np.column_stack([pitch, roll, yaw])).max() <= MOUNTING_AGREE_DEG:
+        return default
+    mounting, left = agreeing_mounting(data, default)
+    return replace(default, mounting=mounting) if left.max() <= MOUNTING_AGREE_DEG else default
 
 
 def _carrying_nodes(recordings: Sequence[Recording], nodes: Sequence[int], motions: Sequence[int]) -> dict[int, int]:

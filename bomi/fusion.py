@@ -248,14 +248,22 @@ def axis_mountings() -> list[Matrix3]:
 
 
 def agreeing_mounting(node: NodeData, calibration: NodeCalibration) -> tuple[Matrix3, np.ndarray]:
-    """Of ``axis_mountings``, the one (with ``calibration``'s iron constants) whose fused pitch and roll
-    are nearest the node's own angle columns, and its ``angle_disagreement``."""
+    """The mounting (with ``calibration``'s iron constants) whose fused pitch and roll agree with the
+    node's own angle columns, and its ``angle_disagreement``: the first within MOUNTING_AGREE_DEG of
+    ``calibration``'s, none (the sensor's own axes), then the other ``axis_mountings`` (pitch and roll
+    of a node that mostly stays upright can agree under several), else the nearest."""
     def disagreement(mounting: Matrix3) -> np.ndarray:
         pitch, roll, yaw = fuse(node.acc, node.gyro, node.mag, replace(calibration, mounting=mounting))
         return angle_disagreement(node.angles, np.column_stack([pitch, roll, yaw]))
-    scored = [(float(disagreement(m).max()), m) for m in axis_mountings()]
-    best = min(scored, key=lambda pair: pair[0])[1]
-    return best, disagreement(best)
+    candidates = list(dict.fromkeys([calibration.mounting, IDENTITY, *axis_mountings()]))
+    scored = []
+    for mounting in candidates:
+        left = disagreement(mounting)
+        if left.max() <= MOUNTING_AGREE_DEG:
+            return mounting, left
+        scored.append((float(left.max()), mounting, left))
+    _, best, left = min(scored, key=lambda entry: entry[0])
+    return best, left
 
 
 def mounting_warnings(rec: Recording, fused: Recording, calibrations: dict[int, NodeCalibration]) -> list[str]:

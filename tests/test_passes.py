@@ -9,13 +9,14 @@ import pytest
 
 from bomi.chain import evaluate, leave_one_pass_out, train
 from bomi.derived import derive_profile
-from bomi.fusion import NodeCalibration, angle_disagreement, fuse, fused_recording, mounting_warnings
+from bomi.fusion import HEADSET_MOUNTING, IDENTITY, NodeCalibration, angle_disagreement, fuse, fused_recording, mounting_warnings
 from bomi.model_io import load_model
 from bomi.profiles import save_profile
 from bomi.passes import (PassBounds, in_sample_share, join, pass_bounds, passes_text, split_passes,
                          training_digests)
-from bomi.recording import NodeData, Recording, read_recording, write_logger_mat
+from bomi.recording import NodeData, Recording, read_recording, write_logger_mat, write_recording
 from tasks.cli import main
+from tasks.cli.chain import most_confused
 from tasks.participants.population import PASS_GAP_S, draw_person, one_file
 
 PERSON = 5   # six head motions and the neutral posture, one node (benchmarks/two_pass_file.py)
@@ -166,3 +167,40 @@ def test_fuse_starts_each_pass_afresh_and_says_when_the_mounting_disagrees(p1_da
     printed = capsys.readouterr().out
     assert f"{path}: 2 passes: rows 0-999, 1000-1499 (a 10.0 s gap in Time at row 1000" in printed
     assert "fused from its own start" in printed and "warning: " in printed
+
+
+def test_most_confused_names_the_largest_confusions_by_hand():
+    truth = np.array([1] * 10 + [2] * 10 + [3] * 10)
+    decided = np.array([1] * 6 + [2] * 4 + [2] * 9 + [1] + [3] * 10)
+    # c1 read as c2 in 4 of 10, c2 as c1 in 1 of 10 (10 %), c3 never wrong
+    assert most_confused(truth, decided) == [(1, 2, 0.4), (2, 1, 0.1)]
+
+
+def test_train_warns_below_the_threshold_and_names_the_confused_classes(tmp_path, capsys):
+    # c2 is held in c1's posture: the two cannot be told apart
+    labels = np.concatenate([np.zeros(150, int)] + [np.repeat([k, 0], [100, 40]) for _ in range(3) for k in (1, 2, 3)])
+    rng = np.random.default_rng(1)
+    angles = rng.normal(0.0, 1.0, (len(labels), 3))
+    angles[labels == 1] += [20.0, 0.0, 0.0]
+    angles[labels == 2] += [20.0, 0.0, 0.0]
+    angles[labels == 3] += [0.0, 20.0, 0.0]
+    path = tmp_path / "alike.csv"
+    write_recording(path, Recording({1: NodeData(angles=angles)}, labels, source="alike"))
+    assert main(["train", str(path), "--out", str(tmp_path / "m.json")]) == 0
+    printed = capsys.readouterr().out
+    headline = next(line for line in printed.splitlines() if line.startswith("how good is this classifier"))
+    accuracy = float(headline.split("cross-validated accuracy ")[1].split(" %")[0])
+    assert accuracy < 85.0
+    warning = next(line for line in printed.splitlines() if line.startswith("warning: accuracy"))
+    assert "is below 85 %" in warning and ("c1 read as c2" in warning or "c2 read as c1" in warning)
+
+
+def test_a_derived_profile_takes_the_mounting_its_recording_agrees_with(p1_days):
+    # P1's published angle columns are in the sensor's own axes, 90 deg from the headset mounting
+    day = p1_days[1]
+    signals = ("acc", "gyro", "mag", "angles")
+    head = Recording({1: NodeData(**{s: getattr(day.nodes[1], s)[:6000] for s in signals})}, day.labels[:6000],
+                     source="head")
+    assert derive_profile([head]).nodes[0].calibration.mounting == IDENTITY
+    angles_only = Recording({1: NodeData(angles=head.nodes[1].angles)}, head.labels, source="angles")
+    assert derive_profile([angles_only]).nodes[0].calibration.mounting == HEADSET_MOUNTING

@@ -208,15 +208,20 @@ def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureS
     cross-validation within it. A warning, naming the classes most confused, when it is below POOR_ACCURACY."""
     model, selection = _fit(passes, profile, spec, allow_missing_classes)
     same_classes = len({tuple(sorted(set(p.labels.tolist()))) for p in passes}) == 1
-    out = leave_one_pass_out(passes, profile, model) if same_classes else None
+    why = ("the passes hold different classes" if len(passes) > 1
+           else "one pass: record a second for a figure on a pass the model has not seen")
+    out = None
+    if same_classes:
+        try:
+            out = leave_one_pass_out(passes, profile, model)
+        except BomiError as exc:   # the passes but one cannot train every class: the within-pass figure
+            why = f"no leave-one-pass-out figure: {exc}"
     if out is not None:
         accuracy, headline = out.accuracy, out.text()
         truth = np.concatenate([ev.truth for ev in out.evaluations])
         decided = np.concatenate([ev.predicted for ev in out.evaluations])
     elif selection is not None and selection.held_out is not None:
         accuracy, (truth, decided) = selection.accuracy, selection.held_out
-        why = ("the passes hold different classes" if len(passes) > 1
-               else "one pass: record a second for a figure on a pass the model has not seen")
         headline = f"cross-validated accuracy {100 * accuracy:.2f} % (whole holds held out within each pass; {why})"
     else:
         print("how good is this classifier: not estimated (no cross-validation: too little data or fixed settings)")
