@@ -17,7 +17,10 @@ from bomi.passes import (PassBounds, in_sample_share, join, pass_bounds, passes_
 from bomi.recording import NodeData, Recording, read_recording, write_logger_mat, write_recording
 from tasks.cli import main
 from tasks.cli.chain import most_confused
+from tasks.episode import profile_controls
+from tasks.participants.participant import load_participant
 from tasks.participants.population import PASS_GAP_S, draw_person, one_file
+from tasks.stick import arm_profile
 
 PERSON = 5   # six head motions and the neutral posture, one node (benchmarks/two_pass_file.py)
 DT = 0.016
@@ -51,9 +54,10 @@ def test_a_pause_is_a_new_pass_only_well_beyond_the_moves_and_the_lost_samples()
 
 @pytest.fixture(scope="module")
 def two_pass_file(tmp_path_factory):
-    """A synthetic person's two passes in one .mat, as the original logger writes it (a 6.2 s pause)."""
+    """A synthetic person's two passes in one .mat, as the original logger writes it (a 6.2 s pause);
+    the first 5000 rows of each pass (every motion held at least once)."""
     path = tmp_path_factory.mktemp("person") / "me.mat"
-    write_logger_mat(path, one_file(draw_person(PERSON)))
+    write_logger_mat(path, one_file(draw_person(PERSON), rows=5000))
     return path
 
 
@@ -204,3 +208,16 @@ def test_a_derived_profile_takes_the_mounting_its_recording_agrees_with(p1_days)
     assert derive_profile([head]).nodes[0].calibration.mounting == IDENTITY
     angles_only = Recording({1: NodeData(angles=head.nodes[1].angles)}, head.labels, source="angles")
     assert derive_profile([angles_only]).nodes[0].calibration.mounting == HEADSET_MOUNTING
+
+
+def test_the_twin_of_a_two_pass_file_counts_two_passes_and_its_profile_drives_the_task(two_pass_file, tmp_path,
+                                                                                        capsys):
+    out = tmp_path / "me_twin.toml"
+    assert main(["twin", str(two_pass_file), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"{two_pass_file}: 2 passes: rows 0-" in printed and "2 pass(es)" in printed
+    assert "layout 2-axis (6 motions" in printed
+    params = load_participant(out)
+    controls = profile_controls(arm_profile(params.profile))   # what `bomi benchmark` checks before any episode
+    assert controls.layout.name == "2-axis" and controls.buttons == ("B1", "B2")
+    assert params.provenance["day_std_deg"].startswith("measured")   # drift measured between the two passes
