@@ -17,6 +17,7 @@ from bomi.passes import (PassBounds, in_sample_share, join, pass_bounds, passes_
 from bomi.recording import NodeData, Recording, read_recording, write_logger_mat, write_recording
 from tasks.cli import main
 from tasks.cli.chain import most_confused
+from tasks.cli.twin import self_check
 from tasks.episode import profile_controls
 from tasks.participants.participant import load_participant
 from tasks.participants.population import PASS_GAP_S, draw_person, one_file
@@ -221,3 +222,13 @@ def test_the_twin_of_a_two_pass_file_counts_two_passes_and_its_profile_drives_th
     controls = profile_controls(arm_profile(params.profile))   # what `bomi benchmark` checks before any episode
     assert controls.layout.name == "2-axis" and controls.buttons == ("B1", "B2")
     assert params.provenance["day_std_deg"].startswith("measured")   # drift measured between the two passes
+    # the self-check: the twin's calibration reads as the person's (100 % here), said in one line
+    check = next(line for line in printed.splitlines() if "self-check:" in line)
+    assert check.startswith("self-check: the twin's calibration reads ")
+    # against a person whose postures cannot be told apart (every label's rows moved to the neutral
+    # posture's levels: a CV near the neutral share), the two are far apart: a warning
+    rec = read_recording(two_pass_file)
+    noise = np.random.default_rng(0).normal(0.0, 1.0, (len(rec), 3))
+    flat = replace(rec, nodes={1: replace(rec.nodes[1], angles=noise)})
+    warning = self_check(out, split_passes(flat, pass_bounds(flat)), arm_profile(params.profile))
+    assert warning.startswith("warning: self-check: ") and "more than 10 points apart" in warning

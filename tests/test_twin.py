@@ -92,7 +92,7 @@ def test_a_minimum_jerk_move_is_timed_back_from_its_10_and_90_percent_times():
 def test_shipped_p1_is_the_twin_of_its_five_days(tmp_path, shared_data, capsys):
     out = tmp_path / "P1.toml"
     days = [shared_data / f"day{d}_testp.mat" for d in range(1, 6)]
-    code, stdout, _ = bomi(capsys, "twin", *days, "--profile", "P1", "--name", "P1", "--prior", "none", "--out", out)
+    code, stdout, _ = bomi(capsys, "twin", *days, "--profile", "P1", "--name", "P1", "--prior", "none", "--out", out, "--no-check")
     assert code == 0, stdout
     assert out.read_text() == P1_TOML.read_text()
     params = load_participant(out)
@@ -109,7 +109,7 @@ def test_shipped_p1_is_the_twin_of_its_five_days(tmp_path, shared_data, capsys):
 
 def test_a_one_day_twin_takes_the_drift_from_the_prior_and_says_so(tmp_path, shared_data, capsys):
     out = tmp_path / "day1.toml"
-    code, stdout, _ = bomi(capsys, "twin", shared_data / "day1_testp.mat", "--profile", "P1", "--out", out)
+    code, stdout, _ = bomi(capsys, "twin", shared_data / "day1_testp.mat", "--profile", "P1", "--out", out, "--no-check")
     assert code == 0
     assert "not measurable, prior used: day_gain_log_std, day_std_deg: one pass shows no drift" in stdout
     assert "not measurable, prior used: onset_s, reaction_s" in stdout
@@ -192,7 +192,7 @@ def test_a_twin_without_a_profile_derives_it_and_is_a_participant_everywhere(tmp
 
 def test_run_task_takes_a_twin_file(tmp_path, shared_data, capsys):
     out = tmp_path / "day2.toml"
-    assert bomi(capsys, "twin", shared_data / "day2_testp.mat", "--profile", "P1", "--out", out)[0] == 0
+    assert bomi(capsys, "twin", shared_data / "day2_testp.mat", "--profile", "P1", "--out", out, "--no-check")[0] == 0
     code, stdout, err = bomi(capsys, "run-task", "--operator", "joystick", "--participant", out, "--time-limit", 2)
     assert code in (0, 1) and re.search(r"^any +joystick ", stdout, re.M), err
 
@@ -242,7 +242,7 @@ def test_a_sweep_grid_names_a_twin_relative_to_itself(tmp_path, shared_data, cap
 
     (tmp_path / "grids").mkdir()
     assert bomi(capsys, "twin", shared_data / "day3_testp.mat", "--profile", "P1", "--out",
-                tmp_path / "grids" / "day3.toml")[0] == 0
+                tmp_path / "grids" / "day3.toml", "--no-check")[0] == 0
     grid_path = tmp_path / "grids" / "grid.toml"
     grid_path.write_text('participants = ["day3.toml", "P1"]\noperators = ["bomi"]\nseeds = [0]\n'
                          '[vary]\nparticipant.reaction_s = [0.3]\n')

@@ -393,8 +393,9 @@ def split_command(args: argparse.Namespace) -> int:
     args.out_dir.mkdir(parents=True, exist_ok=True)
     check_outputs({f"pass {k}": (path, (".csv",)) for k, path in enumerate(paths, start=1)}, inputs=[args.input],
                   force=args.force)
+    one = "no Time clock" if rec.time is None else "no pause of the Time clock longer than a move's"
     print(passes_text(rec, bounds).replace(": each is calibrated and counted as one pass", "")
-          if len(bounds) > 1 else f"{rec.source}: one pass (no pause of the Time clock longer than a move's)")
+          if len(bounds) > 1 else f"{rec.source}: one pass ({one})")
     for path, part in zip(paths, passes):
         write_recording(path, part, overwrite=args.force)
         print(f"{part.source}: {len(part)} rows: wrote {path}")

@@ -5,6 +5,7 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+from bomi.chain import PLAIN, cross_validate
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.files import check_input, write_text
 from bomi.derived import derive_profile, describe
@@ -19,6 +20,7 @@ from tasks.participants.participant import (Protocol, load_participant, protocol
 from tasks.participants.twin import fit_twin, twin_toml
 from tasks.stick import arm_profile
 
+TWIN_MARGIN = 0.10   # the twin's calibration may read this far (share of windows) from the person's own: else a warning
 PROFILE_SUFFIX = ".profile.toml"   # a derived profile is written beside the twin: P.toml -> P.profile.toml
 PAPER_HOLD_S = 5.0                 # the paper's protocol, for a participant with no recording of its own
 PAPER_REPETITIONS = 3
@@ -42,6 +44,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                                  f"'{NO_PRIOR}': everything must be measurable (timing is assumed)")
     p.add_argument("--name", help="the participant's name (default: the --out file's stem)")
     p.add_argument("--verbose", action="store_true", help="describe each recording and list the variables ignored")
+    p.add_argument("--no-check", action="store_true",
+                   help="skip the self-check (the twin's calibration cross-validated beside the person's; a few s)")
     add_force(p)
     p.set_defaults(func=twin_command)
 
@@ -89,12 +93,31 @@ def twin_command(args: argparse.Namespace) -> int:
         save_profile(derived, replace(profile, name=name), overwrite=args.force)
         print(f"profile derived from the recordings: wrote {derived}")
     write_text(outputs["--out"], text, overwrite=args.force)
+    if not args.no_check:
+        print(self_check(outputs["--out"], recordings, profile))
     measured = sum(v.startswith("measured") for v in twin.provenance.values())
     print(f"twin {name}: {len(twin.postures)} motion classes on {len(profile.nodes)} node(s), {twin.passes} pass(es); "
           f"{measured} of {len(twin.provenance)} parameter groups measured ([provenance]); wrote {outputs['--out']}")
     print(f"its sessions: bomi synth --participant {outputs['--out']} --seed N --out session.csv; its episodes: "
           f"bomi run-task --operator bomi --participant {outputs['--out']}")
     return 0
+
+
+def self_check(twin_file: Path, recordings: list[Recording], profile: Profile) -> str:
+    """The twin checked against the person: its own calibration (the first pass's protocol, seed 0)
+    and the person's passes, each cross-validated as `bomi train` does (plain LDA, whole holds held
+    out); both figures, and a warning when they differ by more than TWIN_MARGIN."""
+    params = load_participant(twin_file)
+    session = protocol_session(params, profile, 0, params.protocol)
+    synthetic = session_recording(session, profile, holds_only=params.protocol.holds_only)
+    plain = replace(profile, direction_spread=0.0)
+    twin, person = (cross_validate(recs, plain, profile.spec, [PLAIN])[0].accuracy for recs in ([synthetic], recordings))
+    text = (f"self-check: the twin's calibration reads {100 * twin:.1f} %, the person's own {100 * person:.1f} % "
+            "(cross-validated, plain LDA, whole holds held out)")
+    if abs(twin - person) > TWIN_MARGIN:
+        text = (f"warning: {text}: more than {100 * TWIN_MARGIN:g} points apart; its episodes will not predict this "
+                "person's (see the [provenance] of what was not measured)")
+    return text
 
 
 def paper_protocol(classes: list[int]) -> Protocol:
