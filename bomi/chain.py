@@ -30,6 +30,7 @@ from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_column
 from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, load_filter, neutral_offsets
+from bomi.passes import training_digests
 from bomi.profiles import SELECT, Profile
 from bomi.recording import Recording, Signal
 
@@ -296,7 +297,8 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
                                      profile.class_nodes, profile.amplitude)
         model = Model(classes=classes, parameters=parameters, spec=spec, amplitude=amplitude, post=post,
                       shrinkage=shrinkage, profile=profile.identity, amplitude_scales=profile.amplitude_scales,
-                      cv_accuracy=None if selection is None else selection.accuracy)
+                      cv_accuracy=None if selection is None else selection.accuracy,
+                      training_runs=training_digests(recordings))
     defects = model_defects(model)
     if defects:
         more = f" (and {len(defects) - 1} more)" if len(defects) > 1 else ""
@@ -339,6 +341,38 @@ def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProce
         raise BomiError(f"{rec.source}: no {model.spec.window}-sample window lies within one label; nothing to score")
     decisions = classify_windows(model, prepared.features, post)
     return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure])
+
+
+@dataclass(frozen=True)
+class PassOut:
+    """A leave-one-pass-out cross-validation: each pass decided by a model trained on the others."""
+
+    evaluations: tuple[Evaluation, ...]
+
+    @property
+    def accuracy(self) -> float:
+        """Over every held-out window of every pass (pooled)."""
+        return float(np.mean(np.concatenate([ev.predicted == ev.truth for ev in self.evaluations])))
+
+    def text(self) -> str:
+        each = ", ".join(f"{100 * ev.accuracy:.2f} %" for ev in self.evaluations)
+        return (f"leave-one-pass-out accuracy {100 * self.accuracy:.2f} % (each of {len(self.evaluations)} passes "
+                f"decided by a model trained on the others: {each})")
+
+
+def leave_one_pass_out(passes: Sequence[Recording], profile: Profile, model: Model) -> PassOut | None:
+    """``model``'s settings (shrinkage, copies, post-processing) trained on all passes but one and tested
+    on it, for every pass: how the classifier does on a pass it has not seen. None for one pass; a
+    BomiError when the passes but one cannot train every class."""
+    if len(passes) < 2:
+        return None
+    fixed = replace(profile, amplitude_scales=model.amplitude_scales)
+    evaluations = []
+    for k, held_out in enumerate(passes):
+        others = [p for j, p in enumerate(passes) if j != k]
+        fold = train(others, fixed, model.spec, shrinkage=model.shrinkage, post=model.post)
+        evaluations.append(evaluate(fold, held_out, profile.neutral_samples, model.post))
+    return PassOut(tuple(evaluations))
 
 
 # ------------------------------------------------------------------------------------- streaming
@@ -594,10 +628,13 @@ class CrossValidation:
     def accuracy(self) -> float:
         return self.accuracy_rejecting(None)
 
+    def decided(self, threshold: float | None = None) -> np.ndarray:
+        """Per window: the class decided, a window whose winning posterior is below ``threshold`` neutral."""
+        return reject(self.classes[self.prob.argmax(axis=1)], self.prob.max(axis=1), threshold)
+
     def correct(self, threshold: float | None = None) -> np.ndarray:
-        """Per window: decided right, when a window whose winning posterior is below ``threshold`` is
-        decided neutral."""
-        return reject(self.classes[self.prob.argmax(axis=1)], self.prob.max(axis=1), threshold) == self.truth
+        """Per window: decided right (``decided``)."""
+        return self.decided(threshold) == self.truth
 
     def accuracy_rejecting(self, threshold: float | None) -> float:
         return float(np.mean(self.correct(threshold)))
@@ -736,6 +773,7 @@ class Selection:
     plain_accuracy: float | None       # ... and of the plain setting
     candidates: dict[str, float]       # every candidate setting -> its CV accuracy
     reason: str = ""                   # why, in one line
+    held_out: tuple[np.ndarray, np.ndarray] | None = None   # the chosen settings' CV: (truth, decided) per window
 
     @property
     def candidate(self) -> Candidate:
@@ -823,4 +861,4 @@ def choose_settings(candidates: Sequence[Candidate], results: Sequence[CrossVali
         reason += (f"; best extra {runner}: {100 * scores[runner].accuracy:.2f} % "
                    f"({100 * runner_gain:+.2f} +- {100 * runner_se:.2f} points)")
     return Selection(chosen.shrinkage, chosen.amplitude_scales, threshold, final.accuracy, plain.accuracy,
-                     {k: v.accuracy for k, v in scores.items()}, reason)
+                     {k: v.accuracy for k, v in scores.items()}, reason, (result.truth, result.decided(threshold)))

@@ -134,6 +134,7 @@ class Model:
     profile: ProfileIdentity | None = None  # the profile it was trained for (None: made in memory, e.g. a CV fold)
     amplitude_scales: tuple[float, ...] = ()   # the smaller copies of the motions it was trained with
     cv_accuracy: float | None = None  # the cross-validation estimate of its settings (None: not chosen by one)
+    training_runs: tuple[str, ...] = ()   # digests of the runs it was trained on (bomi.passes.training_digests)
     coef: np.ndarray = field(init=False)        # (K, F)
     intercept: np.ndarray = field(init=False)   # (K,)
 

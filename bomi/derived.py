@@ -2,7 +2,8 @@
 
 What the recording holds decides: its nodes (those with angles in every recording), the feature
 vector (FV3 when every such node has its gyroscope, else FV1), its labels (c0 is the neutral
-posture, c1, c2, ... take the paper's joystick functions F, B, R, L, Rr, Lr, B1, B2 in label order),
+posture; the motions c1, c2, ... take, in label order, the functions of the joystick layout their
+number allows, ``derived_layout``: the stacking task needs translation, wrist and fingers),
 and the node that carries each motion (the one whose mean angle change from neutral is largest
 over the class's samples). Classifier settings are left to the person's own data
 (``shrinkage = "select"``, ``rejection_threshold = "select"``): the plain setting unless the
@@ -13,18 +14,56 @@ multiple-amplitude training), and rejection (``bomi.chain.select_settings``, doc
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
-from bomi.fusion import NodeCalibration, neutral_offsets
+from bomi.fusion import (MOUNTING_AGREE_DEG, NodeCalibration, agreeing_mounting, angle_disagreement, fuse,
+                         neutral_offsets)
 from bomi.paper import CLASS_FUNCTIONS
 from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, NEUTRAL_FUNCTION, SELECT, ClassConfig, NodeConfig, Profile
-from bomi.recording import Recording, Signal
+from bomi.recording import NodeData, Recording, Signal
 
 DERIVED_AMPLITUDE_SCALES = (0.75, 0.5)
+MOUNTING_ROWS = 20_000   # at most the rows a node's mounting is checked on (5 min: the protocol's motions disambiguate it)
+THREE_AXIS, TWO_AXIS = "3-axis", "2-axis"   # the layouts' names (sim/joystick.py LAYOUTS; docs/sim.md)
+AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
+_DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L")}
+
+
+@dataclass(frozen=True)
+class DerivedLayout:
+    """How a person's motions drive the arm: the layout, each motion's function in label order, the
+    assistances on, and why."""
+
+    layout: str
+    functions: tuple[str, ...]
+    assist: tuple[str, ...]
+    reason: str
+
+
+def derived_layout(motions: int) -> DerivedLayout:
+    """The layout that reaches translation, wrist and fingers with ``motions`` classes (3..8): every
+    direction of the layout is a motion, and the mode changes are buttons made of the others (B1
+    forward, B2 back); the 3-axis layout (one mode fewer, the wrist's turns in one mode) when the
+    motions cover its six directions and a button, else the 2-axis layout (Kinova's for a 2-axis
+    input: four directions, four modes). With fewer than five motions no button is left after the
+    four directions: the modes change by themselves (automatic mode switching, tasks/assist.py)."""
+    if motions >= len(_DIRECTIONS[THREE_AXIS]) + 1:
+        buttons = ("B1", "B2")[:motions - len(_DIRECTIONS[THREE_AXIS])]
+        return DerivedLayout(THREE_AXIS, _DIRECTIONS[THREE_AXIS] + buttons, (),
+                             f"{motions} motions: the 3-axis layout's six directions and {' and '.join(buttons)}")
+    if motions >= len(_DIRECTIONS[TWO_AXIS]) + 1:
+        buttons = ("B1", "B2")[:motions - len(_DIRECTIONS[TWO_AXIS])]
+        return DerivedLayout(TWO_AXIS, _DIRECTIONS[TWO_AXIS] + buttons, (),
+                             f"{motions} motions: too few for the 3-axis layout's six directions and a mode button; "
+                             f"the 2-axis layout's four directions and {' and '.join(buttons)}")
+    return DerivedLayout(TWO_AXIS, _DIRECTIONS[TWO_AXIS][:motions], (AUTO_MODE,),
+                         f"{motions} motions: no class left for a mode button after the 2-axis layout's directions; "
+                         "the modes are switched automatically (--assist auto-mode)")
 _BASE_STATION_FIRST_IMU = 10   # node index i is base-station id 10 + i - 1 (hardware.md)
 
 
@@ -49,16 +88,38 @@ def derive_profile(recordings: Sequence[Recording]) -> Profile:
                             "neutral-offset calibration")
     gyro = all(rec.nodes[i].gyro is not None for rec in recordings for i in nodes)
     carriers = _carrying_nodes(recordings, nodes, motions)
+    layout = derived_layout(len(motions))
     classes = (ClassConfig(NEUTRAL_LABEL, "c0", NEUTRAL_FUNCTION, None),) + tuple(
-        ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, CLASS_FUNCTIONS))
+        ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, layout.functions))
+    calibrations = {i: node_calibration(first, i) for i in nodes}
+    mounted = [f"node {i} mounting {calibrations[i].mounting} (the one its own angle columns agree with)"
+               for i in nodes if calibrations[i] != NodeCalibration.default_for(i)]
     return Profile(
-        name="derived", description="derived from the recording: its nodes, its labels, generic class names",
-        nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", NodeCalibration.default_for(i))
-                    for i in nodes),
+        name="derived", description=f"derived from the recording: its nodes, its labels, generic class names; "
+                                    + "".join(f"{m}; " for m in mounted) + f"layout {layout.layout}: {layout.reason}",
+        joystick_layout=layout.layout, assist=layout.assist,
+        nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", calibrations[i]) for i in nodes),
         classes=classes, spec=FeatureSpec("FV3" if gyro else "FV1", tuple(nodes)), shrinkage=SELECT,
         neutral_samples=DEFAULT_NEUTRAL_SAMPLES, post=PostProcessing(), source=f"derived from {first.source}",
         amplitude="along_class",
         select_rejection=True, amplitude_scales=DERIVED_AMPLITUDE_SCALES)
+
+
+def node_calibration(rec: Recording, node: int) -> NodeCalibration:
+    """The node's default calibration (the headset's for node 1), with the axis mounting its own angle
+    columns agree with when they disagree with the default's by more than MOUNTING_AGREE_DEG and the
+    recording has the raw signals to tell (``bomi.fusion.agreeing_mounting``): live, the angles are
+    fused from the raw signals, and must be those the model was trained on."""
+    default = NodeCalibration.default_for(node)
+    signals = (Signal.ACC, Signal.GYRO, Signal.MAG, Signal.ANGLES)
+    if any(getattr(rec.nodes[node], s.value) is None for s in signals):
+        return default
+    data = NodeData(**{s.value: getattr(rec.nodes[node], s.value)[:MOUNTING_ROWS] for s in signals})
+    pitch, roll, yaw = fuse(data.acc, data.gyro, data.mag, default)
+    if angle_disagreement(data.angles, np.column_stack([pitch, roll, yaw])).max() <= MOUNTING_AGREE_DEG:
+        return default
+    mounting, left = agreeing_mounting(data, default)
+    return replace(default, mounting=mounting) if left.max() <= MOUNTING_AGREE_DEG else default
 
 
 def _carrying_nodes(recordings: Sequence[Recording], nodes: Sequence[int], motions: Sequence[int]) -> dict[int, int]:
@@ -81,7 +142,9 @@ def describe(profile: Profile) -> str:
     classes = ", ".join(f"c{c.label} {c.function}" + ("" if c.node is None else f" (node {c.node})")
                         for c in profile.classes)
     scales = ", ".join(f"{s:g}" for s in profile.amplitude_scales)
+    layout = derived_layout(sum(c.function != NEUTRAL_FUNCTION for c in profile.classes))
     return (f"no --profile: {profile.source}: node(s) {list(profile.node_indices)}, {kind} "
             f"({'angles + GYRO' if kind != 'FV1' else 'angles: the recording has no GYRO'}), classes {classes}; "
+            f"layout {layout.layout}{' + ' + ', '.join(layout.assist) if layout.assist else ''} ({layout.reason}); "
             f"classifier plain unless the cross-validation on the training recording earns an extra its place "
             f"(shrinkage, motions also trained at {scales} of their size, rejection)")

@@ -8,9 +8,10 @@ Angles in degrees; inputs raw int16 LSB in the sensor's own axes.
 """
 from __future__ import annotations
 
+import itertools
 import math
 from math import atan2, cos, degrees, radians, sin
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -227,3 +228,71 @@ def fused_recording(rec: Recording, calibrations: dict[int, NodeCalibration]) ->
         pitch, roll, yaw = fuse(node.acc, node.gyro, node.mag, calibrations[index])
         nodes[index] = NodeData(acc=node.acc, gyro=node.gyro, mag=node.mag, angles=np.column_stack([pitch, roll, yaw]))
     return Recording(nodes=nodes, labels=rec.labels, time=rec.time, source=rec.source)
+
+
+
+MOUNTING_AGREE_DEG = 10.0   # fused pitch or roll further than this (median over the rows) from the file's own: a warning
+
+
+def angle_disagreement(own: np.ndarray, fused: np.ndarray) -> np.ndarray:
+    """Median absolute difference of pitch and roll (degrees, wrapped to +-180) between two (n, 3)
+    angle series. Yaw is left out: the recorded heading is not the host fusion's (dataset README)."""
+    diff = (np.asarray(fused)[:, :2] - np.asarray(own)[:, :2] + 180.0) % 360.0 - 180.0
+    return np.median(np.abs(diff), axis=0)
+
+
+def axis_mountings() -> list[Matrix3]:
+    """The 24 rotations that map the sensor's axes onto the body's axes (signed permutations, det +1)."""
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            m = np.zeros((3, 3))
+            m[range(3), perm] = signs
+            if np.linalg.det(m) > 0:
+                out.append(tuple(tuple(float(v) for v in row) for row in m))
+    return out
+
+
+def agreeing_mounting(node: NodeData, calibration: NodeCalibration) -> tuple[Matrix3, np.ndarray]:
+    """The mounting (with ``calibration``'s iron constants) whose fused pitch and roll agree with the
+    node's own angle columns, and its ``angle_disagreement``: the first within MOUNTING_AGREE_DEG of
+    ``calibration``'s, none (the sensor's own axes), then the other ``axis_mountings`` (pitch and roll
+    of a node that mostly stays upright can agree under several), else the nearest."""
+    def disagreement(mounting: Matrix3) -> np.ndarray:
+        pitch, roll, yaw = fuse(node.acc, node.gyro, node.mag, replace(calibration, mounting=mounting))
+        return angle_disagreement(node.angles, np.column_stack([pitch, roll, yaw]))
+    candidates = list(dict.fromkeys([calibration.mounting, IDENTITY, *axis_mountings()]))
+    scored = []
+    for mounting in candidates:
+        left = disagreement(mounting)
+        if left.max() <= MOUNTING_AGREE_DEG:
+            return mounting, left
+        scored.append((float(left.max()), mounting, left))
+    _, best, left = min(scored, key=lambda entry: entry[0])
+    return best, left
+
+
+def mounting_warnings(rec: Recording, fused: Recording, calibrations: dict[int, NodeCalibration]) -> list[str]:
+    """One warning per node whose fused pitch or roll disagree with the angle columns ``rec`` already
+    holds by more than MOUNTING_AGREE_DEG (the mounting the fusion assumed is not the one the logger
+    used), offering the axis mounting that agrees when one does."""
+    lines = []
+    for index, node in rec.nodes.items():
+        if node.angles is None:
+            continue
+        pitch, roll = angle_disagreement(node.angles, fused.nodes[index].angles)
+        if max(pitch, roll) <= MOUNTING_AGREE_DEG:
+            continue
+        line = (f"warning: {rec.source}: node {index}: the fused angles differ from the file's own angle columns by "
+                f"a median {pitch:.1f} deg of pitch and {roll:.1f} deg of roll (more than {MOUNTING_AGREE_DEG:g}): "
+                f"the mounting assumed ({_matrix_text(calibrations[index].mounting)}) is not the one the logger used")
+        mounting, left = agreeing_mounting(node, calibrations[index])
+        if left.max() <= MOUNTING_AGREE_DEG:
+            line += (f"; mounting = {_matrix_text(mounting)} agrees (median {left[0]:.1f} / {left[1]:.1f} deg): "
+                     "put it in the node's [nodes.calibration] of the profile")
+        lines.append(line)
+    return lines
+
+
+def _matrix_text(m: Matrix3) -> str:
+    return "[" + ", ".join("[" + ", ".join(f"{v:g}" for v in row) + "]" for row in m) + "]"

@@ -49,6 +49,7 @@ def _metadata(model: Model) -> dict[str, Any]:
         "shrinkage": model.shrinkage,
         "amplitude_scales": list(model.amplitude_scales),
         "cv_accuracy": model.cv_accuracy,
+        "training_runs": list(model.training_runs),
         "profile": None if model.profile is None else {"name": model.profile.name, "sha256": model.profile.digest},
     }
 
@@ -151,7 +152,8 @@ def _model_from(meta: dict, arrays: dict, source: Path) -> Model:
                                       vote_length=int(post["vote_length"])),
                   shrinkage=meta.get("shrinkage"), profile=ProfileIdentity(profile["name"], profile["sha256"]),
                   amplitude_scales=tuple(float(v) for v in meta.get("amplitude_scales", ())),
-                  cv_accuracy=None if cv_accuracy is None else float(cv_accuracy))
+                  cv_accuracy=None if cv_accuracy is None else float(cv_accuracy),
+                  training_runs=tuple(str(v) for v in meta.get("training_runs", ())))
     defects = model_defects(model)
     if defects:
         raise ValueError("; ".join(defects))

@@ -5,7 +5,8 @@ Two published namings of a node's columns are read:
   Yaw{i}Raw`` (fused angles, degrees), ``ACC{i}X/Y/Z``, ``GYRO{i}X/Y/Z``, ``MAG{i}X/Y/Z`` (raw);
 - node-less, node 1 (the original host software's logger with one node): ``PitchRaw RollRaw YawRaw``,
   ``ACCX/Y/Z``, ``GYROX/Y/Z``, ``MAGX/Y/Z``.
-``Etiquette`` is the class label; a CSV's numeric ``Time`` (seconds) is kept. Any subset of nodes may
+``Etiquette`` is the class label; a CSV's numeric ``Time`` (seconds) is kept, and a .mat's when it
+is floating-point (the logger's clock; bomi.passes finds the passes of the protocol by it). Any subset of nodes may
 be present and, per node, any subset of its four signals (angles, acc, gyro, mag), each with all
 three columns. Every other variable, of any type, is ignored and listed in ``Recording.ignored``.
 What a recording must hold depends on what is done with it: ``Recording.require`` says, in one
@@ -250,9 +251,11 @@ def _recording_from_variables(path: Path, variables: dict[str, object], from_csv
     used = list(meaning) + [name for name in (LABEL_COLUMN,) if name in variables]
     columns = {name: _as_column(path, name, variables[name], from_csv) for name in used}
     ignored = [name for name in variables if name not in columns]
-    if from_csv and TIME_COLUMN in variables:
+    if TIME_COLUMN in variables and (from_csv or np.asarray(variables[TIME_COLUMN]).dtype.kind == "f"):
+        # a .mat's Time is a clock when it is floating-point seconds (the original logger's); the
+        # published files' uint8 counter is not one
         try:
-            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], True)
+            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], from_csv)
             ignored.remove(TIME_COLUMN)
             used.append(TIME_COLUMN)
         except BomiError:
@@ -309,6 +312,27 @@ def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SA
     for k, values in enumerate(table.tolist()):
         buffer.write(_format_row(values, None if rec.labels is None else rec.labels[k]))
     write_text(path, buffer.getvalue(), overwrite=overwrite)
+
+
+def write_logger_mat(path: str | os.PathLike, rec: Recording, *, overwrite: bool = False) -> None:
+    """Write ``rec`` as the original logger's MATLAB file: its node-less column names for a single node 1
+    (indexed names otherwise), ``Time`` in floating-point seconds, ``Etiquette``; an existing file only
+    if ``overwrite``."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise BomiError(f"{path}: file exists, not overwriting it")
+    single = rec.node_indices == (LOGGER_NODE,)
+    variables: dict[str, np.ndarray] = {}
+    for i in rec.node_indices:
+        for signal, names in node_columns(None if single else i).items():
+            values = getattr(rec.nodes[i], signal.value)
+            if values is not None:
+                variables.update({name: values[:, k:k + 1] for k, name in enumerate(names)})
+    time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
+    variables[TIME_COLUMN] = np.asarray(time, dtype=float)[:, None]
+    if rec.labels is not None:
+        variables[LABEL_COLUMN] = rec.labels[:, None].astype(float)
+    scipy.io.savemat(path, variables)
 
 
 class RecordingWriter:

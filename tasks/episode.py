@@ -136,7 +136,7 @@ def summarize(log: EpisodeLog) -> dict:
     d = log.decisions
     if d is None:
         return out
-    errors = metrics.misclassified(d.intended, d.decided, log.allowance)
+    errors = metrics.misclassified(d.intended, d.decided, log.allowance, log.neutral)
     wild = metrics.irrelevant(d.intended, d.decided, log.neutral)
     onsets = metrics.onset_latencies(d.intended, d.decided, log.neutral)
     latency_ms = metrics.recognised(onsets) * 1000.0 * log.sample_period
@@ -146,8 +146,9 @@ def summarize(log: EpisodeLog) -> dict:
         "decisions_intended_active": int(np.sum(d.intended != log.neutral)),
         "decisions_emitted_active": int(np.sum(d.decided != log.neutral)),
         "accuracy_all_decisions": metrics.accuracy_all_decisions(d.intended, d.decided),
-        "accuracy_excused_transitions": metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance),
-        "scored_share": metrics.scored_share(d.intended, log.allowance),
+        "accuracy_excused_transitions": metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance,
+                                                                             log.neutral),
+        "excused_share": metrics.excused_share(d.intended, d.decided, log.allowance, log.neutral),
         "excused_allowance_samples": log.allowance,
         "excused_allowance_ms": 1000.0 * log.allowance * log.sample_period,
         "accuracy_vs_allowance": {"allowance_s": list(ALLOWANCE_CURVE_S),

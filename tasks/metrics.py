@@ -2,11 +2,12 @@
 
 Decision-stream metrics take one entry per classifier decision (one per IMU sample once the
 window is full): the class the virtual participant intended and the class the chain output.
-Two accuracies: over every decision (``accuracy_all_decisions``), and over the decisions made
-more than ``allowance`` samples after the intended class last changed
-(``accuracy_excused_transitions``: the window still holds the previous posture, so those are
-excused; ``scored_share`` says how many decisions that figure keeps).  Arm metrics take one
-entry per 60 Hz control tick.  docs/task.md defines every metric.
+Two accuracies over the same decisions, every one: the share right (``accuracy_all_decisions``),
+and the share right or excused (``accuracy_excused_transitions``): a decision within ``allowance``
+samples of a change of the intended class that is still the previous class, or neutral, is excused
+(the window still holds the previous posture, or the move between); ``excused_share`` says how
+many were. The excused figure is never below the other.  Arm metrics take one entry per 60 Hz
+control tick.  docs/task.md defines every metric.
 """
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.stats
+
+from bomi.classifier import NEUTRAL_LABEL
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -34,19 +37,26 @@ def in_transition(intended: np.ndarray, allowance: int) -> np.ndarray:
     return mask
 
 
-def misclassified(intended: np.ndarray, decided: np.ndarray, allowance: int) -> np.ndarray:
-    """Decisions that differ from the intended class outside transitions."""
+def excused(intended: np.ndarray, decided: np.ndarray, allowance: int, neutral: int = NEUTRAL_LABEL) -> np.ndarray:
+    """Wrong decisions made within ``allowance`` samples of a change of the intended class that are
+    still the previous class, or neutral: late, not mistaken."""
     intended, decided = np.asarray(intended), np.asarray(decided)
-    return (intended != decided) & ~in_transition(intended, allowance)
+    late = (decided == previous_intended(intended)) | (decided == neutral)
+    return (intended != decided) & in_transition(intended, allowance) & late
 
 
-def accuracy_excused_transitions(intended: np.ndarray, decided: np.ndarray, allowance: int) -> float:
-    """Fraction of the decisions outside transitions (more than ``allowance`` samples after the
-    last change of the intended class) equal to the intended class; NaN when none is outside."""
-    settled = ~in_transition(intended, allowance)
-    if not settled.any():
-        return float("nan")
-    return float(np.mean(np.asarray(intended)[settled] == np.asarray(decided)[settled]))
+def misclassified(intended: np.ndarray, decided: np.ndarray, allowance: int, neutral: int = NEUTRAL_LABEL) -> np.ndarray:
+    """Decisions that differ from the intended class and are not ``excused``."""
+    intended, decided = np.asarray(intended), np.asarray(decided)
+    return (intended != decided) & ~excused(intended, decided, allowance, neutral)
+
+
+def accuracy_excused_transitions(intended: np.ndarray, decided: np.ndarray, allowance: int,
+                                 neutral: int = NEUTRAL_LABEL) -> float:
+    """Share of every decision that is the intended class or ``excused``; never below
+    ``accuracy_all_decisions`` of the same decisions; NaN when empty."""
+    errors = misclassified(intended, decided, allowance, neutral)
+    return float(1.0 - np.mean(errors)) if errors.size else float("nan")
 
 
 def accuracy_all_decisions(intended: np.ndarray, decided: np.ndarray) -> float:
@@ -55,10 +65,10 @@ def accuracy_all_decisions(intended: np.ndarray, decided: np.ndarray) -> float:
     return float(np.mean(intended == decided)) if intended.size else float("nan")
 
 
-def scored_share(intended: np.ndarray, allowance: int) -> float:
-    """Share of the decisions that ``accuracy_excused_transitions`` scores (those outside transitions)."""
-    intended = np.asarray(intended)
-    return float(np.mean(~in_transition(intended, allowance))) if intended.size else float("nan")
+def excused_share(intended: np.ndarray, decided: np.ndarray, allowance: int, neutral: int = NEUTRAL_LABEL) -> float:
+    """Share of the decisions that are ``excused`` (the gap between the two accuracies)."""
+    mask = excused(intended, decided, allowance, neutral)
+    return float(np.mean(mask)) if mask.size else float("nan")
 
 
 def accuracy_vs_allowance(intended: np.ndarray, decided: np.ndarray, allowances: np.ndarray) -> np.ndarray:

@@ -147,19 +147,19 @@ def _mark_stuck(axes, period: "failures.StuckPeriod | None") -> None:
                  fontsize=7, color=STUCK_COLOUR, bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
 
 
-def decision_kinds(intended: np.ndarray, decided: np.ndarray, allowance: int
+def decision_kinds(intended: np.ndarray, decided: np.ndarray, allowance: int, neutral: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Masks over the decisions: equal to the intended class; another class but inside the excused
-    transition (the ``allowance`` decisions after an intent change, ``metrics.in_transition``);
-    misclassified (another class outside it, ``metrics.misclassified``)."""
-    wrong = np.asarray(decided) != np.asarray(intended)
-    return ~wrong, wrong & metrics.in_transition(intended, allowance), metrics.misclassified(intended, decided,
-                                                                                              allowance)
+    """Masks over the decisions: equal to the intended class; excused (late: the previous class or
+    neutral within the ``allowance`` decisions after an intent change, ``metrics.excused``);
+    misclassified (the rest, ``metrics.misclassified``)."""
+    right = np.asarray(decided) == np.asarray(intended)
+    return (right, metrics.excused(intended, decided, allowance, neutral),
+            metrics.misclassified(intended, decided, allowance, neutral))
 
 
 def _decision_panels(axes, log: "EpisodeLog") -> None:
     d = log.decisions
-    right, excused, errors = decision_kinds(d.intended, d.decided, log.allowance)
+    right, excused, errors = decision_kinds(d.intended, d.decided, log.allowance, log.neutral)
     ax_class, ax_amplitude, ax_nu = axes
     for ax in axes:
         _shade_phases(ax, log)
@@ -184,7 +184,7 @@ def _decision_panels(axes, log: "EpisodeLog") -> None:
     for ax in axes:
         ax.grid(alpha=0.3)
     every = 100 * metrics.accuracy_all_decisions(d.intended, d.decided)
-    scored = 100 * metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance)
+    scored = 100 * metrics.accuracy_excused_transitions(d.intended, d.decided, log.allowance, log.neutral)
     amplitude = ("signed angle change along the class's own mean direction (profile [proportional] "
                  "amplitude = along_class)" if log.amplitude == "along_class" else
                  "the paper's gamma (profile [proportional] amplitude = gamma)")

@@ -60,10 +60,11 @@ def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_day
     model_path, profile_path = tmp_path / "head.json", tmp_path / "head.toml"
     assert main(["train", str(day1), "--out", str(model_path), "--save-profile", str(profile_path), "--verbose"]) == 0
     printed = capsys.readouterr().out
-    assert f"{day1}: ignored 4 variable(s): Time, Commands, Gain, Who" in printed
+    assert f"{day1}: ignored 3 variable(s): Commands, Gain, Who" in printed
     assert (f"no --profile: derived from {day1}: node(s) [1], FV3 (angles + GYRO), classes c0 neutral, c1 F (node 1), "
-            "c2 B (node 1), c3 R (node 1), c4 L (node 1), c5 Rr (node 1), c6 Lr (node 1)") in printed
-    assert "settings chosen on the training recording: " in printed and "CV estimate" in printed
+            "c2 B (node 1), c3 R (node 1), c4 L (node 1), c5 B1 (node 1), c6 B2 (node 1); layout 2-axis (6 motions") in printed
+    assert "settings chosen on the training recording: " in printed
+    assert "how good is this classifier: cross-validated accuracy " in printed
     model = load_model(model_path)
     assert model.spec == FeatureSpec("FV3", (1,)) and model.classes.tolist() == list(range(7))
     out = tmp_path / "eval.json"

@@ -31,12 +31,13 @@ def test_logger_mat_single_node_without_index(tmp_path, day1):
     path = tmp_path / "logger.mat"
     scipy.io.savemat(path, logger_variables(day1))
     rec = read_recording(path)
-    assert rec.node_indices == (1,) and len(rec) == N and rec.time is None
+    assert rec.node_indices == (1,) and len(rec) == N
+    np.testing.assert_array_equal(rec.time, np.arange(N) / 62.5)   # the logger's clock, floating-point seconds
     for signal in Signal:
         assert np.array_equal(getattr(rec.nodes[1], signal.value), getattr(day1.nodes[1], signal.value)[:N])
     assert np.array_equal(rec.labels, day1.labels[:N])
     assert sorted(rec.ignored) == ["ArmCoordinates", "Commands", "Features", "Gain", "Notes", "Operator",
-                                   "Settings", "Time"]
+                                   "Settings"]
 
 
 def partial(rec: Recording, nodes: dict[int, tuple[Signal, ...]], rows: int = N, labelled: bool = True) -> Recording:
@@ -145,5 +146,5 @@ def test_verbose_lists_the_ignored_variables(tmp_path, capsys, day1):
     scipy.io.savemat(path, logger_variables(day1))
     assert main(["fuse", str(path), "--out", str(tmp_path / "f.csv"), "--verbose"]) == 0
     printed = capsys.readouterr().out
-    assert (f"{path}: ignored 8 variable(s): Time, Commands, ArmCoordinates, Features, Gain, Operator, Notes, "
+    assert (f"{path}: ignored 7 variable(s): Commands, ArmCoordinates, Features, Gain, Operator, Notes, "
             "Settings") in printed

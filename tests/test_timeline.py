@@ -24,8 +24,8 @@ def test_goals_fall_into_reach_carry_and_finish_phases():
 def test_decisions_are_right_excused_or_misclassified():
     intended = np.array([0, 0, 0, 1, 1, 1, 1, 1, 0, 0])
     decided = np.array([0, 2, 0, 0, 0, 1, 0, 1, 1, 0])
-    right, excused, misclassified = decision_kinds(intended, decided, allowance=2)
-    # a change at 3 excuses 3 and 4, a change at 8 excuses 8 and 9
+    right, excused, misclassified = decision_kinds(intended, decided, allowance=2, neutral=0)
+    # a change at 3 excuses 3 and 4 (neutral, the previous class), a change at 8 excuses 8 (class 1, the previous)
     assert right.tolist() == [True, False, True, False, False, True, False, True, False, True]
     assert np.flatnonzero(excused).tolist() == [3, 4, 8]
     assert np.flatnonzero(misclassified).tolist() == [1, 6]

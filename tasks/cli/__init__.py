@@ -45,6 +45,9 @@ COMMANDS: dict[str, Command] = {
                         "drawn (rows: the true class, normalised per row)."),
     "reproduce": Command("tasks.cli.chain", "the paper's reliability-over-days table beside ours (P1 data)"),
     "fuse": Command("tasks.cli.chain", "recompute Pitch/Roll/Yaw columns from the raw ACC/GYRO/MAG columns"),
+    "split": Command("tasks.cli.chain", "write each pass of the protocol a recording holds as a recording of its own",
+                     "Passes are found by the pauses (or restarts) of the Time clock, as every command that reads "
+                     "a recording finds them (bomi/passes.py)."),
     "emulate": Command("tasks.cli.stream", "play a recording or a virtual participant as base-station frames "
                                            "onto a pty, socket or port"),
     "capture": Command("tasks.cli.stream", "record what a base-station stream carries, without prompts"),
@@ -66,6 +69,10 @@ COMMANDS: dict[str, Command] = {
                     "episode), demo_out/bomi_episode.mp4 and demo_out/demo.json; run again, it replaces them."),
     "sweep": Command("tasks.cli.sweep", "episodes over a grid of participants x settings x seeds, resumable"),
     "live": Command("tasks.cli.live", "drive the simulated arm from a live base-station stream"),
+    "design": Command("tasks.cli.design", "choose a person's layout by simulation: candidate mappings run by their twin, "
+                                          "ranked", "Candidates (tasks/design.py): the motions in label order or by "
+                      "opposites, with buttons alone or with automatic mode switching; each runs --seeds episodes; "
+                      "ranked by successes, then completion time (95 % intervals); the best is written as a profile."),
     "twin": Command("tasks.cli.twin", "fit a virtual participant (a twin) to a person's calibration recording(s)"),
     "synth": Command("tasks.cli.twin", "a virtual participant performs its source recording's protocol: a new "
                                        "recording"),

@@ -7,17 +7,20 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
-from bomi.chain import Evaluation, check_training_data, evaluate, require_for, select_settings, train
+from bomi.chain import (Evaluation, Selection, check_training_data, evaluate, leave_one_pass_out, require_for,
+                        select_settings, train)
 from bomi.classifier import Model, PostProcessing
 from bomi.dataset import data_dir
 from bomi.derived import derive_profile, describe
 from bomi.errors import BomiError
 from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.files import atomic_output, check_input, write_text
-from bomi.fusion import NodeCalibration, fused_recording
+from bomi.fusion import NodeCalibration, fused_recording, mounting_warnings
 from bomi.model_io import SUFFIXES, check_model_for, load_model, save_model
+from bomi.passes import check_class_sets, in_sample_share, join, pass_bounds, passes_text, split_passes
 from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, SELECT, Profile, save_profile
 from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_recording, write_recording
 from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdown, reproduction_record
@@ -27,6 +30,11 @@ from tasks.stick import arm_profile
 
 
 DEFAULT_CONFUSION = "confusion.png"  # evaluate's own output when --png names none
+# Below this cross-validated accuracy a classifier is flagged to the clinician: the paper's three
+# participants read 89-98 % offline (Table I), and at 85 % one window in seven is a wrong command.
+POOR_ACCURACY = 0.85
+CONFUSIONS_SHOWN = 3    # the most confused pairs of classes a warning names
+CONFUSION_FLOOR = 0.05  # ... each read as the other in at least this share of its windows
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -79,6 +87,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_force(p)
     p.set_defaults(func=fuse_command)
 
+    p = add_command(subparsers, "split")
+    p.add_argument("input", metavar="IN", help=".mat or .csv recording")
+    p.add_argument("--out-dir", required=True, type=Path, help="directory to write IN's passes to, as "
+                                                                "<stem>_pass<k>.csv (created if missing)")
+    p.add_argument("--verbose", action="store_true", help="describe the recording and list the variables ignored")
+    add_force(p)
+    p.set_defaults(func=split_command)
+
 
 # --------------------------------------------------------------------------------------- helpers
 def read(path: str | Path, verbose: bool) -> Recording:
@@ -89,6 +105,23 @@ def read(path: str | Path, verbose: bool) -> Recording:
         if rec.ignored:
             print(f"{rec.source}: ignored {len(rec.ignored)} variable(s): {', '.join(rec.ignored)}")
     return rec
+
+
+def read_passes(path: str | Path, verbose: bool) -> list[Recording]:
+    """The passes of the protocol in one labelled recording (bomi.passes), said when there are several;
+    a BomiError when they hold different classes."""
+    rec = read(path, verbose)
+    bounds = pass_bounds(rec)
+    if len(bounds) > 1:
+        print(passes_text(rec, bounds))
+    passes = split_passes(rec, bounds)
+    check_class_sets(passes)
+    return passes
+
+
+def read_all_passes(paths: Sequence[str | Path], verbose: bool) -> list[Recording]:
+    """Every pass of every recording, in order."""
+    return [p for path in paths for p in read_passes(path, verbose)]
 
 
 def _spec(profile: Profile, kind: str | None) -> FeatureSpec:
@@ -142,13 +175,65 @@ def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSp
     """Train ``profile``'s model, first checking every recording (``check_training_data``: a class of
     the profile without windows is an error unless ``allow_missing_classes``) and choosing (and
     printing) what the profile leaves to the person's own data."""
+    return _fit(recordings, profile, spec, allow_missing_classes)[0]
+
+
+def _fit(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+         allow_missing_classes: bool = False) -> tuple[Model, Selection | None]:
     check_training_data(recordings, profile, spec, allow_missing_classes)
     selection = None
     if profile.shrinkage == SELECT or profile.select_rejection:
         print("choosing the classifier settings on the training recording (cross-validation) ...", flush=True)
         selection = select_settings(recordings, profile, spec)
         print(selection.explain())
-    return train(recordings, profile, spec, selection=selection, allow_missing_classes=allow_missing_classes)
+    return train(recordings, profile, spec, selection=selection, allow_missing_classes=allow_missing_classes), selection
+
+
+def most_confused(truth: np.ndarray, decided: np.ndarray) -> list[tuple[int, int, float]]:
+    """(class, read as, share of the class's windows) of the CONFUSIONS_SHOWN largest confusions of at
+    least CONFUSION_FLOOR, largest first."""
+    pairs = []
+    for label in np.unique(truth):
+        mine = decided[truth == label]
+        for other, n in zip(*np.unique(mine[mine != label], return_counts=True)):
+            if n / len(mine) >= CONFUSION_FLOOR:
+                pairs.append((int(label), int(other), float(n / len(mine))))
+    return sorted(pairs, key=lambda p: -p[2])[:CONFUSIONS_SHOWN]
+
+
+def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+                   allow_missing_classes: bool = False) -> Model:
+    """``fit_model``, then the one figure that says how good the classifier is, printed: with several
+    passes, each decided by a model trained on the others (leave-one-pass-out); with one, the
+    cross-validation within it. A warning, naming the classes most confused, when it is below POOR_ACCURACY."""
+    model, selection = _fit(passes, profile, spec, allow_missing_classes)
+    same_classes = len({tuple(sorted(set(p.labels.tolist()))) for p in passes}) == 1
+    why = ("the passes hold different classes" if len(passes) > 1
+           else "one pass: record a second for a figure on a pass the model has not seen")
+    out = None
+    if same_classes:
+        try:
+            out = leave_one_pass_out(passes, profile, model)
+        except BomiError as exc:   # the passes but one cannot train every class: the within-pass figure
+            why = f"no leave-one-pass-out figure: {exc}"
+    if out is not None:
+        accuracy, headline = out.accuracy, out.text()
+        truth = np.concatenate([ev.truth for ev in out.evaluations])
+        decided = np.concatenate([ev.predicted for ev in out.evaluations])
+    elif selection is not None and selection.held_out is not None:
+        accuracy, (truth, decided) = selection.accuracy, selection.held_out
+        headline = f"cross-validated accuracy {100 * accuracy:.2f} % (whole holds held out within each pass; {why})"
+    else:
+        print("how good is this classifier: not estimated (no cross-validation: too little data or fixed settings)")
+        return model
+    print(f"how good is this classifier: {headline}")
+    if accuracy < POOR_ACCURACY:
+        confused = ", ".join(f"c{a} read as c{b} in {100 * share:.0f} % of its windows"
+                             for a, b, share in most_confused(truth, decided))
+        print(f"warning: accuracy {100 * accuracy:.2f} % is below {100 * POOR_ACCURACY:g} %: about one window in "
+              f"{max(2, round(1 / (1 - accuracy)))} would be a wrong command. Most confused: {confused or 'no single pair'}. "
+              "Make those motions more distinct (or drop one), then record again")
+    return model
 
 
 def settings_text(model: Model) -> str:
@@ -172,13 +257,12 @@ def train_command(args: argparse.Namespace) -> int:
     for path in args.recordings:
         check_input(path, "recording")
     profile = arm_profile(args.profile) if args.profile else None
-    recordings = [read(path, args.verbose) for path in args.recordings]
+    recordings = read_all_passes(args.recordings, args.verbose)
     profile = profile or _derived(recordings)
-    model = fit_model(recordings, profile, _spec(profile, args.features), args.allow_missing_classes)
+    model = fit_and_report(recordings, profile, _spec(profile, args.features), args.allow_missing_classes)
     save_model(out, model, overwrite=args.force)
-    estimate = "" if model.cv_accuracy is None else f" (CV estimate {100 * model.cv_accuracy:.2f} %)"
-    print(f"trained {model.spec.kind} LDA on {len(recordings)} recording(s), {settings_text(model)}{estimate}: "
-          f"wrote {out}")
+    print(f"trained {model.spec.kind} LDA on {len(recordings)} pass(es) of {len(args.recordings)} recording(s), "
+          f"{settings_text(model)}: wrote {out}")
     if outputs["--save-profile"]:
         save_profile(outputs["--save-profile"], profile, overwrite=args.force)
         print(f"profile {profile.name}: wrote {outputs['--save-profile']} (bomi live --profile "
@@ -214,16 +298,16 @@ def evaluate_command(args: argparse.Namespace) -> int:
         model = load_model(args.train)
         if profile is not None:  # without a profile the model is taken as it is
             check_model_for(model, profile, args.train)
-    training = None if model else read(args.train, args.verbose)
-    tests = [read(path, args.verbose) for path in args.test]
+    training = None if model else read_passes(args.train, args.verbose)
+    tests = read_all_passes(args.test, args.verbose)
     if training is not None:
-        profile = profile or _derived([training])
+        profile = profile or _derived(training)
     spec = model.spec if model else _spec(profile, args.features)
     for rec in tests:  # before any long work: every test recording holds what the model reads, and labels
         require_for(rec, spec)
         rec.require_labels()
     if model is None:
-        model = fit_model([training], profile, spec)
+        model = fit_model(training, profile, spec)
     neutral_samples = profile.neutral_samples if profile else DEFAULT_NEUTRAL_SAMPLES
     post = PostProcessing(rejection_threshold=args.reject if args.reject is not None else model.post.rejection_threshold,
                           vote_length=args.vote if args.vote is not None else model.post.vote_length)
@@ -232,16 +316,22 @@ def evaluate_command(args: argparse.Namespace) -> int:
     results = []
     if model.cv_accuracy is not None:
         print(f"model: {settings_text(model)}")
-    for path, ev in zip(args.test, evaluations):
-        line = f"{path}: accuracy {100 * ev.accuracy:.2f} % over {len(ev.truth)} windows"
-        if model.cv_accuracy is not None:
-            line += f" (CV estimate {100 * model.cv_accuracy:.2f} %, test {100 * ev.accuracy:.2f} %)"
+    for rec, ev in zip(tests, evaluations):
+        in_sample = in_sample_share(rec, model.training_runs)
+        line = f"{rec.source}: accuracy {100 * ev.accuracy:.2f} % over {len(ev.truth)} windows"
+        if in_sample > 0:
+            share = "" if in_sample == 1 else f" for {100 * in_sample:.0f} % of its rows"
+            line += (f" IN-SAMPLE{share}: the model was trained on these rows, so this is no measure of how it "
+                     "reads new data (test on another pass or day)")
+        elif model.cv_accuracy is not None:
+            line += f" (the training CV estimated {100 * model.cv_accuracy:.2f} %)"
         if post.rejection_threshold is not None:
             line += (f"; rejected {100 * ev.rejected_share:.2f} %, accuracy of accepted windows "
                      f"{100 * ev.accepted_accuracy:.2f} %")
         print(line)
         print(confusion_text(ev, model.classes.tolist()))
-        results.append({"test": str(path), "accuracy": ev.accuracy, "cv_estimate": model.cv_accuracy,
+        results.append({"test": rec.source, "accuracy": ev.accuracy, "in_sample_share": in_sample,
+                        "cv_estimate": model.cv_accuracy,
                         "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
     with atomic_output(outputs["--png"], overwrite=args.force or not png_named) as temp:
@@ -277,9 +367,36 @@ def fuse_command(args: argparse.Namespace) -> int:
     profile = arm_profile(args.profile) if args.profile else None
     rec = read(args.input, args.verbose)
     rec.require(rec.node_indices, RAW_SIGNALS, "fuse")
+    bounds = pass_bounds(rec)
+    if len(bounds) > 1:
+        print(passes_text(rec, bounds).replace("calibrated and counted as one pass", "fused from its own start"))
     calibrations = {i: NodeCalibration.default_for(i) for i in rec.node_indices}
     if profile is not None:
         calibrations.update({n.index: n.calibration for n in profile.nodes})
-    write_recording(out, fused_recording(rec, calibrations), overwrite=args.force)
+    fused = join([fused_recording(p, calibrations) for p in split_passes(rec, bounds)], rec.source)
+    for line in mounting_warnings(rec, fused, calibrations):
+        print(line)
+    write_recording(out, fused, overwrite=args.force)
     print(f"fused {len(rec)} samples of node(s) {list(rec.node_indices)}: wrote {out}")
+    return 0
+
+
+def split_command(args: argparse.Namespace) -> int:
+    check_input(args.input, "recording")
+    if args.out_dir.exists() and not args.out_dir.is_dir():
+        raise BomiError(f"{args.out_dir}: --out-dir is a file, not a directory")
+    rec = read(args.input, args.verbose)
+    bounds = pass_bounds(rec)
+    passes = split_passes(rec, bounds)
+    stem = Path(args.input).stem
+    paths = [args.out_dir / f"{stem}_pass{k}.csv" for k in range(1, len(passes) + 1)]
+    args.out_dir.mkdir(parents=True, exist_ok=True)
+    check_outputs({f"pass {k}": (path, (".csv",)) for k, path in enumerate(paths, start=1)}, inputs=[args.input],
+                  force=args.force)
+    one = "no Time clock" if rec.time is None else "no pause of the Time clock longer than a move's"
+    print(passes_text(rec, bounds).replace(": each is calibrated and counted as one pass", "")
+          if len(bounds) > 1 else f"{rec.source}: one pass ({one})")
+    for path, part in zip(paths, passes):
+        write_recording(path, part, overwrite=args.force)
+        print(f"{part.source}: {len(part)} rows: wrote {path}")
     return 0

@@ -49,7 +49,7 @@ METRIC_LABELS = {"completion_time_mean": "completion time, mean of successes (s)
                  "successes": "successful episodes", "success_rate": "success rate (share of episodes)",
                  "accuracy_all_decisions": "accuracy over every decision (share)",
                  "accuracy_excused_transitions": "accuracy, transitions excused (share)",
-                 "scored_share": "share of decisions scored", "relevant_share": "relevant outputs (share)",
+                 "excused_share": "share of decisions excused", "relevant_share": "relevant outputs (share)",
                  "irrelevant_per_min": "irrelevant outputs per minute", "longest_error_run_ms":
                  "longest misclassified run (ms)", "mode_switches": "mode switches per episode",
                  "unintended_displacement_mm": "unintended displacement (mm)",

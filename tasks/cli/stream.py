@@ -14,7 +14,7 @@ from tqdm import tqdm
 from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks, open_sink, play, raw_samples
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ, FrameParser, ImuFrame, RowAssembler, imu_index, imu_node_id
-from bomi.fusion import DT, FusedRows, NodeCalibration
+from bomi.fusion import DT, FusedRows, NodeCalibration, fused_recording, mounting_warnings
 from bomi.files import check_output
 from bomi.gate import Gate, NodeGate
 from bomi.model_io import SUFFIXES, save_model
@@ -22,7 +22,7 @@ from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamLost
 from tasks.cli import add_command
-from tasks.cli.chain import class_listing, fit_model
+from tasks.cli.chain import class_listing, fit_and_report, read_all_passes
 from tasks.cli.options import (add_force, check_outputs, non_negative_int, non_negative_seconds, positive_float,
                                positive_int, probability, seconds)
 from tasks.stick import arm_profile
@@ -159,9 +159,11 @@ def run_emulate(args: argparse.Namespace) -> int:
     if args.settle_first and args.participant is None:
         raise BomiError("--settle-first: only with --participant (a recording is played as it is)")
     config = EmulatorConfig(rate_hz=args.rate, loss=args.loss, corrupt=args.corrupt, seed=args.seed)
-    what, nodes, samples, blocks = (_recording_blocks if args.participant is None else _participant_blocks)(args)
+    what, nodes, samples, blocks, notes = (_recording_blocks if args.participant is None else _participant_blocks)(args)
     sink = open_sink(args.to, args.linger, args.baud)
     print(sink.description, flush=True)
+    for line in notes:   # after the sink opened: a bad --to is the only line then
+        _note(f"emulate: {line}")
     _note(f"emulate: {what}: {nodes} node(s), {samples} samples at {config.rate_hz:g} Hz "
           f"-> {sink.description}; waiting for a reader")
     sink.wait_for_reader()
@@ -175,15 +177,20 @@ def run_emulate(args: argparse.Namespace) -> int:
     return 0
 
 
-RawBlocks = tuple[str, int, int, Iterable[dict[int, np.ndarray]]]  # what, nodes, samples, blocks
+RawBlocks = tuple[str, int, int, Iterable[dict[int, np.ndarray]], list[str]]  # what, nodes, samples, blocks, notes
 
 
 def _recording_blocks(args: argparse.Namespace) -> RawBlocks:
-    raw = raw_samples(read_recording(args.recording))
+    rec = read_recording(args.recording)
+    raw = raw_samples(rec)
+    # the receiver fuses these frames with its profile's mounting: say when the default one (a
+    # derived profile's without the file's raw signals) gives angles other than the file's own
+    defaults = {i: NodeCalibration.default_for(i) for i in rec.node_indices}
+    notes = mounting_warnings(rec, fused_recording(rec, defaults), defaults)
     if args.duration is not None:
         samples = max(1, int(args.duration * args.rate))
         raw = {index: values[:samples] for index, values in raw.items()}
-    return str(args.recording), len(raw), len(next(iter(raw.values()))), [raw]
+    return str(args.recording), len(raw), len(next(iter(raw.values()))), [raw], notes
 
 
 def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
@@ -204,7 +211,7 @@ def _participant_blocks(args: argparse.Namespace) -> RawBlocks:
     end_s = protocol_s if args.duration is None else min(args.duration, protocol_s)
     what += f", {end_s:g} s"
     return (what, len(profile.nodes), int(end_s / DT) + 1,
-            participant_blocks(params, profile, args.seed, cues, end_s))
+            participant_blocks(params, profile, args.seed, cues, end_s), [])
 
 
 def _timed_frames(batches: Iterator[tuple[float, list[ImuFrame]]], backlog: Sequence[TimedFrame],
@@ -430,7 +437,7 @@ def run_record(args: argparse.Namespace) -> int:
                 raise _unfinished(exc, writer) from None
     print(f"{args.out}: {writer.rows_written} labelled rows, {len(segments)} segments; {source.parser.summary()}")
     if args.train is not None:
-        model = fit_model([read_recording(args.out)], profile, profile.spec)
+        model = fit_and_report(read_all_passes([args.out], verbose=False), profile, profile.spec)
         save_model(args.train, model, overwrite=args.force)
         print(f"{args.train}: model of profile {profile.name}; {class_listing(profile, model.classes.tolist())}")
     return 0

@@ -75,7 +75,7 @@ JOB_RANGES = {"time_limit": (MIN_TIME_LIMIT_S, MAX_SECONDS, " s"), "vote_length"
 NOT_READ_BY_JOYSTICK = ("vote_length", "profile.", "participant.")
 # summary-row columns the figure may plot (tests/test_sweep.py checks they are aggregate's)
 FIGURE_METRICS = ("completion_time_mean", "successes", "success_rate", "accuracy_all_decisions",
-                  "accuracy_excused_transitions", "scored_share", "relevant_share", "irrelevant_per_min",
+                  "accuracy_excused_transitions", "excused_share", "relevant_share", "irrelevant_per_min",
                   "longest_error_run_ms", "mode_switches", "unintended_displacement_mm", "latency_ms_median",
                   "cube_drops")
 _TOP_KEYS = {"participants", "operators", "seeds", "vary", "figure"}

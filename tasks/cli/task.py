@@ -153,7 +153,7 @@ def _pooled(rs: list[dict], key: str) -> list:
 # what the assistance did, per episode (0 without one)
 ASSIST_KEYS = ("automatic_switches", "wrong_goal_switches", "refused_switches", "undone_switches", "grasp_helps")
 # the decision metrics of a row (None for an operator without a classifier)
-DECISION_KEYS = ("accuracy_all_decisions", "accuracy_excused_transitions", "scored_share", "excused_allowance_ms",
+DECISION_KEYS = ("accuracy_all_decisions", "accuracy_excused_transitions", "excused_share", "excused_allowance_ms",
                  "relevant_share", "irrelevant_per_min", "irrelevant_longest_run_ms", "longest_error_run_ms",
                  "latency_ms_median", "latency_ms_p90", "onsets_unrecognised_share", "accuracy_vs_allowance")
 
@@ -208,7 +208,7 @@ def aggregate(records: list[dict]) -> list[dict]:
             row.update({
                 "accuracy_all_decisions": _mean([r["accuracy_all_decisions"] for r in decided]),
                 "accuracy_excused_transitions": _mean([r["accuracy_excused_transitions"] for r in decided]),
-                "scored_share": _mean([r["scored_share"] for r in decided]),
+                "excused_share": _mean([r.get("excused_share") for r in decided]),   # None in records before it
                 "excused_allowance_ms": _mean([r["excused_allowance_ms"] for r in decided]),
                 "relevant_share": 1.0 - sum(r["irrelevant_decisions"] for r in decided) / decisions,
                 "irrelevant_per_min": metrics.per_minute(sum(r["irrelevant_runs"] for r in decided), decisions, period_s),
@@ -262,7 +262,7 @@ def _interval(ci, spec: str = ".1f", scale: float = 1.0) -> str:
 # The columns of a row of ``aggregate`` in the tables (``bomi benchmark``, ``bomi sweep``); 95 % intervals
 # in brackets: Wilson for successes, Student-t for the mean completion time
 ROW_COLUMNS = ("layout", "successes [95 % CI]", "completion time (s) [95 % CI]", "accuracy, all decisions",
-               "accuracy, transitions excused (scored share)", "relevant outputs", "irrelevant / min (longest, ms)",
+               "accuracy, transitions excused (excused share)", "relevant outputs", "irrelevant / min (longest, ms)",
                "latency from onset median / p90 (ms) (onsets never recognised)", "assist", "user mode switches",
                "automatic (wrong-goal) switches", "drops", "x real time")
 
@@ -346,7 +346,7 @@ def terminal_mechanisms(records: list[dict]) -> str:
 def row_cells(r: dict) -> list[str]:
     """A row of ``aggregate`` as the texts of ROW_COLUMNS."""
     excused = "-" if r.get("accuracy_excused_transitions") is None else (
-        f"{_pct(r['accuracy_excused_transitions'])} ({_pct(r['scored_share'])} scored, "
+        f"{_pct(r['accuracy_excused_transitions'])} ({_pct(r.get('excused_share'))} excused, "
         f"{r['excused_allowance_ms']:.0f} ms excused)")
     wild = "-" if r.get("irrelevant_per_min") is None else (
         f"{r['irrelevant_per_min']:.2f} ({r['irrelevant_longest_run_ms']:.0f})")

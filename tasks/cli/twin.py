@@ -5,6 +5,7 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+from bomi.chain import PLAIN, cross_validate
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.files import check_input, write_text
 from bomi.derived import derive_profile, describe
@@ -13,7 +14,7 @@ from bomi.profiles import Profile, save_profile
 from bomi.protocol import protocol_order
 from bomi.recording import Recording, write_recording
 from tasks.cli import add_command
-from tasks.cli.chain import read
+from tasks.cli.chain import read_all_passes
 from tasks.cli.options import add_force, check_outputs, non_negative_int
 from bomi.errors import BomiError
 from tasks.participants.participant import (Protocol, load_participant, parse_participant_text, protocol_session,
@@ -21,6 +22,7 @@ from tasks.participants.participant import (Protocol, load_participant, parse_pa
 from tasks.participants.twin import fit_twin, same_person, twin_toml
 from tasks.stick import arm_profile
 
+TWIN_MARGIN = 0.10   # the twin's calibration may read this far (share of windows) from the person's own: else a warning
 PROFILE_SUFFIX = ".profile.toml"   # a derived profile is written beside the twin: P.toml -> P.profile.toml
 PAPER_HOLD_S = 5.0                 # the paper's protocol, for a participant with no recording of its own
 PAPER_REPETITIONS = 3
@@ -29,12 +31,13 @@ NO_PRIOR = "none"
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "twin", description=(
-        "Fit a virtual participant to a person's calibration recording(s) (one pass each): posture, "
+        "Fit a virtual participant to a person's calibration recording(s) (a file holding several passes "
+        "of the protocol, found by the pauses of its Time clock, counts as several): posture, "
         "repetition spread, sway and tremor of every class, onset and reaction time where the recording "
         "keeps the transitions, drift between passes where there are several; the rest from a prior "
         "participant. The file says per parameter what it was measured from, or which prior it took."))
-    p.add_argument("recordings", nargs="+", metavar="REC", help="labelled .mat or .csv recordings, one per pass "
-                                                                "(day or session)")
+    p.add_argument("recordings", nargs="+", metavar="REC", help="labelled .mat or .csv recordings: their passes "
+                                                                "(days or sessions) are found in each")
     p.add_argument("--out", required=True, type=Path, help="participant TOML to write")
     p.add_argument("--profile", help="profile name (P1, P4, P5) or TOML file (default: derived from the recordings "
                                      f"as `bomi train` derives it, written beside --out as *{PROFILE_SUFFIX})")
@@ -46,6 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--same-person", action="store_true",
                    help="the recordings are one person's even though their nodes or classes differ (default: "
                         "recordings that differ are refused as two people)")
+    p.add_argument("--no-check", action="store_true",
+                   help="skip the self-check (the twin's calibration cross-validated beside the person's; a few s)")
     add_force(p)
     p.set_defaults(func=twin_command)
 
@@ -80,7 +85,7 @@ def twin_command(args: argparse.Namespace) -> int:
     for path in args.recordings:
         check_input(path, "recording")
     prior = None if args.prior == NO_PRIOR else load_participant(args.prior)
-    recordings = [read(path, args.verbose) for path in args.recordings]
+    recordings = read_all_passes(args.recordings, args.verbose)
     if not args.same_person:
         same_person(recordings)
     derived = outputs["derived profile"]
@@ -100,12 +105,31 @@ def twin_command(args: argparse.Namespace) -> int:
         save_profile(derived, replace(profile, name=name), overwrite=args.force)
         print(f"profile derived from the recordings: wrote {derived}")
     write_text(outputs["--out"], text, overwrite=args.force)
+    if not args.no_check:
+        print(self_check(outputs["--out"], recordings, profile))
     measured = sum(v.startswith("measured") for v in twin.provenance.values())
     print(f"twin {name}: {len(twin.postures)} motion classes on {len(profile.nodes)} node(s), {twin.passes} pass(es); "
           f"{measured} of {len(twin.provenance)} parameter groups measured ([provenance]); wrote {outputs['--out']}")
     print(f"its sessions: bomi synth --participant {outputs['--out']} --seed N --out session.csv; its episodes: "
           f"bomi run-task --operator bomi --participant {outputs['--out']}")
     return 0
+
+
+def self_check(twin_file: Path, recordings: list[Recording], profile: Profile) -> str:
+    """The twin checked against the person: its own calibration (the first pass's protocol, seed 0)
+    and the person's passes, each cross-validated as `bomi train` does (plain LDA, whole holds held
+    out); both figures, and a warning when they differ by more than TWIN_MARGIN."""
+    params = load_participant(twin_file)
+    session = protocol_session(params, profile, 0, params.protocol)
+    synthetic = session_recording(session, profile, holds_only=params.protocol.holds_only)
+    plain = replace(profile, direction_spread=0.0)
+    twin, person = (cross_validate(recs, plain, profile.spec, [PLAIN])[0].accuracy for recs in ([synthetic], recordings))
+    text = (f"self-check: the twin's calibration reads {100 * twin:.1f} %, the person's own {100 * person:.1f} % "
+            "(cross-validated, plain LDA, whole holds held out)")
+    if abs(twin - person) > TWIN_MARGIN:
+        text = (f"warning: {text}: more than {100 * TWIN_MARGIN:g} points apart; its episodes will not predict this "
+                "person's (see the [provenance] of what was not measured)")
+    return text
 
 
 def paper_protocol(classes: list[int]) -> Protocol:

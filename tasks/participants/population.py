@@ -217,3 +217,19 @@ def _glitch(angles: np.ndarray, gyro: np.ndarray, time: np.ndarray, glitch: Glit
 def pass_recordings(person: SyntheticPerson) -> tuple[Recording, Recording]:
     """The person's two passes of the calibration protocol (pass 1 to train on, pass 2 to test)."""
     return pass_recording(person, 0), pass_recording(person, 1)
+
+
+PASS_GAP_S = 6.2   # the pause between the two passes of a one-file recording (issue 41's real file paused 6.2 s)
+
+
+def one_file(person: SyntheticPerson, gap_s: float = PASS_GAP_S, rows: int | None = None) -> Recording:
+    """Both passes in one recording, as a logger left running between them writes it: the second
+    pass's clock resumes ``gap_s`` after the first's last row. ``rows``: only the first rows of each
+    pass (a shorter protocol: the first repetition of every motion takes about 3500)."""
+    first, second = pass_recordings(person)
+    keep = slice(0, rows)
+    time = np.r_[first.time[keep], second.time[keep] - second.time[0] + first.time[keep][-1] + gap_s]
+    nodes = {i: NodeData(**{s: np.concatenate([getattr(first.nodes[i], s)[keep], getattr(second.nodes[i], s)[keep]])
+                            for s in ("acc", "gyro", "mag", "angles")}) for i in first.nodes}
+    return Recording(nodes=nodes, labels=np.r_[first.labels[keep], second.labels[keep]], time=time,
+                     source=f"person {person.seed}, both passes")

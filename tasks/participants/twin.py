@@ -78,6 +78,12 @@ def _min_jerk_time(share: float) -> float:
 
 
 TIMING_SHARES = (0.1, 0.9)     # a move is timed where it has covered 10 % and 90 % of its way
+# What a fitted timing may be (docs/virtual_participant.md, "Timing a real file supports"): a cued
+# reaction faster than 0.1 s is an anticipation, not a reaction (Luce 1986), and a choice among up to
+# nine cued postures takes well under a second (Hick 1952); voluntary head and limb moves of the
+# protocol's size take 0.2-2 s (head: Zangemeister, Lehman & Stark 1981; arm: Flash & Hogan 1985).
+ONSET_BOUNDS_S = (0.2, 2.0)
+REACTION_BOUNDS_S = (0.1, 1.0)
 
 
 @dataclass(frozen=True)
@@ -186,6 +192,14 @@ def transition(x: np.ndarray, time: np.ndarray, before: Block, after: Block) -> 
         return None
     cue = time[after.start]
     return Transition(float(time[after.start + t10] - cue), float(time[after.start + later[0]] - cue))
+
+
+def implausible_timing(onset: float, reaction: float) -> str | None:
+    """Why a fitted (onset_s, reaction_s) is outside ONSET_BOUNDS_S / REACTION_BOUNDS_S, or None."""
+    out = [f"{what} {value:.2f} s outside {low:g}-{high:g} s"
+           for what, value, (low, high) in (("onset", onset, ONSET_BOUNDS_S), ("reaction", reaction, REACTION_BOUNDS_S))
+           if not low <= value <= high]
+    return "; ".join(out) or None
 
 
 def timing_from(transitions: Sequence[Transition]) -> tuple[float, float] | None:
@@ -473,7 +487,8 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     transitions = [t for p in passes for t in p.transitions]
     timing = timing_from(transitions)
     continuous = [p for p in passes if p.continuous]
-    if timing is not None and continuous:
+    implausible = None if timing is None else implausible_timing(*timing)
+    if timing is not None and continuous and implausible is None:
         onset, reaction = timing
         timed = sum(not t.stitched for t in transitions)
         for key in ("onset_s", "reaction_s"):
@@ -482,7 +497,9 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     else:
         onset, reaction = (ASSUMED_ONSET_S, ASSUMED_REACTION_S) if prior is None else (prior.onset_s, prior.reaction_s)
         why = ("the recordings keep only the holds (no transition)" if not continuous
-               else f"fewer than {MIN_TRANSITIONS} measurable transitions")
+               else f"fewer than {MIN_TRANSITIONS} measurable transitions" if timing is None
+               else f"the timing measured from the transitions is not plausible ({implausible}; "
+                    "docs/virtual_participant.md): are the labels the cues?")
         if prior is None:
             for key in ("onset_s", "reaction_s"):
                 provenance[key] = f"assumed: {why}; voluntary moves take 0.5-1 s, simple reactions 0.2-0.5 s"

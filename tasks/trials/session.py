@@ -334,7 +334,7 @@ def episode_log(recorder: TickRecorder, result: TrialResult, *, operator: str, p
 
 # what a trial record cannot know when nobody knows what the person intended
 INTENT_KEYS = ("unintended_displacement_mm", "accuracy_all_decisions", "accuracy_excused_transitions",
-               "scored_share", "accuracy_vs_allowance", "misclassified", "longest_error_run_ms",
+               "excused_share", "accuracy_vs_allowance", "misclassified", "longest_error_run_ms",
                "errors_to_neutral", "errors_to_other_class", "irrelevant_decisions", "irrelevant_runs",
                "irrelevant_per_min", "irrelevant_longest_run_ms", "latency_onsets_ms", "latency_ms_median",
                "latency_ms_p90", "latency_ms_max", "decisions_intended_active")

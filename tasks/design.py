@@ -1,0 +1,123 @@
+"""A person's layout chosen by simulation (`bomi design`): candidate mappings of their motions onto the
+arm's functions, each run by their twin on development seeds, ranked by success and completion time.
+
+The candidates (kept few, so that a handful of seeds can tell them apart):
+
+- **mapping**: the motions in label order (what `bomi train` / `bomi twin` derive), or *by opposites*:
+  the two motions most nearly opposite (by the twin's postures, the cosine of their angle) drive
+  the first pair of opposite directions (F/B), the two most nearly opposite of the rest the next
+  (R/L), then Rr/Lr in the 3-axis layout; the remaining motions are the buttons, in label order.
+  Opposite functions on opposite motions put the confusions a classifier is prone to (neighbouring
+  postures) between functions that are not each other's undoing.
+- **assistance**: the buttons alone, or the buttons with automatic mode switching (``auto-mode``).
+- **layout**: the derived one (``bomi.derived.derived_layout``: the 3-axis layout from seven motions,
+  the 2-axis one below). The 2-axis layout for seven or eight motions is not a candidate: a motion
+  left without a function would still be decided, and the episode's person knows a class by its function.
+
+Ranking: success share first (Wilson 95 % interval), then the mean completion time of the successes
+(Student-t 95 % interval); on a tie the earlier candidate (the derived default first) is kept.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from bomi.derived import AUTO_MODE, THREE_AXIS, TWO_AXIS, derived_layout
+from bomi.profiles import Profile
+from tasks import metrics
+
+_DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L"))}
+_BUTTONS = ("B1", "B2")
+LABEL_ORDER, OPPOSITES = "label order", "by opposites"
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One way of driving the arm: the layout, each motion's function (by label) and the assistances."""
+
+    layout: str
+    mapping: str
+    functions: tuple[tuple[int, str], ...]
+    assist: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        assisted = " + auto-mode" if AUTO_MODE in self.assist else ""
+        return f"{self.layout}, {self.mapping}, buttons{assisted}"
+
+    def profile(self, base: Profile) -> Profile:
+        """``base`` with this candidate's layout, class functions and assistances."""
+        functions = dict(self.functions)
+        classes = tuple(replace(c, function=functions.get(c.label, c.function)) for c in base.classes)
+        mapping = ", ".join(f"c{label} {function}" for label, function in self.functions)
+        return replace(base, classes=classes, joystick_layout=self.layout, assist=self.assist,
+                       description=f"{base.description.split('; design:')[0]}; design: {self.name} ({mapping})")
+
+
+def opposite_order(postures: Mapping[int, np.ndarray], pairs: int) -> list[int]:
+    """The motion labels as ``pairs`` pairs, each the two most nearly opposite of the motions left (the
+    lowest cosine between their postures, all nodes and angles together), then the rest in label order."""
+    left = sorted(postures)
+    unit = {k: np.ravel(v) / max(np.linalg.norm(v), 1e-9) for k, v in postures.items()}
+    order: list[int] = []
+    for _ in range(pairs):
+        a, b = min(((a, b) for i, a in enumerate(left) for b in left[i + 1:]), key=lambda p: unit[p[0]] @ unit[p[1]])
+        order += [a, b]
+        left = [k for k in left if k not in (a, b)]
+    return order + left
+
+
+def _functions(layout: str, order: Sequence[int]) -> tuple[tuple[int, str], ...]:
+    directions = [f for pair in _DIRECTION_PAIRS[layout] for f in pair]
+    names = directions + list(_BUTTONS[:len(order) - len(directions)])
+    return tuple(sorted(zip(order, names)))
+
+
+def candidates(postures: Mapping[int, np.ndarray]) -> list[Candidate]:
+    """The candidates for a person whose motions have these postures (label -> posture), the derived
+    default first. Fewer than five motions: the derived layout with automatic mode switching only."""
+    labels = sorted(postures)
+    derived = derived_layout(len(labels))
+    if AUTO_MODE in derived.assist:
+        return [Candidate(derived.layout, LABEL_ORDER, tuple(zip(labels, derived.functions)), derived.assist)]
+    layout = derived.layout
+    orders = {LABEL_ORDER: labels, OPPOSITES: opposite_order(postures, len(_DIRECTION_PAIRS[layout]))}
+    out = [Candidate(layout, mapping, _functions(layout, order), assist)
+           for mapping, order in orders.items() for assist in ((), (AUTO_MODE,))]
+    unique: dict[tuple, Candidate] = {}
+    for candidate in out:   # label order and opposites may give the same functions: the first is kept
+        unique.setdefault((candidate.functions, candidate.assist), candidate)
+    return list(unique.values())
+
+
+@dataclass(frozen=True)
+class Score:
+    """A candidate's episodes: successes (Wilson 95 % interval) and the successes' mean completion time
+    (Student-t 95 % interval; None below two successes)."""
+
+    candidate: Candidate
+    episodes: int
+    successes: int
+    success_ci95: tuple[float, float]
+    time_mean: float | None
+    time_ci95: tuple[float, float] | None
+
+    @classmethod
+    def of(cls, candidate: Candidate, records: Sequence[dict]) -> Score:
+        times = [r["completion_time"] for r in records if r["success"]]
+        return cls(candidate, len(records), len(times), metrics.success_ci95(len(times), len(records)),
+                   float(np.mean(times)) if times else None, metrics.mean_ci95(times))
+
+    def text(self) -> str:
+        low, high = self.success_ci95
+        time = "-" if self.time_mean is None else f"{self.time_mean:.1f} s"
+        if self.time_ci95 is not None:
+            time += f" [{max(0.0, self.time_ci95[0]):.1f}, {self.time_ci95[1]:.1f}]"
+        return f"{self.successes}/{self.episodes} [{100 * low:.0f}, {100 * high:.0f} %], time {time}"
+
+
+def ranked(scores: Sequence[Score]) -> list[Score]:
+    """Best first: the success share, then the mean time of the successes (none: last); stable."""
+    return sorted(scores, key=lambda s: (-s.successes / s.episodes, s.time_mean if s.time_mean is not None else np.inf))

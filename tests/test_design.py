@@ -1,0 +1,65 @@
+"""`bomi design`'s candidates and ranking (tasks/design.py), without running episodes."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bomi.derived import derive_profile
+from tasks.design import LABEL_ORDER, OPPOSITES, Candidate, Score, candidates, opposite_order, ranked
+from tasks.episode import profile_controls
+from tests.test_derived_layout import motions
+
+
+def posture(pitch: float, roll: float) -> np.ndarray:
+    return np.array([[pitch, roll, 0.0]])
+
+
+# six head motions: c1 pitch +, c2 roll +, c3 pitch -, c4 roll -, c5 / c6 diagonal, c6 almost opposite c5
+POSTURES = {1: posture(20, 0), 2: posture(0, 20), 3: posture(-25, 2), 4: posture(1, -18), 5: posture(15, 15),
+            6: posture(-14, -16)}
+
+
+def test_by_opposites_pairs_the_most_nearly_opposite_motions_first():
+    # cosines by hand: c2/c4 -360 / (20 * 18.03) = -0.9984, c5/c6 -450 / (21.21 * 21.26) = -0.9978,
+    # c1/c3 -500 / (20 * 25.08) = -0.9968: c2/c4 first, then c5/c6 of the rest, then c1, c3 in label order
+    assert opposite_order(POSTURES, 2) == [2, 4, 5, 6, 1, 3]
+    assert opposite_order(POSTURES, 3) == [2, 4, 5, 6, 1, 3]
+
+
+def test_six_motions_give_four_candidates_the_derived_default_first():
+    options = candidates(POSTURES)
+    assert [(c.layout, c.mapping, c.assist) for c in options] == [
+        ("2-axis", LABEL_ORDER, ()), ("2-axis", LABEL_ORDER, ("auto-mode",)),
+        ("2-axis", OPPOSITES, ()), ("2-axis", OPPOSITES, ("auto-mode",))]
+    assert dict(options[0].functions) == {1: "F", 2: "B", 3: "R", 4: "L", 5: "B1", 6: "B2"}
+    assert dict(options[2].functions) == {2: "F", 4: "B", 5: "R", 6: "L", 1: "B1", 3: "B2"}
+    # each is a profile the stacking user can drive
+    base = derive_profile([motions(6)])
+    for option in options:
+        profile = option.profile(base)
+        assert profile_controls(profile).buttons == ("B1", "B2")
+        assert profile.assist == option.assist and option.name in profile.description
+
+
+def test_where_both_mappings_coincide_the_candidate_is_run_once():
+    # label order already pairs opposites: c1/c2 and c3/c4 opposite, c5 alone
+    same = {1: posture(20, 0), 2: posture(-20, 0), 3: posture(0, 20), 4: posture(0, -20), 5: posture(10, 10)}
+    assert [(c.mapping, c.assist) for c in candidates(same)] == [(LABEL_ORDER, ()), (LABEL_ORDER, ("auto-mode",))]
+
+
+def record(success: bool, time: float) -> dict:
+    return {"success": success, "completion_time": time if success else None}
+
+
+def test_ranking_is_successes_then_time_with_intervals():
+    a, b, c = (Candidate("2-axis", name, ((1, "F"),), ()) for name in "abc")
+    scores = [Score.of(a, [record(True, 200.0), record(False, 0), record(True, 220.0)]),
+              Score.of(b, [record(True, 250.0), record(True, 230.0), record(True, 240.0)]),
+              Score.of(c, [record(True, 190.0), record(True, 210.0), record(True, 200.0)])]
+    assert [s.candidate.mapping for s in ranked(scores)] == ["c", "b", "a"]
+    assert scores[2].time_mean == pytest.approx(200.0)
+    # Student-t: mean 200, sd 10, n 3: 200 +- 4.303 * 10 / sqrt(3) = [175.2, 224.8]
+    assert scores[2].time_ci95 == pytest.approx((200 - 4.3027 * 10 / 3 ** 0.5, 200 + 4.3027 * 10 / 3 ** 0.5), abs=1e-3)
+    # Wilson 2/3: [20.8 %, 93.9 %]
+    assert scores[0].success_ci95 == pytest.approx((0.2077, 0.9385), abs=1e-3)
+    assert scores[2].text() == "3/3 [44, 100 %], time 200.0 s [175.2, 224.8]"
