@@ -16,6 +16,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import tokenize
 import zipfile
 from dataclasses import fields
 from pathlib import Path
@@ -103,7 +104,7 @@ def load_model(path: str | os.PathLike) -> Model:
     except RecursionError:
         raise BomiError(f"{path}: not a valid bomi model (nested too deeply)") from None
     except (ValueError, TypeError, AttributeError, OSError, zipfile.BadZipFile, UnicodeDecodeError,
-            OverflowError, EOFError) as exc:
+            OverflowError, EOFError, tokenize.TokenError, SyntaxError) as exc:   # the last two: a damaged .npy header
         message = str(exc) or type(exc).__name__
         raise BomiError(f"{path}: not a valid bomi model ({message})") from None
 

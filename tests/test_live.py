@@ -5,6 +5,7 @@ import io
 import json
 import subprocess
 import sys
+import re
 import threading
 from dataclasses import asdict, replace
 
@@ -419,7 +420,8 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     assert any(speed[tick["tick"]] > 0 for tick in ticks if tick["t"] > after["t"])   # resumes with the stream
     out = capsys.readouterr()
     assert "live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless" in out.err
-    assert "watchdog stopped the arm 1 time(s)" in out.out
+    # the pause trips it; a busy machine's late frame may trip it again (a real-time test)
+    assert int(re.search(r"watchdog stopped the arm (\d+) time\(s\)", out.out).group(1)) >= 1
 
 
 # ------------------------------------------------------------------------------------- bad input
