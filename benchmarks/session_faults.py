@@ -16,9 +16,9 @@ cases send the signal once the session says "trial 2: go"). A case is counted as
 - trials lost: a finished trial that is not replayable afterwards (the kill cases);
 - ok otherwise.
 
-Cases marked h1 exercise the session writer of issue 40 items 1-2 (`bomi trial --resume DIR`, a
-lock on --out, SIGTERM/SIGHUP like SIGINT, trials written as they finish); they fail until that
-work is merged. Writes benchmarks/results/session_faults.md.
+The trial cases exercise the session writer of issue 40 items 1-2 (`bomi trial --resume DIR`, a
+lock on --out, SIGTERM/SIGHUP like SIGINT, trials written as they finish). Writes
+benchmarks/results/session_faults.md.
 """
 from __future__ import annotations
 
@@ -127,7 +127,6 @@ class Case:
     name: str
     group: str
     run: Callable[[Path, "Bases", float], dict]  # -> {"outcome": ..., "detail": ...}
-    needs_h1: bool = False
 
 
 @dataclass
@@ -152,7 +151,8 @@ def outcome_of(runs: list[Ran], want: str, lost: bool = False, wrong: str = "") 
         outcome = "nonsense accepted" if want == "refuse" or wrong else "other"
     else:
         outcome = "ok"
-    tail = last.err.strip().splitlines()[-1] if last.err.strip() else ""
+    shown = next((r for r in runs if has_traceback(r)), last)  # a traceback: its exception's line
+    tail = shown.err.strip().splitlines()[-1] if shown.err.strip() else ""
     return {"outcome": outcome, "exit": last.code, "last_line": (wrong or tail)[:240],
             "seconds": round(sum(r.seconds for r in runs), 1)}
 
@@ -411,7 +411,7 @@ def sweep_full_disk(work: Path, bases: Bases, timeout: float) -> dict:
     return outcome_of([ran], "refuse")
 
 
-# ------------------------------------------------------------------------------------ session writer cases (h1)
+# ------------------------------------------------------------------------------------ session writer cases
 def replayable(out: Path, trial: int, work: Path, timeout: float) -> Ran:
     return bomi(["replay", str(out), "--trial", str(trial)], work, timeout)
 
@@ -542,14 +542,14 @@ def corpus() -> list[Case]:
         Case("a full disk during a sweep", "sweep", sweep_full_disk),
     ]
     writer = [
-        Case("kill -9 during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGKILL), True),
-        Case("SIGTERM during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGTERM), True),
-        Case("SIGHUP during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGHUP), True),
+        Case("kill -9 during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGKILL)),
+        Case("SIGTERM during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGTERM)),
+        Case("SIGHUP during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGHUP)),
         Case("SIGINT during trial 2 keeps trial 1", "trial", killed_in_trial_2(signal.SIGINT)),
-        Case("--force over a session, killed in trial 1", "trial", force_over_finished, True),
-        Case("--resume after kill -9", "trial", resume_after_kill, True),
-        Case("a second session on the same --out", "trial", second_session_same_out, True),
-        Case("a full disk during a session", "trial", trial_full_disk, True),
+        Case("--force over a session, killed in trial 1", "trial", force_over_finished),
+        Case("--resume after kill -9", "trial", resume_after_kill),
+        Case("a second session on the same --out", "trial", second_session_same_out),
+        Case("a full disk during a session", "trial", trial_full_disk),
     ]
     return replay + twin + config + writer
 
@@ -590,7 +590,7 @@ def main() -> None:
             except Exception as exc:  # the corpus's own fault: said, never counted as ok
                 result = {"outcome": "corpus error", "exit": None, "last_line": f"{type(exc).__name__}: {exc}",
                           "seconds": 0}
-            results.append({"case": case.name, "group": case.group, "needs_h1": case.needs_h1, **result})
+            results.append({"case": case.name, "group": case.group, **result})
             print(f"{result['outcome']:>17}  {case.name}: {result['last_line'][:140]}", flush=True)
             shutil.rmtree(work, ignore_errors=True)
     write_results(results, time.monotonic() - start, args)
@@ -601,19 +601,18 @@ OUTCOMES = ("ok", "traceback", "hang", "nonsense accepted", "trials lost", "othe
 
 def write_results(results: list[dict], wall_s: float, args) -> None:
     total = Counter(r["outcome"] for r in results)
-    mine = Counter(r["outcome"] for r in results if not r["needs_h1"])
     lines = ["# Session fault corpus (issue 40)", "",
              f"`python benchmarks/session_faults.py{' --only ' + args.only if args.only else ''}`: {len(results)} "
              f"cases, {wall_s / 60:.1f} min on this machine; each command is `tasks.cli.main` in a forked process "
              "on files made in a temporary directory (outcome classes in the script's docstring).", "",
              "| cases | " + " | ".join(OUTCOMES) + " |", "|---|" + "---:|" * len(OUTCOMES),
              "| all | " + " | ".join(str(total[o]) for o in OUTCOMES) + " |",
-             "| not needing h1's session writer | " + " | ".join(str(mine[o]) for o in OUTCOMES) + " |", "",
-             "| case | group | needs h1 | outcome | exit | s | last stderr line (or what was wrong) |",
-             "|---|---|---|---|---:|---:|---|"]
+             "",
+             "| case | group | outcome | exit | s | last stderr line (or what was wrong) |",
+             "|---|---|---|---:|---:|---|"]
     for r in results:
         line = r["last_line"].replace("|", "\\|")
-        lines.append(f"| {r['case']} | {r['group']} | {'yes' if r['needs_h1'] else ''} | {r['outcome']} | "
+        lines.append(f"| {r['case']} | {r['group']} | {r['outcome']} | "
                      f"{r['exit']} | {r['seconds']} | `{line}` |")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "session_faults.md").write_text("\n".join(lines) + "\n")

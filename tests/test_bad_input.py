@@ -418,6 +418,28 @@ def test_a_trailing_blank_line_is_accepted(base, tmp_path, capsys):
     assert len(read_recording(path)) == TINY_ROWS
 
 
+def test_ctrl_c_inside_a_compiled_call_is_an_interruption_not_a_bug(tmp_path, capsys, monkeypatch):
+    """A signal's KeyboardInterrupt raised while a numba kernel runs comes back as the SystemError
+    "returned a result with an exception set" (its cause the KeyboardInterrupt; seen in the session
+    fault corpus's SIGINT case): "bomi: interrupted", exit 130, as a plain Ctrl-C; any other
+    SystemError stays a bug."""
+    import tasks.cli.chain as chain_cli
+
+    def interrupted_in_a_kernel(args):
+        raise SystemError("CPUDispatcher(<function kernel>) returned a result with an exception set") \
+            from KeyboardInterrupt("SIGTERM")
+
+    def plain_system_error(args):
+        raise SystemError("a bug")
+
+    (tmp_path / "r.csv").write_text("x")
+    argv = ["fuse", str(tmp_path / "r.csv"), "--out", str(tmp_path / "o.csv")]
+    monkeypatch.setattr(chain_cli, "fuse_command", interrupted_in_a_kernel)
+    assert main(argv) == 130 and capsys.readouterr().err == "bomi: interrupted\n"
+    monkeypatch.setattr(chain_cli, "fuse_command", plain_system_error)
+    assert main(argv) == 1 and capsys.readouterr().err.startswith("bomi: internal error: SystemError: a bug")
+
+
 def test_an_internal_error_is_one_line_and_debug_shows_the_traceback(tmp_path, capsys, monkeypatch):
     import tasks.cli.chain as chain_cli
 

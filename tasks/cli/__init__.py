@@ -233,16 +233,33 @@ def _run(argv: list[str]) -> int:
         return 130
     except BrokenPipeError:
         raise
+    except SystemError as exc:
+        if not is_interruption(exc):
+            return _internal_error(exc, args, argv)
+        print("bomi: interrupted", file=sys.stderr)
+        return 130
     except OSError as exc:  # the system refused (a full disk, a name too long, no permission): not a bug
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"bomi: error: {where}{exc.strerror or type(exc).__name__}", file=sys.stderr)
         return 2
-    except Exception as exc:  # a bug (in a command, or in loading one): one line, the traceback when asked for
-        if args.debug if args is not None else "--debug" in argv:
-            traceback.print_exc()
-        print(f"bomi: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
-              f"(a bug; rerun with --debug for the traceback)", file=sys.stderr)
-        return 1
+    except Exception as exc:
+        return _internal_error(exc, args, argv)
+
+
+def is_interruption(exc: BaseException) -> bool:
+    """A Ctrl-C (or SIGTERM/SIGHUP, which the long commands turn into one): a KeyboardInterrupt, or
+    the SystemError a compiled (numba) call returns when the KeyboardInterrupt is raised while it runs."""
+    return isinstance(exc, KeyboardInterrupt) or (isinstance(exc, SystemError)
+                                                  and isinstance(exc.__cause__, KeyboardInterrupt))
+
+
+def _internal_error(exc: Exception, args, argv: list[str]) -> int:
+    """A bug (in a command, or in loading one): one line, the traceback when asked for."""
+    if args.debug if args is not None else "--debug" in argv:
+        traceback.print_exception(exc)
+    print(f"bomi: internal error: {type(exc).__name__}: {' '.join(str(exc).split())} "
+          f"(a bug; rerun with --debug for the traceback)", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

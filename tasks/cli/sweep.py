@@ -55,7 +55,7 @@ from bomi.classifier import MAX_VOTE_LENGTH
 from bomi.config_files import beside, check_table, config_path, parse_toml
 from bomi.errors import BomiError
 from bomi.files import atomic_output, write_text
-from tasks.cli import add_command
+from tasks.cli import add_command, is_interruption
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args, report
 from tasks.cli.figures import completion_time_figure, metric_figure
 from tasks.cli.options import MAX_SECONDS, MAX_SEED, MAX_SEEDS, MIN_TIME_LIMIT_S
@@ -471,7 +471,9 @@ def run_sweep(grid: Grid, out: Path, engine: Engine, summarize: bool = True) -> 
                     done[key] = {"key": key, "settings": job_settings(job), **record}
                     file.append(done[key])
                     bar.update(1)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, SystemError) as exc:
+            if not is_interruption(exc):
+                raise
             interrupted = True
         finally:
             file.close()
