@@ -56,6 +56,11 @@ saturated frame does not bend the filter.
 
 Buttons (``ButtonEvidence``): a button class acts only after it has been decided on
 ``samples`` consecutive decisions with the gate open (the profile's ``button_hold_s``).
+
+Re-zero (``RezeroGesture``): the person asks for their neutral posture to be taken anew by holding a
+button class for the profile's ``rezero_hold_s`` (a long press, as the JACO's own joystick gives its
+buttons a second meaning when held) and then coming back to rest: the first neutral decision after
+the long press starts the neutral calibration, so the posture taken is the rest, not the press.
 """
 from __future__ import annotations
 
@@ -288,3 +293,32 @@ class ButtonEvidence:
                 out.append(True)
             self._function = function
         return out
+
+
+@dataclass
+class RezeroGesture:
+    """A button class decided ``samples`` times in a row, then the neutral class: a re-zero (module docstring)."""
+
+    samples: int
+    buttons: frozenset[str]
+    neutral: str
+    _function: str | None = None
+    _run: int = 0
+    _armed: bool = False   # the long press was made: the next neutral decision asks for the re-zero
+
+    def reset(self) -> None:
+        self._function, self._run, self._armed = None, 0, False
+
+    def update(self, functions: Iterable[str]) -> bool:
+        """The decided functions in order: True when one of them completes the gesture."""
+        asked = False
+        for function in functions:
+            if function in self.buttons:
+                self._run = self._run + 1 if function == self._function else 1
+                self._armed |= self._run >= self.samples
+            else:
+                self._run = 0
+                if self._armed and function == self.neutral:
+                    self._armed, asked = False, True
+            self._function = function
+        return asked

@@ -36,13 +36,17 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   profile's ``button_hold_s`` without a break (``bomi.gate.ButtonEvidence``);
 - the safety key's standby holds the arm until its control event (its calibration event retakes
   the neutral posture);
+- re-zero by the person (issue 42): a button class held for the profile's ``rezero_hold_s`` (3 s),
+  then rest, retakes the neutral posture (``bomi.gate.RezeroGesture``; the button's own press acts
+  as usual on the way), the arm at rest until it holds: the tick logs ``rezero``, the new offsets
+  come in ``neutral``, and a replay of the session's bytes makes the same gesture again;
 - the loop's own rate and overruns are measured and shown; the film (``--video``) is made in a
   process of its own and drops film frames, never ticks; a log that cannot be written (disk full)
   is given up with one warning, and control goes on.
 
 Log (``--log L``, JSON lines, one object per control tick):
 ``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``reconnected``
-(the source reconnected since the last tick), ``skipped``
+(the source reconnected since the last tick), ``rezero`` (the person's re-zero gesture completed), ``skipped``
 (frames of a backlog kept from the chain this tick), ``lost`` (samples lost so far, from the
 packet counters), ``stale`` (no frames: the watchdog held the arm), ``standby`` (the safety key
 held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
@@ -81,7 +85,7 @@ from bomi.classifier import NEUTRAL_LABEL
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
 from bomi.fusion import DT, NodeFusion
-from bomi.gate import ButtonEvidence, Gate, GateConfig
+from bomi.gate import ButtonEvidence, Gate, GateConfig, RezeroGesture
 from bomi.profiles import NEUTRAL_FUNCTION
 from sim.joystick import BUTTONS, ArmCommand, JoystickState
 from tasks.stick import DecisionStick
@@ -175,11 +179,12 @@ class Tick:
     overruns: int = 0
     imu: Sequence[ImuFrame] = ()
     reconnected: bool = False
+    rezero: bool = False   # the person's re-zero gesture completed on this tick: the neutral is being retaken
 
     def record(self) -> dict:
         """The tick as one JSON-ready log object (columns in the module docstring)."""
         out = {"tick": self.tick, "t": self.t, "frames": self.frames, "reconnected": self.reconnected,
-               "skipped": self.skipped, "lost": self.lost,
+               "rezero": self.rezero, "skipped": self.skipped, "lost": self.lost,
                "stale": self.stale, "standby": self.standby, "hold": self.hold, "calibrating": self.calibrating,
                "loop_hz": self.loop_hz, "overruns": self.overruns,
                "decisions": [asdict(d) for d in self.decisions],
@@ -464,6 +469,7 @@ class LiveSummary:
     held_ticks: int = 0
     watchdog_trips: int = 0
     overruns: int = 0
+    rezeros: int = 0   # neutral postures retaken at the person's gesture
     holds: Counter = field(default_factory=Counter)   # why the gate held the arm, in ticks
     neutral: dict[int, tuple[float, float, float]] | None = None
 
@@ -532,8 +538,11 @@ class LiveLoop:
         self.fusion = {index: NodeFusion(calibration) for index, calibration in self._calibration.items()}
         self.watchdog = watchdog or Watchdog()
         self.stick, self.safety = DecisionStick(), SafetySwitch()
-        self.buttons = ButtonEvidence(max(1, math.ceil(profile.button_hold_s / DT - 1e-9)),
-                                      frozenset(f for f in self.functions.values() if f in BUTTONS))
+        buttons = frozenset(f for f in self.functions.values() if f in BUTTONS)
+        self.buttons = ButtonEvidence(max(1, math.ceil(profile.button_hold_s / DT - 1e-9)), buttons)
+        # a profile without a re-zero hold (0) or without a button class has no gesture
+        self.rezero = RezeroGesture(math.ceil(profile.rezero_hold_s / DT - 1e-9),
+                                    buttons if profile.rezero_hold_s > 0 else frozenset(), NEUTRAL_FUNCTION)
         neutral_class = next(cls for cls in profile.classes if cls.label == NEUTRAL_LABEL)
         self._at_rest = dict(label=neutral_class.label, name=neutral_class.name, function=NEUTRAL_FUNCTION, nu=0.0)
         self.summary = LiveSummary()
@@ -629,7 +638,8 @@ class LiveLoop:
             chain.begin_neutral_calibration()
         acted = decisions[-1:] if skipped else decisions     # a backlog: the newest decision only
         skipped += len(decisions) - len(acted)
-        state = self._stick(acted, hold is not None)
+        rezero = self._rezero_asked(acted, hold is not None)
+        state = self._stick(acted, hold is not None or rezero)
         if self.assist is not None and hold is None:
             state = self.assist(state)
         command = self.arm.step(state)
@@ -640,12 +650,26 @@ class LiveLoop:
             self.on_neutral(new_neutral)
         tick = Tick(summary.ticks, now, len(frames), self.gate.lost, stale, self.safety.standby, chain.calibrating,
                     decisions, dropped, state, self.arm.mode.value, command, new_neutral, hold, skipped,
-                    self.rate.hz, self.rate.overruns, tuple(frames), reconnected)
+                    self.rate.hz, self.rate.overruns, tuple(frames), reconnected, rezero)
         summary.count(tick)
         summary.watchdog_trips = self.watchdog.trips
         for observer in self.observers:
             observer(tick)
         return tick
+
+    def _rezero_asked(self, decisions: Sequence[Decision], hold: bool) -> bool:
+        """The person's re-zero gesture completed on this tick's decisions (``bomi.gate.RezeroGesture``;
+        only while the arm is free: a hold forgets a gesture begun): the neutral is taken anew, the arm
+        at rest meanwhile."""
+        if hold:
+            self.rezero.reset()
+            return False
+        if not self.rezero.update(decision.function for decision in decisions):
+            return False
+        self.chain.begin_neutral_calibration()
+        self.summary.neutral = None
+        self.summary.rezeros += 1
+        return True
 
     def _stick(self, decisions: Sequence[Decision], hold: bool) -> JoystickState:
         """Centred (and the last decision and any button evidence forgotten) while the arm is held;

@@ -3,11 +3,13 @@ silence of 1 s or a packet-counter jump, the node's filter starts again, its war
 neutral is retaken, the arm at rest until then. The loop on an injected clock (``LiveLoop.tick``)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT
-from bomi.gate import GateConfig
+from bomi.gate import GateConfig, RezeroGesture
 from bomi.protocol import Cue
 from tasks.live import LiveLoop
 from tests.test_live import QUICK_GATE, SETTLE, ScriptedChain, StickArm, decision, still_frame
@@ -144,3 +146,49 @@ def test_a_reconnection_restarts_the_filter_and_the_warm_up_floor():
     # the filter 20 samples old again (k = 18: its 20th), then 3 samples of neutral (k = 18, 19, 20): the
     # neutral holds from the end of tick 20 on
     assert [t.hold is None for t in later].index(True) == 21 and later[20].neutral is not None
+
+
+# ------------------------------------------------------------------------- re-zero by the person (issue 42)
+def test_a_button_held_for_the_rezero_hold_then_rest_retakes_the_neutral_with_the_arm_at_rest():
+    """B1 held for the profile's rezero_hold_s (a long press: its mode change acts once, as a press),
+    then the neutral class: the neutral is retaken from the next samples (the rest, not the press),
+    the arm at rest until it holds, then F drives again. A press held just short of it changes the
+    mode and nothing else."""
+    profile = ScriptedChain([]).profile
+    b1 = next(cls.label for cls in profile.classes if cls.function == "B1")
+    hold = math.ceil(profile.rezero_hold_s / DT - 1e-9)
+    rest, f = decision(label=NEUTRAL_LABEL, function="neutral", nu=0.0), decision(nu=0.5)
+    press = decision(label=b1, function="B1", nu=0.0)
+    script = [rest] * 5 + [press] * (hold - 1) + [rest] * 5 + [f] * 5 + [press] * hold + [rest] * 8 + [f] * 5
+    chain = CalibratingChain(script)
+    loop = LiveLoop(chain, StickArm(), neutral={1: (0.0, 0.0, 0.0)}, gate=QUICK_GATE)
+    ticks = _run(loop, [1] * (SETTLE - 1 + len(script) + 3), range(SETTLE - 1 + len(script) + 3))[SETTLE - 1:]
+    assert [k for k, t in enumerate(ticks) if t.rezero] == [5 + hold - 1 + 10 + hold]   # the first rest after it
+    asked = 5 + hold - 1 + 10 + hold
+    assert chain.calibrations == 1 and loop.summary.rezeros == 1 and ticks[asked].record()["rezero"] is True
+    assert sum(bool(t.state.pressed) for t in ticks) == 2                          # each long press is one press too
+    # the neutral is taken from the 3 samples after the gesture's rest (the stick at rest), then the
+    # 7 rests left and F, which reaches the stick again
+    assert ticks[asked].calibrating and ticks[asked + 3].neutral == chain.neutral
+    assert [t.state.deflection for t in ticks[asked:]] == [{}] * 11 + [{"F": 0.5}] * 5
+
+
+def test_the_rezero_gesture_is_the_naive_scan_of_the_decisions():
+    """RezeroGesture against a scan of the whole decision sequence written the plain way: a re-zero at
+    each neutral that follows a run of one button of at least ``samples``, with no neutral between."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        functions = rng.choice(["neutral", "F", "B1", "B2"], size=rng.integers(1, 80), p=[0.3, 0.2, 0.3, 0.2])
+        functions = np.repeat(functions, rng.integers(1, 6, size=len(functions))).tolist()
+        gesture = RezeroGesture(5, frozenset({"B1", "B2"}), "neutral")
+        cuts = sorted(set(rng.integers(0, len(functions) + 1, size=4).tolist()) | {0, len(functions)})
+        got = [gesture.update(functions[a:b]) for a, b in zip(cuts, cuts[1:])]
+        expected, armed, run = [], False, 0
+        for k, function in enumerate(functions):
+            run = run + 1 if function in ("B1", "B2") and k and functions[k - 1] == function else \
+                (1 if function in ("B1", "B2") else 0)
+            armed = armed or run >= 5
+            if function == "neutral" and armed:
+                expected.append(k)
+                armed = False
+        assert [any(a <= k < b for k in expected) for a, b in zip(cuts, cuts[1:])] == got

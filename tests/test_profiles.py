@@ -51,6 +51,9 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
     ('name = "P1"', 'name = "P1', "not valid TOML"),
     ('layout = "3-axis"', "layout = 2", "joystick: 'layout' has the wrong type"),
     ('layout = "3-axis"', 'layuot = "3-axis"', "joystick: unknown key(s) layuot"),
+    ('layout = "3-axis"', 'layout = "3-axis"\n[live]\nrezero_hold_s = 0.3',
+     "[live] rezero_hold_s (0.3 s) must be longer than button_hold_s (0.35 s), or 0 (off)"),
+    ('layout = "3-axis"', 'layout = "3-axis"\n[live]\nrezero_hold_s = -1', "'rezero_hold_s' must be a number in [0.0, 60.0]"),
 ])
 def test_invalid_profiles_name_file_and_problem(tmp_path, old, new, message):
     path = edited_copy(PROFILE_DIR / "P1.toml", tmp_path / "bad.toml", old, new)

@@ -288,3 +288,20 @@ def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_sessio
     capsys.readouterr()
     assert main(["replay", str(out), "--trial", "1"]) == 0
     assert _deviation(capsys.readouterr().out) <= 1e-6
+
+
+def test_a_trials_rezeros_are_its_free_calibrating_runs():
+    """The trial record's recoveries: each run of ticks calibrating the neutral with the arm otherwise
+    free (the person's gesture, the safety key) is a re-zero from its first tick's task time to its
+    last; a retake held after a break in the stream (its ticks carry the hold) is not."""
+    from tasks.recovery import RecoveryAction
+    from tasks.trials.session import neutral_retaken
+
+    untrusted = "node 1 untrusted after reconnect: retaking warm-up and neutral"
+    flags = [(False, ""), (True, ""), (True, ""), (False, ""), (True, untrusted), (True, untrusted), (False, ""),
+             (False, ""), (True, "")]
+    ticks = [{"calibrating": c, "hold": h} for c, h in flags]
+    task_t = [0.5 * k for k in range(len(ticks))]
+    events = neutral_retaken(ticks, task_t)
+    assert [(e.action, e.start_s, e.end_s) for e in events] == [(RecoveryAction.REZERO, 0.5, 1.0),
+                                                                (RecoveryAction.REZERO, 4.0, 4.0)]

@@ -32,6 +32,11 @@ DEFAULT_NEUTRAL_SAMPLES = 100  # hardware.md step 6: about 100 samples of the ne
 # pitch/roll filter's decay (time constant 12.5 samples, 200 ms): 0.35 s outlasts both, and costs a
 # deliberate press 0.35 s.
 DEFAULT_BUTTON_HOLD_S = 0.35
+# Live: a button class held this long, then rest, retakes the neutral posture (bomi.gate.RezeroGesture).
+# 3 s: over eight deliberate presses' worth (DEFAULT_BUTTON_HOLD_S), so that no press meant as a mode
+# change makes it, and short enough for a person who must hold a posture with effort; a profile
+# sets its own ([live] rezero_hold_s; 0: no re-zero by gesture).
+DEFAULT_REZERO_HOLD_S = 3.0
 # The neutral posture is held for seconds, not for hours: more than a minute of samples is a typo.
 MAX_NEUTRAL_SAMPLES = 3750
 
@@ -80,6 +85,7 @@ class Profile:
     # profile meets the arm, tasks/assist.py)
     assist: tuple[str, ...] = ()
     button_hold_s: float = DEFAULT_BUTTON_HOLD_S   # [live] button_hold_s
+    rezero_hold_s: float = DEFAULT_REZERO_HOLD_S   # [live] rezero_hold_s (0: off)
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -139,8 +145,11 @@ def profile_document(profile: Profile) -> dict:
         doc["joystick"] = {"layout": profile.joystick_layout}
     if profile.assist:
         doc["assist"] = {"options": list(profile.assist)}
-    if profile.button_hold_s != DEFAULT_BUTTON_HOLD_S:
-        doc["live"] = {"button_hold_s": profile.button_hold_s}
+    live = {key: value for key, value, default in (("button_hold_s", profile.button_hold_s, DEFAULT_BUTTON_HOLD_S),
+                                                   ("rezero_hold_s", profile.rezero_hold_s, DEFAULT_REZERO_HOLD_S))
+            if value != default}
+    if live:
+        doc["live"] = live
     doc["nodes"] = [{"index": n.index, "node_id": n.node_id, "site": n.site,
                      "calibration": {"hard_iron": list(n.calibration.hard_iron),
                                      "soft_iron": [list(row) for row in n.calibration.soft_iron],
@@ -182,8 +191,16 @@ def _parse(data: dict, source: str) -> Profile:
                    source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
                    joystick_layout=typed(joystick, "layout", str, "joystick", None),
                    assist=_parse_assist(_section(data, "assist", {"options"})),
-                   button_hold_s=number(_section(data, "live", {"button_hold_s"}), "button_hold_s", "live", 0.0, 10.0,
-                                        default=DEFAULT_BUTTON_HOLD_S))
+                   **_parse_live(_section(data, "live", {"button_hold_s", "rezero_hold_s"})))
+
+
+def _parse_live(live: dict) -> dict:
+    button_hold_s = number(live, "button_hold_s", "live", 0.0, 10.0, default=DEFAULT_BUTTON_HOLD_S)
+    rezero_hold_s = number(live, "rezero_hold_s", "live", 0.0, 60.0, default=DEFAULT_REZERO_HOLD_S)
+    if 0.0 < rezero_hold_s <= button_hold_s:
+        raise ValueError(f"[live] rezero_hold_s ({rezero_hold_s:g} s) must be longer than button_hold_s "
+                        f"({button_hold_s:g} s), or 0 (off): a press would re-zero")
+    return {"button_hold_s": button_hold_s, "rezero_hold_s": rezero_hold_s}
 
 
 def _parse_nodes(tables: list) -> tuple[NodeConfig, ...]:

@@ -33,6 +33,7 @@ from bomi.frames import SAMPLE_PERIOD_S, FrameParser, ImuFrame, SampleIndex, imu
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState, Mode
 from tasks.episode import DecisionTrace, EpisodeLog, summarize
+from tasks.recovery import RecoveryAction, RecoveryEvent
 from tasks.stacking import StackingTask, TaskConfig
 
 DEFAULT_TRIALS = 3
@@ -329,7 +330,26 @@ def episode_log(recorder: TickRecorder, result: TrialResult, *, operator: str, p
         decisions=decisions, class_names=class_names, neutral=neutral, allowance=allowance,
         sample_period=sample_period, amplitude=amplitude,
         goals=tuple(t.get("goal", "") for t in ticks) if known else (),
-        stages=tuple(t.get("stage", "") for t in ticks) if known else ())
+        stages=tuple(t.get("stage", "") for t in ticks) if known else (),
+        recoveries=neutral_retaken(ticks, [r["task_t"] for r in rows]))
+
+
+def neutral_retaken(ticks: Sequence[dict], task_t: Sequence[float]) -> tuple[RecoveryEvent, ...]:
+    """The trial's re-zeros: each run of ticks in which the live loop took the neutral posture anew
+    while the arm was otherwise free (the person's gesture or the safety key's calibration event; a
+    retake after a break in the stream, whose ticks are held, is the loop's safety, not a recovery),
+    as recovery events (task time from its first tick to its last)."""
+    events, start = [], None
+    for k, tick in enumerate(ticks):
+        calibrating = bool(tick.get("calibrating")) and not tick.get("hold")
+        if calibrating and start is None:
+            start = k
+        elif not calibrating and start is not None:
+            events.append(RecoveryEvent(RecoveryAction.REZERO, task_t[start], task_t[k - 1]))
+            start = None
+    if start is not None:
+        events.append(RecoveryEvent(RecoveryAction.REZERO, task_t[start], task_t[-1]))
+    return tuple(events)
 
 
 # what a trial record cannot know when nobody knows what the person intended
