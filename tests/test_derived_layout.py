@@ -47,7 +47,12 @@ def test_with_five_motions_or_more_the_stacking_user_has_every_function_and_a_mo
     assert controls.buttons == tuple(f for f in ("B1", "B2") if f in EXPECTED[count][1])
 
 
-def test_with_fewer_the_scripted_user_cannot_yet_do_without_a_button():
-    # automatic mode switching is stored in the profile, but the scripted stacking user still needs B1
-    with pytest.raises(BomiError, match="has no class for B1"):
-        profile_controls(derive_profile([motions(4)]))
+def test_with_four_motions_the_stacking_user_has_every_direction_and_no_button():
+    # the modes change automatically: the scripted user rests and waits for them (tests/test_no_button.py)
+    controls = profile_controls(derive_profile([motions(4)]))
+    assert controls.layout.name == "2-axis" and controls.buttons == ()
+
+
+def test_with_three_motions_a_direction_of_the_two_axis_layout_is_missing():
+    with pytest.raises(BomiError, match="has no class for L;"):
+        profile_controls(derive_profile([motions(3)]))
