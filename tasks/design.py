@@ -11,7 +11,7 @@ The candidates (kept few, so that a handful of seeds can tell them apart):
   postures) between functions that are not each other's undoing.
 - **assistance**: the buttons alone, or the buttons with automatic mode switching (``auto-mode``).
 - **layout**: the derived one (``bomi.derived.derived_layout``: the 3-axis layout from seven motions,
-  the 2-axis one below). The 2-axis layout for seven or eight motions is not a candidate: a motion
+  the 2-axis one from four, the 1-axis one below). The 2-axis layout for seven or eight motions is not a candidate: a motion
   left without a function would still be decided, and the episode's person knows a class by its function.
 
 Ranking: success share first (Wilson 95 % interval), then the mean completion time of the successes
@@ -24,11 +24,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bomi.derived import AUTO_MODE, THREE_AXIS, TWO_AXIS, derived_layout
+from bomi.derived import AUTO_MODE, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
 from bomi.profiles import Profile
 from tasks import metrics
 
-_DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L"))}
+_DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
+                    ONE_AXIS: (("F", "B"),)}
 _BUTTONS = ("B1", "B2")
 LABEL_ORDER, OPPOSITES = "label order", "by opposites"
 
@@ -77,7 +78,8 @@ def _functions(layout: str, order: Sequence[int]) -> tuple[tuple[int, str], ...]
 
 def candidates(postures: Mapping[int, np.ndarray]) -> list[Candidate]:
     """The candidates for a person whose motions have these postures (label -> posture), the derived
-    default first. Fewer than five motions: the derived layout with automatic mode switching only."""
+    default first. No motion left for a button (two or four motions): the derived layout with automatic
+    mode switching only."""
     labels = sorted(postures)
     derived = derived_layout(len(labels))
     if AUTO_MODE in derived.assist:

@@ -478,7 +478,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     tilt_tolerance = math.radians(p.tilt_deg) * (p.settled_share if memory.turning else 1.0)
     at_cube = any(view.touching) and not open_hand
     tilt_x, tilt_y = view.hand_tilt
-    if not at_cube and max(abs(tilt_x), abs(tilt_y)) > tilt_tolerance:  # e.g. after a stray wrist command
+    # e.g. after a stray wrist command (a layout that cannot tilt the hand cannot level it either)
+    if not at_cube and max(abs(tilt_x), abs(tilt_y)) > tilt_tolerance and memory.controls.layout.levels:
         return _turn("level the hand", np.array([tilt_x, tilt_y, 0.0]))
     if top is not None:
         return _finish(view, stack_top, open_hand, p)

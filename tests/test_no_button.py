@@ -1,12 +1,13 @@
 """A person with no class left for a mode button (four motions: the 2-axis layout's directions): the
 scripted user rests and waits for the automatic mode switching, which reads a rest held on as a
-refusal of the arm's mode (docs/task.md, "Without a mode button")."""
+refusal of the arm's mode (docs/task.md, "Without a mode button"); with three motions, the 1-axis
+layout (F/B) and B1."""
 import numpy as np
 import pytest
 
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
-from sim.joystick import TWO_AXIS, JoystickState, Mode
+from sim.joystick import ONE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks.assist import Assist, Assistance, load_assist, presses
 from tasks.episode import JoystickChannel, process_arm, profile_controls, run_episode
 from tasks.planner import Controls, ScriptedUser
@@ -86,3 +87,14 @@ def test_without_a_button_the_user_rests_until_the_automation_gives_the_mode_the
     # the user pushes in the modes the automation gave them: the hand was moved with no press at all
     moved = np.linalg.norm(log.hand_pos[-1] - log.hand_pos[0])
     assert moved > 0.02 and log.pushing.any()
+
+
+def test_with_three_motions_the_user_presses_b1_round_the_one_axis_layouts_five_modes():
+    controls = profile_controls(derive_profile([motions(3)]))
+    assert controls == Controls(ONE_AXIS, ("B1",))
+    log = run_episode(JoystickChannel(controls), operator="joystick", participant="any", seed=5,
+                      task_config=TaskConfig(time_limit=10.0))
+    assert log.presses >= 2 and not log.automatic
+    seen = set(log.mode)
+    assert {Mode.TRANSLATION.value, Mode.SIDEWAYS.value} <= seen   # the x moves have a mode of their own
+    assert np.ptp(log.hand_pos[:, 0]) > 0.01 and np.ptp(log.hand_pos[:, 1]) > 0.01
