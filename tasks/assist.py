@@ -28,6 +28,13 @@ rising first).  The turn to a cube's faces and the travel over it come in either
 who leaves a mode to turn while the travel is still to be made shows that they turn first from
 that far from the cube (``turn_first_within``), and the path puts the turn first there.
 
+A user without a mode button (``buttons`` empty: a profile with no class left for one) cannot
+refuse a switch by a press: for them a mode is one automatic switch away (``presses``), the rest
+is their answer, and the automation offers a mode once per ``rest_refusal`` of rest: a rest held on
+that long after an offer (a switch, or the mode kept at ``rest_time``) refuses the arm's mode, and
+the arm goes to the best mode this rest has not refused (``_refused_by_rest``; all refused, the
+round starts again), so the mode the user waits for comes within one round of the layout's modes.
+
 ``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
 the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
 the arm is put in the finger mode and closes until the fingers have touched the cube for
