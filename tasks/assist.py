@@ -773,10 +773,10 @@ class Assistance:
 
     def _refused_by_rest(self, tick: int, view: View, arm: Switchable) -> None:
         """A user without a mode button can answer a mode only with the stick: resting on for
-        ``rest_refusal`` after the offer (our switch, or keeping the mode; after the stick came to rest)
-        refuses the arm's mode.
-        The arm goes to the best mode this rest has not refused (all refused: the round starts
-        again), so the mode the user waits for comes within one round of the layout's modes."""
+        ``rest_refusal`` after the offer (our switch, or the mode kept) and after the stick came to
+        rest refuses the arm's mode. The arm goes to the best mode this rest has not refused (all
+        refused: the round starts again), so the mode the user waits for comes within one round of
+        the layout's modes."""
         if view.t - max(self._offered_at, self._active_at) < self.params.auto_mode.rest_refusal:
             return
         last = self.switches[-1] if self.switches else None

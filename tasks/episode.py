@@ -279,8 +279,9 @@ def profile_controls(profile: Profile) -> Controls:
     needed = (*layout.functions, *(() if Assist.AUTO_MODE in profile_assist(profile) else ("B1",)))
     missing = [f for f in needed if f not in functions]
     if missing:
+        without = " (or, without B1, [assist] options = [\"auto-mode\"])" if "B1" in missing else ""
         raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
-                        f"the scripted stacking user with the {layout.name} layout needs {', '.join(needed)}")
+                        f"the scripted stacking user with the {layout.name} layout needs {', '.join(needed)}{without}")
     return Controls(layout, tuple(b for b in BUTTONS if b in functions))
 
 

@@ -9,9 +9,11 @@ from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from sim.joystick import ONE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks.assist import Assist, Assistance, load_assist, presses
+from tasks.cli.task import EpisodeJob, job_assist
 from tasks.episode import JoystickChannel, process_arm, profile_controls, run_episode
 from tasks.planner import Controls, ScriptedUser
 from tasks.stacking import TaskConfig
+from tasks.stick import arm_profile
 from test_assist import A1, FakeArm, view
 from test_derived_layout import motions
 
@@ -29,6 +31,12 @@ def test_controls_without_a_button_and_without_the_automatic_switching_are_a_one
     with pytest.raises(BomiError, match="needs --assist auto-mode") as info:
         run_episode(JoystickChannel(Controls(TWO_AXIS, ())), operator="joystick", participant="any", seed=0)
     assert "\n" not in str(info.value)
+
+
+def test_the_joystick_baseline_on_controls_without_a_button_gets_the_automatic_switching_too():
+    joystick = EpisodeJob("joystick", "any", 0)
+    assert job_assist(joystick, derive_profile([motions(4)])) == AUTO
+    assert job_assist(joystick, arm_profile("P4")) == frozenset()   # a button: none, as always
 
 
 def test_without_a_button_a_mode_is_one_automatic_switch_away():
