@@ -46,7 +46,8 @@ class Candidate:
     @property
     def name(self) -> str:
         assisted = " + auto-mode" if AUTO_MODE in self.assist else ""
-        return f"{self.layout}, {self.mapping}, buttons{assisted}"
+        buttons = "buttons" if any(function in _BUTTONS for _, function in self.functions) else "no button"
+        return f"{self.layout}, {self.mapping}, {buttons}{assisted}"
 
     def profile(self, base: Profile) -> Profile:
         """``base`` with this candidate's layout, class functions and assistances."""
