@@ -32,8 +32,8 @@ MOUNTING_ROWS = 20_000   # at most the rows a node's mounting is checked on (5 m
 THREE_AXIS, TWO_AXIS, ONE_AXIS = "3-axis", "2-axis", "1-axis"   # the layouts' names (sim/joystick.py LAYOUTS)
 AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
 # each layout's directions, the richest first
-_WORDS = {6: "six", 4: "four", 2: "two"}
 _DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L"), ONE_AXIS: ("F", "B")}
+_WORDS = {6: "six", 4: "four", 2: "two"}   # their numbers of directions, as the reasons say them
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,9 @@ The candidates (kept few, so that a handful of seeds can tell them apart):
   postures) between functions that are not each other's undoing.
 - **assistance**: the buttons alone, or the buttons with automatic mode switching (``auto-mode``).
 - **layout**: the derived one (``bomi.derived.derived_layout``: the 3-axis layout from seven motions,
-  the 2-axis one from four, the 1-axis one below). The 2-axis layout for seven or eight motions is not a candidate: a motion
-  left without a function would still be decided, and the episode's person knows a class by its function.
+  the 2-axis one from four, the 1-axis one below). The 2-axis layout for seven or eight motions is
+  not a candidate: a motion left without a function would still be decided, and the episode's
+  person knows a class by its function.
 
 Ranking: success share first (Wilson 95 % interval), then the mean completion time of the successes
 (Student-t 95 % interval); on a tie the earlier candidate (the derived default first) is kept.
