@@ -3,7 +3,10 @@
 For each population person (tasks/participants/population.py; development people by default), both
 passes in one logger file as `benchmarks/two_pass_file.py` writes it, the profile `bomi train` /
 `bomi twin` derive from it (bomi/derived.py), and whether the scripted stacking user can drive it
-(tasks.episode.profile_controls, what `bomi benchmark` checks before any episode). No episode is run.
+(tasks.episode.profile_controls, what `bomi benchmark` checks before any episode: every direction of
+the layout, and the mode button B1 or, without a button, the automatic mode switching the user rests
+and waits for). "reached" says only that; whether the person then succeeds is for episodes
+(`bomi benchmark --participants TWIN.toml`). No episode is run.
 
     python benchmarks/derived_layouts.py --people 30 --first 0
 """

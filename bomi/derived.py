@@ -29,9 +29,11 @@ from bomi.recording import NodeData, Recording, Signal
 
 DERIVED_AMPLITUDE_SCALES = (0.75, 0.5)
 MOUNTING_ROWS = 20_000   # at most the rows a node's mounting is checked on (5 min: the protocol's motions disambiguate it)
-THREE_AXIS, TWO_AXIS = "3-axis", "2-axis"   # the layouts' names (sim/joystick.py LAYOUTS; docs/sim.md)
+THREE_AXIS, TWO_AXIS, ONE_AXIS = "3-axis", "2-axis", "1-axis"   # the layouts' names (sim/joystick.py LAYOUTS)
 AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
-_DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L")}
+# each layout's directions, the richest first
+_DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L"), ONE_AXIS: ("F", "B")}
+_WORDS = {6: "six", 4: "four", 2: "two"}   # their numbers of directions, as the reasons say them
 
 
 @dataclass(frozen=True)
@@ -46,24 +48,28 @@ class DerivedLayout:
 
 
 def derived_layout(motions: int) -> DerivedLayout:
-    """The layout that reaches translation, wrist and fingers with ``motions`` classes (3..8): every
-    direction of the layout is a motion, and the mode changes are buttons made of the others (B1
-    forward, B2 back); the 3-axis layout (one mode fewer, the wrist's turns in one mode) when the
-    motions cover its six directions and a button, else the 2-axis layout (Kinova's for a 2-axis
-    input: four directions, four modes). With fewer than five motions no button is left after the
-    four directions: the modes change by themselves (automatic mode switching, tasks/assist.py)."""
-    if motions >= len(_DIRECTIONS[THREE_AXIS]) + 1:
-        buttons = ("B1", "B2")[:motions - len(_DIRECTIONS[THREE_AXIS])]
-        return DerivedLayout(THREE_AXIS, _DIRECTIONS[THREE_AXIS] + buttons, (),
-                             f"{motions} motions: the 3-axis layout's six directions and {' and '.join(buttons)}")
-    if motions >= len(_DIRECTIONS[TWO_AXIS]) + 1:
-        buttons = ("B1", "B2")[:motions - len(_DIRECTIONS[TWO_AXIS])]
-        return DerivedLayout(TWO_AXIS, _DIRECTIONS[TWO_AXIS] + buttons, (),
-                             f"{motions} motions: too few for the 3-axis layout's six directions and a mode button; "
-                             f"the 2-axis layout's four directions and {' and '.join(buttons)}")
-    return DerivedLayout(TWO_AXIS, _DIRECTIONS[TWO_AXIS][:motions], (AUTO_MODE,),
-                         f"{motions} motions: no class left for a mode button after the 2-axis layout's directions; "
+    """The layout that reaches translation, wrist and fingers with ``motions`` classes (2..8): the
+    richest layout whose directions the motions cover (3-axis: six, 2-axis: four, 1-axis: F/B), the
+    motions left over being the mode buttons (B1 forward, B2 back); with none left, the modes change
+    by themselves (automatic mode switching, tasks/assist.py: the user rests and waits for them).
+    The 3-axis layout only with a button: six motions take the 2-axis layout and both buttons."""
+    richer = None   # the next richer layout, whose directions and a button the motions do not cover
+    for layout, directions in _DIRECTIONS.items():
+        spare = motions - len(directions)
+        if spare >= 1 or (spare == 0 and layout != THREE_AXIS):
+            break
+        richer = layout
+    buttons = ("B1", "B2")[:spare]
+    own = f"the {layout} layout's {_WORDS[len(directions)]} directions"
+    if buttons:
+        fewer = "" if richer is None else \
+            f"too few for the {richer} layout's {_WORDS[len(_DIRECTIONS[richer])]} directions and a mode button; "
+        return DerivedLayout(layout, directions + buttons, (), f"{motions} motions: {fewer}{own} and {' and '.join(buttons)}")
+    return DerivedLayout(layout, directions, (AUTO_MODE,),
+                         f"{motions} motions: {own}, no class left for a mode button; "
                          "the modes are switched automatically (--assist auto-mode)")
+
+
 _BASE_STATION_FIRST_IMU = 10   # node index i is base-station id 10 + i - 1 (hardware.md)
 
 

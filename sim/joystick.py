@@ -21,6 +21,10 @@ does nothing there. Two layouts, as on the real arm:
 - wrist: F/B/R/L tip the hand as in the 3-axis wrist mode;
 - fingers: F closes, B opens.
 
+``ONE_AXIS`` (for a person with two directions: F and B only; ``bomi.derived``), modes translation
+-> sideways -> height -> wrist -> fingers, F/B in each: along y-/y+, x-/x+ (as R/L), up/down, the
+turn about z+/z- (as Rr/Lr in the 3-axis wrist mode), close/open.  It cannot tilt the hand.
+
 B1 steps forward through the layout's cycle, B2 backward. Holding no function holds still. An
 assistance may also put the arm in a mode directly (``JoystickInterpreter.switch_to``).
 """
@@ -42,6 +46,7 @@ _FUNCTION_SET, _BUTTON_SET = frozenset(FUNCTIONS), frozenset(BUTTONS)
 
 class Mode(enum.Enum):
     TRANSLATION = "translation"
+    SIDEWAYS = "sideways"  # the 1-axis layout's moves along x
     HEIGHT = "height"
     WRIST = "wrist"
     FINGERS = "fingers"
@@ -99,6 +104,7 @@ class Layout:
     name: str
     modes: tuple[Mode, ...]
     effects: Mapping[Mode, Mapping[str, Effect]]
+    levels: bool = field(init=False)  # it tilts the hand both ways about x and y (can level it)
 
     def __post_init__(self):
         if set(self.effects) != set(self.modes) or len(set(self.modes)) != len(self.modes):
@@ -115,6 +121,8 @@ class Layout:
                 found.setdefault((effect.kind, effect.axis), (mode, fn))  # the first in the cycle's order
         object.__setattr__(self, "_axes", axes)
         object.__setattr__(self, "_found", found)
+        tilts = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0))
+        object.__setattr__(self, "levels", all((Kind.ANGULAR, axis) in found for axis in tilts))
 
     def __reduce__(self):
         """Pickled as its fields (the tables are made again): `bomi live --video` sends the layout to
@@ -168,7 +176,15 @@ TWO_AXIS = Layout("2-axis", (Mode.TRANSLATION, Mode.HEIGHT, Mode.WRIST, Mode.FIN
     Mode.WRIST: _effects(Kind.ANGULAR, WRIST_AXES, ("F", "B", "R", "L")),
     Mode.FINGERS: _FINGERS,
 })
-LAYOUTS = {layout.name: layout for layout in (THREE_AXIS, TWO_AXIS)}
+# F/B alone: each mode one axis of the 2-axis layout's, F taking R's or Rr's part where it has no F
+ONE_AXIS = Layout("1-axis", (Mode.TRANSLATION, Mode.SIDEWAYS, Mode.HEIGHT, Mode.WRIST, Mode.FINGERS), {
+    Mode.TRANSLATION: _effects(Kind.LINEAR, TRANSLATION_AXES, ("F", "B")),
+    Mode.SIDEWAYS: {"F": Effect(Kind.LINEAR, TRANSLATION_AXES["R"]), "B": Effect(Kind.LINEAR, TRANSLATION_AXES["L"])},
+    Mode.HEIGHT: {"F": Effect(Kind.LINEAR, TRANSLATION_AXES["Rr"]), "B": Effect(Kind.LINEAR, TRANSLATION_AXES["Lr"])},
+    Mode.WRIST: {"F": Effect(Kind.ANGULAR, WRIST_AXES["Rr"]), "B": Effect(Kind.ANGULAR, WRIST_AXES["Lr"])},
+    Mode.FINGERS: _FINGERS,
+})
+LAYOUTS = {layout.name: layout for layout in (THREE_AXIS, TWO_AXIS, ONE_AXIS)}
 
 
 @dataclass(frozen=True)

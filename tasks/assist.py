@@ -28,6 +28,13 @@ rising first).  The turn to a cube's faces and the travel over it come in either
 who leaves a mode to turn while the travel is still to be made shows that they turn first from
 that far from the cube (``turn_first_within``), and the path puts the turn first there.
 
+A user without a mode button (``buttons`` empty: a profile with no class left for one) cannot
+refuse a switch by a press: for them a mode is one automatic switch away (``presses``), the rest
+is their answer, and the automation offers a mode once per ``rest_refusal`` of rest: a rest held on
+that long after an offer (a switch, or the mode kept at ``rest_time``) refuses the arm's mode, and
+the arm goes to the best mode this rest has not refused (``_refused_by_rest``; all refused, the
+round starts again), so the mode the user waits for comes within one round of the layout's modes.
+
 ``Assist.GRASP_HELP``: when the open hand is around a cube (centre within ``xy_tol``/``z_tol`` of
 the pinch point, lined up within ``yaw_tol_deg``) and the user has held still for ``hold_still``,
 the arm is put in the finger mode and closes until the fingers have touched the cube for
@@ -122,6 +129,7 @@ class AutoModeParams:
     proximity: float
     off_target_prior: float
     refusal_share: float
+    rest_refusal: float
 
 
 @dataclass(frozen=True)
@@ -432,7 +440,10 @@ def next_step_modes(steps: list[Step]) -> dict[Mode, float]:
 
 
 def presses(layout: Layout, buttons: tuple[str, ...], current: Mode, wanted: Mode) -> int:
-    """The fewest presses of the person's buttons from ``current`` to ``wanted``."""
+    """The fewest presses of the person's buttons from ``current`` to ``wanted``; without a button,
+    the automatic switches the person waits for (one, unless the arm is in ``wanted`` already)."""
+    if not buttons:
+        return int(current is not wanted)
     return min(layout.presses(current, wanted, b) for b in buttons)
 
 
@@ -536,7 +547,9 @@ class AutomaticSwitch:
     by: Assist
     goal: str
     undone: bool = False  # a press came sooner than the user answers a change they see (PressResponse): undone
-    refused: bool = False  # the user left its mode by a press before moving in it (and not before seeing it)
+    # the user left its mode by a press before moving in it (and not before seeing it), or, without a
+    # mode button, rested on in it for ``rest_refusal`` (``Assistance._refused_by_rest``)
+    refused: bool = False
 
 
 @dataclass(frozen=True)
@@ -631,6 +644,8 @@ class Assistance:
         self._paused_until = -math.inf
         self._paused_until_move = False  # after the user's press: paused until they move in a mode
         self._switched_this_rest = False
+        self._rest_refused: set[Mode] = set()  # without a mode button: the modes this rest has refused
+        self._offered_at = -math.inf  # without a mode button: when this rest's latest offer of a mode was made
         self._closing_since: float | None = None  # the grasp help is closing the fingers
         self._touch_since: float | None = None  # the fingers have touched a cube since
         # functions held across an automatic switch: off until the stick rests, for at most mask_time
@@ -669,6 +684,7 @@ class Assistance:
         if not (state.deflection or state.pressed):
             return self._at_rest(tick, view, state, arm)
         self._active_at, self._switched_this_rest, self._closing_since = view.t, False, None
+        self._rest_refused.clear()
         if state.pressed:  # the user's own press wins and pauses the automation
             last = self.switches[-1] if self.switches else None
             undone = self._undo_unseen_switch(view, arm)  # decided before the switch could be seen: no refusal
@@ -735,8 +751,10 @@ class Assistance:
         if self._closing_since is not None:
             return self._close(view, state)
         rested = view.t - self._active_at
+        if self._switched_this_rest and not self.buttons and Assist.AUTO_MODE in self.options:
+            self._refused_by_rest(tick, view, arm)
         if view.t < self._paused_until or self._paused_until_move or self._switched_this_rest:
-            return state  # one switch per rest: the user's next move decides what comes after
+            return state  # one switch per rest: the user's next move (or press) decides what comes after
         if Assist.GRASP_HELP in self.options and rested >= self.params.grasp_help.hold_still:
             cube = self._around(view)
             if cube is not None:
@@ -749,7 +767,32 @@ class Assistance:
             best, goal = self.best_mode(view)
             if best is not None:
                 self._switch(tick, view, arm, best, Assist.AUTO_MODE, goal)
+            if not self.buttons:  # offered (switched, or the mode kept): the rest may refuse it
+                self._switched_this_rest, self._offered_at = True, view.t
         return state
+
+    def _refused_by_rest(self, tick: int, view: View, arm: Switchable) -> None:
+        """A user without a mode button can answer a mode only with the stick: resting on for
+        ``rest_refusal`` after the offer (our switch, or the mode kept) and after the stick came to
+        rest refuses the arm's mode. The arm goes to the best mode this rest has not refused (all
+        refused: the round starts again), so the mode the user waits for comes within one round of
+        the layout's modes."""
+        if view.t - max(self._offered_at, self._active_at) < self.params.auto_mode.rest_refusal:
+            return
+        last = self.switches[-1] if self.switches else None
+        if last is not None and last.t >= self._active_at and arm.mode is last.after:
+            self.switches[-1] = replace(last, refused=True)
+            if self._left is None:  # the rest's first refusal: the user's next move teaches what they wanted
+                self._left = (self._switched_at, True)
+        self._offered_at = view.t
+        self._rest_refused.add(arm.mode)
+        if self._rest_refused.issuperset(self.layout.modes):
+            self._rest_refused = {arm.mode}
+        expected, likely = self.expected_times(view)
+        if not expected:
+            return
+        best = min((m for m in self.layout.modes if m not in self._rest_refused), key=expected.get)
+        self._switch(tick, view, arm, best, Assist.AUTO_MODE, likely)
 
     def precision(self, act: float) -> dict[PathStep, float]:
         """Per step of a path to a goal with finger action ``act`` (+1 grasp, -1 set down): this
@@ -840,9 +883,20 @@ class Assistance:
     def best_mode(self, view: View) -> tuple[Mode | None, str]:
         """The mode that minimises the expected time to the likely goals, if it saves ``min_gain``
         over the current one (else None), and the most likely goal's label."""
+        expected, likely = self.expected_times(view)
+        if not expected:
+            return None, likely
+        best = min(self.layout.modes, key=lambda m: (expected[m], m is not view.mode))
+        if best is view.mode or expected[view.mode] - expected[best] < self.params.auto_mode.min_gain:
+            return None, likely
+        return best, likely
+
+    def expected_times(self, view: View) -> tuple[dict[Mode, float], str]:
+        """Per mode of the layout, the expected time to the likely goals from it (empty: no goal in
+        the scene), and the most likely goal's label."""
         goals = candidate_goals(view, self.params, self.clearance)
         if not goals:
-            return None, ""
+            return {}, ""
         weights = self.belief.probabilities(goals, view.hand_pos[:2], self.params.auto_mode.proximity)
         working_on = self._seen_step(view)
         expected = {m: 0.0 for m in self.layout.modes}
@@ -852,11 +906,7 @@ class Assistance:
             for m, seconds in time_to_goal(self.layout, self.buttons, next_step_modes(steps),
                                            self.params.auto_mode.press_time).items():
                 expected[m] += weight * seconds
-        best = min(self.layout.modes, key=lambda m: (expected[m], m is not view.mode))
-        likely = goals[int(np.argmax(weights))].label
-        if best is view.mode or expected[view.mode] - expected[best] < self.params.auto_mode.min_gain:
-            return None, likely
-        return best, likely
+        return expected, goals[int(np.argmax(weights))].label
 
     def _undo_unseen_switch(self, view: View, arm: Switchable) -> bool:
         """A press that comes sooner after a switch of ours than this user's presses come after they
@@ -876,7 +926,7 @@ class Assistance:
             self._refused = None
         if mode is arm.mode or (self._refused is not None and mode is self._refused[0] and by is Assist.AUTO_MODE):
             return
-        self._moved_since_switch = False
+        self._moved_since_switch, self._offered_at = False, view.t
         self.press_response.switched()
         self._switched_at = self._context(view, mode, goal)
         self.switches.append(AutomaticSwitch(tick, view.t, arm.mode, mode, by, goal))

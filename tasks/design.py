@@ -11,8 +11,9 @@ The candidates (kept few, so that a handful of seeds can tell them apart):
   postures) between functions that are not each other's undoing.
 - **assistance**: the buttons alone, or the buttons with automatic mode switching (``auto-mode``).
 - **layout**: the derived one (``bomi.derived.derived_layout``: the 3-axis layout from seven motions,
-  the 2-axis one below). The 2-axis layout for seven or eight motions is not a candidate: a motion
-  left without a function would still be decided, and the episode's person knows a class by its function.
+  the 2-axis one from four, the 1-axis one below). The 2-axis layout for seven or eight motions is
+  not a candidate: a motion left without a function would still be decided, and the episode's
+  person knows a class by its function.
 
 Ranking: success share first (Wilson 95 % interval), then the mean completion time of the successes
 (Student-t 95 % interval); on a tie the earlier candidate (the derived default first) is kept.
@@ -24,11 +25,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bomi.derived import AUTO_MODE, THREE_AXIS, TWO_AXIS, derived_layout
+from bomi.derived import AUTO_MODE, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
 from bomi.profiles import Profile
 from tasks import metrics
 
-_DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L"))}
+_DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
+                    ONE_AXIS: (("F", "B"),)}
 _BUTTONS = ("B1", "B2")
 LABEL_ORDER, OPPOSITES = "label order", "by opposites"
 
@@ -45,7 +47,8 @@ class Candidate:
     @property
     def name(self) -> str:
         assisted = " + auto-mode" if AUTO_MODE in self.assist else ""
-        return f"{self.layout}, {self.mapping}, buttons{assisted}"
+        buttons = "buttons" if any(function in _BUTTONS for _, function in self.functions) else "no button"
+        return f"{self.layout}, {self.mapping}, {buttons}{assisted}"
 
     def profile(self, base: Profile) -> Profile:
         """``base`` with this candidate's layout, class functions and assistances."""
@@ -77,7 +80,8 @@ def _functions(layout: str, order: Sequence[int]) -> tuple[tuple[int, str], ...]
 
 def candidates(postures: Mapping[int, np.ndarray]) -> list[Candidate]:
     """The candidates for a person whose motions have these postures (label -> posture), the derived
-    default first. Fewer than five motions: the derived layout with automatic mode switching only."""
+    default first. No motion left for a button (two or four motions): the derived layout with automatic
+    mode switching only."""
     labels = sorted(postures)
     derived = derived_layout(len(labels))
     if AUTO_MODE in derived.assist:

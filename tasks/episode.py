@@ -28,7 +28,7 @@ from sim.kernels import clip
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combined
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
 from tasks import failures, metrics
-from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label
+from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label, profile_assist
 from tasks.human import HumanOperator, load_human
 from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
@@ -271,14 +271,17 @@ class Watched:
 
 def profile_controls(profile: Profile) -> Controls:
     """The controls a profile's classes give the scripted user: its joystick layout and the mode
-    buttons it has a class for.  The user needs every direction of the layout and B1."""
+    buttons it has a class for.  The user needs every direction of the layout, and B1 unless the
+    profile switches the modes automatically (``[assist] options`` auto-mode): without a button the
+    user rests and waits for the switch (docs/task.md, "Without a mode button")."""
     layout = profile_layout(profile)
     functions = {cls.function for cls in profile.classes}
-    needed = (*layout.functions, "B1")
+    needed = (*layout.functions, *(() if Assist.AUTO_MODE in profile_assist(profile) else ("B1",)))
     missing = [f for f in needed if f not in functions]
     if missing:
+        without = " (or, without B1, [assist] options = [\"auto-mode\"])" if "B1" in missing else ""
         raise BomiError(f"{profile.source}: profile {profile.name} has no class for {', '.join(missing)}; "
-                        f"the scripted stacking user with the {layout.name} layout needs {', '.join(needed)}")
+                        f"the scripted stacking user with the {layout.name} layout needs {', '.join(needed)}{without}")
     return Controls(layout, tuple(b for b in BUTTONS if b in functions))
 
 
@@ -584,6 +587,9 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     user's parameters, or the file they are read from. ``on_tick`` is told the simulated time
     after every tick (a progress bar). ``assist``: the assistances between the channel's stick and
     the arm (tasks.assist)."""
+    if not channel.controls.buttons and Assist.AUTO_MODE not in assist:
+        raise BomiError(f"the controls {channel.controls.label} change mode only by the automatic mode switching: "
+                        f"the scripted user needs --assist {Assist.AUTO_MODE.value}")
     sim = sim or process_arm(channel.controls.layout)
     if sim.layout is not channel.controls.layout:
         raise ValueError(f"the arm has the {sim.layout.name} joystick layout, the operator's controls the "

@@ -250,22 +250,26 @@ class StickIntent:
 REST = StickIntent()
 
 
+NO_BUTTON = "no button"  # what a results row says of controls without a mode button
+
+
 @dataclass(frozen=True)
 class Controls:
     """The controls the person has and knows: the arm's joystick layout (which mode moves, turns or
-    grips along which axis, with which function) and the mode buttons they can press."""
+    grips along which axis, with which function) and the mode buttons they can press.  No button:
+    the modes change only by the automatic mode switching (the person rests and waits for it)."""
 
     layout: Layout = THREE_AXIS
     buttons: tuple[str, ...] = BUTTONS
 
     def __post_init__(self):
-        if not self.buttons or not set(self.buttons) <= set(BUTTONS):
-            raise ValueError(f"controls need one or more of the buttons {BUTTONS}, got {self.buttons}")
+        if not set(self.buttons) <= set(BUTTONS):
+            raise ValueError(f"controls' buttons must be among {BUTTONS}, got {self.buttons}")
 
     @property
     def label(self) -> str:
-        """What a results row says of the controls, e.g. "2-axis, B1"."""
-        return f"{self.layout.name}, {'+'.join(self.buttons)}"
+        """What a results row says of the controls, e.g. "2-axis, B1" or "2-axis, no button"."""
+        return f"{self.layout.name}, {'+'.join(self.buttons) or NO_BUTTON}"
 
 
 @dataclass(frozen=True)
@@ -474,7 +478,8 @@ def next_action(view: View, memory: Memory, p: OperatorParams) -> Action:
     tilt_tolerance = math.radians(p.tilt_deg) * (p.settled_share if memory.turning else 1.0)
     at_cube = any(view.touching) and not open_hand
     tilt_x, tilt_y = view.hand_tilt
-    if not at_cube and max(abs(tilt_x), abs(tilt_y)) > tilt_tolerance:  # e.g. after a stray wrist command
+    # e.g. after a stray wrist command (a layout that cannot tilt the hand cannot level it either)
+    if not at_cube and max(abs(tilt_x), abs(tilt_y)) > tilt_tolerance and memory.controls.layout.levels:
         return _turn("level the hand", np.array([tilt_x, tilt_y, 0.0]))
     if top is not None:
         return _finish(view, stack_top, open_hand, p)
@@ -625,7 +630,8 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     else:
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
-        button = mode_button(view.mode, need, memory.controls)
+        # without a mode button the person rests and waits for the automatic mode switching (tasks/assist.py)
+        button = mode_button(view.mode, need, memory.controls) if memory.controls.buttons else None
         return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt, **glance)
     remaining = 0.0
     if action.kind is ActionKind.MOVE:

@@ -30,7 +30,7 @@ AXES = (("x", "x: left +, right -", "tab:blue"), ("y", "y: back +, forward -", "
 # wrist mode they turn the hand; B1/B2 are the buttons that change the mode.
 FUNCTION_WORDS = {"F": "forward", "B": "back", "R": "right", "L": "left", "Rr": "twist right: up",
                   "Lr": "twist left: down", "B1": "button 1: next mode", "B2": "button 2: previous mode"}
-MODE_COLOURS = {"translation": "#4c72b0", "height": "#8172b2", "wrist": "#dd8452", "fingers": "#55a868"}
+MODE_COLOURS = {"translation": "#4c72b0", "sideways": "#64b5cd", "height": "#8172b2", "wrist": "#dd8452", "fingers": "#55a868"}
 AMPLITUDE_LABELS = {"gamma": "gamma: angle change\nfrom neutral (deg)",
                     "along_class": "amplitude along\nthe class (deg)"}
 LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.005, 1.0), "fontsize": 7, "borderaxespad": 0.0}

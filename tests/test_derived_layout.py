@@ -1,6 +1,8 @@
 """A derived profile reaches every function the stacking task needs, for any number of motions (bomi/derived.py)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -26,7 +28,8 @@ EXPECTED = {
     6: ("2-axis", ("F", "B", "R", "L", "B1", "B2"), ()),      # issue 41's person: c5 -> B1, c6 -> B2
     5: ("2-axis", ("F", "B", "R", "L", "B1"), ()),
     4: ("2-axis", ("F", "B", "R", "L"), ("auto-mode",)),
-    3: ("2-axis", ("F", "B", "R"), ("auto-mode",)),
+    3: ("1-axis", ("F", "B", "B1"), ()),
+    2: ("1-axis", ("F", "B"), ("auto-mode",)),
 }
 
 
@@ -40,14 +43,21 @@ def test_the_layout_follows_the_number_of_motions_and_says_why(count):
     assert layout.reason in profile.description and layout.reason in describe(profile)
 
 
-@pytest.mark.parametrize("count", [5, 6, 7, 8])
+@pytest.mark.parametrize("count", [3, 5, 6, 7, 8])
 def test_with_five_motions_or_more_the_stacking_user_has_every_function_and_a_mode_button(count):
     controls = profile_controls(derive_profile([motions(count)]))
     assert controls.layout.name == EXPECTED[count][0]
     assert controls.buttons == tuple(f for f in ("B1", "B2") if f in EXPECTED[count][1])
 
 
-def test_with_fewer_the_scripted_user_cannot_yet_do_without_a_button():
-    # automatic mode switching is stored in the profile, but the scripted stacking user still needs B1
-    with pytest.raises(BomiError, match="has no class for B1"):
-        profile_controls(derive_profile([motions(4)]))
+@pytest.mark.parametrize("count", [2, 4])
+def test_with_no_motion_left_for_a_button_the_stacking_user_has_every_direction_and_no_button(count):
+    # the modes change automatically: the scripted user rests and waits for them (tests/test_no_button.py)
+    controls = profile_controls(derive_profile([motions(count)]))
+    assert controls.layout.name == EXPECTED[count][0] and controls.buttons == ()
+
+
+def test_a_profile_without_a_button_or_the_automatic_switching_is_refused_naming_b1():
+    profile = derive_profile([motions(4)])
+    with pytest.raises(BomiError, match="has no class for B1;"):
+        profile_controls(replace(profile, assist=()))

@@ -47,6 +47,19 @@ def test_where_both_mappings_coincide_the_candidate_is_run_once():
     assert [(c.mapping, c.assist) for c in candidates(same)] == [(LABEL_ORDER, ()), (LABEL_ORDER, ("auto-mode",))]
 
 
+def test_three_motions_take_the_one_axis_layout_and_b1_four_no_button_and_auto_mode_alone():
+    three = candidates({1: posture(20, 0), 2: posture(0, 20), 3: posture(-20, 1)})   # c1/c3 opposite
+    assert [(c.layout, c.mapping, c.assist) for c in three] == [
+        ("1-axis", LABEL_ORDER, ()), ("1-axis", LABEL_ORDER, ("auto-mode",)),
+        ("1-axis", OPPOSITES, ()), ("1-axis", OPPOSITES, ("auto-mode",))]
+    assert dict(three[2].functions) == {1: "F", 3: "B", 2: "B1"} and three[0].name == "1-axis, label order, buttons"
+    base = derive_profile([motions(3)])
+    assert all(profile_controls(c.profile(base)).buttons == ("B1",) for c in three)
+    (four,) = candidates({k: POSTURES[k] for k in (1, 2, 3, 4)})
+    assert four.name == "2-axis, label order, no button + auto-mode"
+    assert profile_controls(four.profile(derive_profile([motions(4)]))).buttons == ()
+
+
 def record(success: bool, time: float) -> dict:
     return {"success": success, "completion_time": time if success else None}
 

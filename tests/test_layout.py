@@ -1,4 +1,5 @@
-"""Joystick layouts: the 3-axis one as it always was, Kinova's 2-axis scheme, and the arm under it."""
+"""Joystick layouts: the 3-axis one as it always was, Kinova's 2-axis scheme, the 1-axis one (F/B
+alone), and the arm under them."""
 import sim  # noqa: F401  -- first: sim/__init__ selects headless EGL before mujoco loads
 
 import numpy as np
@@ -6,7 +7,7 @@ import pytest
 
 from sim.check import measure
 from sim.env import ArmSim
-from sim.joystick import (FUNCTIONS, LAYOUTS, THREE_AXIS, TWO_AXIS,
+from sim.joystick import (FUNCTIONS, LAYOUTS, ONE_AXIS, THREE_AXIS, TWO_AXIS,
                           JoystickInterpreter, JoystickState, Kind, Layout, Mode)
 from sim.render import describe
 
@@ -44,6 +45,20 @@ def test_three_axis_is_the_default_and_each_mode_does_one_kind_of_thing():
 
 def test_two_axis_needs_four_directions():
     assert TWO_AXIS.functions == ("F", "B", "R", "L") and LAYOUTS["2-axis"] is TWO_AXIS
+
+
+def test_one_axis_moves_turns_and_grips_with_f_and_b_alone_in_five_modes():
+    assert ONE_AXIS.functions == ("F", "B") and LAYOUTS["1-axis"] is ONE_AXIS
+    # per mode (B1 presses from translation): what F does, as the other layouts' functions do it
+    same = {0: ("linear", TWO_AXIS, 0, "F"), 1: ("linear", TWO_AXIS, 0, "R"), 2: ("linear", TWO_AXIS, 1, "F"),
+            3: ("angular", THREE_AXIS, 1, "Rr")}
+    for presses, (field, layout, their_presses, theirs) in same.items():
+        for fn, their_fn in (("F", theirs), ("B", {"F": "B", "R": "L", "Rr": "Lr"}[theirs])):
+            np.testing.assert_array_equal(getattr(command_after(ONE_AXIS, presses, fn), field),
+                                          getattr(command_after(layout, their_presses, their_fn), field))
+    assert command_after(ONE_AXIS, 4, "F").finger > 0 > command_after(ONE_AXIS, 4, "B").finger
+    # it cannot tilt the hand, so the scripted user never tries to level it with this layout
+    assert not ONE_AXIS.levels and TWO_AXIS.levels and THREE_AXIS.levels
 
 
 def test_two_axis_b1_steps_forward_through_four_modes_and_b2_back():

@@ -68,8 +68,10 @@ def test_mode_button_chooses_only_among_the_buttons_the_user_has():
         assert mode_button(current, wanted, Controls(TWO_AXIS, ("B1",))) == "B1"
         assert mode_button(current, wanted, Controls(TWO_AXIS, ("B2",))) == "B2"
     assert mode_button(Mode.TRANSLATION, Mode.FINGERS, Controls(THREE_AXIS, ("B1",))) == "B1"
+    # no button is a choice (the modes change automatically, tasks/assist.py); an unknown one is not
+    assert Controls(TWO_AXIS, ()).label == "2-axis, no button"
     with pytest.raises(ValueError):
-        Controls(TWO_AXIS, ())
+        Controls(TWO_AXIS, ("B3",))
 
 
 def test_two_axis_descent_needs_the_height_mode_and_b_goes_down():

@@ -101,8 +101,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     assist = None
     if options:  # sees the arm and the scene's cubes and target, as on the table
-        functions = {cls.function for cls in profile.classes}
-        assistance = Assistance(options, sim.layout, tuple(b for b in BUTTONS if b in functions) or BUTTONS)
+        functions = {cls.function for cls in profile.classes}  # no button: a rest held on refuses a mode
+        assistance = Assistance(options, sim.layout, tuple(b for b in BUTTONS if b in functions))
         task = StackingTask(sim)
         assist = lambda state: assistance.step(task.view(), state, sim)  # noqa: E731
     status, log, displays = StatusLine(), None, []

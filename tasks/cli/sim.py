@@ -90,7 +90,7 @@ def run_check(args: argparse.Namespace) -> int:
     return 0
 
 
-SPEED_UNITS = {"translation": "m/s", "height": "m/s", "wrist": "rad/s", "fingers": "1/s"}
+SPEED_UNITS = {"translation": "m/s", "sideways": "m/s", "height": "m/s", "wrist": "rad/s", "fingers": "1/s"}
 
 
 def sim_check_table(results: list[DirectionResult]) -> str:

@@ -113,10 +113,10 @@ def run_job(job: EpisodeJob, video: Path | None = None, video_speedup: float = 4
 
 def job_assist(job: EpisodeJob, profile) -> frozenset[Assist]:
     """The assistances of a job: as the run says, else as the participant's profile says (the
-    joystick operator: none)."""
+    joystick operator: none, unless the profile's controls have no mode button to press)."""
     if job.assist is not None:
         return job.assist
-    return frozenset() if job.operator == "joystick" else profile_assist(profile)
+    return frozenset() if job.operator == "joystick" and profile_controls(profile).buttons else profile_assist(profile)
 
 
 @contextmanager
