@@ -281,8 +281,10 @@ def candidate_goals(view: View, params: AssistParams, clearance: float | None = 
 
 
 def _needed(error: float, tolerance: float, softness: float) -> float:
-    """Probability that a step with this error is still to be made: 1/2 at the tolerance."""
-    return float(1.0 / (1.0 + math.exp(-(error - tolerance) / softness)))
+    """Probability that a step with this error is still to be made: 1/2 at the tolerance.  The exponent
+    is capped at 700 (exp overflows past ~709; 1/(1 + e^700) ~ 1e-304 is already 0 for any use) for an
+    error far below a small softness (seen: bomi design's candidate with auto-mode, OverflowError)."""
+    return float(1.0 / (1.0 + math.exp(min(-(error - tolerance) / softness, 700.0))))
 
 
 def yaw_offset(hand_yaw: float, cube_yaw: float) -> float:

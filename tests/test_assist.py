@@ -1,5 +1,6 @@
 """The assistance layer: choosing assistances, the time-to-goal model, the goal belief, the
 user's precedence, the metrics of automatic switches, and an episode with automatic mode switching."""
+import math
 import numpy as np
 import pytest
 
@@ -678,3 +679,13 @@ def test_a_user_who_leaves_the_height_mode_to_travel_low_where_a_rise_was_expect
     # 8 cm beside it (beyond the 6 cm learnt) this user too is kept in the height mode to rise first
     arm.mode = Mode.HEIGHT
     assert _descend_and_rest(assist, arm, A1 + [0, -0.08, 0.01], 9.0) == []
+
+
+def test_a_step_far_inside_its_tolerance_is_not_needed_without_overflow():
+    """The logistic of a step's error: 1/2 at the tolerance, the plain formula in range, 0 far inside
+    (an error 1 m below a 1 mm softness once overflowed math.exp inside `bomi design`)."""
+    from tasks.assist import _needed
+
+    assert _needed(0.02, 0.02, 0.005) == 0.5
+    assert _needed(0.03, 0.02, 0.005) == 1.0 / (1.0 + math.exp(-2.0))
+    assert _needed(-1.0, 0.02, 0.001) < 1e-300 and _needed(1.0, 0.02, 0.001) == 1.0
