@@ -1,6 +1,7 @@
 """The assistance layer: choosing assistances, the time-to-goal model, the goal belief, the
 user's precedence, the metrics of automatic switches, and an episode with automatic mode switching."""
 import math
+
 import numpy as np
 import pytest
 
