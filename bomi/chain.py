@@ -436,6 +436,12 @@ class OnlineChain:
             self._neutral[self._slot[node]] = tuple(float(v) for v in offset)
         self._window.reset()
 
+    def forget_decisions(self) -> None:
+        """The window and the majority vote start empty: after a break in the stream (another sitting,
+        perhaps) no sample or label from before it takes part in a decision after it."""
+        self._window.reset()
+        self._vote.reset()
+
     def begin_neutral_calibration(self) -> None:
         """Collect the next ``profile.neutral_samples`` fused samples of every node as the neutral posture."""
         self._calibration = {node: [] for node in self.nodes}

@@ -307,6 +307,11 @@ class MajorityVote:
         self._history: deque[int] = deque(maxlen=length)
         self._counts: dict[int, int] = {}   # of each label in the history
 
+    def reset(self) -> None:
+        """Forget every label (the next decision is voted on itself alone)."""
+        self._history.clear()
+        self._counts.clear()
+
     def push(self, label: int) -> int:
         history, counts = self._history, self._counts
         if history.maxlen == 1:   # vote off: the common case, kept cheap for the stream

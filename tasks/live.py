@@ -557,6 +557,7 @@ class LiveLoop:
         the chain until every node has settled, and the neutral then retaken from the stream."""
         self.gate.node[node].restart(counter)
         self.fusion[node] = NodeFusion(self._calibration[node])
+        self.chain.forget_decisions()
         # the first break says why (a reconnection is then also a gap in the node's frames)
         self.untrusted.setdefault(node, f"node {node} untrusted after {cause}: retaking warm-up and neutral")
         self.streaming, self._neutral, self._recalibrate = False, None, False
@@ -666,6 +667,7 @@ class LiveLoop:
             return False
         if not self.rezero.update(decision.function for decision in decisions):
             return False
+        self.chain.forget_decisions()   # the long press's labels do not vote after the new neutral
         self.chain.begin_neutral_calibration()
         self.summary.neutral = None
         self.summary.rezeros += 1

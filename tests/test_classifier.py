@@ -250,3 +250,12 @@ def test_fitting_refuses_non_finite_features_before_any_step(bad):
     for shrinkage in (None, 0.01):
         with pytest.raises(ValueError, match="NaN or infinite"):
             fit_pipeline(features, labels, shrinkage)
+
+
+def test_a_reset_vote_forgets_every_label():
+    """After four F (1) labels a vote of five outputs 1 for a new label 2, twice; reset, it outputs 2 at once
+    (what the live loop needs after a break in the stream: no label of the old sitting votes)."""
+    vote = MajorityVote(5)
+    assert [vote.push(label) for label in (1, 1, 1, 1, 2, 2)] == [1, 1, 1, 1, 1, 1]
+    vote.reset()
+    assert [vote.push(label) for label in (2, 3)] == [2, 3]

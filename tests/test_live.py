@@ -200,6 +200,9 @@ class ScriptedChain:
     def set_neutral(self, offsets) -> None:
         pass
 
+    def forget_decisions(self) -> None:
+        """The real chain empties its window and vote; the script has neither."""
+
     def push_angles(self, node, angles, gyro) -> Decision | None:
         self.pushed += 1
         return next(self._decisions)

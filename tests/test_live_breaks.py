@@ -99,6 +99,9 @@ class CalibratingChain(ScriptedChain):
     def begin_neutral_calibration(self) -> None:
         self._left, self.calibrations = self.samples, self.calibrations + 1
 
+    def forget_decisions(self) -> None:
+        self.forgotten = getattr(self, "forgotten", 0) + 1
+
     def push_angles(self, node, angles, gyro):
         if self._left:
             self._left -= 1
@@ -128,6 +131,7 @@ def test_a_gap_and_a_counter_jump_each_untrust_the_node_even_with_fixed_neutral_
     # warm-up (SETTLE samples) then the neutral (3 samples) before anything moves
     assert [t.command.linear.any() for t in back] == [False] * (SETTLE + 3 - 1) + [True] * (10 - SETTLE - 3 + 1)
     assert chain.calibrations == 1 and back[SETTLE + 1].neutral is not None and back[SETTLE + 2].hold is None
+    assert chain.forgotten == 1          # no label of the first sitting votes in the second
     after = loop.tick(len(ticks) * DT, [still_frame(100)])                 # 80 counters on: another stream
     assert after.hold == "node 1 untrusted after a packet-counter jump (a step of 81): retaking warm-up and neutral"
     assert not after.command.linear.any() and loop.gate.node[1].fused_samples == 1
