@@ -76,7 +76,7 @@ def test_joystick_layout_is_3_axis_unless_the_profile_says_2_axis(tmp_path):
 @pytest.mark.parametrize("old, new, message", [
     ('function = "F"', 'function = "Up"', "class c1 (head pitch up (+29 deg)): function must be one of F, B, R, L, Rr, Lr, B1, B2 "
                                           "or \"neutral\", got 'Up'"),
-    ('layout = "3-axis"', 'layout = "4-axis"', "joystick: layout must be one of '3-axis', '2-axis', got '4-axis'"),
+    ('layout = "3-axis"', 'layout = "4-axis"', "joystick: layout must be one of '3-axis', '2-axis', '1-axis', got '4-axis'"),
 ])
 def test_a_profile_for_the_arm_names_only_the_arms_functions_and_layouts(tmp_path, old, new, message):
     """The chain passes function names through (bomi's loader accepts them); the arm's vocabulary checks them."""
