@@ -622,7 +622,8 @@ class LiveLoop:
                 dropped.append((decision.sample_index, reason))
         if frames:
             self.watchdog.frames_arrived(now)
-        if self.safety.update(key_events):
+        if self.safety.update(key_events):   # the safety key's re-zero: as the person's gesture
+            chain.forget_decisions()
             chain.begin_neutral_calibration()
             summary.neutral = None
         # judged ahead (the next tick's time, plus half a period of scheduling slack): the arm is at rest
