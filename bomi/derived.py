@@ -2,9 +2,10 @@
 
 What the recording holds decides: its nodes (those with angles in every recording), the feature
 vector (FV3 when every such node has its gyroscope, else FV1), its labels (c0 is the neutral
-posture; the motions c1, c2, ... take, in label order, the functions of the joystick layout their
-number allows, ``derived_layout``: the stacking task needs translation, wrist and fingers),
-and the node that carries each motion (the one whose mean angle change from neutral is largest
+posture; the motions c1, c2, ... take the functions of the joystick layout their number allows,
+``derived_layout``: the stacking task needs translation, wrist and fingers; the mode buttons go to
+the motions no other motion passes near on its way from the neutral posture, ``button_motions``,
+the directions to the rest in label order), and the node that carries each motion (the one whose mean angle change from neutral is largest
 over the class's samples). Classifier settings are left to the person's own data
 (``shrinkage = "select"``, ``rejection_threshold = "select"``): the plain setting unless the
 cross-validation on the training recording earns an extra its place, the extras being LDA
@@ -13,7 +14,7 @@ multiple-amplitude training), and rejection (``bomi.chain.select_settings``, doc
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -34,6 +35,7 @@ AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
 # each layout's directions, the richest first
 _DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L"), ONE_AXIS: ("F", "B")}
 _WORDS = {6: "six", 4: "four", 2: "two"}   # their numbers of directions, as the reasons say them
+_BUTTON_NAMES = ("B1", "B2")
 
 
 @dataclass(frozen=True)
@@ -52,7 +54,8 @@ def derived_layout(motions: int) -> DerivedLayout:
     richest layout whose directions the motions cover (3-axis: six, 2-axis: four, 1-axis: F/B), the
     motions left over being the mode buttons (B1 forward, B2 back); with none left, the modes change
     by themselves (automatic mode switching, tasks/assist.py: the user rests and waits for them).
-    The 3-axis layout only with a button: six motions take the 2-axis layout and both buttons."""
+    The 3-axis layout only with a button: six motions take the 2-axis layout and both buttons.
+    ``functions``: the directions, then the buttons (``assigned_functions`` gives them to motions)."""
     richer = None   # the next richer layout, whose directions and a button the motions do not cover
     for layout, directions in _DIRECTIONS.items():
         spare = motions - len(directions)
@@ -68,6 +71,66 @@ def derived_layout(motions: int) -> DerivedLayout:
     return DerivedLayout(layout, directions, (AUTO_MODE,),
                          f"{motions} motions: {own}, no class left for a mode button; "
                          "the modes are switched automatically (--assist auto-mode)")
+
+
+def path_clearance(postures: Mapping[int, np.ndarray]) -> dict[int, float]:
+    """Per motion label: how far its posture lies from the nearest straight path from the neutral
+    posture (zero) to another motion's posture, all nodes and angles together, in the postures' units
+    (``whitened``: within-class standard deviations). On the way to a motion the body passes every
+    posture near that path: one with little clearance is decided there for a moment, and as a mode
+    button it would change the mode the person is using."""
+    flat = {label: np.ravel(np.asarray(p, dtype=float)) for label, p in postures.items()}
+    clearance = {}
+    for label, p in flat.items():
+        distances = [np.inf]
+        for other, q in flat.items():
+            if other != label and q @ q > 0:
+                along = min(max(float(p @ q) / float(q @ q), 0.0), 1.0)
+                distances.append(float(np.linalg.norm(p - along * q)))
+        clearance[label] = min(distances)
+    return clearance
+
+
+def within_class_covariance(recordings: Sequence[Recording], nodes: Sequence[int]) -> np.ndarray:
+    """The pooled covariance of the angles (nodes x 3 together, deg^2) around each class's mean in each
+    recording: how far a posture varies while held, as the LDA sees it (one covariance for all classes)."""
+    deviations = []
+    for rec in recordings:
+        angles = np.hstack([rec.nodes[i].angles for i in nodes])
+        for label in np.unique(rec.labels):
+            held = angles[rec.labels == label]
+            deviations.append(held - held.mean(axis=0))
+    return np.cov(np.vstack(deviations), rowvar=False, bias=True).reshape(3 * len(nodes), 3 * len(nodes))
+
+
+WHITENING_RIDGE = 1e-3   # share of the mean variance added to every direction: a direction that never varies is not infinitely far
+
+
+def whitened(postures: Mapping[int, np.ndarray], covariance: np.ndarray) -> dict[int, np.ndarray]:
+    """The postures (flattened) in units of the within-class spread: distances become how many standard
+    deviations of a held posture apart they are, whatever node or angle they lie along."""
+    ridge = WHITENING_RIDGE * float(np.trace(covariance)) / len(covariance) + 1e-9
+    values, vectors = np.linalg.eigh(covariance + ridge * np.eye(len(covariance)))
+    inverse_root = vectors @ np.diag(values ** -0.5) @ vectors.T
+    return {label: inverse_root @ np.ravel(p) for label, p in postures.items()}
+
+
+def button_motions(postures: Mapping[int, np.ndarray], count: int) -> tuple[int, ...]:
+    """The ``count`` motions with the most path clearance (``path_clearance``), the most first (B1
+    then B2); equal clearances in label order."""
+    clearance = path_clearance(postures)
+    return tuple(sorted(clearance, key=lambda label: (-clearance[label], label))[:count])
+
+
+def assigned_functions(postures: Mapping[int, np.ndarray], layout: DerivedLayout) -> dict[int, str]:
+    """Per motion label (the keys of ``postures``, label -> mean posture from the neutral one): its
+    function in ``layout``: the buttons to the motions of most path clearance, the directions to the
+    others in label order."""
+    roles = list(layout.functions)
+    buttons = [f for f in roles if f in _BUTTON_NAMES]
+    pressing = button_motions(postures, len(buttons))
+    moving = [label for label in sorted(postures) if label not in pressing]
+    return {**dict(zip(moving, [f for f in roles if f not in _BUTTON_NAMES])), **dict(zip(pressing, buttons))}
 
 
 _BASE_STATION_FIRST_IMU = 10   # node index i is base-station id 10 + i - 1 (hardware.md)
@@ -93,16 +156,20 @@ def derive_profile(recordings: Sequence[Recording]) -> Profile:
             raise BomiError(f"{rec.source}: {len(rec)} samples, fewer than the {DEFAULT_NEUTRAL_SAMPLES} of the "
                             "neutral-offset calibration")
     gyro = all(rec.nodes[i].gyro is not None for rec in recordings for i in nodes)
-    carriers = _carrying_nodes(recordings, nodes, motions)
+    postures = motion_postures(recordings, nodes, motions)
+    spread = whitened(postures, within_class_covariance(recordings, nodes))
     layout = derived_layout(len(motions))
+    functions = assigned_functions(spread, layout)
     classes = (ClassConfig(NEUTRAL_LABEL, "c0", NEUTRAL_FUNCTION, None),) + tuple(
-        ClassConfig(label, f"c{label}", function, carriers[label]) for label, function in zip(motions, layout.functions))
+        ClassConfig(label, f"c{label}", functions[label], nodes[int(np.argmax(np.linalg.norm(postures[label], axis=1)))])
+        for label in motions)
     calibrations = {i: node_calibration(first, i) for i in nodes}
     mounted = [f"node {i} mounting {calibrations[i].mounting} (the one its own angle columns agree with)"
                for i in nodes if calibrations[i] != NodeCalibration.default_for(i)]
     return Profile(
         name="derived", description=f"derived from the recording: its nodes, its labels, generic class names; "
-                                    + "".join(f"{m}; " for m in mounted) + f"layout {layout.layout}: {layout.reason}",
+                                    + "".join(f"{m}; " for m in mounted) + f"layout {layout.layout}: {layout.reason}"
+                                    + _buttons_reason(spread, functions),
         joystick_layout=layout.layout, assist=layout.assist,
         nodes=tuple(NodeConfig(i, _BASE_STATION_FIRST_IMU + i - 1, f"node {i}", calibrations[i]) for i in nodes),
         classes=classes, spec=FeatureSpec("FV3" if gyro else "FV1", tuple(nodes)), shrinkage=SELECT,
@@ -128,18 +195,28 @@ def node_calibration(rec: Recording, node: int) -> NodeCalibration:
     return replace(default, mounting=mounting) if left.max() <= MOUNTING_AGREE_DEG else default
 
 
-def _carrying_nodes(recordings: Sequence[Recording], nodes: Sequence[int], motions: Sequence[int]) -> dict[int, int]:
-    """Per motion label: the node whose mean neutral-subtracted angles over the class are largest."""
-    size = {}
+def motion_postures(recordings: Sequence[Recording], nodes: Sequence[int], motions: Sequence[int]) -> dict[int, np.ndarray]:
+    """Per motion label: its mean neutral-subtracted angles over the recordings' samples of the class
+    (nodes x 3, deg; zeros for a class with no sample). Its carrying node is the row of largest norm."""
+    postures = {}
     for label in motions:
-        means = []
+        rows = []
         for i in nodes:
-            changes = [rec.nodes[i].angles[rec.labels == label] - neutral_offsets(rec.nodes[i].angles, DEFAULT_NEUTRAL_SAMPLES)
-                       for rec in recordings]
-            changes = np.concatenate(changes)
-            means.append(float(np.linalg.norm(changes.mean(axis=0))) if len(changes) else 0.0)
-        size[label] = nodes[int(np.argmax(means))]
-    return size
+            changes = np.concatenate([rec.nodes[i].angles[rec.labels == label]
+                                      - neutral_offsets(rec.nodes[i].angles, DEFAULT_NEUTRAL_SAMPLES)
+                                      for rec in recordings])
+            rows.append(changes.mean(axis=0) if len(changes) else np.zeros(3))
+        postures[label] = np.array(rows)
+    return postures
+
+
+def _buttons_reason(postures: Mapping[int, np.ndarray], functions: Mapping[int, str]) -> str:
+    pressing = sorted((f, label) for label, f in functions.items() if f in _BUTTON_NAMES)
+    if not pressing:
+        return ""
+    clearance = path_clearance(postures)
+    return ("; buttons on the motions farthest from the others' paths from neutral, in within-class standard "
+            "deviations (" + ", ".join(f"{f} c{label} {clearance[label]:.1f}" for f, label in pressing) + ")")
 
 
 def describe(profile: Profile) -> str:
@@ -151,6 +228,7 @@ def describe(profile: Profile) -> str:
     layout = derived_layout(sum(c.function != NEUTRAL_FUNCTION for c in profile.classes))
     return (f"no --profile: {profile.source}: node(s) {list(profile.node_indices)}, {kind} "
             f"({'angles + GYRO' if kind != 'FV1' else 'angles: the recording has no GYRO'}), classes {classes}; "
-            f"layout {layout.layout}{' + ' + ', '.join(layout.assist) if layout.assist else ''} ({layout.reason}); "
+            f"layout {layout.layout}{' + ' + ', '.join(layout.assist) if layout.assist else ''} "
+            f"({profile.description.split(f'layout {layout.layout}: ', 1)[-1]}); "
             f"classifier plain unless the cross-validation on the training recording earns an extra its place "
             f"(shrinkage, motions also trained at {scales} of their size, rejection)")

@@ -3,12 +3,16 @@ arm's functions, each run by their twin on development seeds, ranked by success 
 
 The candidates (kept few, so that a handful of seeds can tell them apart):
 
-- **mapping**: the motions in label order (what `bomi train` / `bomi twin` derive), or *by opposites*:
-  the two motions most nearly opposite (by the twin's postures, the cosine of their angle) drive
-  the first pair of opposite directions (F/B), the two most nearly opposite of the rest the next
-  (R/L), then Rr/Lr in the 3-axis layout; the remaining motions are the buttons, in label order.
-  Opposite functions on opposite motions put the confusions a classifier is prone to (neighbouring
-  postures) between functions that are not each other's undoing.
+- **buttons**: in every candidate the twin's profile's own (derived from the person's recording:
+  the motions farthest from the other motions' paths from neutral, ``bomi.derived.button_motions``):
+  a motion passed on the way to another is decided there for a moment, and as a button it would
+  change the mode.
+- **mapping** of the other motions onto the directions: in label order (what `bomi train` / `bomi
+  twin` derive), or *by opposites*: the two motions most nearly opposite (the cosine of their
+  postures' angle) drive the first pair of opposite directions (F/B), the two most nearly opposite
+  of the rest the next (R/L), then Rr/Lr in the 3-axis layout. Opposite functions on opposite
+  motions put the confusions a classifier is prone to (neighbouring postures) between functions
+  that are not each other's undoing.
 - **assistance**: the buttons alone, or the buttons with automatic mode switching (``auto-mode``).
 - **layout**: the derived one (``bomi.derived.derived_layout``: the 3-axis layout from seven motions,
   the 2-axis one from four, the 1-axis one below). The 2-axis layout for seven or eight motions is
@@ -72,23 +76,27 @@ def opposite_order(postures: Mapping[int, np.ndarray], pairs: int) -> list[int]:
     return order + left
 
 
-def _functions(layout: str, order: Sequence[int]) -> tuple[tuple[int, str], ...]:
+def _functions(layout: str, order: Sequence[int], buttons: Sequence[int]) -> tuple[tuple[int, str], ...]:
     directions = [f for pair in _DIRECTION_PAIRS[layout] for f in pair]
-    names = directions + list(_BUTTONS[:len(order) - len(directions)])
-    return tuple(sorted(zip(order, names)))
+    return tuple(sorted([*zip(order, directions), *zip(buttons, _BUTTONS)]))
 
 
-def candidates(postures: Mapping[int, np.ndarray]) -> list[Candidate]:
+def candidates(postures: Mapping[int, np.ndarray], buttons: Sequence[int] = ()) -> list[Candidate]:
     """The candidates for a person whose motions have these postures (label -> posture), the derived
-    default first. No motion left for a button (two or four motions): the derived layout with automatic
-    mode switching only."""
+    default first: ``buttons`` (the motions of B1, B2 in the person's profile; absent: the first motions
+    after the directions in label order) press the buttons, the other motions drive the directions in
+    label order or by opposites. No motion left for a button (two or four motions): the derived
+    layout with automatic mode switching only."""
     labels = sorted(postures)
     derived = derived_layout(len(labels))
     if AUTO_MODE in derived.assist:
         return [Candidate(derived.layout, LABEL_ORDER, tuple(zip(labels, derived.functions)), derived.assist)]
     layout = derived.layout
-    orders = {LABEL_ORDER: labels, OPPOSITES: opposite_order(postures, len(_DIRECTION_PAIRS[layout]))}
-    out = [Candidate(layout, mapping, _functions(layout, order), assist)
+    count = sum(f in _BUTTONS for f in derived.functions)
+    buttons = list(buttons) if len(buttons) == count else labels[len(labels) - count:]
+    moving = {label: p for label, p in postures.items() if label not in buttons}
+    orders = {LABEL_ORDER: sorted(moving), OPPOSITES: opposite_order(moving, len(_DIRECTION_PAIRS[layout]))}
+    out = [Candidate(layout, mapping, _functions(layout, order, buttons), assist)
            for mapping, order in orders.items() for assist in ((), (AUTO_MODE,))]
     unique: dict[tuple, Candidate] = {}
     for candidate in out:   # label order and opposites may give the same functions: the first is kept

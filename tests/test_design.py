@@ -27,12 +27,15 @@ def test_by_opposites_pairs_the_most_nearly_opposite_motions_first():
 
 
 def test_six_motions_give_four_candidates_the_derived_default_first():
-    options = candidates(POSTURES)
+    options = candidates(POSTURES, [3, 5])   # the profile's B1 and B2 motions
     assert [(c.layout, c.mapping, c.assist) for c in options] == [
         ("2-axis", LABEL_ORDER, ()), ("2-axis", LABEL_ORDER, ("auto-mode",)),
         ("2-axis", OPPOSITES, ()), ("2-axis", OPPOSITES, ("auto-mode",))]
-    assert dict(options[0].functions) == {1: "F", 2: "B", 3: "R", 4: "L", 5: "B1", 6: "B2"}
-    assert dict(options[2].functions) == {2: "F", 4: "B", 5: "R", 6: "L", 1: "B1", 3: "B2"}
+    assert dict(options[0].functions) == {1: "F", 2: "B", 4: "R", 6: "L", 3: "B1", 5: "B2"}
+    # of the others c2/c4 most nearly opposite (-0.9984), then c1, c6
+    assert dict(options[2].functions) == {2: "F", 4: "B", 1: "R", 6: "L", 3: "B1", 5: "B2"}
+    # a profile without its buttons named: the motions after the directions press them; c2/c4, then c1/c3
+    assert dict(candidates(POSTURES)[2].functions) == {2: "F", 4: "B", 1: "R", 3: "L", 5: "B1", 6: "B2"}
     # each is a profile the stacking user can drive
     base = derive_profile([motions(6)])
     for option in options:
@@ -42,17 +45,17 @@ def test_six_motions_give_four_candidates_the_derived_default_first():
 
 
 def test_where_both_mappings_coincide_the_candidate_is_run_once():
-    # label order already pairs opposites: c1/c2 and c3/c4 opposite, c5 alone
+    # label order already pairs opposites: c1/c2 and c3/c4 opposite, c5 the button
     same = {1: posture(20, 0), 2: posture(-20, 0), 3: posture(0, 20), 4: posture(0, -20), 5: posture(10, 10)}
-    assert [(c.mapping, c.assist) for c in candidates(same)] == [(LABEL_ORDER, ()), (LABEL_ORDER, ("auto-mode",))]
+    assert [(c.mapping, c.assist) for c in candidates(same, [5])] == [(LABEL_ORDER, ()), (LABEL_ORDER, ("auto-mode",))]
 
 
 def test_three_motions_take_the_one_axis_layout_and_b1_four_no_button_and_auto_mode_alone():
-    three = candidates({1: posture(20, 0), 2: posture(0, 20), 3: posture(-20, 1)})   # c1/c3 opposite
+    # c2 the button: the two left are F/B in label order and by opposites alike (one candidate mapping)
+    three = candidates({1: posture(20, 0), 2: posture(0, 20), 3: posture(-20, 1)}, [2])
     assert [(c.layout, c.mapping, c.assist) for c in three] == [
-        ("1-axis", LABEL_ORDER, ()), ("1-axis", LABEL_ORDER, ("auto-mode",)),
-        ("1-axis", OPPOSITES, ()), ("1-axis", OPPOSITES, ("auto-mode",))]
-    assert dict(three[2].functions) == {1: "F", 3: "B", 2: "B1"} and three[0].name == "1-axis, label order, buttons"
+        ("1-axis", LABEL_ORDER, ()), ("1-axis", LABEL_ORDER, ("auto-mode",))]
+    assert dict(three[0].functions) == {1: "F", 3: "B", 2: "B1"} and three[0].name == "1-axis, label order, buttons"
     base = derive_profile([motions(3)])
     assert all(profile_controls(c.profile(base)).buttons == ("B1",) for c in three)
     (four,) = candidates({k: POSTURES[k] for k in (1, 2, 3, 4)})

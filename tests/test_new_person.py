@@ -61,8 +61,13 @@ def test_one_node_recording_without_profile(tmp_path, capsys, head_files, p1_day
     assert main(["train", str(day1), "--out", str(model_path), "--save-profile", str(profile_path), "--verbose"]) == 0
     printed = capsys.readouterr().out
     assert f"{day1}: ignored 3 variable(s): Commands, Gain, Who" in printed
-    assert (f"no --profile: derived from {day1}: node(s) [1], FV3 (angles + GYRO), classes c0 neutral, c1 F (node 1), "
-            "c2 B (node 1), c3 R (node 1), c4 L (node 1), c5 B1 (node 1), c6 B2 (node 1); layout 2-axis (6 motions") in printed
+    assert (f"no --profile: derived from {day1}: node(s) [1], FV3 (angles + GYRO), classes c0 neutral, c1 B1 (node 1), "
+            "c2 F (node 1), c3 B2 (node 1), c4 B (node 1), c5 R (node 1), c6 L (node 1); layout 2-axis (6 motions") in printed
+    # P1's head on day 1 (held spread 1.28, 2.28, 2.37 deg in pitch, roll, yaw): c1 and c3 are the farthest
+    # from every other motion's path from neutral (22.2 and 21.1 standard deviations); the small yaw turns
+    # c5, c6 the nearest (11.8, 10.2): B1 on c1, B2 on c3
+    assert ("buttons on the motions farthest from the others' paths from neutral, in within-class standard "
+            "deviations (B1 c1 22.2, B2 c3 21.1)") in printed
     assert "settings chosen on the training recording: " in printed
     assert "how good is this classifier: cross-validated accuracy " in printed
     model = load_model(model_path)
@@ -113,7 +118,8 @@ def test_angles_only_recording_gets_fv1(p1_days):
     # the node that carries each class is the one that moves: c7 (right shoulder) is node 2 on P1
     three = derive_profile([p1_days[1]])
     assert three.class_nodes == {1: 1, 2: 1, 3: 1, 4: 1, 5: 1, 6: 1, 7: 2, 8: 3}
-    assert [c.function for c in three.classes] == ["neutral", "F", "B", "R", "L", "Rr", "Lr", "B1", "B2"]
+    # buttons: the left shoulder (c8, node 3: no head motion passes near it) and the head's c1
+    assert [c.function for c in three.classes] == ["neutral", "B2", "F", "B", "R", "L", "Rr", "Lr", "B1"]
 
 
 @pytest.mark.parametrize("labels, message", [

@@ -37,7 +37,9 @@ def design_command(args: argparse.Namespace) -> int:
     engine = engine_from_args(args)
     params = load_participant(args.twin)
     base = arm_profile(params.profile)
-    options = candidates({label: motion.posture_deg for label, motion in params.classes.items()})
+    pressing = {cls.function: cls.label for cls in base.classes}
+    options = candidates({label: motion.posture_deg for label, motion in params.classes.items()},
+                         [pressing[b] for b in ("B1", "B2") if b in pressing])
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     print(f"{params.name}: {len(params.classes)} motions; {len(options)} candidate(s) x {len(seeds)} seed(s) "
           f"({seeds.start}-{seeds.stop - 1}), the derived default first:")
