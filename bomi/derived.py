@@ -5,8 +5,8 @@ vector (FV3 when every such node has its gyroscope, else FV1), its labels (c0 is
 posture; the motions c1, c2, ... take the functions of the joystick layout their number allows,
 ``derived_layout``: the stacking task needs translation, wrist and fingers; the mode buttons go to
 the motions no other motion passes near on its way from the neutral posture, ``button_motions``,
-the directions to the rest in label order), and the node that carries each motion (the one whose mean angle change from neutral is largest
-over the class's samples). Classifier settings are left to the person's own data
+the directions to the rest in label order), and the node that carries each motion (the one whose
+mean angle change from neutral is largest over the class's samples). Classifier settings are left to the person's own data
 (``shrinkage = "select"``, ``rejection_threshold = "select"``): the plain setting unless the
 cross-validation on the training recording earns an extra its place, the extras being LDA
 shrinkage, training also on every motion at 3/4 and 1/2 of its recorded size (the paper's
@@ -35,7 +35,7 @@ AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
 # each layout's directions, the richest first
 _DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L"), ONE_AXIS: ("F", "B")}
 _WORDS = {6: "six", 4: "four", 2: "two"}   # their numbers of directions, as the reasons say them
-_BUTTON_NAMES = ("B1", "B2")
+BUTTON_NAMES = ("B1", "B2")   # the mode buttons (sim/joystick.py BUTTONS; bomi/ does not import sim/)
 
 
 @dataclass(frozen=True)
@@ -127,10 +127,10 @@ def assigned_functions(postures: Mapping[int, np.ndarray], layout: DerivedLayout
     function in ``layout``: the buttons to the motions of most path clearance, the directions to the
     others in label order."""
     roles = list(layout.functions)
-    buttons = [f for f in roles if f in _BUTTON_NAMES]
+    buttons = [f for f in roles if f in BUTTON_NAMES]
     pressing = button_motions(postures, len(buttons))
     moving = [label for label in sorted(postures) if label not in pressing]
-    return {**dict(zip(moving, [f for f in roles if f not in _BUTTON_NAMES])), **dict(zip(pressing, buttons))}
+    return {**dict(zip(moving, [f for f in roles if f not in BUTTON_NAMES])), **dict(zip(pressing, buttons))}
 
 
 _BASE_STATION_FIRST_IMU = 10   # node index i is base-station id 10 + i - 1 (hardware.md)
@@ -211,7 +211,7 @@ def motion_postures(recordings: Sequence[Recording], nodes: Sequence[int], motio
 
 
 def _buttons_reason(postures: Mapping[int, np.ndarray], functions: Mapping[int, str]) -> str:
-    pressing = sorted((f, label) for label, f in functions.items() if f in _BUTTON_NAMES)
+    pressing = sorted((f, label) for label, f in functions.items() if f in BUTTON_NAMES)
     if not pressing:
         return ""
     clearance = path_clearance(postures)

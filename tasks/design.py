@@ -29,13 +29,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bomi.derived import AUTO_MODE, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
+from bomi.derived import AUTO_MODE, BUTTON_NAMES, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
 from bomi.profiles import Profile
 from tasks import metrics
 
 _DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
                     ONE_AXIS: (("F", "B"),)}
-_BUTTONS = ("B1", "B2")
 LABEL_ORDER, OPPOSITES = "label order", "by opposites"
 
 
@@ -51,7 +50,7 @@ class Candidate:
     @property
     def name(self) -> str:
         assisted = " + auto-mode" if AUTO_MODE in self.assist else ""
-        buttons = "buttons" if any(function in _BUTTONS for _, function in self.functions) else "no button"
+        buttons = "buttons" if any(function in BUTTON_NAMES for _, function in self.functions) else "no button"
         return f"{self.layout}, {self.mapping}, {buttons}{assisted}"
 
     def profile(self, base: Profile) -> Profile:
@@ -78,7 +77,7 @@ def opposite_order(postures: Mapping[int, np.ndarray], pairs: int) -> list[int]:
 
 def _functions(layout: str, order: Sequence[int], buttons: Sequence[int]) -> tuple[tuple[int, str], ...]:
     directions = [f for pair in _DIRECTION_PAIRS[layout] for f in pair]
-    return tuple(sorted([*zip(order, directions), *zip(buttons, _BUTTONS)]))
+    return tuple(sorted([*zip(order, directions), *zip(buttons, BUTTON_NAMES)]))
 
 
 def candidates(postures: Mapping[int, np.ndarray], buttons: Sequence[int] = ()) -> list[Candidate]:
@@ -92,7 +91,7 @@ def candidates(postures: Mapping[int, np.ndarray], buttons: Sequence[int] = ()) 
     if AUTO_MODE in derived.assist:
         return [Candidate(derived.layout, LABEL_ORDER, tuple(zip(labels, derived.functions)), derived.assist)]
     layout = derived.layout
-    count = sum(f in _BUTTONS for f in derived.functions)
+    count = sum(f in BUTTON_NAMES for f in derived.functions)
     buttons = list(buttons) if len(buttons) == count else labels[len(labels) - count:]
     moving = {label: p for label, p in postures.items() if label not in buttons}
     orders = {LABEL_ORDER: sorted(moving), OPPOSITES: opposite_order(moving, len(_DIRECTION_PAIRS[layout]))}
