@@ -34,6 +34,7 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from bomi.derived import BUTTON_NAMES  # noqa: E402
 from bomi.recording import write_logger_mat  # noqa: E402
 from tasks.metrics import success_ci95  # noqa: E402
 from tasks.participants.population import draw_person, one_file  # noqa: E402
@@ -60,7 +61,7 @@ def bomi(code: Path, *argv: str) -> str:
 def buttons(profile: Path) -> str:
     """The profile's mode buttons as 'B1 c3, B2 c5' (or 'auto-mode')."""
     classes = tomllib.loads(profile.read_text())["classes"]
-    pressed = [f"{c['function']} {c['name']}" for c in classes if c["function"] in ("B1", "B2")]
+    pressed = [f"{c['function']} {c['name']}" for c in classes if c["function"] in BUTTON_NAMES]
     return ", ".join(sorted(pressed)) or "auto-mode"
 
 
