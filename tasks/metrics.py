@@ -181,18 +181,21 @@ def wrong_goal_switches(t: np.ndarray, mode: list | np.ndarray, automatic_ticks:
     return wrong
 
 
-def cube_drops(cube_z: np.ndarray, touching: np.ndarray, fall_m: float = 0.02, horizon: int = 60) -> int:
-    """Times a cube left the fingers and then fell more than ``fall_m`` within ``horizon`` ticks.
+def cube_drops(cube_z: np.ndarray, touching: np.ndarray, fall_m: float = 0.02) -> int:
+    """Times a cube left the fingers and then fell more than ``fall_m`` before they touched it again.
 
     ``cube_z`` and ``touching`` are (ticks, cubes).  A cube set down on its support falls only
-    the release gap, so a placement is not a drop.
+    the release gap, so a placement is not a drop; a stack that slides off seconds after the
+    release is one (the whole untouched time counts, not a fixed horizon).
     """
     cube_z, touching = np.asarray(cube_z, dtype=float), np.asarray(touching, dtype=bool)
     drops = 0
     for k in range(cube_z.shape[1]):
+        touched = np.flatnonzero(touching[:, k])
         for release in np.flatnonzero(touching[:-1, k] & ~touching[1:, k]) + 1:
-            after = cube_z[release:release + horizon, k]
-            drops += int(cube_z[release, k] - after.min() > fall_m)
+            later = touched[touched > release]
+            untouched = cube_z[release:later[0] if later.size else len(cube_z), k]
+            drops += int(cube_z[release, k] - untouched.min() > fall_m)
     return drops
 
 

@@ -81,6 +81,19 @@ def test_cube_drops_tell_a_fall_from_a_placement():
     assert metrics.cube_drops(z, touching) == 1
 
 
+def test_cube_drops_count_a_stack_that_slides_off_long_after_the_release():
+    """P17406 at seed 17404: cube 2 let go on the stack at 7.9 cm, sliding off 4 s later (240 ticks at
+    60 Hz) to the table; picked up and let go again on the table: one drop, not two, and not none."""
+    z = np.full((1000, 2), 0.025)
+    touching = np.zeros((1000, 2), bool)
+    z[:100, 1], touching[:100, 1] = 0.079, True         # held on the stack, let go at tick 100
+    z[100:340, 1] = 0.076                               # rests on cube 1 for 4 s
+    z[340:400, 1] = np.linspace(0.076, 0.025, 60)       # slides off to the table
+    touching[600:700, 1] = True                         # picked up again (the window ends at the touch)
+    z[600:700, 1] = 0.029                               # and let go 4 mm up: a placement
+    assert metrics.cube_drops(z, touching) == 1  # by hand: falls of 5.4 cm, then 0.4 cm
+
+
 def test_accuracy_over_all_decisions_excuses_nothing():
     # wrong at 1, 3, 4, 6, 9, 10: 6 of 12
     assert metrics.accuracy_all_decisions(INTENDED, DECIDED) == pytest.approx(6 / 12)
