@@ -34,6 +34,8 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from new_people_task import bomi  # noqa: E402  (this folder: the same bomi command runner)
+
 from bomi.derived import BUTTON_NAMES  # noqa: E402
 from bomi.recording import write_logger_mat  # noqa: E402
 from tasks.metrics import success_ci95  # noqa: E402
@@ -48,14 +50,6 @@ def people_range(text: str) -> list[int]:
         first, last = (int(part) for part in text.split("-"))
         return list(range(first, last + 1))
     return [int(part) for part in text.split(",")]
-
-
-def bomi(code: Path, *argv: str) -> str:
-    """A bomi command run with the code of the checkout ``code``; a failure stops the run with its stderr."""
-    ran = subprocess.run([sys.executable, "-m", "tasks.cli", *argv], capture_output=True, text=True, cwd=code)
-    if ran.returncode != 0:
-        raise SystemExit(f"bomi {' '.join(argv)}: exit {ran.returncode}: {ran.stderr.strip().splitlines()[-1:]}")
-    return ran.stdout
 
 
 def buttons(profile: Path) -> str:
@@ -76,14 +70,14 @@ def run(args) -> int:
             recording = work / f"p{seed}.mat"
             write_logger_mat(recording, one_file(draw_person(seed)))
             twin = work / f"p{seed}_twin.toml"
-            bomi(code, "twin", str(recording), "--out", str(twin), "--no-check")
+            bomi("twin", str(recording), "--out", str(twin), "--no-check", code=code)
             twins.append(str(twin))
             layout[seed] = buttons(work / f"p{seed}_twin.profile.toml")
         out = work / "episodes.json"
         print(f"benchmark: {len(twins)} people x {args.seeds} seeds from {args.first_seed}", flush=True)
-        bomi(code, "benchmark", "--participants", ",".join(twins), "--operators", "bomi", "--seeds", str(args.seeds),
+        bomi("benchmark", "--participants", ",".join(twins), "--operators", "bomi", "--seeds", str(args.seeds),
              "--first-seed", str(args.first_seed), "--jobs", str(args.jobs), "--json", str(out),
-             *(["--recovery", args.recovery] if args.recovery else []))
+             *(["--recovery", args.recovery] if args.recovery else []), code=code)
         episodes = json.loads(out.read_text())["episodes"]
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=code).stdout.strip()
     record = {"argv": sys.argv[1:], "commit": commit, "minutes": (time.monotonic() - start) / 60, "people": {

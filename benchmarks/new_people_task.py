@@ -46,9 +46,10 @@ from tasks.participants.population import draw_person, one_file  # noqa: E402
 RESULTS = ROOT / "benchmarks" / "results"
 
 
-def bomi(*argv: str) -> str:
-    """A bomi command (the installed entry point's module), its stdout; a failure stops the run with its stderr."""
-    ran = subprocess.run([sys.executable, "-m", "tasks.cli", *argv], capture_output=True, text=True, cwd=ROOT)
+def bomi(*argv: str, code: Path = ROOT) -> str:
+    """A bomi command (the installed entry point's module) with the code of the checkout ``code``, its stdout;
+    a failure stops the run with its stderr."""
+    ran = subprocess.run([sys.executable, "-m", "tasks.cli", *argv], capture_output=True, text=True, cwd=code)
     if ran.returncode != 0:
         raise SystemExit(f"bomi {' '.join(argv)}: exit {ran.returncode}: {ran.stderr.strip().splitlines()[-1:]}")
     return ran.stdout
