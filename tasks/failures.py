@@ -6,7 +6,8 @@ hand to the cube reached for; the carried cube to its place at B) at a new best 
 An episode's *stuck period* is its longest span without progress; its mechanism is the first of
 these rules that holds over that span (``Rules``; docs/task.md justifies each threshold):
 
-1. cube lost: a cube knocked off the table, or dropped during the span (or just before it);
+1. cube lost: a cube knocked off the table, or dropped during the span, just before it, or (when the
+   span repeats a phase done before, e.g. a stack undone on release) since that phase's first run;
 2. arm at a limit: the stick commanded the hand to move but it did not (IK, a joint or a wall);
 3. classifier stuck: a long run of decisions read as neutral while a motion was intended;
 4. mode-switch storm: the mode switched far more often than a working episode switches it;
@@ -68,7 +69,7 @@ class StuckPeriod:
     start_s: float
     end_s: float
     phase: str  # the task phase the span started in
-    drops: int  # cube drops in the span (or just before it)
+    drops: int  # cube drops in the span, just before it, or since its phase's first run (a repeated phase)
     blocked_s: float  # ticks the stick commanded a hand move that did not happen
     blocked_share: float | None  # of the span's commanded ticks (None: nothing commanded)
     hand_pos: tuple[float, float, float]  # where the hand was at the span's end (m)
@@ -186,8 +187,9 @@ def stuck_period(log: "EpisodeLog", rules: Rules = Rules()) -> StuckPeriod | Non
     dt = float(t[1] - t[0])
     a, b = longest_gap(progress_ticks(log.goals, log.hand_pos, log.cube_pos, log.target_pos, rules.progress_m), n)
     start_s, end_s = float(t[a]), float(t[b - 1]) + dt
-    phase = next((p for s, e, p in metrics.task_phases(log.goals) if s <= a < e), "task")
-    before = max(0, a - int(round(rules.drop_before_s / dt)))
+    runs = metrics.task_phases(log.goals)
+    phase = next((p for s, e, p in runs if s <= a < e), "task")
+    before = drop_window_start(runs, phase, a, int(round(rules.drop_before_s / dt)))
     drops = metrics.cube_drops(log.cube_pos[before:b, :, 2], log.touching[before:b])
     commanded, blocked = (blocked_ticks(log.hand_pos[a:b + 1], log.commanded[a:b + 1], dt, rules.blocked_ratio)
                           if log.commanded is not None else (np.zeros(0, bool), np.zeros(0, bool)))
@@ -205,6 +207,15 @@ def stuck_period(log: "EpisodeLog", rules: Rules = Rules()) -> StuckPeriod | Non
         evidence.update(decision_evidence(log, start_s, end_s))
     evidence["mechanism"] = classify(evidence, failure=log.failure, rules=rules)
     return StuckPeriod(**evidence)
+
+
+def drop_window_start(runs: list[tuple[int, int, str]], phase: str, start: int, before_ticks: int) -> int:
+    """The first tick whose drops explain a stuck span beginning at ``start`` in ``phase``: ``before_ticks``
+    before it; or, when the span repeats a phase the task had left (``runs``: ``metrics.task_phases``), the
+    end of that phase's first run, for a drop since then is what sent the task back (a stack knocked over
+    as the hand let go, and the cubes taken up again)."""
+    first = next((e for s, e, p in runs if p == phase), start)
+    return max(0, min(start - before_ticks, first if first < start else start))
 
 
 def decision_evidence(log: "EpisodeLog", start_s: float, end_s: float) -> dict:

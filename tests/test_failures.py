@@ -130,3 +130,37 @@ def test_the_timeline_hatches_the_stuck_span_and_names_its_mechanism():
     assert hatched.get_x() == pytest.approx(1.0) and hatched.get_width() == pytest.approx(59.0)
     assert "classifier stuck" in ax.texts[0].get_text()
     plt.close(fig)
+
+
+def undone_record(drop: bool) -> EpisodeLog:
+    """Cube 1 reached (2 s) and carried (2 s), let go at 4 s from 10 cm up (``drop``) or set down on the
+    table; then reached for again: the hand comes down 3 cm a tick for 6 s and then stays 10 cm
+    above it until 60 s, so the stuck span starts 6 s after the release (past the 5 s before it)."""
+    ticks = 600
+    t = np.arange(ticks) * DT
+    goals = ("reach cube 1",) * 20 + ("carry cube 1",) * 20 + ("reach cube 1",) * (ticks - 40)
+    cube_z = np.full(ticks, REST_Z)
+    cube_z[20:40] = REST_Z + 0.1  # held up
+    if drop:
+        cube_z[40:44] = REST_Z + np.array([0.1, 0.07, 0.03, 0.0])  # falls 10 cm once the fingers open
+    cubes = np.zeros((ticks, 2, 3))
+    cubes[:, 0] = np.c_[np.full(ticks, 0.3), np.full(ticks, -0.5), cube_z]
+    cubes[:, 1] = [0.35, -0.5, REST_Z]
+    touching = np.zeros((ticks, 2), bool)
+    touching[20:40, 0] = True
+    hand_z = np.r_[np.full(40, REST_Z + 0.1), REST_Z + 0.1 + 0.03 * (60 - np.arange(60)), np.full(ticks - 100, REST_Z + 0.1)]
+    hand = np.c_[np.full(ticks, 0.3), np.full(ticks, -0.5), hand_z]
+    return EpisodeLog(operator="joystick", participant="P9", seed=0, controls="x", t=t, hand_pos=hand,
+                      intended_dir=np.zeros((ticks, 3)), mode=["translation"] * ticks, presses=0, cube_pos=cubes,
+                      touching=touching, target_pos=TARGET, success=False, completion_time=None,
+                      failure="time limit 60 s", wall_time=1.0, cpu_time=1.0, decisions=None, goals=goals,
+                      allowance=2, sample_period=DT, commanded=np.zeros((ticks, 3)))
+
+
+def test_a_drop_that_sent_the_task_back_to_a_phase_done_before_explains_its_stuck_span():
+    dropped, set_down = stuck_period(undone_record(drop=True)), stuck_period(undone_record(drop=False))
+    # the hand's last 3 cm step lands at 10 s; no progress after it (the repeated phase is not new)
+    assert (dropped.start_s, dropped.end_s) == pytest.approx((10.0, 60.0)) and dropped.phase == "reach 1"
+    assert dropped.start_s - 4.3 > Rules().drop_before_s  # the fall (4.0-4.3 s) lies before the 5 s window ...
+    assert dropped.drops == 1 and dropped.mechanism is Mechanism.CUBE_LOST  # ... and still explains the span
+    assert set_down.drops == 0 and set_down.mechanism is Mechanism.PLANNER_STUCK  # no drop: the span alone
