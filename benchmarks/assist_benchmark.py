@@ -10,7 +10,7 @@ the participant's profile) depends only on those controls: one cell per layout (
 "2-axis, B1").  Per cell: successes, completion time (mean +- sd of
 the successes), its change against the first setting on the seeds both finished (ratio of the
 means, 95 % bootstrap interval over seeds), user mode switches, automatic switches, wrong-goal
-switches (tasks.episode.WRONG_GOAL_WINDOW_S), unintended displacement.  Seeds 0-999 are for
+switches (tasks.stacking.episode.WRONG_GOAL_WINDOW_S), unintended displacement.  Seeds 0-999 are for
 development; report held-out seeds (a fresh range of 10000-19999; 1000-4999 are spent) only after
 the assistance is frozen.
 """
@@ -28,11 +28,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tasks.assist import assist_label, parse_assist  # noqa: E402
+from tasks.operators.assist import assist_label, parse_assist  # noqa: E402
 from tasks.cli.engine import ProcessPool  # noqa: E402
 from tasks.cli.task import benchmark_jobs, run_many  # noqa: E402
-from tasks.episode import WRONG_GOAL_WINDOW_S, participant_controls  # noqa: E402
-from tasks.planner import DEFAULT_OPERATOR_FILE  # noqa: E402
+from tasks.stacking.episode import WRONG_GOAL_WINDOW_S, participant_controls  # noqa: E402
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TIME_LIMIT = 600.0

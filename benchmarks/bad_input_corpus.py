@@ -80,7 +80,7 @@ def make_bases(work: Path) -> dict[str, Path]:
     save_model(bases["npz"], load_model(bases["json"]))
     shutil.copy(ROOT / "bomi" / "profiles" / "P1.toml", bases["profile"])
     shutil.copy(ROOT / "tasks" / "participants" / "P1.toml", bases["participant"])
-    shutil.copy(ROOT / "tasks" / "operator.toml", bases["operator"])
+    shutil.copy(ROOT / "tasks" / "operators" / "operator.toml", bases["operator"])
     shutil.copy(ROOT / "models" / "sim.toml", bases["sim"])
     return bases
 

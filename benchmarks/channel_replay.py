@@ -27,7 +27,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 import tasks.cli.task as task_cli
-from tasks.episode import BomiChannel
+from tasks.stacking.episode import BomiChannel
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -14,7 +14,7 @@ people): both passes of the protocol in one logger .mat file, then at the code o
 [--recovery R]``. No
 design step (benchmarks/new_people_task.py runs the whole path). Development people and seeds only.
 
-Writes benchmarks/results/derived_default_NAME.json; ``--compare A B`` writes
+Writes benchmarks/results/derived_default_NAME.json (every episode's record); ``--compare A B`` writes
 benchmarks/results/derived_default_A_vs_B.md: per person the profile's buttons and successes, and
 the successes pooled with Wilson 95 % intervals.
 """
@@ -38,7 +38,7 @@ from new_people_task import bomi  # noqa: E402  (this folder: the same bomi comm
 
 from bomi.derived import BUTTON_NAMES  # noqa: E402
 from bomi.recording import write_logger_mat  # noqa: E402
-from tasks.metrics import success_ci95  # noqa: E402
+from tasks.stacking.metrics import success_ci95  # noqa: E402
 from tasks.participants.population import draw_person, one_file  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
@@ -82,8 +82,7 @@ def run(args) -> int:
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=code).stdout.strip()
     record = {"argv": sys.argv[1:], "commit": commit, "minutes": (time.monotonic() - start) / 60, "people": {
         seed: {"buttons": layout[seed],
-               "episodes": [{k: e[k] for k in ("seed", "success", "completion_time", "mode_switches")}
-                            | {"mechanism": (e["stuck"] or {}).get("mechanism")}
+               "episodes": [e | {"mechanism": (e["stuck"] or {}).get("mechanism")}  # the whole record
                             for e in episodes if Path(e["participant"]).name == f"p{seed}_twin.toml"]}
         for seed in people}}
     RESULTS.mkdir(exist_ok=True)

@@ -3,7 +3,7 @@
 For each population person (tasks/participants/population.py; development people by default), both
 passes in one logger file as `benchmarks/two_pass_file.py` writes it, the profile `bomi train` /
 `bomi twin` derive from it (bomi/derived.py), and whether the scripted stacking user can drive it
-(tasks.episode.profile_controls, what `bomi benchmark` checks before any episode: every direction of
+(tasks.stacking.episode.profile_controls, what `bomi benchmark` checks before any episode: every direction of
 the layout, and the mode button B1 or, without a button, the automatic mode switching the user rests
 and waits for). "reached" says only that; whether the person then succeeds is for episodes
 (`bomi benchmark --participants TWIN.toml`). No episode is run.
@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from bomi.derived import derive_profile  # noqa: E402
 from bomi.errors import BomiError  # noqa: E402
 from bomi.passes import pass_bounds, split_passes  # noqa: E402
-from tasks.episode import profile_controls  # noqa: E402
+from tasks.stacking.episode import profile_controls  # noqa: E402
 from tasks.participants.population import draw_person, one_file  # noqa: E402
 
 

@@ -4,11 +4,11 @@
     python benchmarks/human_model.py predict [--participants P1,P4,P5] [--seeds 5] [--first-seed 0] [--name N] [--jobs 1]
     python benchmarks/human_model.py sensitivity [--params K,K] [--seeds 5] [--first-seed 0] [--jobs 1]
 
-``calibrate`` runs the joystick operator (tasks/human.toml, only ``timing.fitts_slope`` varied) on
+``calibrate`` runs the joystick operator (tasks/operators/human.toml, only ``timing.fitts_slope`` varied) on
 dev seeds 0..N-1 and interpolates the slope at which the mean completion time is the paper's
 joystick mean (58 s): benchmarks/results/human_calibration.{md,json}.  Nothing of the BoMI is run.
 
-``predict`` runs the joystick and the BoMI of each participant with tasks/human.toml as shipped
+``predict`` runs the joystick and the BoMI of each participant with tasks/operators/human.toml as shipped
 (the operator file's ``[human] model = "human"``): completion times against the paper, the
 BoMI/joystick ratio, time per phase, the share of time spent switching modes (Herlant et al. 2016:
 17.4 % for able-bodied JACO users), the fastest joystick and P1 BoMI trials in the paper's layout:
@@ -33,12 +33,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bomi import paper  # noqa: E402
-from tasks import metrics  # noqa: E402
+from tasks.stacking import metrics  # noqa: E402
 from tasks.cli.engine import ProcessPool  # noqa: E402
 from tasks.cli.task import EpisodeJob, run_job  # noqa: E402
-from tasks.episode import participant_controls, summarize  # noqa: E402
-from tasks.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
-from tasks.timeline import timeline_figure  # noqa: E402
+from tasks.stacking.episode import participant_controls, summarize  # noqa: E402
+from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
+from tasks.stacking.timeline import timeline_figure  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_JOYSTICK_S = paper.TASK["joystick_time_s"]
@@ -70,7 +70,7 @@ def mean_ci(values: list[float]) -> tuple[float, float]:
 
 
 def human_variant(directory: Path, key: str, value: float) -> str:
-    """A copy of tasks/human.toml with ``key`` (a key of any table; they are unique) set to ``value``."""
+    """A copy of tasks/operators/human.toml with ``key`` (a key of any table; they are unique) set to ``value``."""
     text = DEFAULT_HUMAN_FILE.read_text()
     line = next(x for x in text.splitlines() if x.split("=")[0].strip() == key)
     comment = line[line.index("#"):] if "#" in line else ""
@@ -96,7 +96,7 @@ def calibrate(args: argparse.Namespace) -> None:
     fitted = float(np.interp(PAPER_JOYSTICK_S, means[order], np.array(slopes)[order]))
     lines = ["# Human model: the Fitts slope fitted on the joystick (dev seeds)", "",
              f"`python benchmarks/human_model.py calibrate --seeds {args.seeds} --slopes {args.slopes}`: joystick "
-             f"operator with tasks/human.toml, only `timing.fitts_slope` varied, seeds 0-{args.seeds - 1}. "
+             f"operator with tasks/operators/human.toml, only `timing.fitts_slope` varied, seeds 0-{args.seeds - 1}. "
              f"Target: the paper's joystick mean {PAPER_JOYSTICK_S:.1f} s.", "",
              "| fitts_slope (s/bit) | successes | completion time mean (s) | 95 % CI half-width |", "|---|---|---|---|"]
     lines += [f"| {r['fitts_slope']:g} | {r['successes']}/{r['episodes']} | {r['mean']:.1f} | {r['ci95']:.1f} |"
@@ -149,7 +149,7 @@ def predict(args: argparse.Namespace) -> None:
     seed_words = f"seeds {seeds[0]}-{seeds[-1]}" + (" (held out)" if seeds[0] >= 1000 else " (development)")
     lines = [f"# Human model: joystick and BoMI completion times, {seed_words}", "",
              f"`python benchmarks/human_model.py predict --participants {args.participants} --seeds {args.seeds} "
-             f"--first-seed {args.first_seed} --name {args.name}`: tasks/human.toml as shipped (fitted on the joystick "
+             f"--first-seed {args.first_seed} --name {args.name}`: tasks/operators/human.toml as shipped (fitted on the joystick "
              f"only).", "",
              "| condition | successes [95 % CI] | completion time mean (s) [95 % CI] | paper (s) | within 25 % | "
              "/ joystick on the same controls | paper ratio | mode-switch share | " + " | ".join(PHASES) + " |",
@@ -178,7 +178,7 @@ def predict(args: argparse.Namespace) -> None:
               f"Mode-switch share: time from the last push before a mode change to the first push after it, "
               f"over the completion time (Herlant et al. 2016 measured {100 * HERLANT_MODE_SWITCH_SHARE:.1f} % "
               f"for able-bodied JACO joystick users). Phases: mean seconds over the successful episodes "
-              f"(`tasks.metrics.TaskPhase`: place = the carried cube lowered onto its place). Figures: "
+              f"(`tasks.stacking.metrics.TaskPhase`: place = the carried cube lowered onto its place). Figures: "
               f"{args.name}.png (times), {args.name}_phases.png (phases), {args.name}_best.png (the fastest "
               f"trial of {' and '.join(best_names) or 'no condition'} in the paper's layout: hand relative to B, "
               f"then the BoMI's decisions and amplitude)."]
@@ -253,7 +253,7 @@ def sensitivity(args: argparse.Namespace) -> None:
     base_j, base_b = statistics.fmean(base["joystick"]), statistics.fmean(base["bomi"])
     lines = [f"# Human model sensitivity (seeds {seeds[0]}-{seeds[-1]})", "",
              f"`python benchmarks/human_model.py sensitivity --seeds {args.seeds} --first-seed {args.first_seed}`: "
-             f"each parameter of tasks/human.toml alone at 50 % and 150 %, the same seeds; mean completion time "
+             f"each parameter of tasks/operators/human.toml alone at 50 % and 150 %, the same seeds; mean completion time "
              f"of the successful episodes, P1.", "",
              "| parameter | value | joystick (s) | change | P1 BoMI (s) | change | ratio | failures (joystick + BoMI) |",
              "|---|---|---|---|---|---|---|---|",

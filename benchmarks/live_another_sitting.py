@@ -21,7 +21,7 @@ from bomi.frames import FrameParser
 from bomi.model_io import load_model, save_model
 from bomi.profiles import load_profile
 from bomi.protocol import Cue
-from tasks.live import LiveLoop
+from tasks.trials.live import LiveLoop
 from tasks.participants.participant import calibration_session, load_participant, session_recording
 from test_live_breaks import TICK, sitting_ticks
 from test_live import StickArm

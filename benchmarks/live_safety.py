@@ -39,10 +39,10 @@ from bomi.model_io import load_model, save_model
 from bomi.protocol import Cue
 from bomi.serial_source import SerialSource, StreamReader
 from sim.env import ArmSim
-from tasks.live import LiveLoop
+from tasks.trials.live import LiveLoop
 from tasks.participants.participant import calibration_session, load_participant, session_recording
 from tasks.participants.wire import participant_blocks, session_heading
-from tasks.stick import arm_profile, profile_layout
+from tasks.operators.stick import arm_profile, profile_layout
 
 RESULTS = Path(__file__).resolve().parent / "results"
 WARM_S = 14.0        # neutral hold before the first motion: the filter settles, then the neutral is taken

@@ -11,7 +11,7 @@ tree (so each side's own code runs; the subprocess checks that bomi, sim and tas
 there), with the same Python environment, one BLAS thread, one side after the other.  The
 episodes: virtual P1, P4 and P5, joystick and BoMI (calibration, LDA training and task), task
 seeds 0..N-1 (development seeds; N=2 by default: 12 episodes a side).  A record is what
-``bomi benchmark`` stores for an episode (``tasks.episode.summarize``) without its four timing
+``bomi benchmark`` stores for an episode (``tasks.stacking.episode.summarize``) without its four timing
 fields, plus a SHA-256 of every array the episode logged (hand and cube trajectories, modes,
 goals, the BoMI's decisions with their gamma and nu): equal digests mean bit-identical
 trajectories, not just equal summaries.  Writes benchmarks/results/records_identity.md (the two
@@ -103,7 +103,7 @@ def worker(seeds: int, check_only: bool) -> int:
     import sim
     import tasks
     from tasks.cli.task import EpisodeJob, run_job
-    from tasks.episode import summarize
+    from tasks.stacking.episode import summarize
 
     here = Path.cwd().resolve()
     for module in (bomi, sim, tasks):

@@ -3,7 +3,7 @@
 
     python benchmarks/sensitivity.py [--seeds 10] [--first-seed 2000] [--jobs 2] [--knobs KEY,KEY]
 
-The knobs are the documented settings of ``tasks/operator.toml`` ([learning], [planner]), of
+The knobs are the documented settings of ``tasks/operators/operator.toml`` ([learning], [planner]), of
 ``tasks/participants/P1.toml`` ([feel]) and the majority vote (``vote_length``, whose default is
 ``tasks.cli.task.DEFAULT_VOTE``).  Seeds 0-999 are for development; the reported table uses a
 held-out range distinct from the headline's (2000-2009), run once the knobs are frozen.  Writes
@@ -20,7 +20,7 @@ from tasks.cli.engine import ProcessPool
 from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, aggregate, run_many
 from bomi.errors import BomiError
 from tasks.participants.participant import PARTICIPANT_DIR, load_participant
-from tasks.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PARTICIPANT = "P1"

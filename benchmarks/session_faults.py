@@ -335,10 +335,10 @@ def operator_human_beside(work: Path, bases: Bases, timeout: float) -> dict:
     the file (exit 0 or 1: the episode ran); the copy in the working directory is a broken file."""
     (work / "conf").mkdir()
     (work / "cwd").mkdir()
-    text = (ROOT / "tasks" / "operator.toml").read_text()
+    text = (ROOT / "tasks" / "operators" / "operator.toml").read_text()
     head, _, _ = text.partition("[human]")
     (work / "conf" / "op.toml").write_text(head + '[human]\nmodel = "h.toml"\n')
-    shutil.copy(ROOT / "tasks" / "human.toml", work / "conf" / "h.toml")
+    shutil.copy(ROOT / "tasks" / "operators" / "human.toml", work / "conf" / "h.toml")
     (work / "cwd" / "h.toml").write_text("not = [valid\n")
     ran = bomi(["run-task", "--operator", "joystick", "--operator-file", str(work / "conf" / "op.toml"),
                 "--time-limit", "1"], work / "cwd", timeout)

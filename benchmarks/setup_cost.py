@@ -3,7 +3,7 @@ session (synthesis), its recording (parse, rows, fusion) and the LDA's training,
 
     python benchmarks/setup_cost.py [--seeds 931 932 933] [--repeats 3] [--participant P1]
 
-What ``tasks.episode.calibrated_model`` does before a BoMI episode's first tick (the warm-up and
+What ``tasks.stacking.episode.calibrated_model`` does before a BoMI episode's first tick (the warm-up and
 neutral calibration of the channel, ~0.05 s, are not included), charged as
 ``benchmarks/side_by_side.py`` charges it: ``time.process_time`` (every thread of the process), one
 process pinned to one core, after one untimed set-up (a sweep worker's steady state: imports,
@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from bomi.chain import train
-from tasks.episode import arm_profile, calibration_order
+from tasks.stacking.episode import arm_profile, calibration_order
 from tasks.participants.participant import calibration_session, load_participant, session_recording
 
 RESULTS = Path(__file__).resolve().parent / "results"

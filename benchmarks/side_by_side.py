@@ -57,17 +57,17 @@ import numpy as np
 from dm_control import manipulation
 
 import sim.env
-import tasks.episode
+import tasks.stacking.episode
 from bomi.chain import OnlineChain
 from bomi.frames import FrameParser
 from sim.controller import CartesianVelocityController
 from sim.env import ArmSim
 from tasks.cli.task import EpisodeJob, job_assist, run_job
-from tasks.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode
+from tasks.stacking.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode
 from tasks.participants.participant import VirtualParticipant, load_participant
-from tasks.planner import ScriptedUser, load_operator
-from tasks.stacking import StackingTask, TaskConfig
-from tasks.stick import arm_profile
+from tasks.operators.planner import ScriptedUser, load_operator
+from tasks.stacking.task import StackingTask, TaskConfig
+from tasks.operators.stick import arm_profile
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PHYSICS, DM, JOY, BOMI = ("physics alone (our scene, mj_step, no control): the limit",
@@ -160,12 +160,12 @@ STAGES = (  # (stage, path fragment, function names or None for any); first matc
     ("IK (DLS, Pinocchio)", "sim/controller.py", None),
     ("IK (DLS, Pinocchio)", "sim/kinematics.py", None),
     ("arm (joystick, actuators, read-outs)", "sim/", None),
-    ("operator / planner", "tasks/planner.py", None),
-    ("operator / planner", "tasks/human.py", None),
-    ("operator / planner", "tasks/stick.py", None),
-    ("task (view, outcome)", "tasks/stacking.py", None),
-    ("episode loop, BoMI channel", "tasks/episode.py", None),
-    ("assistance", "tasks/assist.py", None),
+    ("operator / planner", "tasks/operators/planner.py", None),
+    ("operator / planner", "tasks/operators/human.py", None),
+    ("operator / planner", "tasks/operators/stick.py", None),
+    ("task (view, outcome)", "tasks/stacking/task.py", None),
+    ("episode loop, BoMI channel", "tasks/stacking/episode.py", None),
+    ("assistance", "tasks/operators/assist.py", None),
 )
 
 
@@ -267,9 +267,9 @@ def instrumented_episode(operator: str, seed: int) -> dict:
 
     setup = (("calibration session (synthesis)", "calibration_session"), ("its recording (parse, fuse)", "session_recording"),
              ("LDA training", "train"), ("channel (warm-up, neutral calibration)", "BomiChannel"))
-    originals = [(tasks.episode, name, getattr(tasks.episode, name)) for _, name in setup]
+    originals = [(tasks.stacking.episode, name, getattr(tasks.stacking.episode, name)) for _, name in setup]
     for (stage, name), (_, _, method) in zip(setup, originals):
-        setattr(tasks.episode, name, timed(stage, method))
+        setattr(tasks.stacking.episode, name, timed(stage, method))
     cpu = time.process_time()
     try:
         params = load_participant(job.participant)

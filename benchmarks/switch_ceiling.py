@@ -35,11 +35,11 @@ from sim.env import ArmSim
 from sim.joystick import JoystickState, Mode
 from tasks.cli.engine import ProcessPool
 from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, episode_record
-from tasks.episode import OperatorChannel, calibrated_channel, run_episode, summarize
+from tasks.stacking.episode import OperatorChannel, calibrated_channel, run_episode, summarize
 from tasks.participants.participant import load_participant
-from tasks.planner import DEFAULT_OPERATOR_FILE, REST, StickIntent, load_operator
-from tasks.stacking import TaskConfig
-from tasks.stick import arm_profile
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE, REST, StickIntent, load_operator
+from tasks.stacking.task import TaskConfig
+from tasks.operators.stick import arm_profile
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from assist_benchmark import RESULTS, TIME_LIMIT, change, summary  # noqa: E402

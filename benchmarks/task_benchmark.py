@@ -26,9 +26,9 @@ from bomi.frames import FrameParser, imu_index
 from tasks.cli.engine import ProcessPool
 from tasks.cli.figures import accuracy_allowance_figure, completion_time_figure
 from tasks.cli.task import DEFAULT_VOTE, JOYSTICK_ANYONE, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many
-from tasks.episode import calibrated_channel, summarize
+from tasks.stacking.episode import calibrated_channel, summarize
 from tasks.participants.participant import VirtualParticipant, load_participant
-from tasks.planner import DEFAULT_OPERATOR_FILE
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TIME_LIMIT = 600.0

@@ -46,7 +46,7 @@ from side_by_side import BARS, BOMI, JOY, checkout_commit, pin_to_one_core, writ
 from sim.env import ArmSim
 from sim.joystick import JoystickState
 from tasks.cli.task import EpisodeJob, run_job
-from tasks.stacking import StackingTask, TaskConfig
+from tasks.stacking.task import StackingTask, TaskConfig
 
 LAYERS = ("physics", "+ IK", "+ joystick", "+ task", "episode")
 KINDS = {"joystick": JOY, "bomi": BOMI}

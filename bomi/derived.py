@@ -31,7 +31,7 @@ from bomi.recording import NodeData, Recording, Signal
 DERIVED_AMPLITUDE_SCALES = (0.75, 0.5)
 MOUNTING_ROWS = 20_000   # at most the rows a node's mounting is checked on (5 min: the protocol's motions disambiguate it)
 THREE_AXIS, TWO_AXIS, ONE_AXIS = "3-axis", "2-axis", "1-axis"   # the layouts' names (sim/joystick.py LAYOUTS)
-AUTO_MODE = "auto-mode"                     # tasks/assist.py Assist.AUTO_MODE
+AUTO_MODE = "auto-mode"                     # tasks/operators/assist.py Assist.AUTO_MODE
 # each layout's directions, the richest first
 _DIRECTIONS = {THREE_AXIS: ("F", "B", "R", "L", "Rr", "Lr"), TWO_AXIS: ("F", "B", "R", "L"), ONE_AXIS: ("F", "B")}
 _WORDS = {6: "six", 4: "four", 2: "two"}   # their numbers of directions, as the reasons say them
@@ -53,7 +53,7 @@ def derived_layout(motions: int) -> DerivedLayout:
     """The layout that reaches translation, wrist and fingers with ``motions`` classes (2..8): the
     richest layout whose directions the motions cover (3-axis: six, 2-axis: four, 1-axis: F/B), the
     motions left over being the mode buttons (B1 forward, B2 back); with none left, the modes change
-    by themselves (automatic mode switching, tasks/assist.py: the user rests and waits for them).
+    by themselves (automatic mode switching, tasks/operators/assist.py: the user rests and waits for them).
     The 3-axis layout only with a button: six motions take the 2-axis layout and both buttons.
     ``functions``: the directions, then the buttons (``assigned_functions`` gives them to motions)."""
     richer = None   # the next richer layout, whose directions and a button the motions do not cover

@@ -46,7 +46,7 @@ repeated or jumping by more than ``max_counter_step`` (the parser delivers such 
 more follow it in step: a stream that started again), or a reconnection of the source (the loop says
 so). ``NodeGate.restart`` then forgets everything the node was trusted for, and the caller starts its
 orientation filter again: the warm-up (with the 12 s floor) is rerun, and the neutral retaken
-(``tasks.live.LiveLoop``).
+(``tasks.trials.live.LiveLoop``).
 
 After an implausible sample the node must settle again: a full window of plausible samples that passes the settle test, and ``resume_s`` (1.6 s)
 of wall time since the last implausible frame arrived (a burst can bring a whole window at

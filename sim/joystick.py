@@ -209,7 +209,7 @@ class JoystickState:
     def trusted(cls, deflection: dict[str, float], pressed: frozenset[str] = frozenset()) -> JoystickState:
         """A state from internal code that guarantees what the constructor checks (known functions with
         deflections in [0, 1], known buttons, a frozenset): without the checks, which would otherwise
-        run at every control tick of a channel (``tasks.stick.DecisionStick``). Input from a user, a
+        run at every control tick of a channel (``tasks.operators.stick.DecisionStick``). Input from a user, a
         file or a planner goes through the constructor."""
         state = object.__new__(cls)
         object.__setattr__(state, "deflection", deflection)

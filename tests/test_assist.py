@@ -9,13 +9,13 @@ from bomi.errors import BomiError
 from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import benchmark_script, edited_copy
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState, Mode
-from tasks import metrics
-from tasks.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, LearntTolerance, PathStep, Step, assist_label, candidate_goals,
+from tasks.stacking import metrics
+from tasks.operators.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, LearntTolerance, PathStep, Step, assist_label, candidate_goals,
                           load_assist, next_step_modes, parse_assist, path_order, presses, profile_assist, revisit_scale,
                           step_of_move, time_to_goal)
 from tasks.cli import main
-from tasks.episode import JoystickChannel, run_episode, summarize
-from tasks.planner import Goal, StickIntent, View
+from tasks.stacking.episode import JoystickChannel, run_episode, summarize
+from tasks.operators.planner import Goal, StickIntent, View
 
 CUBE = 0.05
 A1, A2 = np.array([-0.14, -0.51, CUBE / 2]), np.array([-0.14, -0.39, CUBE / 2])
@@ -685,7 +685,7 @@ def test_a_user_who_leaves_the_height_mode_to_travel_low_where_a_rise_was_expect
 def test_a_step_far_inside_its_tolerance_is_not_needed_without_overflow():
     """The logistic of a step's error: 1/2 at the tolerance, the plain formula in range, 0 far inside
     (an error 1 m below a 1 mm softness once overflowed math.exp inside `bomi design`)."""
-    from tasks.assist import _needed
+    from tasks.operators.assist import _needed
 
     assert _needed(0.02, 0.02, 0.005) == 0.5
     assert _needed(0.03, 0.02, 0.005) == 1.0 / (1.0 + math.exp(-2.0))

@@ -216,7 +216,7 @@ CASES = [
          "post_processing.vote_length", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
              "vote_length = 1", "vote_length = 99999999999999999999999")}),
     Case("operator-infinite-speed", ["run-task", "--operator", "joystick", "--operator-file", "{d}/o.toml"],
-         "deflection.full_speed", {"o.toml": lambda b: shipped_text("tasks/operator.toml").replace(
+         "deflection.full_speed", {"o.toml": lambda b: shipped_text("tasks/operators/operator.toml").replace(
              "full_speed = 0.20", "full_speed = inf")}),
     # 10. nonsense that used to be accepted (issue 29): physical quantities and sizes out of range
     Case("model-coefficient-1e308", ["evaluate", "--train", "{d}/bad.json", "--test", "{d}/tiny.csv"], "LDA parameters",
@@ -242,7 +242,7 @@ CASES = [
     Case("profile-nested-3000-deep", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
          "nested deeper", {"p.toml": lambda b: "a = " + "[" * 3000 + "]" * 3000 + "\n"}),
     Case("operator-full-speed-0", ["run-task", "--operator", "joystick", "--operator-file", "{d}/o.toml"],
-         "full_speed", {"o.toml": lambda b: shipped_text("tasks/operator.toml").replace(
+         "full_speed", {"o.toml": lambda b: shipped_text("tasks/operators/operator.toml").replace(
              "full_speed = 0.20", "full_speed = 0")}),
     Case("run-task-time-limit-1e-300", ["run-task", "--operator", "joystick", "--time-limit", "1e-300"], "--time-limit"),
     Case("demo-time-limit-nan", ["demo", "--time-limit", "nan", "--out", "{d}/demo"], "--time-limit"),

@@ -252,6 +252,6 @@ def test_a_confusion_matrix_is_coloured_by_the_share_of_its_row_and_names_the_cl
 
 def test_the_timeline_explains_every_joystick_function_a_shipped_profile_uses():
     from bomi.profiles import load_profile
-    from tasks.timeline import FUNCTION_WORDS
+    from tasks.stacking.timeline import FUNCTION_WORDS
     functions = {cls.function for name in ("P1", "P4", "P5") for cls in load_profile(name).classes} - {"neutral"}
     assert functions <= set(FUNCTION_WORDS)

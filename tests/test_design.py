@@ -1,12 +1,12 @@
-"""`bomi design`'s candidates and ranking (tasks/design.py), without running episodes."""
+"""`bomi design`'s candidates and ranking (tasks/operators/design.py), without running episodes."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from bomi.derived import derive_profile
-from tasks.design import LABEL_ORDER, OPPOSITES, Candidate, Score, candidates, opposite_order, ranked
-from tasks.episode import profile_controls
+from tasks.operators.design import LABEL_ORDER, OPPOSITES, Candidate, Score, candidates, opposite_order, ranked
+from tasks.stacking.episode import profile_controls
 from tests.test_derived_layout import motions
 
 

@@ -1,12 +1,12 @@
-"""The failure mechanisms' rules on small hand-built records (tasks/failures.py): progress, the
+"""The failure mechanisms' rules on small hand-built records (tasks/stacking/failures.py): progress, the
 stuck span, blocked ticks, each rule and its order, which episodes need a mechanism."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tasks.episode import DecisionTrace, EpisodeLog
-from tasks.failures import (Mechanism, Rules, blocked_ticks, classify, longest_gap, mechanism_rows, needs_mechanism,
+from tasks.stacking.episode import DecisionTrace, EpisodeLog
+from tasks.stacking.failures import (Mechanism, Rules, blocked_ticks, classify, longest_gap, mechanism_rows, needs_mechanism,
                             phase_distance, progress_ticks, stuck_period)
 
 DT = 0.1  # s a tick in these records (the rules read the tick from the record)
@@ -121,7 +121,7 @@ def test_episodes_needing_a_mechanism_failed_or_took_over_twice_the_median():
 def test_the_timeline_hatches_the_stuck_span_and_names_its_mechanism():
     import matplotlib.pyplot as plt
 
-    from tasks.timeline import _mark_stuck
+    from tasks.stacking.timeline import _mark_stuck
     intended = np.r_[np.zeros(100, int), np.ones(500, int)]
     period = stuck_period(record(600, intended, np.zeros(600, int)))
     fig, ax = plt.subplots()

@@ -6,7 +6,7 @@ import pytest
 
 from bomi import paper
 from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, run_job
-from tasks.episode import summarize
+from tasks.stacking.episode import summarize
 
 DEV_SEED = 0
 

@@ -7,10 +7,10 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
-from tasks.human import (DEFAULT_HUMAN_FILE, Eyes, HumanOperator, HumanTiming, InterfaceModel, alternatives,
+from tasks.operators.human import (DEFAULT_HUMAN_FILE, Eyes, HumanOperator, HumanTiming, InterfaceModel, alternatives,
                          choice_time, fitts_time, judgement_error, load_human)
 from helpers import assert_one_line_error, benchmark_script
-from tasks.planner import REST, Controls, StickIntent, View, deflection_for, load_operator, placed_cubes
+from tasks.operators.planner import REST, Controls, StickIntent, View, deflection_for, load_operator, placed_cubes
 
 H = load_human()
 P = load_operator()
@@ -153,8 +153,8 @@ def test_bad_human_file_is_one_clear_error(tmp_path, text, fault):
 
 
 def test_the_operator_file_names_the_human_model(tmp_path):
-    from tasks.episode import JoystickChannel, operator_user
-    from tasks.planner import DEFAULT_OPERATOR_FILE, ScriptedUser
+    from tasks.stacking.episode import JoystickChannel, operator_user
+    from tasks.operators.planner import DEFAULT_OPERATOR_FILE, ScriptedUser
     assert isinstance(operator_user(P, JoystickChannel(), seed=0), ScriptedUser)  # model = "none"
     humane = load_operator(DEFAULT_OPERATOR_FILE, {"human.model": "human"})
     person = operator_user(humane, JoystickChannel(), seed=0)
@@ -166,7 +166,7 @@ def test_the_operator_file_names_the_human_model(tmp_path):
 
 
 def test_phase_times_follow_the_steps():
-    from tasks.metrics import phase_times
+    from tasks.stacking.metrics import phase_times
     steps = (["reach cube 1"] * 3 + ["grasp cube 1"] * 2 + ["carry cube 1"] * 5 + ["release cube 1"]
              + ["level the hand"])
     assert phase_times(steps, 0.5) == {"reach": 1.5, "grasp": 1.0, "carry": 2.5, "place": 0.0, "release": 0.5,
@@ -178,7 +178,7 @@ def test_phase_times_follow_the_steps():
 
 
 def test_mode_switch_time_spans_from_the_last_push_to_the_next():
-    from tasks.metrics import mode_switch_time
+    from tasks.stacking.metrics import mode_switch_time
     mode = ["translation"] * 5 + ["fingers"] * 5
     pushing = [True, True, False, False, False, False, False, True, True, False]
     # last push before the change at tick 5: tick 1; first after: tick 7 -> ticks 2..6 = 5 ticks

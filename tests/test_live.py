@@ -19,9 +19,9 @@ from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, enco
 from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
-from tasks.stick import DecisionStick
+from tasks.operators.stick import DecisionStick
 from bomi.gate import GateConfig
-from tasks.live import StatusLine, Tick, TickLog, Watchdog, display_opens, has_display, refusal, run_live, status_text
+from tasks.trials.live import StatusLine, Tick, TickLog, Watchdog, display_opens, has_display, refusal, run_live, status_text
 from tasks.participants.imu_synth import SensorNoise, synthesize_raw
 from tasks.participants.wire import participant_blocks
 from tasks.participants.participant import load_participant

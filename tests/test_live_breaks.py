@@ -11,7 +11,7 @@ from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT
 from bomi.gate import GateConfig, RezeroGesture
 from bomi.protocol import Cue
-from tasks.live import LiveLoop
+from tasks.trials.live import LiveLoop
 from tests.test_live import QUICK_GATE, SETTLE, ScriptedChain, StickArm, decision, still_frame
 
 TICK = 1 / 60

@@ -18,7 +18,7 @@ import pytest
 from bomi.fusion import DT, NodeCalibration, NodeFusion
 from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_ratio, raw_defect, settle_change
 from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
-from tasks.live import LiveLoop, TickLog, VideoDisplay
+from tasks.trials.live import LiveLoop, TickLog, VideoDisplay
 from tests.test_live import QUICK_GATE, SETTLE, FakeClock, ScriptedChain, StickArm, decision, still_frame
 
 STILL = still_frame(0)
@@ -346,7 +346,7 @@ def test_the_loop_is_deterministic_given_each_ticks_frames(p1_model_file):
     from sim.env import ArmSim
     from tasks.participants.participant import load_participant
     from tasks.participants.wire import participant_blocks
-    from tasks.stick import profile_layout
+    from tasks.operators.stick import profile_layout
 
     profile = load_profile("P1")
     f_label = next(cls.label for cls in profile.classes if cls.function == "F")

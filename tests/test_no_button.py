@@ -8,12 +8,12 @@ import pytest
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from sim.joystick import ONE_AXIS, TWO_AXIS, JoystickState, Mode
-from tasks.assist import Assist, Assistance, load_assist, presses
+from tasks.operators.assist import Assist, Assistance, load_assist, presses
 from tasks.cli.task import EpisodeJob, job_assist
-from tasks.episode import JoystickChannel, process_arm, profile_controls, run_episode
-from tasks.planner import Controls, ScriptedUser
-from tasks.stacking import TaskConfig
-from tasks.stick import arm_profile
+from tasks.stacking.episode import JoystickChannel, process_arm, profile_controls, run_episode
+from tasks.operators.planner import Controls, ScriptedUser
+from tasks.stacking.task import TaskConfig
+from tasks.operators.stick import arm_profile
 from test_assist import A1, FakeArm, view
 from test_derived_layout import motions
 

@@ -18,10 +18,10 @@ from bomi.recording import NodeData, Recording, read_recording, write_logger_mat
 from tasks.cli import main
 from tasks.cli.chain import most_confused
 from tasks.cli.twin import self_check
-from tasks.episode import profile_controls
+from tasks.stacking.episode import profile_controls
 from tasks.participants.participant import load_participant
 from tasks.participants.population import PASS_GAP_S, draw_person, one_file
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 PERSON = 5   # six head motions and the neutral posture, one node (benchmarks/two_pass_file.py)
 DT = 0.016

@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from helpers import disagreement
-from tasks import planner
-from tasks.planner import (Action, Memory, Phase, View, _approach, _close, _move, _open, _turn, cube_to_take,
+from tasks.operators import planner
+from tasks.operators.planner import (Action, Memory, Phase, View, _approach, _close, _move, _open, _turn, cube_to_take,
                            held_cube, load_operator, missed_grasp, placed_cubes, xy_distance, yaw_error)
 from sim.joystick import Mode
 

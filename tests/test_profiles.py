@@ -7,7 +7,7 @@ from bomi.errors import BomiError
 from bomi.fusion import NodeCalibration
 from bomi.profiles import PROFILE_DIR, load_profile
 from sim.joystick import THREE_AXIS, TWO_AXIS
-from tasks.stick import arm_profile, profile_layout
+from tasks.operators.stick import arm_profile, profile_layout
 from helpers import edited_copy
 
 

@@ -1,4 +1,4 @@
-"""The recovery a session has (tasks/recovery.py): the choice of action, the stuck clock, and the
+"""The recovery a session has (tasks/operators/recovery.py): the choice of action, the stuck clock, and the
 supervisor on hand-built traces (a fake person and channel, views built by hand)."""
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import pytest
 from bomi.errors import BomiError
 from sim.joystick import JoystickState, Mode
 from tasks.cli.task import EpisodeJob, aggregate, comparison, recovery_option, run_job, terminal_table
-from tasks.episode import summarize
-from tasks.failures import mechanism_rows
-from tasks.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View, load_operator
-from tasks.recovery import StuckClock, Supervisor, choose
+from tasks.stacking.episode import summarize
+from tasks.stacking.failures import mechanism_rows
+from tasks.operators.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View, load_operator
+from tasks.operators.recovery import StuckClock, Supervisor, choose
 
 REZERO, BACKOFF, PAUSE = RecoveryAction.REZERO, RecoveryAction.BACKOFF, RecoveryAction.PAUSE
 ALL = frozenset(RecoveryAction)

@@ -35,7 +35,7 @@ def unequal_fields(a, b, prefix: str = "") -> list[str]:
 
 def test_one_episode_run_twice_in_one_process_is_bit_identical():
     # the BoMI: the participant's calibration protocol, the LDA trained on it, then the task; the
-    # second run reuses the process's arm (tasks.episode.process_arm), reset by the task
+    # second run reuses the process's arm (tasks.stacking.episode.process_arm), reset by the task
     job = EpisodeJob("bomi", "P1", 0, time_limit=4.0)
     first, second = run_job(job), run_job(job)
     assert len(first.t) == 241 and np.sum(first.decisions.decided != first.neutral) > 50  # functions decided

@@ -23,7 +23,7 @@ from bomi.fusion import NodeFusion
 from bomi.gate import NodeGate
 from bomi.recording import NodeData, Recording, read_recording, write_recording
 from bomi.serial_source import RetryPolicy, SerialSource
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 pytestmark = pytest.mark.real_time  # emulators and recorders paced on the wall clock
 

@@ -10,10 +10,10 @@ from dataclasses import replace
 import pytest
 
 from bomi.fusion import DT
-from tasks import metrics
-from tasks.episode import calibrated_channel
+from tasks.stacking import metrics
+from tasks.stacking.episode import calibrated_channel
 from tasks.participants.participant import load_participant
-from tasks.planner import StickIntent
+from tasks.operators.planner import StickIntent
 
 SEED = 3
 MOVE_SAMPLES = 4

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from tasks import metrics
+from tasks.stacking import metrics
 
 # intended: neutral x3, class 2 x6, neutral x3 ; decided lags by 2 and has one error to class 5
 # and one error to neutral in the settled part

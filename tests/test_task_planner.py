@@ -8,7 +8,7 @@ import pytest
 from bomi.errors import BomiError
 from helpers import assert_agree, assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
-from tasks.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View,
+from tasks.operators.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View,
                            _updated, cube_to_take, deflection_for, hand_velocity, held_cube, load_operator,
                            mode_button, norm, placed_cubes, plan, turn_deflection_for, xy_distance)
 
@@ -68,7 +68,7 @@ def test_mode_button_chooses_only_among_the_buttons_the_user_has():
         assert mode_button(current, wanted, Controls(TWO_AXIS, ("B1",))) == "B1"
         assert mode_button(current, wanted, Controls(TWO_AXIS, ("B2",))) == "B2"
     assert mode_button(Mode.TRANSLATION, Mode.FINGERS, Controls(THREE_AXIS, ("B1",))) == "B1"
-    # no button is a choice (the modes change automatically, tasks/assist.py); an unknown one is not
+    # no button is a choice (the modes change automatically, tasks/operators/assist.py); an unknown one is not
     assert Controls(TWO_AXIS, ()).label == "2-axis, no button"
     with pytest.raises(ValueError):
         Controls(TWO_AXIS, ("B3",))

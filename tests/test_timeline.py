@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tasks.metrics import task_phase, task_phases
-from tasks.timeline import AMPLITUDE_LABELS, decision_kinds
+from tasks.stacking.metrics import task_phase, task_phases
+from tasks.stacking.timeline import AMPLITUDE_LABELS, decision_kinds
 
 GOALS = ["rest", "reach cube 1: rise", "reach cube 1: travel", "open hand", "grasp cube 1", "carry cube 1: rise",
          "release cube 1", "level the hand", "turn to cube 2", "grasp cube 2", "carry cube 2: descend",

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from tasks.cli import main
-from tasks.episode import DecisionTrace, EpisodeLog, summarize
+from tasks.stacking.episode import DecisionTrace, EpisodeLog, summarize
 
 BOMI_ARGS = ["trial", "--stand-in", "P1", "--profile", "P1", "--controller", "bomi", "--trials", "2",
              "--seed", "11", "--headless", "--time-limit", "8", "--countdown", "0.5"]
@@ -223,7 +223,7 @@ def test_the_viewer_keys_hold_a_function_for_a_moment_and_press_a_button_once():
 
 
 def test_the_joystick_stand_in_does_what_the_simulated_episode_of_its_seed_does(joystick_dir):
-    """An independent path to the same trial: `bomi run-task`'s episode (tasks.episode.run_episode)
+    """An independent path to the same trial: `bomi run-task`'s episode (tasks.stacking.episode.run_episode)
     with the trial's seed moves the hand exactly as the trial did; only the clock differs (the trial
     is timed from the first command, the episode from its start)."""
     from tasks.cli.task import EpisodeJob, run_job
@@ -294,7 +294,7 @@ def test_a_trials_rezeros_are_its_free_calibrating_runs():
     """The trial record's recoveries: each run of ticks calibrating the neutral with the arm otherwise
     free (the person's gesture, the safety key) is a re-zero from its first tick's task time to its
     last; a retake held after a break in the stream (its ticks carry the hold) is not."""
-    from tasks.recovery import RecoveryAction
+    from tasks.operators.recovery import RecoveryAction
     from tasks.trials.session import neutral_retaken
 
     untrusted = "node 1 untrusted after reconnect: retaking warm-up and neutral"

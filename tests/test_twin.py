@@ -11,11 +11,11 @@ from bomi.fusion import DT
 from bomi.profiles import load_profile
 from bomi.recording import Recording, read_recording, write_recording
 from tasks.cli import main
-from tasks.episode import profile_controls
+from tasks.stacking.episode import profile_controls
 from tasks.participants import twin as twin_module
 from tasks.participants.participant import (PARTICIPANT_DIR, VirtualParticipant, calibration_session, load_participant,
                                             session_recording)
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 P1_TOML = PARTICIPANT_DIR / "P1.toml"
 

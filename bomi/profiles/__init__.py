@@ -21,7 +21,7 @@ from bomi.fusion import NodeCalibration
 
 PROFILE_DIR = Path(__file__).resolve().parent
 # A class's function and the profile's joystick layout are names of the device the classes drive
-# (the JACO's stick: sim/joystick.py, checked where a profile meets the arm, tasks/stick.py); the
+# (the JACO's stick: sim/joystick.py, checked where a profile meets the arm, tasks/operators/stick.py); the
 # chain passes them through untouched. Only the neutral class's function means something here.
 NEUTRAL_FUNCTION = "neutral"
 # A classifier setting left to the person's own training recording (bomi.chain.select_settings).
@@ -82,7 +82,7 @@ class Profile:
     # the neutral posture (bomi.chain.MotionCopies); 0: off
     direction_spread: float = 0.0
     # the assistances on unless a run says otherwise ([assist] options; names checked where the
-    # profile meets the arm, tasks/assist.py)
+    # profile meets the arm, tasks/operators/assist.py)
     assist: tuple[str, ...] = ()
     button_hold_s: float = DEFAULT_BUTTON_HOLD_S   # [live] button_hold_s
     rezero_hold_s: float = DEFAULT_REZERO_HOLD_S   # [live] rezero_hold_s (0: off)

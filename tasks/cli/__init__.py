@@ -70,7 +70,7 @@ COMMANDS: dict[str, Command] = {
     "sweep": Command("tasks.cli.sweep", "episodes over a grid of participants x settings x seeds, resumable"),
     "live": Command("tasks.cli.live", "drive the simulated arm from a live base-station stream"),
     "design": Command("tasks.cli.design", "choose a person's layout by simulation: candidate mappings run by their twin, "
-                                          "ranked", "Candidates (tasks/design.py): the motions in label order or by "
+                                          "ranked", "Candidates (tasks/operators/design.py): the motions in label order or by "
                       "opposites, with buttons alone or with automatic mode switching; each runs --seeds episodes; "
                       "ranked by successes, then completion time (95 % intervals); the best is written as a profile."),
     "twin": Command("tasks.cli.twin", "fit a virtual participant (a twin) to a person's calibration recording(s)"),

@@ -26,7 +26,7 @@ from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_reco
 from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
 from tasks.cli.options import add_force, check_outputs, open_unit_interval, positive_int
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 
 DEFAULT_CONFUSION = "confusion.png"  # evaluate's own output when --png names none

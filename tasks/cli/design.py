@@ -1,4 +1,4 @@
-"""`bomi design`: a person's layout chosen by simulation with their twin (tasks/design.py)."""
+"""`bomi design`: a person's layout chosen by simulation with their twin (tasks/operators/design.py)."""
 from __future__ import annotations
 
 import argparse
@@ -10,10 +10,10 @@ from tasks.cli import add_command
 from tasks.cli.engine import add_engine_arguments, engine_from_args
 from tasks.cli.options import add_force, check_outputs, episode_seconds, seed, seed_count
 from tasks.cli.task import EpisodeJob, run_many, write_json
-from tasks.design import Score, candidates, ranked
-from tasks.episode import profile_controls
+from tasks.operators.design import Score, candidates, ranked
+from tasks.stacking.episode import profile_controls
 from tasks.participants.participant import load_participant
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

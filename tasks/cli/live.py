@@ -1,4 +1,4 @@
-"""`bomi live`: the simulated arm driven by a live base-station stream (see tasks.live)."""
+"""`bomi live`: the simulated arm driven by a live base-station stream (see tasks.trials.live)."""
 from __future__ import annotations
 
 import argparse
@@ -13,13 +13,13 @@ from bomi.recording import read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamReader
 from sim.env import ArmSim
 from sim.joystick import BUTTONS
-from tasks.assist import ASSIST_HELP, Assistance, assist_option, profile_assist
+from tasks.operators.assist import ASSIST_HELP, Assistance, assist_option, profile_assist
 from tasks.cli import add_command
 from tasks.cli.options import non_negative_int, positive_int, seconds
-from tasks.live import (Displays, Headless, PassiveViewer, StatusLine, TickLog, VideoDisplay, display_opens,
+from tasks.trials.live import (Displays, Headless, PassiveViewer, StatusLine, TickLog, VideoDisplay, display_opens,
                         has_display, open_log, run_live)
-from tasks.stacking import StackingTask
-from tasks.stick import arm_profile, profile_layout
+from tasks.stacking.task import StackingTask
+from tasks.operators.stick import arm_profile, profile_layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "during a backlog; a button class acts only once held for the profile's [live] "
                     "button_hold_s. After a break in the stream (a reconnection, 1 s without a node's frames, a packet counter "
                     "that jumps) the stream may come from another sitting: the warm-up and the neutral are retaken "
-                    "(also over --neutral-from), the arm at rest until then. See tasks/live.py.")
+                    "(also over --neutral-from), the arm at rest until then. See tasks/trials/live.py.")
     live.add_argument("--port", required=True, metavar="PORT_OR_URL",
                       help="serial port, pty path or pyserial URL (socket://, loop://)")
     live.add_argument("--profile", required=True, help="profile (name of a shipped one, or a TOML file)")

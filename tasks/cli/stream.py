@@ -25,7 +25,7 @@ from tasks.cli import add_command
 from tasks.cli.chain import class_listing, fit_and_report, read_all_passes
 from tasks.cli.options import (add_force, check_outputs, non_negative_int, non_negative_seconds, positive_float,
                                positive_int, probability, seconds)
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 # After the first IMU frame, how long capture listens to learn which nodes are on the stream.
 NODE_DETECTION_S = 0.5

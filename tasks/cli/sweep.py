@@ -62,10 +62,10 @@ from tasks.cli.options import MAX_SECONDS, MAX_SEED, MAX_SEEDS, MIN_TIME_LIMIT_S
 from tasks.cli.task import (DEFAULT_VOTE, EDITABLE_FILES, MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,
                             EpisodeJob, aggregate, aligned_table, episode_record, markdown_table, row_cells,
                             terminal_cells, terminal_mechanisms)
-from tasks.episode import OPERATORS, profile_controls
+from tasks.stacking.episode import OPERATORS, profile_controls
 from tasks.participants.participant import PARTICIPANT_DIR, load_participant
-from tasks.planner import load_operator
-from tasks.stick import arm_profile
+from tasks.operators.planner import load_operator
+from tasks.operators.stick import arm_profile
 
 RESULTS_FILE = "episodes.jsonl"
 # EpisodeJob fields a grid may vary, beside the EDITABLE_FILES' keys

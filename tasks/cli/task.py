@@ -16,20 +16,20 @@ from tqdm import tqdm
 
 from bomi import paper
 from bomi.errors import BomiError
-from tasks import failures, metrics
-from tasks.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option, profile_assist
+from tasks.stacking import failures, metrics
+from tasks.operators.assist import ASSIST_HELP, NONE, Assist, assist_label, assist_option, profile_assist
 from tasks.cli.engine import Engine, add_engine_arguments, engine_from_args
 from tasks.cli import add_command
 from bomi.files import atomic_output, write_text
 from tasks.cli.options import add_force, check_outputs, episode_seconds, positive_int, seed_count
 from tasks.cli.options import seed as seed_option
-from tasks.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
+from tasks.stacking.episode import (OPERATORS, JoystickChannel, calibrated_channel, participant_controls, profile_controls,
                            run_episode, summarize)
 from tasks.participants.participant import load_participant
-from tasks.planner import DEFAULT_OPERATOR_FILE, NO_RECOVERY, RecoveryAction, load_operator, parse_recovery_actions
-from tasks.stacking import TaskConfig
-from tasks.stick import arm_profile
-from tasks.timeline import timeline_figure
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE, NO_RECOVERY, RecoveryAction, load_operator, parse_recovery_actions
+from tasks.stacking.task import TaskConfig
+from tasks.operators.stick import arm_profile
+from tasks.stacking.timeline import timeline_figure
 
 # Majority vote over this many decisions on the simulated BoMI (the profiles ship with it off):
 # it removes the one- and two-decision blips that would otherwise press B1/B2 by mistake.
@@ -577,7 +577,7 @@ def _episode_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--time-limit", type=episode_seconds, default=600.0,
                         help="seconds of simulated time before an episode fails (default %(default)s)")
     parser.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
-                        help="the scripted user's settings (TOML; default: the shipped tasks/operator.toml)")
+                        help="the scripted user's settings (TOML; default: the shipped tasks/operators/operator.toml)")
     parser.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     parser.add_argument("--vote", type=positive_int, default=DEFAULT_VOTE,
                         help="BoMI: majority vote over this many decisions (default %(default)s)")

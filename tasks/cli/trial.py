@@ -24,8 +24,8 @@ from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.cli.task import _simulated_time, _stage
-from tasks.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
-from tasks.stick import arm_profile, profile_layout
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
+from tasks.operators.stick import arm_profile, profile_layout
 from tasks.trials.dataset import part_name, replace_atomically, session_files, sync_directory, write_session
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
@@ -92,7 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="also simulate this virtual participant's episodes on the same cube placements "
                             "and set them beside the trials in the report (default: none)")
     trial.add_argument("--operator-file", type=Path, default=DEFAULT_OPERATOR_FILE,
-                       help="the stand-in's scripted user (TOML; default: the shipped tasks/operator.toml)")
+                       help="the stand-in's scripted user (TOML; default: the shipped tasks/operators/operator.toml)")
     trial.add_argument("--headless", action="store_true", help="no viewer window (default: a window when a "
                                                                "display is there)")
     trial.add_argument("--baud", type=positive_int, default=BASE_STATION_BAUD,
@@ -144,7 +144,7 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
     from tasks.cli.live import _viewer as live_viewer
     if keys is None:
         return live_viewer(headless, sim)
-    from tasks.live import PassiveViewer
+    from tasks.trials.live import PassiveViewer
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
@@ -360,7 +360,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
             settings = json.dumps({"argv": _settings_argv(args)}, indent=1) + "\n"
             replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
         if bomi and model is None:
-            from tasks.episode import calibrated_model
+            from tasks.stacking.episode import calibrated_model
             with _stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
                         f"record does, then bomi train)", progress=True):
                 model = calibrated_model(standin, profile, args.seed)
@@ -415,7 +415,7 @@ def _score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[li
 
 def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source, sessions, meta: dict,
                   after_tick) -> None:
-    from tasks.live import Headless, StatusLine
+    from tasks.trials.live import Headless, StatusLine
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
     arm = TrialArm(sim, plan)
@@ -478,7 +478,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
                  "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}})
     try:
         if standin is not None:
-            from tasks.live import Headless
+            from tasks.trials.live import Headless
             from tasks.trials.standin import JoystickStandIn
             clock = SimulatedClock()
             person = JoystickStandIn(arm, operator)
@@ -516,7 +516,7 @@ def _person_stick(index: int | None, headless: bool):
     """A person's joystick: gamepad ``index``; by default gamepad 0, else the viewer's keys."""
     import time
 
-    from tasks.live import display_opens, has_display
+    from tasks.trials.live import display_opens, has_display
     from tasks.trials.devices import Gamepad, ViewerKeys
     if index is not None:
         return Gamepad(index)
@@ -531,7 +531,7 @@ def _person_stick(index: int | None, headless: bool):
 
 
 def _controls_label(profile) -> str:
-    """The layout and buttons a profile's classes give (``tasks.planner.Controls.label``)."""
+    """The layout and buttons a profile's classes give (``tasks.operators.planner.Controls.label``)."""
     functions = {cls.function for cls in profile.classes}
     buttons = tuple(b for b in BUTTONS if b in functions)
     return Controls(profile_layout(profile), buttons).label if buttons else profile_layout(profile).name
@@ -541,7 +541,7 @@ def _predictions(args) -> list[tuple[dict, object]]:
     """The named virtual participant's simulated episodes (``bomi benchmark``'s), one per trial, on
     the trials' cube placements: (record, episode log) each."""
     from tasks.cli.task import EpisodeJob, run_job
-    from tasks.episode import summarize
+    from tasks.stacking.episode import summarize
     out = []
     for controller in args.controller:
         for k in range(args.trials):

@@ -20,7 +20,7 @@ from bomi.errors import BomiError
 from tasks.participants.participant import (Protocol, load_participant, parse_participant_text, protocol_session,
                                             session_recording)
 from tasks.participants.twin import fit_twin, same_person, twin_toml
-from tasks.stick import arm_profile
+from tasks.operators.stick import arm_profile
 
 TWIN_MARGIN = 0.10   # the twin's calibration may read this far (share of windows) from the person's own: else a warning
 PROFILE_SUFFIX = ".profile.toml"   # a derived profile is written beside the twin: P.toml -> P.profile.toml

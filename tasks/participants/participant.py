@@ -76,7 +76,7 @@ class ClassMotion:
 
 @dataclass(frozen=True)
 class Feel:
-    """How the participant drives a proportional class through the BoMI (``tasks.episode``): the
+    """How the participant drives a proportional class through the BoMI (``tasks.stacking.episode``): the
     leans they use and calibrate with, and how they correct a lean while watching the arm."""
 
     least_lean: float        # the least lean (share of the body's range) used and calibrated; full range is 1

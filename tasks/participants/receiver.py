@@ -1,7 +1,7 @@
 """The host end of a virtual participant's link in a simulated episode: its deliveries of
 base-station frames through the parser and the streaming chain, a delivery at a time.
 
-The participant makes its samples a chunk at a time (``tasks.episode.BomiChannel``: as far ahead
+The participant makes its samples a chunk at a time (``tasks.stacking.episode.BomiChannel``: as far ahead
 as its reaction time allows), so the frames of a chunk, and their arrival times, are known when it
 is made. The chain's output depends only on the sequence of frames it is given, not on when, so a
 chunk goes through the parser and the chain at once, by stages over all its frames

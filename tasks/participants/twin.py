@@ -60,7 +60,7 @@ ASSUMED_REACTION_S = 0.4
 # How the participant leans through the BoMI (tasks.participants.participant.Feel): recordings of
 # holds do not show it; written as assumed, the same as P4's and P5's files.
 ASSUMED_FEEL = """
-[feel]   # how the participant drives a proportional class through the BoMI (tasks/episode.py); assumed, the same for P1, P4, P5
+[feel]   # how the participant drives a proportional class through the BoMI (tasks/stacking/episode.py); assumed, the same for P1, P4, P5
 least_lean = 0.5           # the least lean used, and calibrated with (half the body's range): the calibrated nu range spans the leans used
 lean_step = 0.15           # a correction leans this much further (arm too slow or not answering) or less far (too fast)
 watch_s = 1.0              # s: after reaction + move, how long a posture is watched before it is corrected

@@ -1,11 +1,15 @@
-"""Human-in-the-loop trials: `bomi trial` runs the paper's session, `bomi replay` re-runs a logged trial.
+"""A person in the loop: `bomi live` drives the arm from a stream, `bomi trial` runs the paper's
+session, `bomi replay` re-runs a logged trial.
 
 Map (data flows down):
 
+- ``live``: the live loop: a base-station stream through the gate, the chain and the stick to the
+  arm at its control rate, with the safety path (any input it cannot trust leaves the arm at rest).
+
 - ``session``: the runner. ``TrialArm`` runs N trials on the simulated arm (wait, countdown, the
-  timed trial, next); ``run_bomi`` drives it from the live loop (``tasks.live.run_live``),
+  timed trial, next); ``run_bomi`` drives it from the live loop (``tasks.trials.live.run_live``),
   ``run_joystick`` from an input device; ``TickRecorder`` keeps every tick; ``episode_log`` and
-  ``trial_record`` score each trial with ``tasks.episode.summarize`` (the benchmark's records).
+  ``trial_record`` score each trial with ``tasks.stacking.episode.summarize`` (the benchmark's records).
 - ``standin``: a virtual participant at the controls (BoMI: base-station bytes through the live
   path; joystick: the scripted user's stick), on a simulated clock.
 - ``devices``: a person's joystick: a gamepad (pygame) or the viewer's keys.

@@ -313,7 +313,7 @@ def check_against_record(path: Path, record: TrialRecord, trials: dict[str, np.n
 def check_logged_model(path: Path, attrs: dict, profile: Profile, model: Model, model_path: Path) -> None:
     """The session's logged profile is the one it ran with (name, classes and functions, layout),
     and the logged model was trained for it."""
-    from tasks.stick import profile_layout
+    from tasks.operators.stick import profile_layout
     logged = json.loads(attrs["classes"])
     found = {str(c.label): f"{c.function} ({c.name})" for c in profile.classes}
     if profile.name != attrs["profile"] or found != logged:

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 from bomi.errors import BomiError
 from sim.joystick import JoystickState
-from tasks.stick import rising_edge
+from tasks.operators.stick import rising_edge
 
 DEAD_ZONE = 0.15
 KEY_HOLD_S = 0.25

@@ -23,8 +23,8 @@ from bomi.frames import FrameParser, ImuFrame
 from bomi.profiles import Profile
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState
-from tasks import metrics
-from tasks.live import Headless
+from tasks.stacking import metrics
+from tasks.trials.live import Headless
 from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_model, inside,
                                  read_records)
 from tasks.trials.dataset import SessionData
@@ -67,9 +67,9 @@ class Replayed:
 
 
 def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
-    """The logged bytes of each tick through the live loop's tick (``tasks.live.LiveLoop``, which is
+    """The logged bytes of each tick through the live loop's tick (``tasks.trials.live.LiveLoop``, which is
     deterministic given its inputs) at the logged tick time, until the arm's last trial is over."""
-    from tasks.live import LiveLoop
+    from tasks.trials.live import LiveLoop
 
     loop = LiveLoop(chain, arm, on_neutral=arm.ready)
     parser, seen = FrameParser(), 0
@@ -199,7 +199,7 @@ def load_trial(directory: Path, number: int) -> LoggedTrial:
     """Trial ``number`` of the `bomi trial` directory ``directory``, checked before use (one line per fault)."""
     from bomi.files import check_input
     from bomi.model_io import load_model
-    from tasks.stick import arm_profile
+    from tasks.operators.stick import arm_profile
     from tasks.trials.dataset import read_session, trial_file
     if not directory.is_dir():
         raise BomiError(f"{directory}: not a directory (a `bomi trial` output directory)")

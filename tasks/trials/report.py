@@ -1,14 +1,14 @@
 """The session report: the paper's trial table (each trial's time, mode switches and accuracy,
 beside P1's trials in the paper and, when one is named, a virtual participant's prediction for the
-same cube placements) and the timeline figure (``tasks.timeline``) of each controller's best trial."""
+same cube placements) and the timeline figure (``tasks.stacking.timeline``) of each controller's best trial."""
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
 
 from bomi import paper
-from tasks.episode import EpisodeLog
-from tasks.timeline import timeline_figure
+from tasks.stacking.episode import EpisodeLog
+from tasks.stacking.timeline import timeline_figure
 
 
 def _cell(value, spec: str = ".2f") -> str:

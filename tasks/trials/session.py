@@ -1,8 +1,8 @@
 """The trial session: N trials of the stacking task per controller, scored like simulated episodes.
 
 One session per controller is one continuous control loop: for the BoMI the live loop itself
-(``tasks.live.run_live``: source -> parser -> chain -> safety -> stick), for the joystick a loop
-paced the same way (``tasks.live.paced_ticks``) that reads an input device. The loop drives a
+(``tasks.trials.live.run_live``: source -> parser -> chain -> safety -> stick), for the joystick a loop
+paced the same way (``tasks.trials.live.paced_ticks``) that reads an input device. The loop drives a
 ``TrialArm``, which runs the trials one after the other on the simulated arm:
 
     WAIT (BoMI: until the live loop has taken the neutral posture) -> COUNTDOWN (the task at its
@@ -12,7 +12,7 @@ paced the same way (``tasks.live.paced_ticks``) that reads an input device. The 
 A trial ends at success, a cube off the table, or the time limit (counted from the go). Every
 control tick is recorded (``TickRecorder``): what the source delivered (bytes and frames), the
 decisions, the stick, the command and the arm's and cubes' state; each trial's ticks become an
-``EpisodeLog`` scored by ``tasks.episode.summarize``, the benchmark's own record builder.
+``EpisodeLog`` scored by ``tasks.stacking.episode.summarize``, the benchmark's own record builder.
 
 Clocks: with a person the loop runs on the wall clock; with a stand-in (``tasks.trials.standin``)
 on a ``SimulatedClock`` whose sleep advances time at once, so a session runs as fast as the
@@ -32,9 +32,9 @@ from bomi.chain import Decision
 from bomi.frames import SAMPLE_PERIOD_S, FrameParser, ImuFrame, SampleIndex, imu_node_id
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState, Mode
-from tasks.episode import DecisionTrace, EpisodeLog, summarize
-from tasks.recovery import RecoveryAction, RecoveryEvent
-from tasks.stacking import StackingTask, TaskConfig
+from tasks.stacking.episode import DecisionTrace, EpisodeLog, summarize
+from tasks.operators.recovery import RecoveryAction, RecoveryEvent
+from tasks.stacking.task import StackingTask, TaskConfig
 
 DEFAULT_TRIALS = 3
 DEFAULT_COUNTDOWN_S = 3.0
@@ -94,7 +94,7 @@ class TrialResult:
 
 
 class TrialArm:
-    """The simulated arm as the control loop sees it (``tasks.live.Arm``), running the trials.
+    """The simulated arm as the control loop sees it (``tasks.trials.live.Arm``), running the trials.
 
     Only ticks in the RUN phase pass the stick to the arm; the others step it with a centred stick.
     The countdown is counted in control ticks, so a replay of the same ticks runs the same trials.
@@ -278,7 +278,7 @@ class TickRecorder:
         self.ticks.append(row)
 
     def observe(self, tick) -> None:
-        """``tasks.live.run_live``'s observer: one live tick."""
+        """``tasks.trials.live.run_live``'s observer: one live tick."""
         self.record(tick.t, tick.state, tick.command, tick.decisions,
                     {"stale": tick.stale, "standby": tick.standby, "calibrating": tick.calibrating,
                      "reconnected": tick.reconnected,
@@ -389,7 +389,7 @@ class TrialDisplay:
     """The session's display: the trial's status before the loop's, each trial's go and end on one
     line, and running until the last trial is over."""
 
-    inner: object  # tasks.live.Display
+    inner: object  # tasks.trials.live.Display
     arm: TrialArm
     say: Callable[[str], None] = lambda line: None
     _seen: tuple[int, Phase] = (0, Phase.WAIT)
@@ -418,7 +418,7 @@ class TrialStatusLine:
     """The live loop's status line on the terminal, the trial's status before it."""
 
     def __init__(self, arm: TrialArm, line):
-        self.arm, self.line = arm, line  # line: a tasks.live.StatusLine
+        self.arm, self.line = arm, line  # line: a tasks.trials.live.StatusLine
 
     def show(self, t: float, text: Callable[[], str]) -> None:
         self.line.show(t, lambda: f"{self.arm.status()} | {text()}")
@@ -453,10 +453,10 @@ class Session:
 def run_bomi(session: Session, source, chain, *, display, on_tick: Callable[[object], None] | None = None,
              status=None, clock: Callable[[], float] = time.monotonic,
              sleep: Callable[[float], None] = time.sleep) -> None:
-    """The BoMI's trials through the live loop (``tasks.live.run_live``: gate, chain, safety):
-    ``source`` is a ``tasks.live.Source`` whose parser is a ``TappedParser``; ``on_tick`` is told
+    """The BoMI's trials through the live loop (``tasks.trials.live.run_live``: gate, chain, safety):
+    ``source`` is a ``tasks.trials.live.Source`` whose parser is a ``TappedParser``; ``on_tick`` is told
     every tick after it is recorded (a stand-in watching the arm answer the tick's decisions)."""
-    from tasks.live import run_live  # the live loop (imports the viewer's machinery)
+    from tasks.trials.live import run_live  # the live loop (imports the viewer's machinery)
 
     observers = [session.recorder.observe] + ([on_tick] if on_tick is not None else [])
     run_live(source, chain, session.arm, status=status, display=display, on_neutral=session.arm.ready,
@@ -467,7 +467,7 @@ def run_joystick(session: Session, device: StickDevice, *, display, clock: Calla
                  sleep: Callable[[float], None] = time.sleep, on_tick: Callable[[float], None] | None = None) -> None:
     """The joystick's trials: every tick, the device's stick to the arm, paced as the live loop is;
     ``on_tick`` is told the session's time after every tick (a progress bar)."""
-    from tasks.live import paced_ticks
+    from tasks.trials.live import paced_ticks
 
     arm, start = session.arm, clock()
     for now, _ in paced_ticks(arm.dt, display, clock, sleep, start, None):

@@ -1,14 +1,14 @@
 """The stand-in: a virtual participant at the controls of a trial, where a person would sit.
 
-It watches the simulated arm as a person does (the scripted user of ``tasks.planner``, or the
-human operator model the operator file names, through ``tasks.episode.operator_user``): holds
+It watches the simulated arm as a person does (the scripted user of ``tasks.operators.planner``, or the
+human operator model the operator file names, through ``tasks.stacking.episode.operator_user``): holds
 still while the controller gets ready and through the countdown, then does the task.
 
-- BoMI: its body moves as ``tasks.episode.BomiChannel`` moves a virtual participant's, and the
+- BoMI: its body moves as ``tasks.stacking.episode.BomiChannel`` moves a virtual participant's, and the
   base-station bytes it sends go through the same live path a person's stream does
-  (``StandInSource``: bytes -> parser -> chain -> safety -> stick -> arm, in ``tasks.live.run_live``);
+  (``StandInSource``: bytes -> parser -> chain -> safety -> stick -> arm, in ``tasks.trials.live.run_live``);
   it sees the arm answer the decisions the live loop acted on (``heard``).
-- Joystick: the person's intent straight to the stick (``tasks.episode.JoystickChannel``).
+- Joystick: the person's intent straight to the stick (``tasks.stacking.episode.JoystickChannel``).
 
 ``seed`` draws the BoMI stand-in's body and noise (one body for the session); the scripted user of
 trial k is that of a simulated episode with the trial's cube-placement seed (its human model's
@@ -24,9 +24,9 @@ from bomi.chain import Decision, OnlineChain
 from bomi.frames import ImuFrame
 from bomi.profiles import Profile
 from sim.joystick import JoystickState
-from tasks.episode import BomiChannel, JoystickChannel, OperatorChannel, intended_direction, operator_user
+from tasks.stacking.episode import BomiChannel, JoystickChannel, OperatorChannel, intended_direction, operator_user
 from tasks.participants.participant import ParticipantParams, VirtualParticipant
-from tasks.planner import REST, OperatorParams, StickIntent
+from tasks.operators.planner import REST, OperatorParams, StickIntent
 from tasks.trials.session import Phase, TappedParser, TrialArm
 
 IDLE = {"intended_dir": (0.0, 0.0, 0.0), "pushing": False, "goal": "", "stage": ""}
@@ -119,7 +119,7 @@ class JoystickStandIn(StandIn):
 
 
 class StandInSource:
-    """The stand-in's bytes as a live source gives them (a ``tasks.live.Source``), on the session's
+    """The stand-in's bytes as a live source gives them (a ``tasks.trials.live.Source``), on the session's
     clock: each poll, the stand-in looks at the arm and sends what has arrived by now."""
 
     error = None  # a stand-in never goes away

@@ -27,18 +27,18 @@ from sim.env import ArmSim
 from sim.kernels import clip
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode, combined
 from sim.render import FrameRenderer, VideoWriter, describe, site_colour
-from tasks import failures, metrics
-from tasks.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label, profile_assist
-from tasks.human import HumanOperator, load_human
+from tasks.stacking import failures, metrics
+from tasks.operators.assist import NONE, Assist, Assistance, AutomaticSwitch, assist_label, profile_assist
+from tasks.operators.human import HumanOperator, load_human
 from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session, load_participant,
                                session_recording)
 from tasks.participants.receiver import Receiver
-from tasks.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, NO_RECOVERY, Controls, Memory, OperatorParams,
+from tasks.operators.planner import (DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, NO_RECOVERY, Controls, Memory, OperatorParams,
                            Phase, ScriptedUser, StickIntent, View, load_operator)
-from tasks.recovery import RecoveryEvent, Supervisor
-from tasks.stacking import StackingTask, TaskConfig
-from tasks.stick import DecisionStick, arm_profile, profile_layout, rising_edge
+from tasks.operators.recovery import RecoveryEvent, Supervisor
+from tasks.stacking.task import StackingTask, TaskConfig
+from tasks.operators.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 
 OPERATORS = ("joystick", "bomi")
 _MODE_VALUE = {mode: mode.value for mode in Mode}  # what a log records of a mode and a stage, looked up
@@ -88,12 +88,12 @@ class EpisodeLog:
     amplitude: str = "gamma"  # what the decisions' amplitude is: the profile's [proportional] amplitude
     goals: tuple[str, ...] = ()  # per control tick: the scripted user's step (planner Goal.step, plain words)
     stages: tuple[str, ...] = ()  # per control tick: the stage of the step's approach (planner Phase value, or "")
-    assist: str = NONE  # the assistances on (tasks.assist.assist_label)
+    assist: str = NONE  # the assistances on (tasks.operators.assist.assist_label)
     automatic: tuple[AutomaticSwitch, ...] = ()  # the mode switches the assistance made
     grasp_helps: int = 0  # closes the grasp help started
     commanded: np.ndarray | None = None  # (N, 3) hand velocity the stick commanded the arm (m/s, world)
     recovery: str = NO_RECOVERY  # the recovery actions on (RecoveryParams.label)
-    recoveries: tuple[RecoveryEvent, ...] = ()  # the recovery actions taken (tasks.recovery)
+    recoveries: tuple[RecoveryEvent, ...] = ()  # the recovery actions taken (tasks.operators.recovery)
 
 
 # allowances (s) at which the excused accuracy is also given: its curve shows what excusing buys
@@ -187,7 +187,7 @@ class OperatorChannel(Protocol):
         """Extra ``EpisodeLog`` fields the channel recorded (the BoMI's decisions)."""
 
     def begin_rezero(self) -> None:
-        """Take the neutral posture anew from the samples to come (``tasks.recovery``; a stick: nothing)."""
+        """Take the neutral posture anew from the samples to come (``tasks.operators.recovery``; a stick: nothing)."""
 
     @property
     def rezeroing(self) -> bool:
@@ -586,7 +586,7 @@ def run_episode(channel: OperatorChannel, *, operator: str, participant: str, se
     (played ``video_speedup`` times faster than simulated time).  ``operator_file``: the scripted
     user's parameters, or the file they are read from. ``on_tick`` is told the simulated time
     after every tick (a progress bar). ``assist``: the assistances between the channel's stick and
-    the arm (tasks.assist)."""
+    the arm (tasks.operators.assist)."""
     if not channel.controls.buttons and Assist.AUTO_MODE not in assist:
         raise BomiError(f"the controls {channel.controls.label} change mode only by the automatic mode switching: "
                         f"the scripted user needs --assist {Assist.AUTO_MODE.value}")

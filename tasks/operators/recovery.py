@@ -1,7 +1,7 @@
 """The recovery a session has when the task stops progressing (docs/task.md, "Recovery").
 
 Off unless the operator file's ``[recovery]`` table names actions (``--recovery``); then, after
-``stuck_s`` without progress (``tasks.failures.ProgressWatch``: what the person sees of the task),
+``stuck_s`` without progress (``tasks.stacking.failures.ProgressWatch``: what the person sees of the task),
 the person acts on what they have seen of the arm since the last progress:
 
 - the arm did not answer the stick moves asked for (less than ``obeyed_share`` of them): the
@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from sim.joystick import JoystickState
-from tasks import failures, metrics
-from tasks.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View
+from tasks.stacking import failures, metrics
+from tasks.operators.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View
 
 if TYPE_CHECKING:
-    from tasks.planner import ScriptedUser
+    from tasks.operators.planner import ScriptedUser
 
 # the goal each stopped action logs (no task phase: it interrupts the phase it is in, metrics.task_phase)
 _GOALS = {RecoveryAction.REZERO: Goal("re-zero the neutral"), RecoveryAction.PAUSE: Goal("pause")}

@@ -16,11 +16,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from tasks import failures, metrics  # noqa: E402
-from tasks.metrics import task_phases  # noqa: E402
+from tasks.stacking import failures, metrics  # noqa: E402
+from tasks.stacking.metrics import task_phases  # noqa: E402
 
 if TYPE_CHECKING:
-    from tasks.episode import EpisodeLog
+    from tasks.stacking.episode import EpisodeLog
 
 # The world axes as the joystick moves the hand along them (docs/sim.md): what "hand - B" is per line.
 AXES = (("x", "x: left +, right -", "tab:blue"), ("y", "y: back +, forward -", "tab:orange"),
@@ -120,7 +120,7 @@ RECOVERY_COLOUR = "tab:purple"
 
 
 def _mark_recoveries(ax, log: "EpisodeLog") -> None:
-    """Each recovery action (tasks/recovery.py): a line where it started, named, and the time the arm
+    """Each recovery action (tasks/operators/recovery.py): a line where it started, named, and the time the arm
     stood still for it shaded."""
     for event in log.recoveries:
         ax.axvline(event.start_s, color=RECOVERY_COLOUR, lw=1.0, ls="--")
@@ -132,7 +132,7 @@ def _mark_recoveries(ax, log: "EpisodeLog") -> None:
 
 def _mark_stuck(axes, period: "failures.StuckPeriod | None") -> None:
     """The stuck period (the longest span without progress) hatched on ``axes``, named with its
-    mechanism and evidence on the first (tasks/failures.py)."""
+    mechanism and evidence on the first (tasks/stacking/failures.py)."""
     if period is None:
         return
     for ax in axes:

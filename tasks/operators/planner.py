@@ -4,7 +4,7 @@
 every tick from where the hand and the cubes really are, so overshoots, misclassified BoMI
 outputs and slipped cubes are corrected rather than ignored.  ``ScriptedUser`` adds the human
 timing on top: reaction time before a new move, pauses between moves, stopping early by
-anticipation.  One set of parameters (``tasks/operator.toml``) serves both channels; the only
+anticipation.  One set of parameters (``tasks/operators/operator.toml``) serves both channels; the only
 difference between channels is whether several axes may be combined (a 3-axis joystick can, a
 BoMI gives one class at a time).
 """
@@ -32,7 +32,7 @@ OPENING_PROGRESS = 0.02  # closure the fingers must lose to be seen opening (0 o
 
 class RecoveryAction(str, enum.Enum):
     """What the person (or whoever runs the session) does after a while without progress
-    (``tasks.recovery``; docs/task.md, "Recovery")."""
+    (``tasks.operators.recovery``; docs/task.md, "Recovery")."""
 
     REZERO = "rezero"  # hold still while the chain takes the neutral posture anew
     BACKOFF = "backoff"  # lift the hand and make the plan afresh
@@ -109,7 +109,7 @@ class OperatorParams:
     still_speed: float
     coasting_min_speed: float
     stall_time: float
-    human_model: str = NO_HUMAN_MODEL  # a human-model TOML (tasks.human) around this user, or none
+    human_model: str = NO_HUMAN_MODEL  # a human-model TOML (tasks.operators.human) around this user, or none
     recovery: RecoveryParams = RecoveryParams()
 
 
@@ -630,7 +630,7 @@ def plan(view: View, memory: Memory, p: OperatorParams, combine_axes: bool,
     else:
         (need, deflection), axis = _other_action(action, memory.controls.layout, p, anticipation), None
     if need is not None and need is not view.mode:
-        # without a mode button the person rests and waits for the automatic mode switching (tasks/assist.py)
+        # without a mode button the person rests and waits for the automatic mode switching (tasks/operators/assist.py)
         button = mode_button(view.mode, need, memory.controls) if memory.controls.buttons else None
         return StickIntent(button=button, goal=replace(action.goal, mode=need)), _updated(memory, **learnt, **glance)
     remaining = 0.0
@@ -727,7 +727,7 @@ def mode_button(current: Mode, wanted: Mode, controls: Controls = Controls()) ->
 # the person in time
 
 class Timing(Protocol):
-    """When a person starts a new move and how fast they make it (``tasks.human.HumanTiming``)."""
+    """When a person starts a new move and how fast they make it (``tasks.operators.human.HumanTiming``)."""
 
     def reaction(self, view: View, wanted: StickIntent, after: frozenset[Kind], controls: Controls) -> float:
         """Seconds from wanting ``wanted`` to starting it, drawn once per move; ``after``: what the
@@ -871,7 +871,7 @@ class ScriptedUser:
         return wanted
 
     def resume(self, view: View) -> None:
-        """Take the task up again after a recovery (``tasks.recovery``): from rest, with a new reaction."""
+        """Take the task up again after a recovery (``tasks.operators.recovery``): from rest, with a new reaction."""
         self.current, self._waiting_since, self._stopped_at, self._hold = REST, None, view.t, math.inf
 
     def back_off(self, view: View) -> None:

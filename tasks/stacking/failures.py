@@ -28,11 +28,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tasks import metrics
-from tasks.planner import NO_RECOVERY
+from tasks.stacking import metrics
+from tasks.operators.planner import NO_RECOVERY
 
 if TYPE_CHECKING:
-    from tasks.episode import EpisodeLog
+    from tasks.stacking.episode import EpisodeLog
 
 SLOW_FACTOR = 2.0  # an episode slower than this many times its participant's median needs a mechanism
 
@@ -113,7 +113,7 @@ def phase_distance(phase: str, hand_pos: np.ndarray, cube_pos: np.ndarray, targe
 @dataclass
 class ProgressWatch:
     """Progress tick by tick (the definition of the module docstring), for a record read back
-    (``progress_ticks``) or an episode under way (``tasks.recovery``)."""
+    (``progress_ticks``) or an episode under way (``tasks.operators.recovery``)."""
 
     progress_m: float
     phase: str | None = None

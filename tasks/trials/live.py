@@ -88,7 +88,7 @@ from bomi.fusion import DT, NodeFusion
 from bomi.gate import ButtonEvidence, Gate, GateConfig, RezeroGesture
 from bomi.profiles import NEUTRAL_FUNCTION
 from sim.joystick import BUTTONS, ArmCommand, JoystickState
-from tasks.stick import DecisionStick
+from tasks.operators.stick import DecisionStick
 
 WATCHDOG_TIMEOUT_S = 0.1
 LOOKAHEAD_TICKS = 1.5  # the watchdog and the gate judge a tick at its time + this many periods (see LiveLoop.tick)
@@ -514,7 +514,7 @@ class LiveLoop:
 
     ``chain`` (a fresh ``OnlineChain`` of the model and profile), ``arm`` (``sim.env.ArmSim`` or
     anything with ``step``/``mode``/``dt``), ``neutral`` (offsets per node index; None: taken from
-    the stream once it has settled), ``assist`` (``tasks.assist``: between the decided stick and the
+    the stream once it has settled), ``assist`` (``tasks.operators.assist``: between the decided stick and the
     arm, not consulted while the arm is held), ``observers`` (called with each ``Tick`` after the arm
     has stepped: read the arm's state then), ``on_neutral`` (told the offsets once they hold).
 

@@ -60,7 +60,7 @@ from bomi.config_files import load_toml
 from bomi.errors import BomiError
 from bomi.profiles import Profile
 from sim.joystick import BUTTONS, JoystickState, Kind, Layout, Mode, combine
-from tasks.planner import CUBE_SYMMETRY, View, wrapped_angle
+from tasks.operators.planner import CUBE_SYMMETRY, View, wrapped_angle
 
 DEFAULT_ASSIST_FILE = Path(__file__).with_name("assist.toml")
 NONE = "none"

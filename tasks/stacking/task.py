@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.env import ArmSim
-from tasks.planner import View
+from tasks.operators.planner import View
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,8 @@
 """The human operator model: one person, the same behind the joystick and behind the BoMI.
 
-The scripted user (``tasks.planner``) knows the task; this module gives it a human's eyes and
+The scripted user (``tasks.operators.planner``) knows the task; this module gives it a human's eyes and
 timing, so that the only difference between the joystick and the BoMI conditions is the
-interface.  Parameters: ``tasks/human.toml``; sources and the one fitted value: docs/human_model.md.
+interface.  Parameters: ``tasks/operators/human.toml``; sources and the one fitted value: docs/human_model.md.
 
 - **Perception** (``Eyes``), as dm_control's composer observables: the scene is seen every
   ``glance_interval``, ``visual_delay`` late (hand, cubes, the mode on the arm's indicator,
@@ -44,7 +44,7 @@ import scipy.stats
 
 from bomi.config_files import check_table, load_toml, number, typed
 from sim.joystick import Kind, Mode
-from tasks.planner import REST, Controls, Memory, OperatorParams, ScriptedUser, StickIntent, View, wrapped_angle
+from tasks.operators.planner import REST, Controls, Memory, OperatorParams, ScriptedUser, StickIntent, View, wrapped_angle
 
 DEFAULT_HUMAN_FILE = Path(__file__).with_name("human.toml")
 HUMAN_STREAM = 0x4855  # the human's random streams: independent of the task's and the participant's

@@ -271,7 +271,7 @@ _CUBE = re.compile(r"cube (\d+)")
 
 
 def task_phase(goal: str) -> str | None:
-    """The phase of the task a step of the scripted user (``tasks.planner.Goal.step``) belongs to: "reach k" until cube k is
+    """The phase of the task a step of the scripted user (``tasks.operators.planner.Goal.step``) belongs to: "reach k" until cube k is
     held, "carry k" while it is carried and set down, "finish" once both are stacked; None for a
     goal that only interrupts a phase (opening the hand, levelling it, resting)."""
     if goal.startswith(("release cube", "carry cube")):

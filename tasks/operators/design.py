@@ -31,7 +31,7 @@ import numpy as np
 
 from bomi.derived import AUTO_MODE, BUTTON_NAMES, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
 from bomi.profiles import Profile
-from tasks import metrics
+from tasks.stacking import metrics
 
 _DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
                     ONE_AXIS: (("F", "B"),)}
