@@ -22,6 +22,10 @@ default's, and the mean paired difference of completion time (recommended - defa
 (person, seed) pairs both succeed) at most 0 (its Student-t 95 % interval reported).
 
 Writes benchmarks/results/new_people_task_NAME.json (every person, every episode record) and .md.
+
+    python benchmarks/new_people_task.py --pool 17200 17300
+
+pools runs already made (their JSON files) into one verdict, as the README reports a bar.
 """
 from __future__ import annotations
 
@@ -136,15 +140,23 @@ def markdown(people: list[dict], total: dict, argv: list[str], minutes: float) -
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--first-person", type=int, required=True, help="first population seed")
+    parser.add_argument("--pool", nargs="+", metavar="NAME", help="pool the runs NAME (their result files) and stop")
+    parser.add_argument("--first-person", type=int, help="first population seed")
     parser.add_argument("--people", type=int, default=30)
-    parser.add_argument("--first-seed", type=int, required=True, help="first task seed of the comparison")
+    parser.add_argument("--first-seed", type=int, help="first task seed of the comparison")
     parser.add_argument("--seeds", type=int, default=2, help="task seeds per person and layout (default %(default)s)")
     parser.add_argument("--design-seeds", type=int, default=3, help="bomi design's seeds (default %(default)s)")
     parser.add_argument("--design-first-seed", type=int, default=600, help="bomi design's first seed (development)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default=None, help="result files' name (default: the first person)")
     args = parser.parse_args()
+    if args.pool:
+        runs = [json.loads((RESULTS / f"new_people_task_{n}.json").read_text()) for n in args.pool]
+        total = summary([p for run in runs for p in run["people"]])
+        print(markdown([], total, ["--pool", *args.pool], 0.0).split("\n\n")[-1].strip())
+        return 0
+    if args.first_person is None or args.first_seed is None:
+        parser.error("--first-person and --first-seed are required (or --pool)")
     name = args.name or str(args.first_person)
     start, people = time.monotonic(), []
     with tempfile.TemporaryDirectory(prefix="bomi-new-people-") as directory:
