@@ -124,8 +124,14 @@ def markdown(people: list[dict], total: dict, argv: list[str], minutes: float) -
         lines.append(f"| {p['person']} | {p['classes']} | {p['default']} | {cell(p['default_episodes'])} | "
                      f"{p['recommended'] if p['differs'] else '(the default)'} | "
                      f"{cell(p['recommended_episodes']) if p['differs'] else '-'} |")
+    lines += ["", *verdict(total)]
+    return "\n".join(lines) + "\n"
+
+
+def verdict(total: dict) -> list[str]:
+    """The bars' lines of a run's (or pooled runs') ``summary``."""
     ci = total["time_difference_ci95_s"]
-    lines += ["", f"Every person ran the task with the derived profile: {'yes' if total['every_person_ran'] else 'NO'} "
+    return [f"Every person ran the task with the derived profile: {'yes' if total['every_person_ran'] else 'NO'} "
               f"({total['episodes']} episodes, {total['successes']} successes; {total['people_with_a_success']} of "
               f"{total['people']} people with at least one success).",
               f"Recommendation differs from the default for {total['differing']} people: successes "
@@ -135,7 +141,6 @@ def markdown(people: list[dict], total: dict, argv: list[str], minutes: float) -
                                              is not None else "-")
               + (f" [{ci[0]:+.1f}, {ci[1]:+.1f}]" if ci else "") + "; never slower: "
               + {True: "met", False: "**missed**", None: "no person to compare"}[total["never_slower"]]]
-    return "\n".join(lines) + "\n"
 
 
 def main() -> int:
@@ -153,7 +158,7 @@ def main() -> int:
     if args.pool:
         runs = [json.loads((RESULTS / f"new_people_task_{n}.json").read_text()) for n in args.pool]
         total = summary([p for run in runs for p in run["people"]])
-        print(markdown([], total, ["--pool", *args.pool], 0.0).split("\n\n")[-1].strip())
+        print("\n".join(verdict(total)))
         return 0
     if args.first_person is None or args.first_seed is None:
         parser.error("--first-person and --first-seed are required (or --pool)")
