@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from bomi.derived import derive_profile
-from tasks.operators.design import LABEL_ORDER, OPPOSITES, Candidate, Score, candidates, opposite_order, ranked
+from tasks.operators.design import (LABEL_ORDER, OPPOSITES, Against, Candidate, Score, candidates, opposite_order, ranked,
+                                    recommend)
 from tasks.stacking.episode import profile_controls
 from tests.test_derived_layout import motions
 
@@ -79,3 +80,40 @@ def test_ranking_is_successes_then_time_with_intervals():
     # Wilson 2/3: [20.8 %, 93.9 %]
     assert scores[0].success_ci95 == pytest.approx((0.2077, 0.9385), abs=1e-3)
     assert scores[2].text() == "3/3 [44, 100 %], time 200.0 s [175.2, 224.8]"
+
+
+def scored(name: str, *times: float | None) -> Score:
+    """A candidate's score from its completion time per seed (None: failed)."""
+    return Score.of(Candidate("2-axis", name, ((1, "F"),), ()), [record(t is not None, t or 0.0) for t in times])
+
+
+def test_a_candidate_beats_the_default_only_beyond_chance_on_the_same_seeds():
+    default = scored("default", 200.0, None, 210.0, None, None)
+    # 3 seeds won, none lost: sign test p = 0.5 ** 3 = 0.125, not below 0.05; faster by 10 and 5 s on the two
+    # seeds both succeeded: mean -7.5, sd 3.536, sem 2.5, t(1) 12.706: [-39.3, 24.3], not below 0
+    some = Against.of(default, scored("some", 190.0, 220.0, 205.0, 230.0, 240.0))
+    assert (some.won, some.lost, some.time_differences) == (3, 0, (-10.0, -5.0))
+    assert some.success_p == pytest.approx(0.125) and some.better() is None
+    # every seed the default failed won, on 5 seeds: p = 0.5 ** 5 = 0.03125
+    all_won = Against.of(scored("default", None, None, None, None, None), scored("all", *[300.0] * 5))
+    assert all_won.success_p == pytest.approx(0.03125) and "p = 0.031" in all_won.better()
+    # the same seeds succeeded, faster by 10, 12, 11 s: mean -11, sd 1, t(2) 4.303: [-13.48, -8.52] s, below 0
+    faster = Against.of(scored("default", 200.0, 210.0, 220.0), scored("faster", 190.0, 198.0, 209.0))
+    assert "11.0 s faster on the 3 seeds" in faster.better() and "[-13.5, -8.5]" in faster.better()
+    # as fast, but one more failure: not better
+    assert Against.of(scored("default", 200.0, 210.0, 220.0, 230.0),
+                      scored("fails", 190.0, 198.0, 209.0, None)).better() is None
+    with pytest.raises(ValueError, match="ran 2 seeds, the default 3"):
+        Against.of(scored("default", 200.0, 210.0, 220.0), scored("short", 190.0, 198.0))
+
+
+def test_the_recommendation_is_the_best_ranked_of_those_beating_the_default_else_the_default():
+    default = scored("default", 200.0, 210.0, 220.0)
+    lucky = scored("lucky", 100.0, 110.0, 220.0)      # faster on average, not beyond chance: ranked first
+    steady = scored("steady", 190.0, 198.0, 209.0)    # beats the default (above)
+    steadier = scored("steadier", 195.0, 205.0, 215.0)  # 5 s faster on each seed: sd 0, [-5, -5]
+    assert [s.candidate.mapping for s in ranked([default, lucky, steady, steadier])][0] == "lucky"
+    chosen, reason = recommend([default, lucky, steadier, steady])
+    assert chosen is steady and "faster" in reason
+    chosen, reason = recommend([default, lucky])
+    assert chosen is default and "no candidate beat the derived default beyond chance on 3 seed(s)" in reason

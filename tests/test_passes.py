@@ -232,3 +232,26 @@ def test_the_twin_of_a_two_pass_file_counts_two_passes_and_its_profile_drives_th
     flat = replace(rec, nodes={1: replace(rec.nodes[1], angles=noise)})
     warning = self_check(out, split_passes(flat, pass_bounds(flat)), arm_profile(params.profile))
     assert warning.startswith("warning: self-check: ") and "more than 10 points apart" in warning
+
+
+def test_the_new_person_path_end_to_end_twin_design_benchmark_train(two_pass_file, tmp_path, capsys):
+    """docs/start_here.md's commands, in order, on the six-motion two-pass file, no edit: each exits 0
+    and hands the next what it needs (short episodes: the path, not the success, is under test)."""
+    twin, best, design = tmp_path / "me_twin.toml", tmp_path / "best.toml", tmp_path / "design.json"
+    assert main(["twin", str(two_pass_file), "--out", str(twin), "--no-check"]) == 0
+    assert main(["design", str(twin), "--seeds", "1", "--time-limit", "5", "--jobs", "1", "--out", str(best),
+                 "--json", str(design)]) == 0
+    chosen = json.loads(design.read_text())
+    assert len(chosen["candidates"]) >= 2 and all(c["episodes"] == 1 for c in chosen["candidates"])
+    # one seed can show no candidate better than the default beyond chance: the default is written
+    assert chosen["recommended"] == chosen["candidates"][0]["name"] and "no candidate beat" in chosen["reason"]
+    assert main(["twin", str(two_pass_file), "--profile", str(best), "--out", str(twin), "--force", "--no-check"]) == 0
+    out = tmp_path / "benchmark.json"
+    assert main(["benchmark", "--participants", str(twin), "--operators", "bomi", "--seeds", "1", "--time-limit", "5",
+                 "--jobs", "1", "--json", str(out)]) == 0
+    (episode,) = json.loads(out.read_text())["episodes"]
+    assert episode["participant"] == str(twin) and episode["layout"] == "2-axis, B1+B2"
+    assert episode["failure"] == "time limit 5 s" and episode["sim_time"] == pytest.approx(5.0, abs=0.02)
+    assert episode["decisions"] > 200   # the chain decided all along (5 s at 62.5 Hz: about 300 windows)
+    assert main(["train", str(two_pass_file), "--profile", str(best), "--out", str(tmp_path / "me.json")]) == 0
+    assert "2 passes" in capsys.readouterr().out

@@ -72,7 +72,8 @@ COMMANDS: dict[str, Command] = {
     "design": Command("tasks.cli.design", "choose a person's layout by simulation: candidate mappings run by their twin, "
                                           "ranked", "Candidates (tasks/operators/design.py): the motions in label order or by "
                       "opposites, with buttons alone or with automatic mode switching; each runs --seeds episodes; "
-                      "ranked by successes, then completion time (95 % intervals); the best is written as a profile."),
+                      "ranked by successes, then completion time (95 % intervals); written as a profile: the derived "
+                      "default unless a candidate beats it beyond chance on the same seeds."),
     "twin": Command("tasks.cli.twin", "fit a virtual participant (a twin) to a person's calibration recording(s)"),
     "synth": Command("tasks.cli.twin", "a virtual participant performs its source recording's protocol: a new "
                                        "recording"),

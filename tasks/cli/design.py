@@ -10,7 +10,7 @@ from tasks.cli import add_command
 from tasks.cli.engine import add_engine_arguments, engine_from_args
 from tasks.cli.options import add_force, check_outputs, episode_seconds, seed, seed_count
 from tasks.cli.task import EpisodeJob, run_many, write_json
-from tasks.operators.design import Score, candidates, ranked
+from tasks.operators.design import Against, Score, candidates, ranked, recommend
 from tasks.stacking.episode import profile_controls
 from tasks.participants.participant import load_participant
 from tasks.operators.stick import arm_profile
@@ -59,16 +59,19 @@ def design_command(args: argparse.Namespace) -> int:
     print("ranked by successes [Wilson 95 % interval], then mean completion time of the successes [Student-t 95 %]:")
     for place, score in enumerate(order, start=1):
         print(f"  {place}. {score.candidate.name}: {score.text()}")
-    best = order[0].candidate
+    chosen, reason = recommend(scores)
+    best = chosen.candidate
     save_profile(outputs["--out"], best.profile(base), overwrite=args.force)
-    print(f"recommended: {best.name}: wrote {outputs['--out']} (use it: bomi twin RECORDING --profile {outputs['--out']} "
+    print(f"recommended: {best.name}: {reason}")
+    print(f"wrote {outputs['--out']} (use it: bomi twin RECORDING --profile {outputs['--out']} "
           f"--out TWIN.toml, bomi train RECORDING --profile {outputs['--out']} ...)")
     if outputs["--json"]:
         write_json(outputs["--json"], {
-            "twin": args.twin, "seeds": list(seeds), "recommended": best.name,
+            "twin": args.twin, "seeds": list(seeds), "recommended": best.name, "reason": reason,
             "candidates": [{"name": s.candidate.name, "functions": dict(s.candidate.functions),
                             "episodes": s.episodes, "successes": s.successes, "success_ci95": s.success_ci95,
                             "completion_time_mean": s.time_mean, "completion_time_ci95": s.time_ci95,
+                            "against_default": vars(Against.of(scores[0], s)),
                             "records": records[k * len(seeds):(k + 1) * len(seeds)]}
                            for k, s in enumerate(scores)]}, overwrite=args.force)
     return 0

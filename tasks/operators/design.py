@@ -21,6 +21,15 @@ The candidates (kept few, so that a handful of seeds can tell them apart):
 
 Ranking: success share first (Wilson 95 % interval), then the mean completion time of the successes
 (Student-t 95 % interval); on a tie the earlier candidate (the derived default first) is kept.
+
+Recommendation: the derived default, unless a candidate beats it beyond chance on the same seeds
+(``Against``): it succeeded where the default failed more often than the reverse at a one-sided
+exact sign test below ``ALPHA``, or, failing where the default succeeded no more often than the
+reverse, its completion time minus the default's on the seeds both succeeded has a Student-t 95 %
+interval below 0. Of the candidates that do, the best ranked. A layout the person must learn anew is
+not worth a difference a few seeds may show by chance: on two held-out new-people runs the best
+ranked of 3 seeds, taken as it came, had 50 successes where the default had 51 of 62 episodes
+(docs/results_history.md, 17200 and 17300).
 """
 from __future__ import annotations
 
@@ -28,6 +37,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.stats
 
 from bomi.derived import AUTO_MODE, BUTTON_NAMES, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
 from bomi.profiles import Profile
@@ -36,6 +46,7 @@ from tasks.stacking import metrics
 _DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
                     ONE_AXIS: (("F", "B"),)}
 LABEL_ORDER, OPPOSITES = "label order", "by opposites"
+ALPHA = 0.05   # the one-sided level at which a candidate's successes beat the default's (the usual 5 %)
 
 
 @dataclass(frozen=True)
@@ -114,12 +125,14 @@ class Score:
     success_ci95: tuple[float, float]
     time_mean: float | None
     time_ci95: tuple[float, float] | None
+    times: tuple[float | None, ...]   # per seed, in the seeds' order: the completion time, None on a failure
 
     @classmethod
     def of(cls, candidate: Candidate, records: Sequence[dict]) -> Score:
-        times = [r["completion_time"] for r in records if r["success"]]
+        per_seed = tuple(r["completion_time"] if r["success"] else None for r in records)
+        times = [t for t in per_seed if t is not None]
         return cls(candidate, len(records), len(times), metrics.success_ci95(len(times), len(records)),
-                   float(np.mean(times)) if times else None, metrics.mean_ci95(times))
+                   float(np.mean(times)) if times else None, metrics.mean_ci95(times), per_seed)
 
     def text(self) -> str:
         low, high = self.success_ci95
@@ -132,3 +145,51 @@ class Score:
 def ranked(scores: Sequence[Score]) -> list[Score]:
     """Best first: the success share, then the mean time of the successes (none: last); stable."""
     return sorted(scores, key=lambda s: (-s.successes / s.episodes, s.time_mean if s.time_mean is not None else np.inf))
+
+
+
+@dataclass(frozen=True)
+class Against:
+    """A candidate against the derived default on the same seeds: the seeds only it succeeded on
+    (``won``), only the default did (``lost``), and its time minus the default's where both did."""
+
+    won: int
+    lost: int
+    time_differences: tuple[float, ...]
+
+    @classmethod
+    def of(cls, default: Score, candidate: Score) -> Against:
+        if default.episodes != candidate.episodes:
+            raise ValueError(f"{candidate.candidate.name} ran {candidate.episodes} seeds, the default {default.episodes}")
+        pairs = list(zip(default.times, candidate.times))
+        return cls(sum(d is None and c is not None for d, c in pairs), sum(d is not None and c is None for d, c in pairs),
+                   tuple(c - d for d, c in pairs if d is not None and c is not None))
+
+    @property
+    def success_p(self) -> float:
+        """One-sided exact sign test of the seeds one of the two failed: P(won or more | a fair coin)."""
+        n = self.won + self.lost
+        return float(scipy.stats.binomtest(self.won, n, 0.5, alternative="greater").pvalue) if n else 1.0
+
+    def better(self) -> str | None:
+        """Why the candidate beats the default beyond chance, or None."""
+        if self.success_p < ALPHA:
+            return (f"it succeeded on {self.won} seed(s) the default failed, failed on {self.lost} the default "
+                    f"succeeded (sign test p = {self.success_p:.3f} < {ALPHA})")
+        ci = metrics.mean_ci95(self.time_differences)
+        if self.won >= self.lost and ci is not None and ci[1] < 0.0:
+            return (f"{-np.mean(self.time_differences):.1f} s faster on the {len(self.time_differences)} seeds both "
+                    f"succeeded (95 % interval of the difference [{ci[0]:.1f}, {ci[1]:.1f}] s), and no more failures")
+        return None
+
+
+def recommend(scores: Sequence[Score]) -> tuple[Score, str]:
+    """The recommended of ``scores`` (the derived default's first) and why: the best ranked of the
+    candidates that beat the default beyond chance (``Against``), else the default."""
+    default = scores[0]
+    beating = {id(s): reason for s in scores[1:] if (reason := Against.of(default, s).better()) is not None}
+    for score in ranked(scores):
+        if id(score) in beating:
+            return score, beating[id(score)]
+    return default, (f"no candidate beat the derived default beyond chance on {default.episodes} seed(s) (more "
+                     "seeds, --seeds, tell smaller differences apart)")
