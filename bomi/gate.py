@@ -278,6 +278,12 @@ class ButtonEvidence:
     _function: str | None = None
     _run: int = 0
 
+    @classmethod
+    def held_for(cls, seconds: float, buttons: Iterable[str]) -> ButtonEvidence:
+        """The evidence of a hold of ``seconds`` (a profile's ``button_hold_s``): that many samples'
+        decisions, at least one."""
+        return cls(max(1, math.ceil(seconds / DT - 1e-9)), frozenset(buttons))
+
     def reset(self) -> None:
         self._function, self._run = None, 0
 

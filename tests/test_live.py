@@ -77,18 +77,25 @@ def test_sanitizer_lets_valid_decisions_through():
 
 
 # --------------------------------------------------------------------------------------- stick
-def test_stick_deflects_by_nu_and_presses_buttons_on_rising_edges():
-    buttons = {cls.function: cls.label for cls in load_profile("P1").classes}
+def test_stick_deflects_by_nu_and_presses_a_button_held_long_enough_on_its_rising_edge():
+    profile = load_profile("P1")   # button_hold_s 0.35 s: 22 decisions at 62.5 Hz (21 are 0.336 s)
+    buttons = {cls.function: cls.label for cls in profile.classes}
     b1 = decision(label=buttons["B1"], function="B1", nu=0.0)
-    stick = DecisionStick()
+    pressed = JoystickState(pressed=frozenset({"B1"}))
+    stick = DecisionStick(profile)
     assert stick.update([decision(nu=0.25)]) == JoystickState({"F": 0.25})
     assert stick.update([]) == JoystickState({"F": 0.25})                 # held until the next decision
-    assert stick.update([b1, b1]) == JoystickState(pressed=frozenset({"B1"}))  # one press per edge
-    assert stick.update([b1]) == JoystickState()
-    assert stick.update([decision(), b1]) == JoystickState(pressed=frozenset({"B1"}))
-    stick.update([decision(nu=0.7)])
-    stick.release()
-    assert stick.update([]) == JoystickState()
+    assert stick.update([b1] * 21) == JoystickState()                     # not yet: the stick centred meanwhile
+    assert stick.update([b1]) == pressed                                  # the 22nd in a row
+    assert stick.update([b1] * 30) == JoystickState()                     # one press per hold
+    assert stick.update([decision(), *[b1] * 21]) == JoystickState()      # a break starts the count anew
+    assert stick.update([b1]) == pressed
+    stick.update([decision(nu=0.7), *[b1] * 12])
+    stick.release()                                                       # forgets the evidence too
+    assert stick.update([b1] * 12) == JoystickState() and stick.update([]) == JoystickState()
+    # without a hold (0 s) every button decision counts: a press on each rising edge
+    quick = DecisionStick(replace(profile, button_hold_s=0.0))
+    assert quick.update([b1, b1]) == pressed and quick.update([decision(), b1]) == pressed
 
 
 # ------------------------------------------------------------------------------ status, display

@@ -6,12 +6,13 @@ so a profile meant for the arm is checked against the arm's vocabulary here (``a
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from bomi.chain import Decision
 from bomi.errors import BomiError
+from bomi.gate import ButtonEvidence
 from bomi.profiles import NEUTRAL_FUNCTION, Profile, load_profile
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, THREE_AXIS, JoystickState, Layout
 
@@ -46,21 +47,26 @@ def rising_edge(button: str | None, previous: str | None) -> frozenset[str]:
 
 class DecisionStick:
     """Decisions -> the stick: the latest decision's function deflected by its nu (held until the
-    next decision); a B1/B2 class presses its button on its rising edge."""
+    next decision); a B1/B2 class presses its button on its rising edge once decided for the
+    profile's ``button_hold_s`` without a break (``bomi.gate.ButtonEvidence``: a shorter run, e.g. a
+    misread on the way to another motion, centres the stick), simulated and live alike."""
 
-    def __init__(self) -> None:
+    def __init__(self, profile: Profile) -> None:
+        self._evidence = ButtonEvidence.held_for(profile.button_hold_s, BUTTONS)
         self.release()
 
     def release(self) -> None:
-        """Forget the last decision: the stick is centred until a new one comes."""
+        """Forget the last decision and any button evidence: the stick is centred until a new one comes."""
         self.function, self.nu = NEUTRAL_FUNCTION, 0.0
+        self._evidence.reset()
 
-    def update(self, decisions: Iterable[Decision]) -> JoystickState:
+    def update(self, decisions: Sequence[Decision]) -> JoystickState:
         pressed = _NOTHING
-        for decision in decisions:
-            if decision.function in BUTTONS:
-                pressed = pressed | rising_edge(decision.function, self.function)
-            self.function, self.nu = decision.function, decision.nu
+        for decision, admitted in zip(decisions, self._evidence.admit(d.function for d in decisions)):
+            function, nu = (decision.function, decision.nu) if admitted else (NEUTRAL_FUNCTION, 0.0)
+            if function in BUTTONS:
+                pressed = pressed | rising_edge(function, self.function)
+            self.function, self.nu = function, nu
         # a function of the stick with nu in (0, 1], buttons among BUTTONS: what the constructor checks holds
         if self.function in FUNCTIONS and self.nu > 0:
             return JoystickState.trusted({self.function: min(1.0, self.nu)}, pressed)

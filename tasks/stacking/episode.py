@@ -329,7 +329,7 @@ class BomiChannel:
         # the body starts moving reaction_s after an intent: that much of the person's reaction is here
         self.body_reaction = participant.params.reaction_s
         self._decided: int | None = None  # the label of the chain's latest decision
-        self.stick = DecisionStick()
+        self.stick = DecisionStick(profile)
         self._rows: list[tuple[int, int, float, float]] = []  # (sample, decided label, gamma, nu)
         self._queue: list[Delivery] = []  # generated frames, those from _next_frame on not yet arrived
         self._next_frame = 0              # in the first delivery of the queue

@@ -73,7 +73,7 @@ import time
 import warnings
 from collections import Counter, deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, Protocol
 
@@ -81,11 +81,10 @@ import mujoco
 import numpy as np
 
 from bomi.chain import Decision, OnlineChain
-from bomi.classifier import NEUTRAL_LABEL
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
 from bomi.fusion import DT, NodeFusion
-from bomi.gate import ButtonEvidence, Gate, GateConfig, RezeroGesture
+from bomi.gate import Gate, GateConfig, RezeroGesture
 from bomi.profiles import NEUTRAL_FUNCTION
 from sim.joystick import BUTTONS, ArmCommand, JoystickState
 from tasks.operators.stick import DecisionStick
@@ -537,14 +536,11 @@ class LiveLoop:
         self._calibration = {n.index: n.calibration for n in profile.nodes if n.index in chain.nodes}
         self.fusion = {index: NodeFusion(calibration) for index, calibration in self._calibration.items()}
         self.watchdog = watchdog or Watchdog()
-        self.stick, self.safety = DecisionStick(), SafetySwitch()
+        self.stick, self.safety = DecisionStick(profile), SafetySwitch()
         buttons = frozenset(f for f in self.functions.values() if f in BUTTONS)
-        self.buttons = ButtonEvidence(max(1, math.ceil(profile.button_hold_s / DT - 1e-9)), buttons)
         # a profile without a re-zero hold (0) or without a button class has no gesture
         self.rezero = RezeroGesture(math.ceil(profile.rezero_hold_s / DT - 1e-9),
                                     buttons if profile.rezero_hold_s > 0 else frozenset(), NEUTRAL_FUNCTION)
-        neutral_class = next(cls for cls in profile.classes if cls.label == NEUTRAL_LABEL)
-        self._at_rest = dict(label=neutral_class.label, name=neutral_class.name, function=NEUTRAL_FUNCTION, nu=0.0)
         self.summary = LiveSummary()
         self.rate = LoopRate(arm.dt)
         self.streaming = False        # every node settled once: frames go to the chain from then on
@@ -641,7 +637,7 @@ class LiveLoop:
         acted = decisions[-1:] if skipped else decisions     # a backlog: the newest decision only
         skipped += len(decisions) - len(acted)
         rezero = self._rezero_asked(acted, hold is not None)
-        state = self._stick(acted, hold is not None or rezero)
+        state = guarded_stick(self.stick, acted, hold is not None or rezero)
         if self.assist is not None and hold is None:
             state = self.assist(state)
         command = self.arm.step(state)
@@ -673,16 +669,6 @@ class LiveLoop:
         self.summary.neutral = None
         self.summary.rezeros += 1
         return True
-
-    def _stick(self, decisions: Sequence[Decision], hold: bool) -> JoystickState:
-        """Centred (and the last decision and any button evidence forgotten) while the arm is held;
-        else the decisions, a button only once held long enough, on the stick."""
-        if hold:
-            self.buttons.reset()
-        else:
-            admitted = self.buttons.admit(decision.function for decision in decisions)
-            decisions = [d if ok else replace(d, **self._at_rest) for d, ok in zip(decisions, admitted)]
-        return guarded_stick(self.stick, decisions, hold)
 
     def run(self, source: Source, *, duration_s: float | None = None, log: TickLog | None = None,
             status: StatusLine | None = None, display: Display = Headless(),
