@@ -85,7 +85,7 @@ def person_run(seed: int, args, work: Path) -> dict:
         bomi("twin", str(recording), "--profile", str(recommended), "--out", str(twin_rec))
         mine = episodes(twin_rec, seeds, args.jobs, work / f"person{seed}_recommended.json")
     return {"person": seed, "classes": person.n_classes, "default": candidates[0]["name"],
-            "recommended": chosen["recommended"], "differs": differs,
+            "recommended": chosen["recommended"], "differs": differs, "reason": chosen.get("reason"),
             "design": [{k: c[k] for k in ("name", "episodes", "successes", "completion_time_mean")} for c in candidates],
             "default_episodes": default, "recommended_episodes": mine}
 

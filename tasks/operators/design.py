@@ -147,7 +147,6 @@ def ranked(scores: Sequence[Score]) -> list[Score]:
     return sorted(scores, key=lambda s: (-s.successes / s.episodes, s.time_mean if s.time_mean is not None else np.inf))
 
 
-
 @dataclass(frozen=True)
 class Against:
     """A candidate against the derived default on the same seeds: the seeds only it succeeded on
@@ -184,7 +183,7 @@ class Against:
 
 
 def recommend(scores: Sequence[Score]) -> tuple[Score, str]:
-    """The recommended of ``scores`` (the derived default's first) and why: the best ranked of the
+    """The recommended of ``scores`` (the derived default first) and why: the best ranked of the
     candidates that beat the default beyond chance (``Against``), else the default."""
     default = scores[0]
     beating = {id(s): reason for s in scores[1:] if (reason := Against.of(default, s).better()) is not None}
