@@ -2,13 +2,13 @@
 path a new user takes, as commands, with no hand edit.
 
     python benchmarks/new_people_task.py --first-person P --people 30 --first-seed S --seeds 2 \
-        [--design-seeds 3 --design-first-seed 600] [--jobs 2] [--name NAME]
+        [--design-seeds D --design-first-seed 600] [--jobs 2] [--name NAME]
 
 Per person (tasks/participants/population.py; people drawn from ``--first-person`` on): both passes
 of the protocol in one logger .mat file (benchmarks/two_pass_file.py), then
 
 1. ``bomi twin FILE --out twin.toml``: the passes found, the profile derived, the twin fitted;
-2. ``bomi design twin.toml --seeds D --first-seed DS``: the candidate layouts on development seeds,
+2. ``bomi design twin.toml [--seeds D] --first-seed DS``: the candidate layouts on development seeds,
    the recommended profile written (people with fewer than five motions have one candidate);
 3. ``bomi benchmark --participants twin.toml --operators bomi --seeds N --first-seed S``: the
    derived default on the task seeds given (held out when the range is fresh); and, when the
@@ -72,7 +72,8 @@ def person_run(seed: int, args, work: Path) -> dict:
     twin = work / f"person{seed}_twin.toml"
     bomi("twin", str(recording), "--out", str(twin))
     recommended, design = work / f"person{seed}_design.toml", work / f"person{seed}_design.json"
-    bomi("design", str(twin), "--seeds", str(args.design_seeds), "--first-seed", str(args.design_first_seed),
+    design_seeds = () if args.design_seeds is None else ("--seeds", str(args.design_seeds))
+    bomi("design", str(twin), *design_seeds, "--first-seed", str(args.design_first_seed),
          "--out", str(recommended), "--json", str(design), "--jobs", str(args.jobs))
     chosen = json.loads(design.read_text())
     candidates = chosen["candidates"]
@@ -150,7 +151,7 @@ def main() -> int:
     parser.add_argument("--people", type=int, default=30)
     parser.add_argument("--first-seed", type=int, help="first task seed of the comparison")
     parser.add_argument("--seeds", type=int, default=2, help="task seeds per person and layout (default %(default)s)")
-    parser.add_argument("--design-seeds", type=int, default=3, help="bomi design's seeds (default %(default)s)")
+    parser.add_argument("--design-seeds", type=int, help="bomi design's seeds (default: bomi design's own)")
     parser.add_argument("--design-first-seed", type=int, default=600, help="bomi design's first seed (development)")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--name", default=None, help="result files' name (default: the first person)")

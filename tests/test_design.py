@@ -89,31 +89,40 @@ def scored(name: str, *times: float | None) -> Score:
 
 def test_a_candidate_beats_the_default_only_beyond_chance_on_the_same_seeds():
     default = scored("default", 200.0, None, 210.0, None, None)
-    # 3 seeds won, none lost: sign test p = 0.5 ** 3 = 0.125, not below 0.05; faster by 10 and 5 s on the two
-    # seeds both succeeded: mean -7.5, sd 3.536, sem 2.5, t(1) 12.706: [-39.3, 24.3], not below 0
+    # 3 seeds won, none lost: sign test p = 0.5 ** 3 = 0.125, not below 0.05; faster on the two seeds
+    # both succeeded: signed ranks all negative, p = 0.5 ** 2 = 0.25
     some = Against.of(default, scored("some", 190.0, 220.0, 205.0, 230.0, 240.0))
     assert (some.won, some.lost, some.time_differences) == (3, 0, (-10.0, -5.0))
-    assert some.success_p == pytest.approx(0.125) and some.better() is None
+    assert some.success_p == pytest.approx(0.125) and some.time_p == pytest.approx(0.25) and some.better() is None
     # every seed the default failed won, on 5 seeds: p = 0.5 ** 5 = 0.03125
     all_won = Against.of(scored("default", None, None, None, None, None), scored("all", *[300.0] * 5))
     assert all_won.success_p == pytest.approx(0.03125) and "p = 0.031" in all_won.better()
-    # the same seeds succeeded, faster by 10, 12, 11 s: mean -11, sd 1, t(2) 4.303: [-13.48, -8.52] s, below 0
-    faster = Against.of(scored("default", 200.0, 210.0, 220.0), scored("faster", 190.0, 198.0, 209.0))
-    assert "11.0 s faster on the 3 seeds" in faster.better() and "[-13.5, -8.5]" in faster.better()
+    # the same 5 seeds succeeded, faster on each (by 10, 12, 11, 1, 2 s): the 2^5 sign patterns of the ranks
+    # equally likely, none as low as all negative: p = 1/32; the median gain 10 s
+    base = (200.0, 210.0, 220.0, 230.0, 240.0)
+    faster = Against.of(scored("default", *base), scored("faster", 190.0, 198.0, 209.0, 229.0, 238.0))
+    assert faster.time_p == pytest.approx(1 / 32)
+    assert "faster on the 5 seeds both succeeded, by 10.0 s in the median (signed-rank test p = 0.031" in faster.better()
+    # faster by much on 4, slower by 1 s on the fifth (the smallest rank, 1): sums of negative-free ranks
+    # <= 1 are 2 patterns of 32: p = 0.0625; a heavy tail cannot buy it (ranks, not sizes)
+    lucky = Against.of(scored("default", *base), scored("lucky", 100.0, 110.0, 120.0, 130.0, 241.0))
+    assert lucky.time_p == pytest.approx(2 / 32) and lucky.better() is None
+    # 3 seeds can never be enough: all faster, p = 1/8
+    assert Against.of(scored("default", 200.0, 210.0, 220.0), scored("three", 100.0, 110.0, 120.0)).better() is None
     # as fast, but one more failure: not better
-    assert Against.of(scored("default", 200.0, 210.0, 220.0, 230.0),
-                      scored("fails", 190.0, 198.0, 209.0, None)).better() is None
+    assert Against.of(scored("default", *base), scored("fails", 190.0, 198.0, 209.0, 229.0, None)).better() is None
     with pytest.raises(ValueError, match="ran 2 seeds, the default 3"):
         Against.of(scored("default", 200.0, 210.0, 220.0), scored("short", 190.0, 198.0))
 
 
 def test_the_recommendation_is_the_best_ranked_of_those_beating_the_default_else_the_default():
-    default = scored("default", 200.0, 210.0, 220.0)
-    lucky = scored("lucky", 100.0, 110.0, 220.0)      # faster on average, not beyond chance: ranked first
-    steady = scored("steady", 190.0, 198.0, 209.0)    # beats the default (above)
-    steadier = scored("steadier", 195.0, 205.0, 215.0)  # 5 s faster on each seed: sd 0, [-5, -5]
+    base = (200.0, 210.0, 220.0, 230.0, 240.0)
+    default = scored("default", *base)
+    lucky = scored("lucky", 100.0, 110.0, 120.0, 130.0, 241.0)   # faster on average, not beyond chance: ranked first
+    steady = scored("steady", 190.0, 198.0, 209.0, 229.0, 238.0)  # beats the default (above)
+    steadier = scored("steadier", 195.0, 205.0, 215.0, 225.0, 235.0)  # 5 s faster on each seed: ties, p 1/32
     assert [s.candidate.mapping for s in ranked([default, lucky, steady, steadier])][0] == "lucky"
     chosen, reason = recommend([default, lucky, steadier, steady])
     assert chosen is steady and "faster" in reason
     chosen, reason = recommend([default, lucky])
-    assert chosen is default and "no candidate beat the derived default beyond chance on 3 seed(s)" in reason
+    assert chosen is default and "no candidate beat the derived default beyond chance on 5 seed(s)" in reason

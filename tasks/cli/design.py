@@ -19,7 +19,8 @@ from tasks.operators.stick import arm_profile
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = add_command(subparsers, "design")
     p.add_argument("twin", metavar="TWIN", help="the person's twin (bomi twin's TOML file)")
-    p.add_argument("--seeds", type=seed_count, default=3, help="task seeds per candidate (default %(default)s)")
+    p.add_argument("--seeds", type=seed_count, default=5, help="task seeds per candidate (default %(default)s: the "
+                                                                 "fewest on which a candidate can beat the default)")
     p.add_argument("--first-seed", type=seed, default=0,
                    help="the first task seed (default %(default)s; seeds 0-999 are for development)")
     p.add_argument("--time-limit", type=episode_seconds, default=600.0, help="seconds of simulated time before an "
