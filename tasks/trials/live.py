@@ -725,8 +725,8 @@ def paced_ticks(dt: float, display: Display, clock: Callable[[], float], sleep: 
 
 
 def guarded_stick(stick: DecisionStick, decisions: Sequence[Decision], hold: bool) -> JoystickState:
-    """The tick's stick: centred, and the last decision forgotten, while the arm is held (no fresh
-    frames, or the safety key's standby); else the decisions on the stick."""
+    """The tick's stick: centred, and the last decision and any button evidence forgotten, while the
+    arm is held (no fresh frames, the safety key's standby, a re-zero); else the decisions on the stick."""
     if hold:
         stick.release()
         return JoystickState()
