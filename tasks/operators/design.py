@@ -50,7 +50,7 @@ from tasks.stacking import metrics
 _DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
                     ONE_AXIS: (("F", "B"),)}
 LABEL_ORDER, OPPOSITES = "label order", "by opposites"
-ALPHA = 0.05   # the one-sided level at which a candidate's successes beat the default's (the usual 5 %)
+ALPHA = 0.05   # the one-sided level of both tests by which a candidate beats the default (the usual 5 %)
 
 
 @dataclass(frozen=True)
@@ -196,9 +196,8 @@ def recommend(scores: Sequence[Score]) -> tuple[Score, str]:
     """The recommended of ``scores`` (the derived default first) and why: the best ranked of the
     candidates that beat the default beyond chance (``Against``), else the default."""
     default = scores[0]
-    beating = {id(s): reason for s in scores[1:] if (reason := Against.of(default, s).better()) is not None}
-    for score in ranked(scores):
-        if id(score) in beating:
-            return score, beating[id(score)]
+    for score in ranked(scores[1:]):
+        if (reason := Against.of(default, score).better()) is not None:
+            return score, reason
     return default, (f"no candidate beat the derived default beyond chance on {default.episodes} seed(s) (more "
                      "seeds, --seeds, tell smaller differences apart)")
