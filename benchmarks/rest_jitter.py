@@ -144,7 +144,7 @@ def run_people(people: list[int], seeds: range, jobs: int) -> dict:
 
 
 def people_report(results: dict, argv: list[str]) -> str:
-    lines = [f"# Rest jitter: synthetic people, the twin as fitted and with still rests", "",
+    lines = ["# Rest jitter: synthetic people, the twin as fitted and with still rests", "",
              f"`python benchmarks/rest_jitter.py {' '.join(argv)}`", "",
              "| variant | successes (95 % interval) | median time of successes (s) | accuracy, transitions excused "
              "(mean) | failures |", "|---|---|---|---|---|"]
@@ -178,7 +178,11 @@ def main() -> int:
         (RESULTS / "rest_jitter_p1.md").write_text(report)
         print(report)
     if args.population:
-        report = population_report(people_range(args.population), sys.argv[1:])
+        people = people_range(args.population)
+        if max(people) >= 1000:
+            print("bomi: error: --population: development people only (0-999)", file=sys.stderr)
+            return 2
+        report = population_report(people, sys.argv[1:])
         (RESULTS / "rest_jitter_population.md").write_text(report)
         print(report)
     if args.people:
