@@ -45,6 +45,7 @@ from new_people_task import bomi  # noqa: E402
 
 from bomi.classifier import NEUTRAL_LABEL  # noqa: E402
 from bomi.dataset import data_dir  # noqa: E402
+from bomi.neutral import hold_levels  # noqa: E402
 from bomi.recording import read_recording, write_logger_mat  # noqa: E402
 from tasks.stacking.metrics import success_ci95  # noqa: E402
 from tasks.participants.population import draw_person, one_file, pass_recording  # noqa: E402
@@ -52,13 +53,9 @@ from tasks.participants.population import draw_person, one_file, pass_recording 
 RESULTS = ROOT / "benchmarks" / "results"
 
 
-def hold_levels(rec) -> list[tuple[int, np.ndarray]]:
+def recording_levels(rec) -> list[tuple[int, np.ndarray]]:
     """(label, mean angles of every node) of each run of one label, in order."""
-    labels = rec.labels
-    starts = np.flatnonzero(np.diff(labels, prepend=labels[0] - 1))
-    ends = np.r_[starts[1:], len(labels)]
-    return [(int(labels[a]), np.hstack([rec.nodes[i].angles[a:b].mean(axis=0) for i in sorted(rec.nodes)]))
-            for a, b in zip(starts, ends)]
+    return hold_levels(rec.labels, np.hstack([rec.nodes[i].angles for i in sorted(rec.nodes)]))
 
 
 def rest_following(levels: list[tuple[int, np.ndarray]]) -> dict:
@@ -90,7 +87,7 @@ def rest_following(levels: list[tuple[int, np.ndarray]]) -> dict:
 
 def following_report(title: str, recordings: dict[str, object]) -> str:
     """``rest_following`` of each recording (name -> Recording) as a table."""
-    rows = [(name, rest_following(hold_levels(rec))) for name, rec in recordings.items()]
+    rows = [(name, rest_following(recording_levels(rec))) for name, rec in recordings.items()]
     lines = [f"# Rest jitter: {title}", "",
              "| recording | rests | rest spread (deg, median axis) | slope of a hold on the rest before it | "
              "hold variance from that rest (deg^2) | from the recording's mean rest (deg^2) |", "|---|---|---|---|---|---|"]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, replace
 from operator import itemgetter
 
 import numpy as np
+from scipy.linalg import hadamard
 
 from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing, amplitude_ranges, classify_windows,
                              fit_pipeline, model_defects, pipeline_parameters, posteriors, proportional, reject,
@@ -30,6 +31,7 @@ from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_column
 from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, load_filter, neutral_offsets
+from bomi.neutral import rest_spread
 from bomi.passes import training_digests
 from bomi.profiles import SELECT, Profile
 from bomi.recording import Recording, Signal
@@ -121,16 +123,41 @@ class MotionCopies:
     ``scales``: every motion again at these fractions of its size. ``spread_degrees``: the motions of
     ``spread_nodes`` (class -> carrying node) again with their angle changes on that node turned by
     +-spread about each of the two axes perpendicular to the class's mean direction.
+    ``rest_offsets``: every single-label window (the neutral posture's too) once more, measured from
+    another rest (``rest_offsets``, below): training sees how far the person's reference moves
+    between sessions. Each window copied once, so training takes about twice as long, not K times.
     """
 
     scales: tuple[float, ...] = ()
     spread_degrees: float = 0.0
     spread_nodes: Mapping[int, int] = field(default_factory=dict)
+    rest_offsets: bool = False
 
     @classmethod
     def of(cls, profile: Profile) -> MotionCopies:
         return cls(profile.amplitude_scales, profile.direction_spread,
-                   profile.lone_class_nodes if profile.direction_spread else {})
+                   profile.lone_class_nodes if profile.direction_spread else {}, profile.rest_offsets)
+
+
+def rest_offsets(labels: np.ndarray, angles: np.ndarray) -> np.ndarray | None:
+    """(K, k) offsets of the (n, k) neutral-subtracted ``angles``: how far the reference of another
+    session may lie from this recording's, in K balanced, uncorrelated +-steps.
+
+    Motions are measured from the one rest the session calibrated on; a person never comes back to
+    quite the same rest (bomi/neutral.py), so between the training's reference and a later
+    session's lies the difference of two rests: on each angle a spread of sqrt(2) times the
+    person's own rest-to-rest standard deviation, measured here on the rests of the recording.
+    The offsets are the columns 1..k of a Hadamard matrix of order K (the smallest power of two above
+    k) scaled by that spread: over the K rows every angle moves by exactly +-the spread, each mean
+    zero and uncorrelated with the others, so copies taking the rows in turn (``training_windows``:
+    window j the row j mod K) add that variance, and no more, to every class and no mean shift.
+    None when the recording has fewer than three rests. Nothing here is tuned: the spread is the
+    person's, the factor the difference of two rests."""
+    spread = rest_spread(labels, angles)
+    if spread is None:
+        return None
+    order = 1 << int(np.ceil(np.log2(len(spread) + 1)))
+    return hadamard(order)[:, 1:len(spread) + 1] * (np.sqrt(2.0) * spread)
 
 
 def rotated_about(vectors: np.ndarray, axis: np.ndarray, radians: float) -> np.ndarray:
@@ -177,7 +204,8 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
     motion's samples by the factor (the same motion made smaller: the paper's multiple-amplitude
     training); a turned copy turns the carrying node's angle change about the neutral posture (the
     same motion made in a somewhat other direction; the gyroscope, whose axes are not the angles',
-    is left as recorded). Features are computed as for a recorded window. Neutral windows are not copied.
+    is left as recorded). Features are computed as for a recorded window. Neutral windows are not
+    copied so; the rest-offset copies (``MotionCopies.rest_offsets``) take every single-label window.
     """
     prepared = prepare(rec, spec, neutral_samples)
     pure = prepared.pure
@@ -189,6 +217,15 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
         states[motion_samples] *= scale
         parts.append((window_features(states, spec, motion_windows), prepared.labels[motion_windows],
                       prepared.ends[motion_windows], False))
+    if copies.rest_offsets:
+        angle_columns = np.array([slot * _WIDTH + axis for slot in range(len(spec.nodes)) for axis in range(3)])
+        offsets = rest_offsets(rec.labels, prepared.states[:, angle_columns])
+        turn = np.arange(len(pure))   # window k takes offset k mod K: each window copied once, the offsets
+        for k, offset in enumerate(() if offsets is None else offsets):   # balanced within every hold
+            states = prepared.states.copy()
+            states[:, angle_columns] += offset
+            mine = pure & (turn % len(offsets) == k)
+            parts.append((window_features(states, spec, mine), prepared.labels[mine], prepared.ends[mine], False))
     for label, node in copies.spread_nodes.items():
         samples, windows = rec.labels == label, pure & (prepared.labels == label)
         if not samples.any():
@@ -366,13 +403,19 @@ def leave_one_pass_out(passes: Sequence[Recording], profile: Profile, model: Mod
     BomiError when the passes but one cannot train every class."""
     if len(passes) < 2:
         return None
-    fixed = replace(profile, amplitude_scales=model.amplitude_scales)
+    return PassOut(tuple(each_pass_by_the_others(passes, replace(profile, amplitude_scales=model.amplitude_scales),
+                                                 model.spec, model.shrinkage, model.post)))
+
+
+def each_pass_by_the_others(passes: Sequence[Recording], profile: Profile, spec: FeatureSpec,
+                            shrinkage: float | str | None, post: PostProcessing) -> list[Evaluation]:
+    """Each pass decided by the model of these settings trained on all the other passes."""
     evaluations = []
     for k, held_out in enumerate(passes):
         others = [p for j, p in enumerate(passes) if j != k]
-        fold = train(others, fixed, model.spec, shrinkage=model.shrinkage, post=model.post)
-        evaluations.append(evaluate(fold, held_out, profile.neutral_samples, model.post))
-    return PassOut(tuple(evaluations))
+        fold = train(others, profile, spec, shrinkage=shrinkage, post=post)
+        evaluations.append(evaluate(fold, held_out, profile.neutral_samples, post))
+    return evaluations
 
 
 # ------------------------------------------------------------------------------------- streaming
@@ -753,10 +796,11 @@ REQUIRED_GAIN = 0.02
 CONSISTENCY = 2.0
 
 
-def choose_option(options: Sequence[HoldScores], consistency: float = CONSISTENCY) -> int:
+def choose_option(options: Sequence[HoldScores], consistency: float = CONSISTENCY,
+                  required_gain: float = REQUIRED_GAIN) -> int:
     """Index of the option (simplest first, each scored on the same held-out holds) the rule above
     takes: the simplest within ``consistency`` standard errors of the best (the first best on a tie),
-    unless it gains less than REQUIRED_GAIN over the first option, which is then kept. (0: the best,
+    unless it gains less than ``required_gain`` over the first option, which is then kept. (0: the best,
     the rule before the standard errors; other values only to replay it, benchmarks/new_people_candidates.py.)"""
     best = max(range(len(options)), key=lambda i: options[i].accuracy)
 
@@ -765,7 +809,7 @@ def choose_option(options: Sequence[HoldScores], consistency: float = CONSISTENC
         return i == best or gain <= consistency * se
 
     chosen = next(i for i in range(len(options)) if within(i))
-    return chosen if options[chosen].gain_over(options[0])[0] >= REQUIRED_GAIN else 0
+    return chosen if options[chosen].gain_over(options[0])[0] >= required_gain else 0
 
 
 @dataclass
@@ -841,6 +885,33 @@ def select_settings(recordings: Sequence[Recording], profile: Profile, spec: Fea
     except BomiError as exc:
         return Selection(None, (), None, None, None, {}, f"{exc}: plain settings")
     return choose_settings(candidates, results, profile.select_rejection)
+
+
+def choose_rest_offsets(passes: Sequence[Recording], profile: Profile) -> tuple[bool, str]:
+    """Whether the rest-offset copies (``MotionCopies.rest_offsets``) earn their place for this person,
+    and why in one line. A cross-validation within one recording cannot tell (its folds share one
+    reference); passes calibrated each on its own rest can: each pass read by the model of the
+    others, without and with the copies (the profile's plain LDA and smaller copies: the copies' own
+    effect), scored per held-out hold and judged by ``choose_option``'s rule, its standard errors
+    without its margin: REQUIRED_GAIN stands for the drift to the next recording that a
+    cross-validation within one cannot see, and the other pass shows it. One pass: no evidence, no copies."""
+    if len(passes) < 2:
+        return False, "no rest-offset copies: one pass, nothing to judge them on"
+    scores = []
+    for on in (False, True):
+        correct, windows = [], []
+        for result in each_pass_by_the_others(passes, replace(profile, rest_offsets=on), profile.spec, None,
+                                              PostProcessing()):
+            hold = np.cumsum(np.diff(result.truth, prepend=result.truth[0] - 1) != 0)   # runs of one label
+            correct.append(np.bincount(hold, result.predicted == result.truth)[1:])
+            windows.append(np.bincount(hold)[1:])
+        scores.append(HoldScores(np.concatenate(correct), np.concatenate(windows)))
+    chosen = choose_option(scores, required_gain=0.0) == 1
+    gain, se = scores[1].gain_over(scores[0])
+    return chosen, (f"{'' if chosen else 'no '}rest-offset copies: each pass read by the others' model "
+                    f"{100 * scores[0].accuracy:.2f} % without, {100 * scores[1].accuracy:.2f} % with "
+                    f"({100 * gain:+.2f} +- {100 * se:.2f} points over {len(scores[0].windows)} holds: they come in "
+                    f"for a gain of {CONSISTENCY:g} standard errors)")
 
 
 def choose_settings(candidates: Sequence[Candidate], results: Sequence[CrossValidation],

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from bomi.chain import choose_rest_offsets
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec
@@ -166,7 +167,7 @@ def derive_profile(recordings: Sequence[Recording]) -> Profile:
     calibrations = {i: node_calibration(first, i) for i in nodes}
     mounted = [f"node {i} mounting {calibrations[i].mounting} (the one its own angle columns agree with)"
                for i in nodes if calibrations[i] != NodeCalibration.default_for(i)]
-    return Profile(
+    profile = Profile(
         name="derived", description=f"derived from the recording: its nodes, its labels, generic class names; "
                                     + "".join(f"{m}; " for m in mounted) + f"layout {layout.layout}: {layout.reason}"
                                     + _buttons_reason(spread, functions),
@@ -176,6 +177,8 @@ def derive_profile(recordings: Sequence[Recording]) -> Profile:
         neutral_samples=DEFAULT_NEUTRAL_SAMPLES, post=PostProcessing(), source=f"derived from {first.source}",
         amplitude="along_class",
         select_rejection=True, amplitude_scales=DERIVED_AMPLITUDE_SCALES)
+    rest_offsets, reason = choose_rest_offsets(recordings, profile)
+    return replace(profile, rest_offsets=rest_offsets, description=f"{profile.description}; {reason}")
 
 
 def node_calibration(rec: Recording, node: int) -> NodeCalibration:

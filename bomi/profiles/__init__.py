@@ -81,6 +81,9 @@ class Profile:
     # training also sees each motion alone on its carrying node turned by +-this many degrees about
     # the neutral posture (bomi.chain.MotionCopies); 0: off
     direction_spread: float = 0.0
+    # training also sees every window measured from other rests, as far as the person's own rests
+    # scatter (bomi.chain.rest_offsets); [classifier] rest_offsets
+    rest_offsets: bool = False
     # the assistances on unless a run says otherwise ([assist] options; names checked where the
     # profile meets the arm, tasks/operators/assist.py)
     assist: tuple[str, ...] = ()
@@ -133,6 +136,8 @@ def profile_document(profile: Profile) -> dict:
         classifier["amplitude_scales"] = list(profile.amplitude_scales)
     if profile.direction_spread:
         classifier["direction_spread"] = profile.direction_spread
+    if profile.rest_offsets:
+        classifier["rest_offsets"] = True
     post: dict[str, Any] = {"vote_length": profile.post.vote_length}
     if profile.select_rejection or profile.post.rejection_threshold is not None:
         post["rejection_threshold"] = SELECT if profile.select_rejection else profile.post.rejection_threshold
@@ -179,13 +184,14 @@ def _parse(data: dict, source: str) -> Profile:
     indices = [node.index for node in nodes]
     classes = _parse_classes(typed(data, "classes", list, "profile"), set(indices))
     joystick = _section(data, "joystick", {"layout"})
-    classifier = _section(data, "classifier", {"shrinkage", "amplitude_scales", "direction_spread"})
+    classifier = _section(data, "classifier", {"shrinkage", "amplitude_scales", "direction_spread", "rest_offsets"})
     post, select_rejection = _parse_post(_section(data, "post_processing", {"rejection_threshold", "vote_length"}))
     return Profile(name=typed(data, "name", str, "profile"), description=typed(data, "description", str, "profile", ""),
                    nodes=nodes, classes=classes, spec=_parse_spec(_section(data, "features", {"vector", "window", "stride"}),
                                                                   tuple(indices)),
                    shrinkage=_parse_shrinkage(classifier), amplitude_scales=_parse_amplitude_scales(classifier),
                    direction_spread=number(classifier, "direction_spread", "classifier", 0.0, 89.0, default=0.0),
+                   rest_offsets=typed(classifier, "rest_offsets", bool, "classifier", False),
                    neutral_samples=_parse_neutral_samples(_section(data, "neutral", {"samples"})),
                    post=post, select_rejection=select_rejection,
                    source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
