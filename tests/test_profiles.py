@@ -54,6 +54,7 @@ def test_p4_p5_have_two_nodes_and_six_classes(name, sites):
     ('layout = "3-axis"', 'layout = "3-axis"\n[live]\nrezero_hold_s = 0.3',
      "[live] rezero_hold_s (0.3 s) must be longer than button_hold_s (0.35 s), or 0 (off)"),
     ('layout = "3-axis"', 'layout = "3-axis"\n[live]\nrezero_hold_s = -1', "'rezero_hold_s' must be a number in [0.0, 60.0]"),
+    ("shrinkage = 0.001", 'shrinkage = 0.001\nrest_offsets = "yes"', "classifier: 'rest_offsets' has the wrong type"),
 ])
 def test_invalid_profiles_name_file_and_problem(tmp_path, old, new, message):
     path = edited_copy(PROFILE_DIR / "P1.toml", tmp_path / "bad.toml", old, new)
