@@ -5,8 +5,8 @@
 
 ``--people``: synthetic people (tasks/participants/population.py; development seeds only), their two
 passes: each pass read by the model of the other (the derived profile's plain LDA and smaller copies),
-without and with the copies (pooled over the windows, as ``bomi.chain.choose_rest_offsets``
-reads them per hold), and whether the derived profile takes them. ``--p1``: P1's shipped profile on every ordered pair of its five real days
+without and with the copies (``bomi.chain.rest_offset_scores``, what the derived profile decides on),
+and whether the derived profile takes them. ``--p1``: P1's shipped profile on every ordered pair of its five real days
 (20), trained as ``bomi reproduce`` trains it, without and with the copies forced on: the real
 person the copies must not harm (its day files are one pass each, so a derived profile of them would
 never take the copies).
@@ -28,8 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from derived_default_task import people_range  # noqa: E402  (this folder)
 
-from bomi.chain import each_pass_by_the_others, evaluate, train  # noqa: E402
-from bomi.classifier import PostProcessing  # noqa: E402
+from bomi.chain import evaluate, rest_offset_scores, train  # noqa: E402
 from bomi.dataset import data_dir  # noqa: E402
 from bomi.derived import derive_profile  # noqa: E402
 from bomi.profiles import load_profile  # noqa: E402
@@ -47,11 +46,7 @@ def people_report(people: list[int], argv: list[str]) -> str:
     for person in tqdm(people, desc="people", unit="person"):
         passes = pass_recordings(draw_person(person))
         profile = derive_profile(list(passes))
-        accuracy = []
-        for on in (False, True):
-            read = each_pass_by_the_others(passes, replace(profile, rest_offsets=on), profile.spec, None,
-                                           PostProcessing())
-            accuracy.append(100 * np.mean(np.concatenate([e.predicted == e.truth for e in read])))
+        accuracy = [100 * scores.accuracy for scores in rest_offset_scores(passes, profile)]
         gains.append(accuracy[1] - accuracy[0])
         lines.append(f"| {person} | {len(profile.classes) - 1} | {accuracy[0]:.2f} % | {accuracy[1]:.2f} % | "
                      f"{'yes' if profile.rest_offsets else 'no'} |")

@@ -26,8 +26,8 @@ from bomi.classifier import (NEUTRAL_LABEL, MajorityVote, Model, PostProcessing,
                              fit_pipeline, model_defects, pipeline_parameters, posteriors, proportional, reject,
                              sample_amplitude, single_threaded_blas)
 from bomi.errors import BomiError
-from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_columns, features, single_label_windows,
-                           window_ends)
+from bomi.features import (NODE_STATE, FeatureSpec, WindowBuffer, feature_columns, features, run_edges,
+                           single_label_windows, window_ends)
 from bomi.features import window_features as batch_window_features
 from bomi.frames import ImuFrame, imu_index
 from bomi.fusion import NodeFusion, load_filter, neutral_offsets
@@ -182,17 +182,18 @@ def _spread_angles(states: np.ndarray, labels: np.ndarray, slot: int, radians: f
     return copies
 
 
-def _with_angles(prepared: PreparedRecording, spec: FeatureSpec, slot: int, angles: np.ndarray,
+def _with_states(prepared: PreparedRecording, spec: FeatureSpec, columns: np.ndarray, values: np.ndarray,
                  windows: np.ndarray) -> np.ndarray:
-    """The features of the ``windows`` (mask) of ``prepared``'s states with node ``slot``'s angles
-    replaced by (n, 3) ``angles``: the recorded windows' features, the columns the angles make
-    recomputed (each column is computed from its own component alone: the same bits as computing
-    every column of the changed states, tests/test_new_person.py)."""
-    which = np.flatnonzero(spec.components // _WIDTH == slot)
-    which = which[spec.components[which] % _WIDTH < 3]          # the node's angles among the components
+    """The features of the ``windows`` (mask) of ``prepared``'s states with the state ``columns``
+    replaced by (n, len(columns)) ``values``: the recorded windows' features, the columns those
+    components make recomputed (each column is computed from its own component alone: the same bits
+    as computing every column of the changed states, tests/test_new_person.py)."""
+    position = {int(column): k for k, column in enumerate(columns)}
+    which = np.flatnonzero(np.isin(spec.components, columns))   # the changed states among the components
+    source = [position[int(column)] for column in spec.components[which]]
     out = prepared.features[windows]
     out[:, feature_columns(spec.kind, len(spec.components), which)] = batch_window_features(
-        angles[:, spec.components[which] % _WIDTH], spec.kind, spec.window, spec.stride, windows)
+        values[:, source], spec.kind, spec.window, spec.stride, windows)
     return out
 
 
@@ -219,20 +220,21 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
                       prepared.ends[motion_windows], False))
     if copies.rest_offsets:
         angle_columns = np.array([slot * _WIDTH + axis for slot in range(len(spec.nodes)) for axis in range(3)])
-        offsets = rest_offsets(rec.labels, prepared.states[:, angle_columns])
+        angles = prepared.states[:, angle_columns]
+        offsets = rest_offsets(rec.labels, angles)
         turn = np.arange(len(pure))   # window k takes offset k mod K: each window copied once, the offsets
         for k, offset in enumerate(() if offsets is None else offsets):   # balanced within every hold
-            states = prepared.states.copy()
-            states[:, angle_columns] += offset
             mine = pure & (turn % len(offsets) == k)
-            parts.append((window_features(states, spec, mine), prepared.labels[mine], prepared.ends[mine], False))
+            parts.append((_with_states(prepared, spec, angle_columns, angles + offset, mine), prepared.labels[mine],
+                          prepared.ends[mine], False))
     for label, node in copies.spread_nodes.items():
         samples, windows = rec.labels == label, pure & (prepared.labels == label)
         if not samples.any():
             continue
         slot = spec.nodes.index(node)
         for angles in _spread_angles(prepared.states, samples, slot, np.radians(copies.spread_degrees)):
-            parts.append((_with_angles(prepared, spec, slot, angles, windows), prepared.labels[windows],
+            parts.append((_with_states(prepared, spec, slot * _WIDTH + np.arange(3), angles, windows),
+                          prepared.labels[windows],
                           prepared.ends[windows], False))
     windows = TrainingWindows(*(np.concatenate([part[k] for part in parts]) for k in range(3)),
                               np.concatenate([np.full(len(part[1]), part[3]) for part in parts]))
@@ -625,8 +627,8 @@ def hold_folds(labels: np.ndarray, n_folds: int = N_FOLDS) -> np.ndarray:
     each of its holds cut into ``n_folds`` consecutive chunks instead, so that every fold still
     trains on every class.
     """
-    starts = np.flatnonzero(np.diff(labels, prepend=labels[0] - 1))
-    lengths = np.diff(np.append(starts, len(labels)))
+    edges = run_edges(labels)
+    starts, lengths = edges[:-1], np.diff(edges)
     hold_labels = labels[starts]
     folds = np.empty(len(labels), dtype=int)
     for label in np.unique(hold_labels):
@@ -887,30 +889,36 @@ def select_settings(recordings: Sequence[Recording], profile: Profile, spec: Fea
     return choose_settings(candidates, results, profile.select_rejection)
 
 
-def choose_rest_offsets(passes: Sequence[Recording], profile: Profile) -> tuple[bool, str]:
-    """Whether the rest-offset copies (``MotionCopies.rest_offsets``) earn their place for this person,
-    and why in one line. A cross-validation within one recording cannot tell (its folds share one
-    reference); passes calibrated each on its own rest can: each pass read by the model of the
-    others, without and with the copies (the profile's plain LDA and smaller copies: the copies' own
-    effect), scored per held-out hold and judged by ``choose_option``'s rule, its standard errors
-    without its margin: REQUIRED_GAIN stands for the drift to the next recording that a
-    cross-validation within one cannot see, and the other pass shows it. One pass: no evidence, no copies."""
-    if len(passes) < 2:
-        return False, "no rest-offset copies: one pass, nothing to judge them on"
+def rest_offset_scores(passes: Sequence[Recording], profile: Profile) -> tuple[HoldScores, HoldScores]:
+    """Each pass read by the model of the others, without and with the rest-offset copies (the
+    profile's plain LDA and smaller copies: the copies' own effect), scored per hold."""
     scores = []
     for on in (False, True):
         correct, windows = [], []
         for result in each_pass_by_the_others(passes, replace(profile, rest_offsets=on), profile.spec, None,
                                               PostProcessing()):
-            hold = np.cumsum(np.diff(result.truth, prepend=result.truth[0] - 1) != 0)   # runs of one label
-            correct.append(np.bincount(hold, result.predicted == result.truth)[1:])
-            windows.append(np.bincount(hold)[1:])
+            holds = run_edges(result.truth)   # the scored windows, in time order: a run of one label is a hold
+            correct.append(np.add.reduceat(result.predicted == result.truth, holds[:-1]))
+            windows.append(np.diff(holds))
         scores.append(HoldScores(np.concatenate(correct), np.concatenate(windows)))
-    chosen = choose_option(scores, required_gain=0.0) == 1
-    gain, se = scores[1].gain_over(scores[0])
+    return scores[0], scores[1]
+
+
+def choose_rest_offsets(passes: Sequence[Recording], profile: Profile) -> tuple[bool, str]:
+    """Whether the rest-offset copies (``MotionCopies.rest_offsets``) earn their place for this person,
+    and why in one line. A cross-validation within one recording cannot tell (its folds share one
+    reference); passes calibrated each on its own rest can (``rest_offset_scores``), judged by
+    ``choose_option``'s rule, its standard errors without its margin: REQUIRED_GAIN stands for the
+    drift to the next recording that a cross-validation within one cannot see, and the other pass
+    shows it. One pass: no evidence, no copies."""
+    if len(passes) < 2:
+        return False, "no rest-offset copies: one pass, nothing to judge them on"
+    without, with_copies = rest_offset_scores(passes, profile)
+    chosen = choose_option([without, with_copies], required_gain=0.0) == 1
+    gain, se = with_copies.gain_over(without)
     return chosen, (f"{'' if chosen else 'no '}rest-offset copies: each pass read by the others' model "
-                    f"{100 * scores[0].accuracy:.2f} % without, {100 * scores[1].accuracy:.2f} % with "
-                    f"({100 * gain:+.2f} +- {100 * se:.2f} points over {len(scores[0].windows)} holds: they come in "
+                    f"{100 * without.accuracy:.2f} % without, {100 * with_copies.accuracy:.2f} % with "
+                    f"({100 * gain:+.2f} +- {100 * se:.2f} points over {len(without.windows)} holds: they come in "
                     f"for a gain of {CONSISTENCY:g} standard errors)")
 
 

@@ -60,6 +60,12 @@ def window_ends(n_samples: int, length: int = 8, stride: int = 1) -> np.ndarray:
     return np.arange(length - 1, n_samples, stride)
 
 
+def run_edges(labels: np.ndarray) -> np.ndarray:
+    """(runs + 1,) the first sample of every run of equal labels, then ``len(labels)``: run k is
+    samples ``edges[k]:edges[k + 1]``."""
+    return np.r_[np.flatnonzero(np.diff(labels, prepend=labels[0] - 1)), len(labels)]
+
+
 def single_label_windows(labels: np.ndarray, length: int = 8, stride: int = 1) -> np.ndarray:
     """Boolean mask over windows: True where all samples of the window carry the same label."""
     windows = sliding_windows(np.asarray(labels)[:, None], length, stride)[:, :, 0]

@@ -11,15 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from bomi.classifier import NEUTRAL_LABEL
+from bomi.features import run_edges
 
 MIN_RESTS = 3   # rests a spread is measured from (two degrees of freedom at the least)
 
 
 def hold_levels(labels: np.ndarray, angles: np.ndarray) -> list[tuple[int, np.ndarray]]:
     """(label, mean of the (n, k) ``angles`` over the run) of each run of one label in (n,) ``labels``, in order."""
-    starts = np.flatnonzero(np.diff(labels, prepend=labels[0] - 1))
-    ends = np.r_[starts[1:], len(labels)]
-    return [(int(labels[a]), angles[a:b].mean(axis=0)) for a, b in zip(starts, ends)]
+    edges = run_edges(labels)
+    return [(int(labels[a]), angles[a:b].mean(axis=0)) for a, b in zip(edges[:-1], edges[1:])]
 
 
 def rest_spread(labels: np.ndarray, angles: np.ndarray) -> np.ndarray | None:

@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from bomi.errors import BomiError
+from bomi.features import run_edges
 from bomi.recording import TIME_COLUMN, NodeData, Recording, Signal
 
 PASS_GAP_S = 2.0     # a pause of the clock shorter than this is never a new pass
@@ -83,8 +84,7 @@ def pass_name(source: str, k: int, bounds: PassBounds) -> str:
 
 def class_sequence(labels: np.ndarray) -> tuple[int, ...]:
     """The labels of the runs of equal labels, in order."""
-    starts = np.flatnonzero(np.diff(labels, prepend=labels[0] - 1))
-    return tuple(int(v) for v in labels[starts])
+    return tuple(int(v) for v in labels[run_edges(labels)[:-1]])
 
 
 def passes_text(rec: Recording, bounds: Sequence[PassBounds]) -> str:
@@ -128,7 +128,7 @@ def join(passes: Sequence[Recording], source: str) -> Recording:
 def run_digests(rec: Recording) -> list[tuple[int, int, str]]:
     """(start, stop, digest) of every run of equal labels: a hash of its labels and every node's angles."""
     labels = rec.require_labels()
-    edges = np.r_[np.flatnonzero(np.diff(labels, prepend=labels[0] - 1)), len(labels)]
+    edges = run_edges(labels)
     out = []
     for a, b in zip(edges[:-1], edges[1:]):
         h = hashlib.sha256(np.ascontiguousarray(labels[a:b], dtype=np.int64).tobytes())
