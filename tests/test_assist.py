@@ -59,7 +59,7 @@ def test_unknown_or_contradictory_assist_names_are_one_line_errors(text):
 def test_run_task_rejects_an_unknown_assistance_before_running(capsys):
     assert main(["run-task", "--operator", "joystick", "--assist", "bogus"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("bomi: error: argument --assist: unknown bogus") and err.count("\n") == 1
+    assert err.startswith("bomi: error: --assist: unknown bogus") and err.count("\n") == 1
 
 
 def test_a_profile_chooses_its_assistances_and_rejects_unknown_ones(tmp_path):
@@ -685,7 +685,7 @@ def test_a_user_who_leaves_the_height_mode_to_travel_low_where_a_rise_was_expect
 def test_a_step_far_inside_its_tolerance_is_not_needed_without_overflow():
     """The logistic of a step's error: 1/2 at the tolerance, the plain formula in range, 0 far inside
     (an error 1 m below a 1 mm softness once overflowed math.exp inside `bomi design`)."""
-    from tasks.operators.assist import _needed
+    from tasks.operators.assist.path import _needed
 
     assert _needed(0.02, 0.02, 0.005) == 0.5
     assert _needed(0.03, 0.02, 0.005) == 1.0 / (1.0 + math.exp(-2.0))
