@@ -1,9 +1,22 @@
-"""Loading the project's TOML configuration files (profiles, participants, operators)."""
+"""The one loader of the project's TOML configuration files (profiles, participants, operators, the
+assistance, the simulation): a file -> its TOML document -> validated frozen dataclasses, every fault
+one line, ``path: [section] key: what is wrong``.
+
+``load_toml`` reads the file (a path, or a shipped file by bare name), applies overrides and rejects
+numbers no setting takes (``check_numbers``); its ``parse`` builds the dataclasses. A section whose
+keys are the fields of a dataclass is read by ``from_table`` (each value checked against the field's
+type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError) and a document of
+such sections by ``from_sections``. ``check_table``, ``typed`` and ``number`` check a table by hand,
+for the tables whose shape is not one dataclass (arrays of tables, values of several kinds).
+"""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import tomllib
+import types
+import typing
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -91,8 +104,8 @@ MAX_ABS_SETTING = 1e6
 
 
 def check_numbers(data: Any, where: str = "") -> None:
-    """ValueError naming the key of the first number that is not finite (TOML allows nan and inf) or
-    beyond +-MAX_ABS_SETTING."""
+    """ValueError naming the key (``[section] key``) of the first number that is not finite (TOML
+    allows nan and inf) or beyond +-MAX_ABS_SETTING."""
     if isinstance(data, dict):
         for key, value in data.items():
             check_numbers(value, f"{where}.{key}" if where else str(key))
@@ -101,7 +114,9 @@ def check_numbers(data: Any, where: str = "") -> None:
             check_numbers(value, f"{where}[{k}]")
     elif isinstance(data, (int, float)) and not isinstance(data, bool):
         if not math.isfinite(data) or abs(data) > MAX_ABS_SETTING:
-            raise ValueError(f"{where} = {data!r}: not a finite number within +-{MAX_ABS_SETTING:g}")
+            table, dot, key = where.rpartition(".")
+            raise ValueError(f"{f'[{table}] ' if dot else ''}{key}: {data!r} is not a finite number within "
+                             f"+-{MAX_ABS_SETTING:g}")
 
 
 def with_overrides(data: dict, overrides: Mapping[str, Any]) -> dict:
@@ -159,3 +174,99 @@ def number(table: dict, key: str, where: str, low: float = -math.inf, high: floa
             or not low <= value <= high:
         raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
     return float(value)
+
+
+# ------------------------------------------------------------------------------ tables as dataclasses
+def from_sections(cls: type[T], data: Any, **extra: Any) -> T:
+    """A ``cls`` dataclass whose fields (but those given in ``extra``) are section dataclasses, each
+    read from the document's table of the field's name (``from_table``); ValueError on an unknown or
+    missing section."""
+    if not isinstance(data, dict):
+        raise ValueError("not a table of sections")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in extra]
+    sections = {name: from_table(hints[name], data.get(name), name) for name in names}
+    unknown = set(data) - set(names)
+    if unknown:
+        raise ValueError(f"unknown section(s) {sorted(unknown)}")
+    return cls(**sections, **extra)
+
+
+def from_table(cls: type[T], table: Any, section: str) -> T:
+    """A ``cls`` dataclass from the TOML table ``[section]``: no key outside its fields, every field
+    without a default present, each value of the field's type hint (``coerce``), then ``cls``'s own
+    checks (its ``__post_init__`` raising ValueError). ValueError ``[section] key: ...``."""
+    if table is None:
+        raise ValueError(f"[{section}] section missing")
+    if not isinstance(table, dict):
+        raise ValueError(f"[{section}] must be a table, got {table!r}")
+    hints = typing.get_type_hints(cls)
+    fields = [f for f in dataclasses.fields(cls) if f.init]
+    unknown = set(table) - {f.name for f in fields}
+    if unknown:
+        raise ValueError(f"[{section}] unknown key(s) {sorted(unknown)}")
+    values = {}
+    for f in fields:
+        if f.name not in table:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ValueError(f"[{section}] {f.name}: missing")
+            continue
+        try:
+            values[f.name] = coerce(table[f.name], hints[f.name])
+        except ValueError as exc:
+            raise ValueError(f"[{section}] {f.name}: {exc}") from None
+    try:
+        return cls(**values)
+    except ValueError as exc:
+        raise ValueError(f"[{section}] {exc}") from None
+
+
+def coerce(value: Any, kind: Any) -> Any:
+    """A TOML value checked against a type hint: bool, int, float (an integer is taken), str (not
+    empty), a fixed-length ``tuple[X, Y]`` or a ``tuple[X, ...]`` (from an array), ``X | None`` (an
+    absent key only: TOML has no null). ValueError saying what was expected."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        kinds = [k for k in typing.get_args(kind) if k is not type(None)]
+        if len(kinds) == 1:
+            return coerce(value, kinds[0])
+        raise TypeError(f"no TOML reading of {kind}")
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"expected true/false, got {value!r}")
+        return value
+    if kind is str:
+        if not isinstance(value, str) or not value:
+            raise ValueError(f"expected a non-empty string, got {value!r}")
+        return value
+    if kind in (int, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"expected a number, got {value!r}")
+        if kind is int and not isinstance(value, int):
+            raise ValueError(f"expected an integer, got {value!r}")
+        if not math.isfinite(value):
+            raise ValueError(f"expected a finite number, got {value!r}")
+        return kind(value)
+    args = typing.get_args(kind)
+    if typing.get_origin(kind) is not tuple:
+        raise TypeError(f"no TOML reading of {kind}")
+    if not isinstance(value, list):
+        raise ValueError(f"expected a list, got {value!r}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(coerce(item, args[0]) for item in value)
+    if len(value) != len(args):
+        raise ValueError(f"expected {len(args)} values, got {len(value)}")
+    return tuple(coerce(item, arg) for item, arg in zip(value, args))
+
+
+def positive(section: Any, *names: str) -> None:
+    """ValueError ``name: must be > 0`` for the first of the ``section``'s fields ``names`` that is not."""
+    for name in names:
+        if not getattr(section, name) > 0:
+            raise ValueError(f"{name}: must be > 0, got {getattr(section, name)!r}")
+
+
+def at_most(section: Any, limit: float, *names: str) -> None:
+    """ValueError ``name: must be at most limit`` for the first of the fields ``names`` above ``limit``."""
+    for name in names:
+        if getattr(section, name) > limit:
+            raise ValueError(f"{name}: must be at most {limit!r}, got {getattr(section, name)!r}")

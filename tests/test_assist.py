@@ -75,9 +75,15 @@ def test_a_profile_chooses_its_assistances_and_rejects_unknown_ones(tmp_path):
 def test_the_assist_file_is_validated_naming_the_file(tmp_path):
     params = load_assist()
     assert params.auto_mode.press_grace < params.auto_mode.press_time
-    bad = edited_copy(DEFAULT_ASSIST_FILE, tmp_path / "assist.toml", "rest_time = 0.10", "rest_time = -1")
-    with pytest.raises(BomiError, match=r"assist.toml: \[auto_mode\] rest_time must be positive"):
-        load_assist(bad)
+    for old, new, fault in [("rest_time = 0.10", "rest_time = -1", r"\[auto_mode\] rest_time: must be > 0, got -1.0"),
+                            ("open_closure = 0.15", "open_closure = 1.0", r"\[path\] open_closure: must be below 1"),
+                            ("hold_still = 0.3", 'hold_still = "long"', r"\[grasp_help\] hold_still: expected a number"),
+                            ("revisit = 2.0", "revisit = 2.0\nbounce = 1", r"\[path\] unknown key\(s\) \['bounce'\]"),
+                            ("squeeze = 0.4 ", "# squeeze = 0.4 ", r"\[path\] squeeze: missing")]:
+        bad = edited_copy(DEFAULT_ASSIST_FILE, tmp_path / "assist.toml", old, new)
+        with pytest.raises(BomiError, match=r"^\S*assist.toml: " + fault):
+            load_assist(bad)
+    assert load_assist(DEFAULT_ASSIST_FILE).auto_mode.off_target_prior == -5.0   # a log-odds may be negative
 
 
 # ------------------------------------------------------------------------------------ time model

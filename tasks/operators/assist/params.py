@@ -1,11 +1,10 @@
 """The assistance's parameters (``assist.toml``: [auto_mode], [path], [grasp_help])."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from bomi.config_files import load_toml
+from bomi.config_files import from_sections, load_toml, positive
 
 DEFAULT_ASSIST_FILE = Path(__file__).resolve().parents[1] / "assist.toml"
 
@@ -26,6 +25,11 @@ class AutoModeParams:
     refusal_share: float
     rest_refusal: float
 
+    def __post_init__(self) -> None:
+        positive(self, *(f.name for f in fields(self) if f.name != "off_target_prior"))   # a log-odds: any sign
+        if not self.refusal_share < 1:
+            raise ValueError(f"refusal_share: must be below 1, got {self.refusal_share!r}")
+
 
 @dataclass(frozen=True)
 class PathParams:
@@ -42,6 +46,11 @@ class PathParams:
     squeeze: float
     revisit: float
 
+    def __post_init__(self) -> None:
+        positive(self, *(f.name for f in fields(self)))
+        if not self.open_closure < 1:
+            raise ValueError(f"open_closure: must be below 1, got {self.open_closure!r}")
+
 
 @dataclass(frozen=True)
 class GraspHelpParams:
@@ -49,6 +58,9 @@ class GraspHelpParams:
     xy_tol: float
     z_tol: float
     yaw_tol_deg: float
+
+    def __post_init__(self) -> None:
+        positive(self, *(f.name for f in fields(self)))
 
 
 @dataclass(frozen=True)
@@ -58,39 +70,10 @@ class AssistParams:
     grasp_help: GraspHelpParams
 
 
-_TABLES = {"auto_mode": AutoModeParams, "path": PathParams, "grasp_help": GraspHelpParams}
-_MAY_BE_NEGATIVE = {"off_target_prior"}
-
-
 def load_assist(path: Path | str = DEFAULT_ASSIST_FILE) -> AssistParams:
-    """Read and validate an assistance TOML file; BomiError names the file and the fault."""
+    """Read and validate an assistance TOML file; a one-line BomiError names the file and the fault."""
     return load_toml(path, DEFAULT_ASSIST_FILE.parent, "assist", _parse_assist)
 
 
 def _parse_assist(data: dict, source: str) -> AssistParams:
-    unknown = set(data) - set(_TABLES)
-    if unknown:
-        raise ValueError(f"unknown table(s): {', '.join(sorted(unknown))}")
-    tables = {}
-    for name, cls in _TABLES.items():
-        table = data.get(name)
-        if not isinstance(table, dict):
-            raise ValueError(f"missing table [{name}]")
-        keys = [f.name for f in fields(cls)]
-        extra = set(table) - set(keys)
-        if extra:
-            raise ValueError(f"unknown key(s) in [{name}]: {', '.join(sorted(extra))}")
-        values = {}
-        for key in keys:
-            value = table.get(key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"[{name}] {key} must be a finite number, got {value!r}")
-            if value <= 0 and key not in _MAY_BE_NEGATIVE:
-                raise ValueError(f"[{name}] {key} must be positive, got {value}")
-            values[key] = float(value)
-        tables[name] = cls(**values)
-    if not tables["path"].open_closure < 1:
-        raise ValueError("[path] open_closure must be below 1")
-    if not tables["auto_mode"].refusal_share < 1:
-        raise ValueError("[auto_mode] refusal_share must be below 1")
-    return AssistParams(**tables)
+    return from_sections(AssistParams, data)
