@@ -5,8 +5,8 @@ one line, ``path: [section] key: what is wrong``.
 ``load_toml`` reads the file (a path, or a shipped file by bare name), applies overrides and rejects
 numbers no setting takes (``check_numbers``); its ``parse`` builds the dataclasses. A section whose
 keys are the fields of a dataclass is read by ``from_table`` (each value checked against the field's
-type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError) and a document of
-such sections by ``from_sections``. ``check_table``, ``typed`` and ``number`` check a table by hand,
+type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError), and a document by
+a dataclass whose fields are such sections (or arrays of them). ``check_table``, ``typed`` and ``number`` check a table by hand,
 for the tables whose shape is not one dataclass (arrays of tables, values of several kinds).
 """
 from __future__ import annotations
@@ -177,78 +177,83 @@ def number(table: dict, key: str, where: str, low: float = -math.inf, high: floa
 
 
 # ------------------------------------------------------------------------------ tables as dataclasses
-def from_sections(cls: type[T], data: Any, **extra: Any) -> T:
-    """A ``cls`` dataclass whose fields (but those given in ``extra``) are section dataclasses, each
-    read from the document's table of the field's name (``from_table``); ValueError on an unknown or
-    missing section."""
-    if not isinstance(data, dict):
-        raise ValueError("not a table of sections")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls) if f.init and f.name not in extra]
-    sections = {name: from_table(hints[name], data.get(name), name) for name in names}
-    unknown = set(data) - set(names)
-    if unknown:
-        raise ValueError(f"unknown section(s) {sorted(unknown)}")
-    return cls(**sections, **extra)
-
-
-def from_table(cls: type[T], table: Any, section: str) -> T:
-    """A ``cls`` dataclass from the TOML table ``[section]``: no key outside its fields, every field
-    without a default present, each value of the field's type hint (``coerce``), then ``cls``'s own
-    checks (its ``__post_init__`` raising ValueError). ValueError ``[section] key: ...``."""
-    if table is None:
-        raise ValueError(f"[{section}] section missing")
+def from_table(cls: type[T], table: Any, section: str | None = None, **given: Any) -> T:
+    """A ``cls`` dataclass from a TOML table: the document itself (``section`` None) or the table
+    ``[section]``. No key outside the fields of ``cls`` (but those ``given``), every field without a
+    default present, each value of its field's type hint: a dataclass field is a table read the same
+    way (its section ``section.field``), a ``tuple[Dataclass, ...]`` an array of tables
+    (``field[k]``), anything else ``coerce``d. Then ``cls``'s own checks (its ``__post_init__``,
+    raising ValueError). ValueError ``[section] key: ...``, one line."""
+    where = f"[{section}] " if section else ""
     if not isinstance(table, dict):
-        raise ValueError(f"[{section}] must be a table, got {table!r}")
+        raise ValueError(f"{where}must be a table, got {table!r}")
     hints = typing.get_type_hints(cls)
-    fields = [f for f in dataclasses.fields(cls) if f.init]
-    unknown = set(table) - {f.name for f in fields}
-    if unknown:
-        raise ValueError(f"[{section}] unknown key(s) {sorted(unknown)}")
+    fields = [f for f in dataclasses.fields(cls) if f.init and f.name not in given]
     values = {}
     for f in fields:
+        inner, kind = f.name if section is None else f"{section}.{f.name}", hints[f.name]
         if f.name not in table:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ValueError(f"[{section}] {f.name}: missing")
+                raise ValueError(f"[{inner}] section missing" if dataclasses.is_dataclass(kind)
+                                 else f"{where}{f.name}: missing")
             continue
-        try:
-            values[f.name] = coerce(table[f.name], hints[f.name])
-        except ValueError as exc:
-            raise ValueError(f"[{section}] {f.name}: {exc}") from None
+        value = table[f.name]
+        if dataclasses.is_dataclass(kind):
+            values[f.name] = from_table(kind, value, inner)
+        elif typing.get_origin(kind) is tuple and dataclasses.is_dataclass(typing.get_args(kind)[0]):
+            if not isinstance(value, list):
+                raise ValueError(f"{where}{f.name}: expected an array of tables ([[{inner}]]), got {value!r}")
+            values[f.name] = tuple(from_table(typing.get_args(kind)[0], item, f"{inner}[{k}]")
+                                   for k, item in enumerate(value))
+        else:
+            try:
+                values[f.name] = coerce(value, kind)
+            except ValueError as exc:
+                raise ValueError(f"{where}{f.name}: {exc}") from None
+    unknown = set(table) - {f.name for f in fields}
+    if unknown:
+        raise ValueError(f"{where}unknown key(s) {sorted(unknown)}")
     try:
-        return cls(**values)
+        return cls(**values, **given)
     except ValueError as exc:
-        raise ValueError(f"[{section}] {exc}") from None
+        raise ValueError(f"{where}{exc}") from None
 
 
 def coerce(value: Any, kind: Any) -> Any:
-    """A TOML value checked against a type hint: bool, int, float (an integer is taken), str (not
-    empty), a fixed-length ``tuple[X, Y]`` or a ``tuple[X, ...]`` (from an array), ``X | None`` (an
-    absent key only: TOML has no null). ValueError saying what was expected."""
+    """A TOML value checked against a type hint: bool, int, float (an integer is taken), str, a
+    fixed-length ``tuple[X, Y]`` or a ``tuple[X, ...]`` (from an array), a union (the first of its
+    kinds that takes the value; ``None`` only as an absent key's default: TOML has no null).
+    ValueError saying what was expected."""
     if typing.get_origin(kind) in (typing.Union, types.UnionType):
         kinds = [k for k in typing.get_args(kind) if k is not type(None)]
         if len(kinds) == 1:
             return coerce(value, kinds[0])
-        raise TypeError(f"no TOML reading of {kind}")
+        faults = []
+        for each in kinds:
+            try:
+                return coerce(value, each)
+            except ValueError as exc:
+                faults.append(str(exc).split(", got ")[0])
+        raise ValueError(f"expected {' or '.join(f.removeprefix('expected ') for f in faults)}, got {value!r}")
     if kind is bool:
         if not isinstance(value, bool):
             raise ValueError(f"expected true/false, got {value!r}")
         return value
     if kind is str:
-        if not isinstance(value, str) or not value:
-            raise ValueError(f"expected a non-empty string, got {value!r}")
+        if not isinstance(value, str):
+            raise ValueError(f"expected a string, got {value!r}")
         return value
     if kind in (int, float):
+        if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ValueError(f"expected an integer, got {value!r}")
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ValueError(f"expected a number, got {value!r}")
-        if kind is int and not isinstance(value, int):
-            raise ValueError(f"expected an integer, got {value!r}")
         if not math.isfinite(value):
             raise ValueError(f"expected a finite number, got {value!r}")
         return kind(value)
-    args = typing.get_args(kind)
     if typing.get_origin(kind) is not tuple:
         raise TypeError(f"no TOML reading of {kind}")
+    args = typing.get_args(kind)
     if not isinstance(value, list):
         raise ValueError(f"expected a list, got {value!r}")
     if len(args) == 2 and args[1] is Ellipsis:

@@ -10,7 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from bomi.config_files import at_most, from_sections, load_toml, positive
+from bomi.config_files import at_most, from_table, load_toml, positive
 
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 DEFAULT_CONFIG = MODELS_DIR / "sim.toml"
@@ -110,6 +110,8 @@ class RenderConfig:
     fps: float
 
     def __post_init__(self) -> None:
+        if not self.camera:
+            raise ValueError("camera: expected a camera's name, got ''")
         positive(self, "width", "height", "fps")
 
 
@@ -130,7 +132,7 @@ def load_config(path: Path | str | None = None) -> SimConfig:
 
 
 def _parse(data: dict, source: str) -> SimConfig:
-    config = from_sections(SimConfig, data, source=Path(source))
+    config = from_table(SimConfig, data, source=Path(source))
     for gain in GAINS:  # a pull of g per second applied once per tick overshoots beyond g = control_hz
         value = getattr(config.control, gain)
         if value > config.physics.control_hz:

@@ -33,14 +33,14 @@ def test_default_config_loads_with_the_measured_timing():
 
 
 @pytest.mark.parametrize("old, new, complaint", [
-    ("substeps = 8", 'substeps = "8"', "[physics] substeps: expected a number"),
+    ("substeps = 8", 'substeps = "8"', "[physics] substeps: expected an integer, got '8'"),
     ("substeps = 8", "substeps = 2.5", "[physics] substeps: expected an integer"),
     ("full_speed = 0.20", "full_speed = -0.2", "[control] full_speed: must be > 0"),
     ("x = [-0.45, 0.45]", "x = [0.45, -0.45]", "[workspace] x: lower bound"),
     ("base_pos = [0.0, 0.0, 0.0]", "base_pos = [0.0, 0.0]", "[arm] base_pos: expected 3 values"),
     ("fps = 30", "fps = 30\nspeed = 2", "[render] unknown key(s) ['speed']"),
     ("[render]", "[rendering]", "[render] section missing"),
-    ("fps = 30", "fps = 30\n[extra]\nx = 1", "unknown section(s) ['extra']"),
+    ("fps = 30", "fps = 30\n[extra]\nx = 1", "unknown key(s) ['extra']"),
     ("control_hz = 60.0", "control_hz = nan", "[physics] control_hz: nan is not a finite number within +-1e+06"),
     ("[physics]", "[physics", "not valid TOML"),
     ("control_hz = 60.0", "control_hz = 1e300", "[physics] control_hz: 1e+300 is not a finite number within"),

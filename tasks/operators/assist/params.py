@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from bomi.config_files import from_sections, load_toml, positive
+from bomi.config_files import from_table, load_toml, positive
 
 DEFAULT_ASSIST_FILE = Path(__file__).resolve().parents[1] / "assist.toml"
 
@@ -76,4 +76,4 @@ def load_assist(path: Path | str = DEFAULT_ASSIST_FILE) -> AssistParams:
 
 
 def _parse_assist(data: dict, source: str) -> AssistParams:
-    return from_sections(AssistParams, data)
+    return from_table(AssistParams, data)
