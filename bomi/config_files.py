@@ -75,15 +75,31 @@ MAX_TOML_DEPTH = 16
 def parse_toml(path: Path, kind: str) -> dict:
     """The TOML document of the configuration file ``path`` (a regular file of at most
     MAX_CONFIG_BYTES, nested at most MAX_TOML_DEPTH deep); every fault a one-line BomiError."""
-    text = read_config_text(path, kind)
+    try:
+        return toml_document(read_config_text(path, kind), kind)
+    except ValueError as exc:
+        raise BomiError(f"{path}: {exc}") from None
+
+
+def parse_text(text: str, source: str, kind: str, parse: Callable[[dict, str], T]) -> T:
+    """``load_toml`` of a configuration's text rather than its file (one about to be written is
+    checked so): the document (``toml_document``), its numbers (``check_numbers``), then ``parse``;
+    every fault a ValueError."""
+    data = toml_document(text, kind)
+    check_numbers(data)
+    return parse(data, source)
+
+
+def toml_document(text: str, kind: str) -> dict:
+    """The TOML document in ``text``, nested at most MAX_TOML_DEPTH deep; ValueError otherwise."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+        raise ValueError(f"not valid TOML ({exc})") from None
     except RecursionError:
-        raise BomiError(f"{path}: not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)") from None
+        raise ValueError(f"not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)") from None
     if _depth(data) > MAX_TOML_DEPTH:
-        raise BomiError(f"{path}: not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)")
+        raise ValueError(f"not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)")
     return data
 
 

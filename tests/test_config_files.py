@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from bomi.config_files import coerce, from_table, load_toml
+from bomi.config_files import coerce, from_table, load_toml, parse_text
 from bomi.errors import BomiError
 
 
@@ -74,3 +74,15 @@ def test_a_file_is_named_in_front_of_the_fault(tmp_path):
     path.write_text('name = "b"\nwheels = []\n[frame]\nradius = 1e300\n')
     with pytest.raises(BomiError, match=r"bike.toml: \[frame\] radius: 1e\+300 is not a finite number within"):
         load_toml(path, tmp_path, "bike", lambda data, source: from_table(Bike, data))
+
+
+def test_a_text_is_checked_as_its_file_would_be_with_value_errors():
+    def bike(data: dict, source: str) -> Bike:
+        return from_table(Bike, data)
+
+    assert parse_text('name = "b"\nwheels = []\n[frame]\nradius = 1\n', "t.toml", "bike", bike).frame == Wheel(1.0)
+    for text, fault in [('name = "b', "not valid TOML"), ("a = " + "[" * 40 + "]" * 40, "not a bike file (nested deeper"),
+                        ('name = "b"\nwheels = []\n[frame]\nradius = nan\n', "[frame] radius: nan is not a finite number")]:
+        with pytest.raises(ValueError) as info:
+            parse_text(text, "t.toml", "bike", bike)
+        assert str(info.value).startswith(fault)
