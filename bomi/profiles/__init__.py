@@ -3,6 +3,10 @@ window, LDA shrinkage, post-processing and the joystick layout the classes drive
 
 Node calibration defaults: node 1 (the headset) gets hardware.md's headset constants; other nodes get
 h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`` table says otherwise.
+
+A file is read by ``bomi.config_files``: each of its tables is a dataclass below (``_ProfileFile``),
+its faults one line ``path: [section] key: ...``; ``_parse`` then checks what spans tables (nodes and
+classes) and builds the ``Profile``.
 """
 from __future__ import annotations
 
