@@ -82,7 +82,7 @@ class Profile:
     # scatter (bomi.chain.rest_offsets); [classifier] rest_offsets
     rest_offsets: bool = False
     # the assistances on unless a run says otherwise ([assist] options; names checked where the
-    # profile meets the arm, tasks/operators/assist.py)
+    # profile meets the arm, tasks/operators/assist/options.py)
     assist: tuple[str, ...] = ()
     button_hold_s: float = DEFAULT_BUTTON_HOLD_S   # [live] button_hold_s
     rezero_hold_s: float = DEFAULT_REZERO_HOLD_S   # [live] rezero_hold_s (0: off)
