@@ -6,8 +6,9 @@ one line, ``path: [section] key: what is wrong``.
 numbers no setting takes (``check_numbers``); its ``parse`` builds the dataclasses. A section whose
 keys are the fields of a dataclass is read by ``from_table`` (each value checked against the field's
 type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError), and a document by
-a dataclass whose fields are such sections (or arrays of them). ``check_table``, ``typed`` and ``number`` check a table by hand,
-for the tables whose shape is not one dataclass (arrays of tables, values of several kinds).
+a dataclass whose fields are such sections (or arrays of them). ``parse_text`` reads a
+configuration's text (one about to be written) the same way. ``check_table``, ``typed`` and
+``number`` check a table by hand: the operator, human-model, participant and grid readers still do.
 """
 from __future__ import annotations
 

@@ -255,7 +255,8 @@ class _Neutral:
 
     def __post_init__(self) -> None:
         if not 1 <= self.samples <= MAX_NEUTRAL_SAMPLES:
-            raise ValueError(f"samples: must be in [1, {MAX_NEUTRAL_SAMPLES}] (a minute at 62.5 Hz), got {self.samples}")
+            raise ValueError(f"samples: must be in [1, {MAX_NEUTRAL_SAMPLES}] (a minute at 62.5 Hz), "
+                             f"got {self.samples}")
 
 
 @dataclass(frozen=True)
@@ -278,8 +279,8 @@ class _PostProcessing:
                              f"got {self.rejection_threshold!r}")
 
     def post(self) -> PostProcessing:
-        return PostProcessing(rejection_threshold=None if self.rejection_threshold == SELECT else self.rejection_threshold,
-                              vote_length=self.vote_length)
+        threshold = None if self.rejection_threshold == SELECT else self.rejection_threshold
+        return PostProcessing(rejection_threshold=threshold, vote_length=self.vote_length)
 
 
 @dataclass(frozen=True)
@@ -364,7 +365,8 @@ def _parse_classes(tables: tuple[_Class, ...], node_indices: set[int]) -> tuple[
     """The classes in label order: distinct labels, at least three, exactly one neutral (label 0)."""
     for k, cls in enumerate(tables):
         if cls.node is not None and cls.node not in node_indices:
-            raise ValueError(f"[classes[{k}]] node: {cls.node} is not one of the profile's nodes {sorted(node_indices)}")
+            raise ValueError(f"[classes[{k}]] node: {cls.node} is not one of the profile's nodes "
+                             f"{sorted(node_indices)}")
     classes = tuple(ClassConfig(label=c.label, name=c.name, function=c.function, node=c.node) for c in tables)
     labels = [cls.label for cls in classes]
     if len(set(labels)) != len(labels):
