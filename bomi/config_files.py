@@ -1,9 +1,23 @@
-"""Loading the project's TOML configuration files (profiles, participants, operators)."""
+"""The one loader of the project's TOML configuration files (profiles, participants, operators, the
+assistance, the simulation): a file -> its TOML document -> validated frozen dataclasses, every fault
+one line, ``path: [section] key: what is wrong``.
+
+``load_toml`` reads the file (a path, or a shipped file by bare name), applies overrides and rejects
+numbers no setting takes (``check_numbers``); its ``parse`` builds the dataclasses. A section whose
+keys are the fields of a dataclass is read by ``from_table`` (each value checked against the field's
+type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError), and a document by
+a dataclass whose fields are such sections (or arrays of them). ``parse_text`` reads a
+configuration's text (one about to be written) the same way. ``check_table``, ``typed`` and
+``number`` check a table by hand: the operator, human-model, participant and grid readers still do.
+"""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import tomllib
+import types
+import typing
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -62,15 +76,31 @@ MAX_TOML_DEPTH = 16
 def parse_toml(path: Path, kind: str) -> dict:
     """The TOML document of the configuration file ``path`` (a regular file of at most
     MAX_CONFIG_BYTES, nested at most MAX_TOML_DEPTH deep); every fault a one-line BomiError."""
-    text = read_config_text(path, kind)
+    try:
+        return toml_document(read_config_text(path, kind), kind)
+    except ValueError as exc:
+        raise BomiError(f"{path}: {exc}") from None
+
+
+def parse_text(text: str, source: str, kind: str, parse: Callable[[dict, str], T]) -> T:
+    """``load_toml`` of a configuration's text rather than its file (one about to be written is
+    checked so): the document (``toml_document``), its numbers (``check_numbers``), then ``parse``;
+    every fault a ValueError."""
+    data = toml_document(text, kind)
+    check_numbers(data)
+    return parse(data, source)
+
+
+def toml_document(text: str, kind: str) -> dict:
+    """The TOML document in ``text``, nested at most MAX_TOML_DEPTH deep; ValueError otherwise."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise BomiError(f"{path}: not valid TOML ({exc})") from None
+        raise ValueError(f"not valid TOML ({exc})") from None
     except RecursionError:
-        raise BomiError(f"{path}: not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)") from None
+        raise ValueError(f"not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)") from None
     if _depth(data) > MAX_TOML_DEPTH:
-        raise BomiError(f"{path}: not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)")
+        raise ValueError(f"not a {kind} file (nested deeper than {MAX_TOML_DEPTH} levels)")
     return data
 
 
@@ -91,8 +121,8 @@ MAX_ABS_SETTING = 1e6
 
 
 def check_numbers(data: Any, where: str = "") -> None:
-    """ValueError naming the key of the first number that is not finite (TOML allows nan and inf) or
-    beyond +-MAX_ABS_SETTING."""
+    """ValueError naming the key (``[section] key``) of the first number that is not finite (TOML
+    allows nan and inf) or beyond +-MAX_ABS_SETTING."""
     if isinstance(data, dict):
         for key, value in data.items():
             check_numbers(value, f"{where}.{key}" if where else str(key))
@@ -101,7 +131,9 @@ def check_numbers(data: Any, where: str = "") -> None:
             check_numbers(value, f"{where}[{k}]")
     elif isinstance(data, (int, float)) and not isinstance(data, bool):
         if not math.isfinite(data) or abs(data) > MAX_ABS_SETTING:
-            raise ValueError(f"{where} = {data!r}: not a finite number within +-{MAX_ABS_SETTING:g}")
+            table, dot, key = where.rpartition(".")
+            raise ValueError(f"{f'[{table}] ' if dot else ''}{key}: {data!r} is not a finite number within "
+                             f"+-{MAX_ABS_SETTING:g}")
 
 
 def with_overrides(data: dict, overrides: Mapping[str, Any]) -> dict:
@@ -159,3 +191,104 @@ def number(table: dict, key: str, where: str, low: float = -math.inf, high: floa
             or not low <= value <= high:
         raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
     return float(value)
+
+
+# ------------------------------------------------------------------------------ tables as dataclasses
+def from_table(cls: type[T], table: Any, section: str | None = None, **given: Any) -> T:
+    """A ``cls`` dataclass from a TOML table: the document itself (``section`` None) or the table
+    ``[section]``. No key outside the fields of ``cls`` (but those ``given``), every field without a
+    default present, each value of its field's type hint: a dataclass field is a table read the same
+    way (its section ``section.field``), a ``tuple[Dataclass, ...]`` an array of tables
+    (``field[k]``), anything else ``coerce``d. Then ``cls``'s own checks (its ``__post_init__``,
+    raising ValueError). ValueError ``[section] key: ...``, one line."""
+    where = f"[{section}] " if section else ""
+    if not isinstance(table, dict):
+        raise ValueError(f"{where}must be a table, got {table!r}")
+    hints = typing.get_type_hints(cls)
+    fields = [f for f in dataclasses.fields(cls) if f.init and f.name not in given]
+    values = {}
+    for f in fields:
+        inner, kind = f.name if section is None else f"{section}.{f.name}", hints[f.name]
+        if f.name not in table:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ValueError(f"[{inner}] section missing" if dataclasses.is_dataclass(kind)
+                                 else f"{where}{f.name}: missing")
+            continue
+        value = table[f.name]
+        if dataclasses.is_dataclass(kind):
+            values[f.name] = from_table(kind, value, inner)
+        elif typing.get_origin(kind) is tuple and dataclasses.is_dataclass(typing.get_args(kind)[0]):
+            if not isinstance(value, list):
+                raise ValueError(f"{where}{f.name}: expected an array of tables ([[{inner}]]), got {value!r}")
+            values[f.name] = tuple(from_table(typing.get_args(kind)[0], item, f"{inner}[{k}]")
+                                   for k, item in enumerate(value))
+        else:
+            try:
+                values[f.name] = coerce(value, kind)
+            except ValueError as exc:
+                raise ValueError(f"{where}{f.name}: {exc}") from None
+    unknown = set(table) - {f.name for f in fields}
+    if unknown:
+        raise ValueError(f"{where}unknown key(s) {sorted(unknown)}")
+    try:
+        return cls(**values, **given)
+    except ValueError as exc:
+        raise ValueError(f"{where}{exc}") from None
+
+
+def coerce(value: Any, kind: Any) -> Any:
+    """A TOML value checked against a type hint: bool, int, float (an integer is taken), str, a
+    fixed-length ``tuple[X, Y]`` or a ``tuple[X, ...]`` (from an array), a union (the first of its
+    kinds that takes the value; ``None`` only as an absent key's default: TOML has no null).
+    ValueError saying what was expected."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        kinds = [k for k in typing.get_args(kind) if k is not type(None)]
+        if len(kinds) == 1:
+            return coerce(value, kinds[0])
+        faults = []
+        for each in kinds:
+            try:
+                return coerce(value, each)
+            except ValueError as exc:
+                faults.append(str(exc).split(", got ")[0])
+        raise ValueError(f"expected {' or '.join(f.removeprefix('expected ') for f in faults)}, got {value!r}")
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"expected true/false, got {value!r}")
+        return value
+    if kind is str:
+        if not isinstance(value, str):
+            raise ValueError(f"expected a string, got {value!r}")
+        return value
+    if kind in (int, float):
+        if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+            raise ValueError(f"expected an integer, got {value!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ValueError(f"expected a finite number, got {value!r}")
+        return kind(value)
+    if typing.get_origin(kind) is not tuple:
+        raise TypeError(f"no TOML reading of {kind}")
+    args = typing.get_args(kind)
+    if not isinstance(value, list):
+        raise ValueError(f"expected a list, got {value!r}")
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(coerce(item, args[0]) for item in value)
+    if len(value) != len(args):
+        raise ValueError(f"expected {len(args)} values, got {len(value)}")
+    return tuple(coerce(item, arg) for item, arg in zip(value, args))
+
+
+def positive(section: Any, *names: str) -> None:
+    """ValueError ``name: must be > 0`` for the first of the ``section``'s fields ``names`` that is not."""
+    for name in names:
+        if not getattr(section, name) > 0:
+            raise ValueError(f"{name}: must be > 0, got {getattr(section, name)!r}")
+
+
+def at_most(section: Any, limit: float, *names: str) -> None:
+    """ValueError ``name: must be at most limit`` for the first of the fields ``names`` above ``limit``."""
+    for name in names:
+        if getattr(section, name) > limit:
+            raise ValueError(f"{name}: must be at most {limit!r}, got {getattr(section, name)!r}")

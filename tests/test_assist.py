@@ -59,7 +59,7 @@ def test_unknown_or_contradictory_assist_names_are_one_line_errors(text):
 def test_run_task_rejects_an_unknown_assistance_before_running(capsys):
     assert main(["run-task", "--operator", "joystick", "--assist", "bogus"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("bomi: error: argument --assist: unknown bogus") and err.count("\n") == 1
+    assert err.startswith("bomi: error: --assist: unknown bogus") and err.count("\n") == 1
 
 
 def test_a_profile_chooses_its_assistances_and_rejects_unknown_ones(tmp_path):
@@ -75,9 +75,15 @@ def test_a_profile_chooses_its_assistances_and_rejects_unknown_ones(tmp_path):
 def test_the_assist_file_is_validated_naming_the_file(tmp_path):
     params = load_assist()
     assert params.auto_mode.press_grace < params.auto_mode.press_time
-    bad = edited_copy(DEFAULT_ASSIST_FILE, tmp_path / "assist.toml", "rest_time = 0.10", "rest_time = -1")
-    with pytest.raises(BomiError, match=r"assist.toml: \[auto_mode\] rest_time must be positive"):
-        load_assist(bad)
+    for old, new, fault in [("rest_time = 0.10", "rest_time = -1", r"\[auto_mode\] rest_time: must be > 0, got -1.0"),
+                            ("open_closure = 0.15", "open_closure = 1.0", r"\[path\] open_closure: must be below 1"),
+                            ("hold_still = 0.3", 'hold_still = "long"', r"\[grasp_help\] hold_still: expected a number"),
+                            ("revisit = 2.0", "revisit = 2.0\nbounce = 1", r"\[path\] unknown key\(s\) \['bounce'\]"),
+                            ("squeeze = 0.4 ", "# squeeze = 0.4 ", r"\[path\] squeeze: missing")]:
+        bad = edited_copy(DEFAULT_ASSIST_FILE, tmp_path / "assist.toml", old, new)
+        with pytest.raises(BomiError, match=r"^\S*assist.toml: " + fault):
+            load_assist(bad)
+    assert load_assist(DEFAULT_ASSIST_FILE).auto_mode.off_target_prior == -5.0   # a log-odds may be negative
 
 
 # ------------------------------------------------------------------------------------ time model
@@ -685,7 +691,7 @@ def test_a_user_who_leaves_the_height_mode_to_travel_low_where_a_rise_was_expect
 def test_a_step_far_inside_its_tolerance_is_not_needed_without_overflow():
     """The logistic of a step's error: 1/2 at the tolerance, the plain formula in range, 0 far inside
     (an error 1 m below a 1 mm softness once overflowed math.exp inside `bomi design`)."""
-    from tasks.operators.assist import _needed
+    from tasks.operators.assist.path import _needed
 
     assert _needed(0.02, 0.02, 0.005) == 0.5
     assert _needed(0.03, 0.02, 0.005) == 1.0 / (1.0 + math.exp(-2.0))

@@ -3,21 +3,25 @@ window, LDA shrinkage, post-processing and the joystick layout the classes drive
 
 Node calibration defaults: node 1 (the headset) gets hardware.md's headset constants; other nodes get
 h = 0, C = identity and no mounting rotation unless their ``[nodes.calibration]`` table says otherwise.
+
+A file is read by ``bomi.config_files``: each of its tables is a dataclass below (``_ProfileFile``),
+its faults one line ``path: [section] key: ...``; ``_parse`` then checks what spans tables (nodes and
+classes) and builds the ``Profile``.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bomi.classifier import AMPLITUDE_KINDS, MAX_CLASSES, NEUTRAL_LABEL, PostProcessing, ProfileIdentity
-from bomi.config_files import check_table, load_toml, number, typed
+from bomi.config_files import from_table, load_toml
 from bomi.files import write_text
 from bomi.features import FEATURE_KINDS, FeatureSpec
-from bomi.fusion import NodeCalibration
+from bomi.fusion import Matrix3, NodeCalibration, Vector3
 
 PROFILE_DIR = Path(__file__).resolve().parent
 # A class's function and the profile's joystick layout are names of the device the classes drive
@@ -39,13 +43,6 @@ DEFAULT_BUTTON_HOLD_S = 0.35
 DEFAULT_REZERO_HOLD_S = 3.0
 # The neutral posture is held for seconds, not for hours: more than a minute of samples is a typo.
 MAX_NEUTRAL_SAMPLES = 3750
-
-_TOP_KEYS = {"name", "description", "nodes", "classes", "features", "classifier", "neutral", "proportional",
-             "post_processing", "joystick", "assist", "live"}
-_NODE_KEYS = {"index", "node_id", "site", "calibration"}
-_CALIBRATION_KEYS = {"hard_iron", "soft_iron", "mounting"}
-_CLASS_KEYS = {"label", "name", "function", "node"}
-
 
 @dataclass(frozen=True)
 class NodeConfig:
@@ -85,7 +82,7 @@ class Profile:
     # scatter (bomi.chain.rest_offsets); [classifier] rest_offsets
     rest_offsets: bool = False
     # the assistances on unless a run says otherwise ([assist] options; names checked where the
-    # profile meets the arm, tasks/operators/assist.py)
+    # profile meets the arm, tasks/operators/assist/options.py)
     assist: tuple[str, ...] = ()
     button_hold_s: float = DEFAULT_BUTTON_HOLD_S   # [live] button_hold_s
     rezero_hold_s: float = DEFAULT_REZERO_HOLD_S   # [live] rezero_hold_s (0: off)
@@ -173,151 +170,211 @@ def save_profile(path: str | Path, profile: Profile, *, overwrite: bool = False)
     write_text(path, header + tomli_w.dumps(profile_document(profile)), overwrite=overwrite)
 
 
-def _section(data: dict, name: str, allowed: set[str]) -> dict:
-    """An optional top-level table (empty when absent) with its keys checked."""
-    return check_table(typed(data, name, dict, "profile", {}), name, allowed)
+# ------------------------------------------------------------------- the file's tables (bomi.config_files)
+@dataclass(frozen=True)
+class _Calibration:
+    """[nodes.calibration]: what is absent is the node's default (``NodeCalibration.default_for``)."""
+
+    hard_iron: Vector3 | None = None
+    soft_iron: Matrix3 | None = None
+    mounting: Matrix3 | None = None
+
+
+@dataclass(frozen=True)
+class _Node:
+    index: int
+    node_id: int
+    site: str
+    calibration: _Calibration = _Calibration()
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.index <= 6:
+            raise ValueError(f"index: must be in 1..6, got {self.index}")
+
+    def config(self, where: str) -> NodeConfig:
+        """The node, its calibration completed by the defaults (``where``: the table's name in errors)."""
+        default = NodeCalibration.default_for(self.index)
+        given = self.calibration
+        try:
+            calibration = NodeCalibration(
+                hard_iron=default.hard_iron if given.hard_iron is None else given.hard_iron,
+                soft_iron=default.soft_iron if given.soft_iron is None else given.soft_iron,
+                mounting=default.mounting if given.mounting is None else given.mounting)
+        except ValueError as exc:
+            raise ValueError(f"[{where}.calibration] {exc}") from None
+        return NodeConfig(self.index, self.node_id, self.site, calibration)
+
+
+@dataclass(frozen=True)
+class _Class:
+    label: int
+    name: str
+    function: str
+    node: int | None = None   # the node that carries a motion class
+
+    def __post_init__(self) -> None:
+        if self.label < 0:
+            raise ValueError(f"label: must be >= 0, got {self.label}")
+        if self.function != NEUTRAL_FUNCTION and self.node is None:
+            raise ValueError("node: a motion class needs 'node' (the node that carries it)")
+
+
+@dataclass(frozen=True)
+class _Features:
+    vector: str = "FV3"
+    window: int = 8
+    stride: int = 1
+
+    def __post_init__(self) -> None:
+        if self.vector not in FEATURE_KINDS:
+            raise ValueError(f"vector: must be one of {', '.join(FEATURE_KINDS)}, got {self.vector!r}")
+
+
+@dataclass(frozen=True)
+class _Classifier:
+    shrinkage: float | str = "none"
+    amplitude_scales: tuple[float, ...] = ()
+    direction_spread: float = 0.0
+    rest_offsets: bool = False
+
+    def __post_init__(self) -> None:
+        if isinstance(self.shrinkage, str) and self.shrinkage not in ("auto", "none", SELECT):
+            raise ValueError(f"shrinkage: must be \"{SELECT}\", \"auto\", \"none\" or a number in [0, 1], "
+                             f"got {self.shrinkage!r}")
+        if not isinstance(self.shrinkage, str) and not 0.0 <= self.shrinkage <= 1.0:
+            raise ValueError(f"shrinkage: must be in [0, 1], got {self.shrinkage}")
+        if not all(0.0 < v < 1.0 for v in self.amplitude_scales):
+            raise ValueError(f"amplitude_scales: must be fractions in (0, 1), got {list(self.amplitude_scales)!r}")
+        if not 0.0 <= self.direction_spread <= 89.0:
+            raise ValueError(f"direction_spread: must be in [0, 89] degrees, got {self.direction_spread}")
+
+
+@dataclass(frozen=True)
+class _Neutral:
+    samples: int = DEFAULT_NEUTRAL_SAMPLES
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.samples <= MAX_NEUTRAL_SAMPLES:
+            raise ValueError(f"samples: must be in [1, {MAX_NEUTRAL_SAMPLES}] (a minute at 62.5 Hz), "
+                             f"got {self.samples}")
+
+
+@dataclass(frozen=True)
+class _Proportional:
+    amplitude: str = "gamma"
+
+    def __post_init__(self) -> None:
+        if self.amplitude not in AMPLITUDE_KINDS:
+            raise ValueError(f"amplitude: must be one of {', '.join(AMPLITUDE_KINDS)}, got {self.amplitude!r}")
+
+
+@dataclass(frozen=True)
+class _PostProcessing:
+    rejection_threshold: float | str | None = None   # or SELECT: chosen on the training recording
+    vote_length: int = 1
+
+    def __post_init__(self) -> None:
+        if isinstance(self.rejection_threshold, str) and self.rejection_threshold != SELECT:
+            raise ValueError(f"rejection_threshold: must be a number in (0, 1) or \"{SELECT}\", "
+                             f"got {self.rejection_threshold!r}")
+
+    def post(self) -> PostProcessing:
+        threshold = None if self.rejection_threshold == SELECT else self.rejection_threshold
+        return PostProcessing(rejection_threshold=threshold, vote_length=self.vote_length)
+
+
+@dataclass(frozen=True)
+class _Joystick:
+    layout: str | None = None
+
+
+@dataclass(frozen=True)
+class _Assist:
+    options: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class _Live:
+    button_hold_s: float = DEFAULT_BUTTON_HOLD_S
+    rezero_hold_s: float = DEFAULT_REZERO_HOLD_S
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.button_hold_s <= 10.0:
+            raise ValueError(f"button_hold_s: must be in [0, 10] s, got {self.button_hold_s}")
+        if not 0.0 <= self.rezero_hold_s <= 60.0:
+            raise ValueError(f"rezero_hold_s: must be in [0, 60] s, got {self.rezero_hold_s}")
+        if 0.0 < self.rezero_hold_s <= self.button_hold_s:
+            raise ValueError(f"rezero_hold_s: {self.rezero_hold_s:g} s must be longer than button_hold_s "
+                             f"({self.button_hold_s:g} s), or 0 (off): a press would re-zero")
+
+
+@dataclass(frozen=True)
+class _ProfileFile:
+    """A profile file as written: its top-level keys and tables."""
+
+    name: str
+    nodes: tuple[_Node, ...]
+    classes: tuple[_Class, ...]
+    description: str = ""
+    features: _Features = _Features()
+    classifier: _Classifier = _Classifier()
+    neutral: _Neutral = _Neutral()
+    proportional: _Proportional = _Proportional()
+    post_processing: _PostProcessing = _PostProcessing()
+    joystick: _Joystick = _Joystick()
+    assist: _Assist = _Assist()
+    live: _Live = _Live()
 
 
 def _parse(data: dict, source: str) -> Profile:
-    check_table(data, "profile", _TOP_KEYS)
-    nodes = _parse_nodes(typed(data, "nodes", list, "profile"))
-    indices = [node.index for node in nodes]
-    classes = _parse_classes(typed(data, "classes", list, "profile"), set(indices))
-    joystick = _section(data, "joystick", {"layout"})
-    classifier = _section(data, "classifier", {"shrinkage", "amplitude_scales", "direction_spread", "rest_offsets"})
-    post, select_rejection = _parse_post(_section(data, "post_processing", {"rejection_threshold", "vote_length"}))
-    return Profile(name=typed(data, "name", str, "profile"), description=typed(data, "description", str, "profile", ""),
-                   nodes=nodes, classes=classes, spec=_parse_spec(_section(data, "features", {"vector", "window", "stride"}),
-                                                                  tuple(indices)),
-                   shrinkage=_parse_shrinkage(classifier), amplitude_scales=_parse_amplitude_scales(classifier),
-                   direction_spread=number(classifier, "direction_spread", "classifier", 0.0, 89.0, default=0.0),
-                   rest_offsets=typed(classifier, "rest_offsets", bool, "classifier", False),
-                   neutral_samples=_parse_neutral_samples(_section(data, "neutral", {"samples"})),
-                   post=post, select_rejection=select_rejection,
-                   source=source, amplitude=_parse_amplitude(_section(data, "proportional", {"amplitude"})),
-                   joystick_layout=typed(joystick, "layout", str, "joystick", None),
-                   assist=_parse_assist(_section(data, "assist", {"options"})),
-                   **_parse_live(_section(data, "live", {"button_hold_s", "rezero_hold_s"})))
+    file = from_table(_ProfileFile, data)
+    nodes = _parse_nodes(file.nodes)
+    indices = tuple(node.index for node in nodes)
+    classes = _parse_classes(file.classes, set(indices))
+    features = file.features
+    try:
+        spec = FeatureSpec(kind=features.vector, nodes=indices, window=features.window, stride=features.stride)
+    except ValueError as exc:
+        raise ValueError(f"[features] {exc}") from None
+    try:
+        post = file.post_processing.post()
+    except ValueError as exc:
+        raise ValueError(f"[post_processing] {exc}") from None
+    classifier = file.classifier
+    return Profile(name=file.name, description=file.description, nodes=nodes, classes=classes, spec=spec,
+                   shrinkage=None if classifier.shrinkage == "none" else classifier.shrinkage,
+                   amplitude_scales=classifier.amplitude_scales, direction_spread=classifier.direction_spread,
+                   rest_offsets=classifier.rest_offsets, neutral_samples=file.neutral.samples,
+                   post=post, select_rejection=file.post_processing.rejection_threshold == SELECT,
+                   source=source, amplitude=file.proportional.amplitude, joystick_layout=file.joystick.layout,
+                   assist=file.assist.options, button_hold_s=file.live.button_hold_s,
+                   rezero_hold_s=file.live.rezero_hold_s)
 
 
-def _parse_live(live: dict) -> dict:
-    button_hold_s = number(live, "button_hold_s", "live", 0.0, 10.0, default=DEFAULT_BUTTON_HOLD_S)
-    rezero_hold_s = number(live, "rezero_hold_s", "live", 0.0, 60.0, default=DEFAULT_REZERO_HOLD_S)
-    if 0.0 < rezero_hold_s <= button_hold_s:
-        raise ValueError(f"[live] rezero_hold_s ({rezero_hold_s:g} s) must be longer than button_hold_s "
-                        f"({button_hold_s:g} s), or 0 (off): a press would re-zero")
-    return {"button_hold_s": button_hold_s, "rezero_hold_s": rezero_hold_s}
-
-
-def _parse_nodes(tables: list) -> tuple[NodeConfig, ...]:
-    nodes = tuple(_parse_node(t, f"nodes[{k}]") for k, t in enumerate(tables))
+def _parse_nodes(tables: tuple[_Node, ...]) -> tuple[NodeConfig, ...]:
+    nodes = [table.config(f"nodes[{k}]") for k, table in enumerate(tables)]
     indices = [node.index for node in nodes]
     if not nodes or len(set(indices)) != len(indices) or len({n.node_id for n in nodes}) != len(nodes):
-        raise ValueError("nodes: need at least one node, with distinct index and node_id")
+        raise ValueError("[[nodes]]: need at least one node, with distinct index and node_id")
     if indices != sorted(indices):
-        raise ValueError("nodes: list them in increasing index (the first one carries yaw in FV1)")
-    return nodes
+        raise ValueError("[[nodes]]: list them in increasing index (the first one carries yaw in FV1)")
+    return tuple(nodes)
 
 
-def _parse_classes(tables: list, node_indices: set[int]) -> tuple[ClassConfig, ...]:
+def _parse_classes(tables: tuple[_Class, ...], node_indices: set[int]) -> tuple[ClassConfig, ...]:
     """The classes in label order: distinct labels, at least three, exactly one neutral (label 0)."""
-    classes = tuple(_parse_class(t, f"classes[{k}]", node_indices) for k, t in enumerate(tables))
+    for k, cls in enumerate(tables):
+        if cls.node is not None and cls.node not in node_indices:
+            raise ValueError(f"[classes[{k}]] node: {cls.node} is not one of the profile's nodes "
+                             f"{sorted(node_indices)}")
+    classes = tuple(ClassConfig(label=c.label, name=c.name, function=c.function, node=c.node) for c in tables)
     labels = [cls.label for cls in classes]
     if len(set(labels)) != len(labels):
-        raise ValueError("classes: duplicate label")
+        raise ValueError("[[classes]]: duplicate label")
     if not 3 <= len(classes) <= MAX_CLASSES:
-        raise ValueError(f"classes: need three to {MAX_CLASSES} classes (neutral and at least two motions), "
+        raise ValueError(f"[[classes]]: need three to {MAX_CLASSES} classes (neutral and at least two motions), "
                          f"got {len(classes)}")
     neutral = [cls for cls in classes if cls.function == NEUTRAL_FUNCTION]
     if len(neutral) != 1 or neutral[0].label != NEUTRAL_LABEL:
-        raise ValueError(f"classes: exactly one class, label {NEUTRAL_LABEL}, must have function \"neutral\"")
+        raise ValueError(f"[[classes]]: exactly one class, label {NEUTRAL_LABEL}, must have function \"neutral\"")
     return tuple(sorted(classes, key=lambda c: c.label))
-
-
-def _parse_spec(features: dict, nodes: tuple[int, ...]) -> FeatureSpec:
-    kind = typed(features, "vector", str, "features", "FV3")
-    if kind not in FEATURE_KINDS:
-        raise ValueError(f"features: vector must be one of {', '.join(FEATURE_KINDS)}, got {kind!r}")
-    return FeatureSpec(kind=kind, nodes=nodes, window=typed(features, "window", int, "features", 8),
-                       stride=typed(features, "stride", int, "features", 1))
-
-
-def _parse_shrinkage(classifier: dict) -> float | str | None:
-    shrinkage = typed(classifier, "shrinkage", (str, float, int), "classifier", "none")
-    if isinstance(shrinkage, str):
-        if shrinkage not in ("auto", "none", SELECT):
-            raise ValueError(f"classifier: shrinkage must be \"{SELECT}\", \"auto\", \"none\" or a number in [0, 1], "
-                             f"got {shrinkage!r}")
-        return None if shrinkage == "none" else shrinkage
-    if not 0.0 <= shrinkage <= 1.0:
-        raise ValueError(f"classifier: shrinkage must be in [0, 1], got {shrinkage}")
-    return shrinkage
-
-
-def _parse_amplitude_scales(classifier: dict) -> tuple[float, ...]:
-    scales = typed(classifier, "amplitude_scales", list, "classifier", [])
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0 for v in scales):
-        raise ValueError(f"classifier: amplitude_scales must be fractions in (0, 1), got {scales!r}")
-    return tuple(float(v) for v in scales)
-
-
-def _parse_neutral_samples(neutral: dict) -> int:
-    samples = typed(neutral, "samples", int, "neutral", DEFAULT_NEUTRAL_SAMPLES)
-    if not 1 <= samples <= MAX_NEUTRAL_SAMPLES:
-        raise ValueError(f"neutral: samples must be in [1, {MAX_NEUTRAL_SAMPLES}] (a minute at 62.5 Hz), got {samples}")
-    return samples
-
-
-def _parse_amplitude(proportional: dict) -> str:
-    amplitude = typed(proportional, "amplitude", str, "proportional", "gamma")
-    if amplitude not in AMPLITUDE_KINDS:
-        raise ValueError(f"proportional: amplitude must be one of {', '.join(AMPLITUDE_KINDS)}, got {amplitude!r}")
-    return amplitude
-
-
-def _parse_post(post: dict) -> tuple[PostProcessing, bool]:
-    """The post-processing, and whether its rejection threshold is left to the training recording."""
-    threshold = typed(post, "rejection_threshold", (float, int, str), "post_processing", None)
-    if isinstance(threshold, str) and threshold != SELECT:
-        raise ValueError(f"post_processing: rejection_threshold must be a number in (0, 1) or \"{SELECT}\", "
-                         f"got {threshold!r}")
-    return (PostProcessing(rejection_threshold=None if threshold == SELECT else threshold,
-                           vote_length=typed(post, "vote_length", int, "post_processing", 1)), threshold == SELECT)
-
-
-def _parse_assist(assist: dict) -> tuple[str, ...]:
-    options = typed(assist, "options", list, "assist", [])
-    if not all(isinstance(name, str) for name in options):
-        raise ValueError(f"assist: options must be a list of names, got {options!r}")
-    return tuple(options)
-
-
-def _parse_node(table: Any, where: str) -> NodeConfig:
-    check_table(table, where, _NODE_KEYS)
-    index = typed(table, "index", int, where)
-    if not 1 <= index <= 6:
-        raise ValueError(f"{where}: index must be in 1..6, got {index}")
-    default = NodeCalibration.default_for(index)
-    calibration = check_table(typed(table, "calibration", dict, where, {}), f"{where}.calibration", _CALIBRATION_KEYS)
-    try:
-        cal = NodeCalibration(hard_iron=calibration.get("hard_iron", default.hard_iron),
-                              soft_iron=calibration.get("soft_iron", default.soft_iron),
-                              mounting=calibration.get("mounting", default.mounting))
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{where}.calibration: {exc}") from None
-    return NodeConfig(index=index, node_id=typed(table, "node_id", int, where),
-                      site=typed(table, "site", str, where), calibration=cal)
-
-
-def _parse_class(table: Any, where: str, node_indices: set[int]) -> ClassConfig:
-    check_table(table, where, _CLASS_KEYS)
-    label = typed(table, "label", int, where)
-    if label < 0:
-        raise ValueError(f"{where}: label must be >= 0")
-    function = typed(table, "function", str, where)
-    node = typed(table, "node", int, where, None)
-    if function != NEUTRAL_FUNCTION and node is None:
-        raise ValueError(f"{where}: a motion class needs 'node' (the node that carries it)")
-    if node is not None and node not in node_indices:
-        raise ValueError(f"{where}: node {node} is not one of the profile's nodes {sorted(node_indices)}")
-    return ClassConfig(label=label, name=typed(table, "name", str, where), function=function, node=node)

@@ -41,11 +41,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.stats
 
 from bomi.derived import AUTO_MODE, BUTTON_NAMES, ONE_AXIS, THREE_AXIS, TWO_AXIS, derived_layout
 from bomi.profiles import Profile
-from tasks.stacking import metrics
+from tasks.statistics import Alternative, mean_interval, sign_test_p, signed_rank_p, wilson_interval
 
 _DIRECTION_PAIRS = {THREE_AXIS: (("F", "B"), ("R", "L"), ("Rr", "Lr")), TWO_AXIS: (("F", "B"), ("R", "L")),
                     ONE_AXIS: (("F", "B"),)}
@@ -135,8 +134,8 @@ class Score:
     def of(cls, candidate: Candidate, records: Sequence[dict]) -> Score:
         per_seed = tuple(r["completion_time"] if r["success"] else None for r in records)
         times = [t for t in per_seed if t is not None]
-        return cls(candidate, len(records), len(times), metrics.success_ci95(len(times), len(records)),
-                   float(np.mean(times)) if times else None, metrics.mean_ci95(times), per_seed)
+        return cls(candidate, len(records), len(times), wilson_interval(len(times), len(records)),
+                   float(np.mean(times)) if times else None, mean_interval(times), per_seed)
 
     def text(self) -> str:
         low, high = self.success_ci95
@@ -171,15 +170,12 @@ class Against:
     @property
     def success_p(self) -> float:
         """One-sided exact sign test of the seeds one of the two failed: P(won or more | a fair coin)."""
-        n = self.won + self.lost
-        return float(scipy.stats.binomtest(self.won, n, 0.5, alternative="greater").pvalue) if n else 1.0
+        return sign_test_p(self.won, self.lost, Alternative.GREATER)
 
     @property
     def time_p(self) -> float:
         """One-sided exact Wilcoxon signed-rank test of the paired times: the candidate faster."""
-        if not any(self.time_differences):
-            return 1.0
-        return float(scipy.stats.wilcoxon(self.time_differences, alternative="less", method="exact").pvalue)
+        return signed_rank_p(self.time_differences, Alternative.LESS)
 
     def better(self) -> str | None:
         """Why the candidate beats the default beyond chance, or None."""
