@@ -213,10 +213,10 @@ CASES = [
          "shorter than one",
          {"short.csv": lambda b: "\n".join(tiny_text(b).splitlines()[:5]) + "\n"}),
     Case("profile-value-beyond-any-setting", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
-         "post_processing.vote_length", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
+         "[post_processing] vote_length", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
              "vote_length = 1", "vote_length = 99999999999999999999999")}),
     Case("operator-infinite-speed", ["run-task", "--operator", "joystick", "--operator-file", "{d}/o.toml"],
-         "deflection.full_speed", {"o.toml": lambda b: shipped_text("tasks/operators/operator.toml").replace(
+         "[deflection] full_speed", {"o.toml": lambda b: shipped_text("tasks/operators/operator.toml").replace(
              "full_speed = 0.20", "full_speed = inf")}),
     # 10. nonsense that used to be accepted (issue 29): physical quantities and sizes out of range
     Case("model-coefficient-1e308", ["evaluate", "--train", "{d}/bad.json", "--test", "{d}/tiny.csv"], "LDA parameters",
@@ -237,7 +237,7 @@ CASES = [
     Case("profile-70-classes", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
          "need three to 64 classes", {"p.toml": lambda b: many_classes(61)}),
     Case("profile-neutral-samples-1e6", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
-         "neutral: samples", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
+         "[neutral] samples", {"p.toml": lambda b: shipped_text("bomi/profiles/P1.toml").replace(
              "samples = 100 ", "samples = 1000000 ")}),
     Case("profile-nested-3000-deep", ["train", "{d}/tiny.csv", "--profile", "{d}/p.toml", "--out", "{d}/n.json"],
          "nested deeper", {"p.toml": lambda b: "a = " + "[" * 3000 + "]" * 3000 + "\n"}),
