@@ -6,7 +6,8 @@ Two published namings of a node's columns are read:
 - node-less, node 1 (the original host software's logger with one node): ``PitchRaw RollRaw YawRaw``,
   ``ACCX/Y/Z``, ``GYROX/Y/Z``, ``MAGX/Y/Z``.
 ``Etiquette`` is the class label; a CSV's numeric ``Time`` (seconds) is kept, and a .mat's when it
-is floating-point (the logger's clock; bomi.passes finds the passes of the protocol by it). Any subset of nodes may
+is a clock: floating-point seconds, or the original logger's int32 milliseconds (bomi.passes finds
+the passes of the protocol by it; the published files' uint8 ``Time`` counter is not a clock). Any subset of nodes may
 be present and, per node, any subset of its four signals (angles, acc, gyro, mag), each with all
 three columns. Every other variable, of any type, is ignored and listed in ``Recording.ignored``.
 What a recording must hold depends on what is done with it: ``Recording.require`` says, in one
@@ -38,6 +39,8 @@ RECORDING_SUFFIXES = (".mat", ".csv")
 MAX_ABS_VALUE = 1e6
 MAX_LABEL = 2**31 - 1  # labels are ints; a larger value is a garbled cell, not a class
 LOGGER_NODE = 1  # the node the original logger's node-less column names belong to
+LOGGER_CLOCK_DTYPE = np.dtype(np.int32)  # the original logger's Time: an int32 count of ...
+LOGGER_TICKS_PER_S = 1000               # ... milliseconds
 
 
 class Signal(str, Enum):
@@ -230,6 +233,23 @@ def _is_number(cell: str) -> bool:
     return True
 
 
+def _clock_ticks_per_s(time: object, from_csv: bool) -> int | None:
+    """Units per second of a file's ``Time`` variable, None when it is not a clock: a CSV's is in
+    seconds; a .mat's is in seconds when floating-point, in milliseconds when an integer of 32 bits
+    or more (the original logger's int32 millisecond clock), and not a clock when a narrower integer
+    (the published 5-day files' uint8 counter, which wraps every 256 rows)."""
+    if time is None:
+        return None
+    if from_csv:
+        return 1
+    dtype = np.asarray(time).dtype
+    if dtype.kind == "f":
+        return 1
+    if dtype.kind in "iu" and dtype.itemsize >= LOGGER_CLOCK_DTYPE.itemsize:
+        return LOGGER_TICKS_PER_S
+    return None
+
+
 def _recording_from_variables(path: Path, variables: dict[str, object], from_csv: bool) -> Recording:
     """The node columns, labels and (CSV only) a numeric Time of ``variables``; the rest is ignored."""
     meaning = {name: _COLUMN_MEANING[name] for name in variables if name in _COLUMN_MEANING}
@@ -251,11 +271,10 @@ def _recording_from_variables(path: Path, variables: dict[str, object], from_csv
     used = list(meaning) + [name for name in (LABEL_COLUMN,) if name in variables]
     columns = {name: _as_column(path, name, variables[name], from_csv) for name in used}
     ignored = [name for name in variables if name not in columns]
-    if TIME_COLUMN in variables and (from_csv or np.asarray(variables[TIME_COLUMN]).dtype.kind == "f"):
-        # a .mat's Time is a clock when it is floating-point seconds (the original logger's); the
-        # published files' uint8 counter is not one
+    ticks_per_s = _clock_ticks_per_s(variables.get(TIME_COLUMN), from_csv)
+    if ticks_per_s is not None:
         try:
-            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], from_csv)
+            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], from_csv) / ticks_per_s
             ignored.remove(TIME_COLUMN)
             used.append(TIME_COLUMN)
         except BomiError:
@@ -316,8 +335,9 @@ def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SA
 
 def write_logger_mat(path: str | os.PathLike, rec: Recording, *, overwrite: bool = False) -> None:
     """Write ``rec`` as the original logger's MATLAB file: its node-less column names for a single node 1
-    (indexed names otherwise), ``Time`` in floating-point seconds, ``Etiquette``; an existing file only
-    if ``overwrite``."""
+    (indexed names otherwise), ``Time`` its int32 millisecond clock (``rec.time`` rounded to the
+    millisecond), ``Etiquette``; an existing file only if ``overwrite``. bomi.logger_layout gives
+    the clock the logger's pauses."""
     path = Path(path)
     if path.exists() and not overwrite:
         raise BomiError(f"{path}: file exists, not overwriting it")
@@ -329,7 +349,7 @@ def write_logger_mat(path: str | os.PathLike, rec: Recording, *, overwrite: bool
             if values is not None:
                 variables.update({name: values[:, k:k + 1] for k, name in enumerate(names)})
     time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
-    variables[TIME_COLUMN] = np.asarray(time, dtype=float)[:, None]
+    variables[TIME_COLUMN] = np.round(np.asarray(time, dtype=float) * LOGGER_TICKS_PER_S).astype(LOGGER_CLOCK_DTYPE)[:, None]
     if rec.labels is not None:
         variables[LABEL_COLUMN] = rec.labels[:, None].astype(float)
     scipy.io.savemat(path, variables)
