@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -39,6 +40,15 @@ RECORDING_SUFFIXES = (".mat", ".csv")
 MAX_ABS_VALUE = 1e6
 MAX_LABEL = 2**31 - 1  # labels are ints; a larger value is a garbled cell, not a class
 LOGGER_NODE = 1  # the node the original logger's node-less column names belong to
+# The most rows a recording may have: 67 minutes at 62.5 Hz, 15 times P1's recorded day (16,555 rows;
+# a calibration pass lasts minutes). Reading a CSV of P1's 37 columns peaks near 10 kB a row (0.97 GB
+# for 99,330 rows, measured), so this bounds a read near 2.5 GB, where a million rows ran out of memory.
+MAX_RECORDING_ROWS = 250_000
+# The smallest difference between two classes' postures a calibration can hold: a motion class is
+# held 10 deg or more from the neutral posture (P1's smallest, head yaw: 12 deg; dataset README).
+# Every angle within +-pi and the classes' postures at most pi apart, yet differing by more than
+# this in radians, are angles in radians.
+MIN_POSTURE_RAD = math.radians(10.0) / 2
 LOGGER_CLOCK_DTYPE = np.dtype(np.int32)  # the original logger's Time: an int32 count of ...
 LOGGER_TICKS_PER_S = 1000               # ... milliseconds
 
@@ -161,15 +171,73 @@ class NodeSample:
 
 
 def read_recording(path: str | os.PathLike) -> Recording:
-    """Read a .mat (MATLAB v5) or .csv recording in either naming; other variables are ignored."""
+    """Read a .mat (MATLAB v5) or .csv recording in either naming; other variables are ignored. Its rows
+    are counted before anything is loaded (at most MAX_RECORDING_ROWS); angles in radians are refused."""
     path = check_input(path, "recording")
     suffix = path.suffix.lower()
     if suffix == ".mat":
+        check_recording_rows(_mat_rows(path), str(path))
         # The published .mat files carry a uint8 'Time' counter that is not a clock (dataset README).
-        return _recording_from_variables(path, _read_mat_variables(path), from_csv=False)
-    if suffix == ".csv":
-        return _recording_from_variables(path, _read_csv_variables(path), from_csv=True)
-    raise BomiError(f"{path}: unknown recording format '{suffix}' (expected {' or '.join(RECORDING_SUFFIXES)})")
+        rec = _recording_from_variables(path, _read_mat_variables(path), from_csv=False)
+    elif suffix == ".csv":
+        check_recording_rows(_csv_rows(path), str(path))
+        rec = _recording_from_variables(path, _read_csv_variables(path), from_csv=True)
+    else:
+        raise BomiError(f"{path}: unknown recording format '{suffix}' (expected {' or '.join(RECORDING_SUFFIXES)})")
+    check_degrees(rec)
+    return rec
+
+
+def check_recording_rows(rows: int, what: str) -> None:
+    """One-line BomiError when a recording of ``rows`` rows (``what``: the file, or what would make it)
+    exceeds MAX_RECORDING_ROWS; called before the rows are allocated."""
+    if rows > MAX_RECORDING_ROWS:
+        raise BomiError(f"{what}: {rows} rows ({rows / SAMPLE_RATE_HZ / 3600:.1f} h at {SAMPLE_RATE_HZ:g} Hz), more "
+                        f"than the {MAX_RECORDING_ROWS} ({MAX_RECORDING_ROWS / SAMPLE_RATE_HZ / 3600:.1f} h) a "
+                        "recording may have: cut it into shorter recordings")
+
+
+def check_recording_seconds(seconds: float, what: str) -> None:
+    """``check_recording_rows`` for a recording of ``seconds`` at SAMPLE_RATE_HZ yet to be made (a
+    protocol `bomi synth` would perform), before anything is allocated."""
+    check_recording_rows(math.floor(seconds * SAMPLE_RATE_HZ) + 1, what)
+
+
+def _mat_rows(path: Path) -> int:
+    """The most rows of any variable of a .mat file, from its headers alone (nothing loaded)."""
+    try:
+        shapes = [shape for _, shape, _ in scipy.io.whosmat(path)]
+    except Exception as exc:  # as in _read_mat_variables: several types for corrupt or v7.3 files
+        raise BomiError(f"{path}: not a readable MATLAB v5 file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    return max((max(shape) for shape in shapes if shape), default=0)
+
+
+def _csv_rows(path: Path) -> int:
+    """A CSV file's lines after the header, counted by reading it in blocks (nothing kept)."""
+    lines, last = 0, b"\n"
+    with open(path, "rb") as handle:
+        while block := handle.read(1 << 20):
+            lines += block.count(b"\n")
+            last = block[-1:]
+    return lines + (last != b"\n") - 1
+
+
+def check_degrees(rec: Recording) -> None:
+    """One-line BomiError when a labelled recording's angles look like radians: every angle within
+    +-pi, and two classes' median postures more than MIN_POSTURE_RAD apart yet never more than pi."""
+    nodes = [i for i in rec.node_indices if rec.nodes[i].angles is not None]
+    if rec.labels is None or not nodes:
+        return
+    angles = np.column_stack([rec.nodes[i].angles for i in nodes])
+    classes = np.unique(rec.labels)
+    if len(classes) < 2 or np.max(np.abs(angles)) > math.pi:
+        return
+    postures = np.array([np.median(angles[rec.labels == c], axis=0) for c in classes])
+    apart = float(np.max(np.ptp(postures, axis=0)))
+    if apart > MIN_POSTURE_RAD:
+        raise BomiError(f"{rec.source}: every angle is within +-{math.pi:.2f} and the classes' postures differ by at "
+                        f"most {apart:.2f}: the angles look like radians; a recording's angles are degrees "
+                        f"(multiply by {math.degrees(1.0):.2f})")
 
 
 def _read_mat_variables(path: Path) -> dict[str, object]:
