@@ -42,7 +42,7 @@ MIN_MOVE_PAUSES = 5  # fewer pauses are passes, not a holds-only file's moves (a
 MIN_PASS_S = 15.0
 # A recording shorter than this cannot hold a posture and the neutral around it (a class's posture
 # needs 0.5 s of holding to be measured, tasks/participants/twin.py): nothing can be judged from it.
-MIN_JUDGED_S = 1.0
+MIN_JUDGED_S = 1.0   # one second (said so in words)
 DIGEST_HEX = 16      # characters kept of each run's sha256 (64 bits: no two runs of real data collide)
 
 
@@ -84,8 +84,8 @@ def check_long_enough(rec: Recording) -> None:
     """One-line BomiError when ``rec`` has fewer rows than MIN_JUDGED_S of samples."""
     least = round(MIN_JUDGED_S * SAMPLE_RATE_HZ)
     if len(rec) < least:
-        raise BomiError(f"{rec.source}: {len(rec)} rows, too short to judge: a recording needs at least {least} "
-                        f"({MIN_JUDGED_S:g} s at {SAMPLE_RATE_HZ:g} Hz) to hold a posture and its neutral")
+        raise BomiError(f"{rec.source}: {len(rec)} rows, too short to judge: shorter than one second ({least} "
+                        f"rows at {SAMPLE_RATE_HZ:g} Hz), the least that holds a posture and its neutral")
 
 
 def _check_clock_forwards(rec: Recording, steps: np.ndarray, bounds: Sequence[PassBounds]) -> None:

@@ -49,6 +49,7 @@ MAX_RECORDING_ROWS = 250_000
 # Every angle within +-pi and the classes' postures at most pi apart, yet differing by more than
 # this in radians, are angles in radians.
 MIN_POSTURE_RAD = math.radians(10.0) / 2
+POSTURE_ROWS = 31   # 0.5 s: fewer rows of a class do not show its posture (tasks/participants/twin.py)
 LOGGER_CLOCK_DTYPE = np.dtype(np.int32)  # the original logger's Time: an int32 count of ...
 LOGGER_TICKS_PER_S = 1000               # ... milliseconds
 
@@ -224,12 +225,14 @@ def _csv_rows(path: Path) -> int:
 
 def check_degrees(rec: Recording) -> None:
     """One-line BomiError when a labelled recording's angles look like radians: every angle within
-    +-pi, and two classes' median postures more than MIN_POSTURE_RAD apart yet never more than pi."""
+    +-pi, and the median postures of two classes held POSTURE_ROWS or more more than MIN_POSTURE_RAD
+    apart, yet never more than pi."""
     nodes = [i for i in rec.node_indices if rec.nodes[i].angles is not None]
     if rec.labels is None or not nodes:
         return
     angles = np.column_stack([rec.nodes[i].angles for i in nodes])
-    classes = np.unique(rec.labels)
+    classes, counts = np.unique(rec.labels, return_counts=True)
+    classes = classes[counts >= POSTURE_ROWS]
     if len(classes) < 2 or np.max(np.abs(angles)) > math.pi:
         return
     postures = np.array([np.median(angles[rec.labels == c], axis=0) for c in classes])

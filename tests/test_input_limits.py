@@ -90,8 +90,8 @@ def test_a_recording_too_short_to_judge_is_said_so_not_called_saturated(tmp_path
     write_recording(path, labelled(10))
     assert main(["twin", str(path), "--out", str(tmp_path / "t.toml")]) == 2
     line = one_error_line(capsys)
-    assert line == (f"{path}: 10 rows, too short to judge: a recording needs at least 62 (1 s at 62.5 Hz) to hold "
-                    "a posture and its neutral")
+    assert line == (f"{path}: 10 rows, too short to judge: shorter than one second (62 rows at 62.5 Hz), the least that "
+                    "holds a posture and its neutral")
     assert "saturated" not in line
     assert len(pass_bounds(labelled(62))) == 1
 
