@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from bomi.classifier import NEUTRAL_LABEL
-from bomi.fusion import DT
 from bomi.gate import GateConfig, NodeGate, sensor_turn
 from bomi.protocol import Cue
 from tasks.trials.live import LiveLoop
