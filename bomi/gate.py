@@ -43,8 +43,23 @@ another sitting (another neutral posture, another heading, another person on the
 a silence of ``break_gap_s`` (1 s: the sender's frames are never that late while its counters stay
 in step, and the one-byte counter wraps every 4.1 s, so only time tells a long gap), a packet counter
 repeated or jumping by more than ``max_counter_step`` (the parser delivers such a frame only once two
-more follow it in step: a stream that started again), or a reconnection of the source (the loop says
-so). ``NodeGate.restart`` then forgets everything the node was trusted for, and the caller starts its
+more follow it in step: a stream that started again), a **turn no body makes** between two samples,
+or a reconnection of the source (the loop says so). The turn is the sensor's own, frame to frame, not
+the fused angles' (the filter follows a new sitting's heading at 1 % a sample, a step of 0.5 deg for a
+46 deg splice): the angle between two frames' accelerometer vectors (the tilt) and between their
+magnetometer vectors' parts across gravity (the heading; raw, without the node's iron calibration,
+which the hard-iron offset bends by a few degrees at most: the part across gravity is a quarter or
+more of the field for every class of the virtual P1 at any heading), against ``max_turn_deg_s`` times the
+samples between them. The bound is the gyroscope's full scale, 2000 deg/s (hardware.md; 32 deg a
+sample): 2.6 times the fastest turns a head makes (group median of the maximal head velocity in
+vigorous voluntary yaw rotation 780 deg/s, Grossman et al. 1988, Ann Neurol 23:4, "Frequency and
+velocity of rotational head perturbations during locomotion"), a turn the sensor could not even
+measure; on P1's five recorded days the head node's largest frame-to-frame turn is 22.0 deg of tilt
+and 12.2 deg of heading (its 99.99th percentiles 4.2 and 5.5 deg; the shoulders' post-processed
+columns, whose blocks repeat rows, aside). So another sitting spliced onto the stream with the
+counters in step (a new heading, a new tilt) is a break like a restarted counter: ``check_raw`` finds
+the turn and keeps the frame from the filter, the next frame's ``count`` returns the break.
+``NodeGate.restart`` then forgets everything the node was trusted for, and the caller starts its
 orientation filter again: the warm-up (with the 12 s floor) is rerun, and the neutral retaken
 (``tasks.trials.live.LiveLoop``).
 
@@ -94,12 +109,18 @@ class GateConfig:
     max_counter_step: int = 16            # as the parser's phantom guard (bomi.frames.MAX_COUNTER_GAP)
     stale_s: float = 0.1
     break_gap_s: float = 1.0              # a silence this long is a break: the node is untrusted from scratch
+    max_turn_deg_s: float = 2000.0        # a sensor turning faster between two frames is a break (module docstring)
     flood_factor: float = 1.5
     rate_hz: float = SAMPLE_RATE_HZ
 
     @property
     def max_jump_deg(self) -> float:
         return self.max_rate_deg_s * DT
+
+    @property
+    def max_turn_deg(self) -> float:
+        """The largest turn of a sensor between two consecutive samples that is not a break."""
+        return self.max_turn_deg_s * DT
 
     @property
     def resume_s(self) -> float:
@@ -117,6 +138,35 @@ def raw_defect(mag: Sequence[int], gyro: Sequence[int], acc: Sequence[int]) -> s
         if any(v in INT16_LIMITS for v in values):
             return f"{name} saturated"
     return None
+
+
+Vector = tuple[float, float, float]
+
+
+def _dot(a: Vector, b: Vector) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _angle_deg(a: Vector, b: Vector) -> float:
+    cos = _dot(a, b) / math.sqrt(_dot(a, a) * _dot(b, b))
+    return math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+
+
+def _across(m: Vector, a: Vector) -> Vector:
+    """``m``'s part across ``a`` (perpendicular to it)."""
+    k = _dot(m, a) / _dot(a, a)
+    return (m[0] - k * a[0], m[1] - k * a[1], m[2] - k * a[2])
+
+
+def sensor_turn(before: tuple[Vector, Vector], after: tuple[Vector, Vector]) -> float:
+    """How far a sensor turned between two frames' (acc, mag), in degrees: the larger of the turn of its
+    accelerometer vector (the tilt) and of its magnetometer vector's part across gravity (the heading)."""
+    (acc0, mag0), (acc1, mag1) = before, after
+    tilt = _angle_deg(acc0, acc1)
+    h0, h1 = _across(mag0, acc0), _across(mag1, acc1)
+    if _dot(h0, h0) == 0.0 or _dot(h1, h1) == 0.0:
+        return tilt     # a field along gravity has no heading
+    return max(tilt, _angle_deg(h0, h1))
 
 
 def settle_change(angles: np.ndarray) -> float:
@@ -141,6 +191,9 @@ class NodeGate:
     _last_angles: tuple[float, float, float] | None = field(default=None, repr=False)
     _last_arrival: float | None = field(default=None, repr=False)
     _step: int = field(default=1, repr=False)                      # counter step of the last frame
+    _last_pose: tuple[Vector, Vector] | None = field(default=None, repr=False)   # the last checked frame's (acc, mag)
+    _since_pose: int = field(default=0, repr=False)                # samples since it, by the counters
+    _turned: str | None = field(default=None, repr=False)          # a turn no body makes, for ``count`` to return
     _defect_at: float | None = field(default=None, repr=False)     # arrival time of the last implausibility
     _arrivals: deque = field(default_factory=deque, repr=False)   # (time, frames) over the last second
 
@@ -175,14 +228,29 @@ class NodeGate:
         return None
 
     def count(self, counter: int) -> str | None:
-        """A frame's packet counter (fused or not): the break a repeated or jumping counter is, else None
-        (the samples it says were lost are counted)."""
+        """A frame's packet counter (fused or not): the break a repeated or jumping counter is, or the turn
+        no body makes that ``check_raw`` found in the frame before (module docstring); else None (the
+        samples the counter says were lost are counted)."""
         step = 1 if self._last_counter is None else counter_step(self._last_counter, counter)
         self._last_counter = counter
+        turned, self._turned = self._turned, None
         if step == 0 or step > self.config.max_counter_step:
             return f"a packet-counter jump (a step of {step})"
         self.lost += step - 1
         self._step = step
+        self._since_pose += step
+        return turned
+
+    def _turn(self, acc: Vector, mag: Vector) -> str | None:
+        """The turn no body makes since the last frame that reached ``check_raw``, if this frame shows one."""
+        previous, self._last_pose = self._last_pose, (acc, mag)
+        samples, self._since_pose = self._since_pose, 0
+        if previous is None:
+            return None
+        turn = sensor_turn(previous, self._last_pose)
+        if turn > self.config.max_turn_deg * max(samples, 1):
+            return (f"a turn of {turn:.0f} deg in {samples} sample(s) (faster than {self.config.max_turn_deg_s:g} "
+                    "deg/s: no body turns so fast)")
         return None
 
     def backlog(self, frames: int) -> None:
@@ -191,10 +259,17 @@ class NodeGate:
 
     def check_raw(self, mag, gyro, acc) -> bool:
         """A frame before fusion (its counter already ``count``-ed): False (and the node held) if it must not
-        reach the filter."""
+        reach the filter. A turn no body makes since the last frame is a break, which the next frame's
+        ``count`` returns (this one is from the new sitting: it does not reach the old filter)."""
         defect = raw_defect(mag, gyro, acc)
         if defect is not None:
             self._implausible(defect)
+            return False
+        # the magnetometer's raw z points against the other sensors' (hardware.md section 3: raw z negated)
+        turned = self._turn((float(acc[0]), float(acc[1]), float(acc[2])), (float(mag[0]), float(mag[1]), -float(mag[2])))
+        if turned is not None:
+            self._turned = turned
+            self._implausible(turned)
             return False
         return True
 

@@ -6,7 +6,8 @@ Two published namings of a node's columns are read:
 - node-less, node 1 (the original host software's logger with one node): ``PitchRaw RollRaw YawRaw``,
   ``ACCX/Y/Z``, ``GYROX/Y/Z``, ``MAGX/Y/Z``.
 ``Etiquette`` is the class label; a CSV's numeric ``Time`` (seconds) is kept, and a .mat's when it
-is floating-point (the logger's clock; bomi.passes finds the passes of the protocol by it). Any subset of nodes may
+is a clock: floating-point seconds, or the original logger's int32 milliseconds (bomi.passes finds
+the passes of the protocol by it; the published files' uint8 ``Time`` counter is not a clock). Any subset of nodes may
 be present and, per node, any subset of its four signals (angles, acc, gyro, mag), each with all
 three columns. Every other variable, of any type, is ignored and listed in ``Recording.ignored``.
 What a recording must hold depends on what is done with it: ``Recording.require`` says, in one
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -38,6 +40,18 @@ RECORDING_SUFFIXES = (".mat", ".csv")
 MAX_ABS_VALUE = 1e6
 MAX_LABEL = 2**31 - 1  # labels are ints; a larger value is a garbled cell, not a class
 LOGGER_NODE = 1  # the node the original logger's node-less column names belong to
+# The most rows a recording may have: 67 minutes at 62.5 Hz, 15 times P1's recorded day (16,555 rows;
+# a calibration pass lasts minutes). Reading a CSV of P1's 37 columns peaks near 10 kB a row (0.97 GB
+# for 99,330 rows, measured), so this bounds a read near 2.5 GB, where a million rows ran out of memory.
+MAX_RECORDING_ROWS = 250_000
+# The smallest difference between two classes' postures a calibration can hold: a motion class is
+# held 10 deg or more from the neutral posture (P1's smallest, head yaw: 12 deg; dataset README).
+# Every angle within +-pi and the classes' postures at most pi apart, yet differing by more than
+# this in radians, are angles in radians.
+MIN_POSTURE_RAD = math.radians(10.0) / 2
+POSTURE_ROWS = 31   # 0.5 s: fewer rows of a class do not show its posture (tasks/participants/twin.py)
+LOGGER_CLOCK_DTYPE = np.dtype(np.int32)  # the original logger's Time: an int32 count of ...
+LOGGER_TICKS_PER_S = 1000               # ... milliseconds
 
 
 class Signal(str, Enum):
@@ -158,15 +172,75 @@ class NodeSample:
 
 
 def read_recording(path: str | os.PathLike) -> Recording:
-    """Read a .mat (MATLAB v5) or .csv recording in either naming; other variables are ignored."""
+    """Read a .mat (MATLAB v5) or .csv recording in either naming; other variables are ignored. Its rows
+    are counted before anything is loaded (at most MAX_RECORDING_ROWS); angles in radians are refused."""
     path = check_input(path, "recording")
     suffix = path.suffix.lower()
     if suffix == ".mat":
+        check_recording_rows(_mat_rows(path), str(path))
         # The published .mat files carry a uint8 'Time' counter that is not a clock (dataset README).
-        return _recording_from_variables(path, _read_mat_variables(path), from_csv=False)
-    if suffix == ".csv":
-        return _recording_from_variables(path, _read_csv_variables(path), from_csv=True)
-    raise BomiError(f"{path}: unknown recording format '{suffix}' (expected {' or '.join(RECORDING_SUFFIXES)})")
+        rec = _recording_from_variables(path, _read_mat_variables(path), from_csv=False)
+    elif suffix == ".csv":
+        check_recording_rows(_csv_rows(path), str(path))
+        rec = _recording_from_variables(path, _read_csv_variables(path), from_csv=True)
+    else:
+        raise BomiError(f"{path}: unknown recording format '{suffix}' (expected {' or '.join(RECORDING_SUFFIXES)})")
+    check_degrees(rec)
+    return rec
+
+
+def check_recording_rows(rows: int, what: str) -> None:
+    """One-line BomiError when a recording of ``rows`` rows (``what``: the file, or what would make it)
+    exceeds MAX_RECORDING_ROWS; called before the rows are allocated."""
+    if rows > MAX_RECORDING_ROWS:
+        raise BomiError(f"{what}: {rows} rows ({rows / SAMPLE_RATE_HZ / 3600:.1f} h at {SAMPLE_RATE_HZ:g} Hz), more "
+                        f"than the {MAX_RECORDING_ROWS} ({MAX_RECORDING_ROWS / SAMPLE_RATE_HZ / 3600:.1f} h) a "
+                        "recording may have: cut it into shorter recordings")
+
+
+def check_recording_seconds(seconds: float, what: str) -> None:
+    """``check_recording_rows`` for a recording of ``seconds`` at SAMPLE_RATE_HZ yet to be made (a
+    protocol `bomi synth` would perform), before anything is allocated."""
+    check_recording_rows(math.floor(seconds * SAMPLE_RATE_HZ) + 1, what)
+
+
+def _mat_rows(path: Path) -> int:
+    """The most rows of any variable of a .mat file, from its headers alone (nothing loaded)."""
+    try:
+        shapes = [shape for _, shape, _ in scipy.io.whosmat(path)]
+    except Exception as exc:  # as in _read_mat_variables: several types for corrupt or v7.3 files
+        raise BomiError(f"{path}: not a readable MATLAB v5 file ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    return max((max(shape) for shape in shapes if shape), default=0)
+
+
+def _csv_rows(path: Path) -> int:
+    """A CSV file's lines after the header, counted by reading it in blocks (nothing kept)."""
+    lines, last = 0, b"\n"
+    with open(path, "rb") as handle:
+        while block := handle.read(1 << 20):
+            lines += block.count(b"\n")
+            last = block[-1:]
+    return lines + (last != b"\n") - 1
+
+
+def check_degrees(rec: Recording) -> None:
+    """One-line BomiError when a labelled recording's angles look like radians: every angle within
+    +-pi, and the median postures of two classes held POSTURE_ROWS or more more than MIN_POSTURE_RAD
+    apart, yet never more than pi."""
+    nodes = [i for i in rec.node_indices if rec.nodes[i].angles is not None]
+    if rec.labels is None or not nodes:
+        return
+    angles = np.column_stack([rec.nodes[i].angles for i in nodes])
+    classes, counts = np.unique(rec.labels, return_counts=True)
+    classes = classes[counts >= POSTURE_ROWS]
+    if len(classes) < 2 or np.max(np.abs(angles)) > math.pi:
+        return
+    postures = np.array([np.median(angles[rec.labels == c], axis=0) for c in classes])
+    apart = float(np.max(np.ptp(postures, axis=0)))
+    if apart > MIN_POSTURE_RAD:
+        raise BomiError(f"{rec.source}: every angle is within +-{math.pi:.2f} and the classes' postures differ by at "
+                        f"most {apart:.2f}: the angles look like radians; a recording's angles are degrees "
+                        f"(multiply by {math.degrees(1.0):.2f})")
 
 
 def _read_mat_variables(path: Path) -> dict[str, object]:
@@ -230,6 +304,23 @@ def _is_number(cell: str) -> bool:
     return True
 
 
+def _clock_ticks_per_s(time: object, from_csv: bool) -> int | None:
+    """Units per second of a file's ``Time`` variable, None when it is not a clock: a CSV's is in
+    seconds; a .mat's is in seconds when floating-point, in milliseconds when an integer of 32 bits
+    or more (the original logger's int32 millisecond clock), and not a clock when a narrower integer
+    (the published 5-day files' uint8 counter, which wraps every 256 rows)."""
+    if time is None:
+        return None
+    if from_csv:
+        return 1
+    dtype = np.asarray(time).dtype
+    if dtype.kind == "f":
+        return 1
+    if dtype.kind in "iu" and dtype.itemsize >= LOGGER_CLOCK_DTYPE.itemsize:
+        return LOGGER_TICKS_PER_S
+    return None
+
+
 def _recording_from_variables(path: Path, variables: dict[str, object], from_csv: bool) -> Recording:
     """The node columns, labels and (CSV only) a numeric Time of ``variables``; the rest is ignored."""
     meaning = {name: _COLUMN_MEANING[name] for name in variables if name in _COLUMN_MEANING}
@@ -251,11 +342,10 @@ def _recording_from_variables(path: Path, variables: dict[str, object], from_csv
     used = list(meaning) + [name for name in (LABEL_COLUMN,) if name in variables]
     columns = {name: _as_column(path, name, variables[name], from_csv) for name in used}
     ignored = [name for name in variables if name not in columns]
-    if TIME_COLUMN in variables and (from_csv or np.asarray(variables[TIME_COLUMN]).dtype.kind == "f"):
-        # a .mat's Time is a clock when it is floating-point seconds (the original logger's); the
-        # published files' uint8 counter is not one
+    ticks_per_s = _clock_ticks_per_s(variables.get(TIME_COLUMN), from_csv)
+    if ticks_per_s is not None:
         try:
-            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], from_csv)
+            columns[TIME_COLUMN] = _as_column(path, TIME_COLUMN, variables[TIME_COLUMN], from_csv) / ticks_per_s
             ignored.remove(TIME_COLUMN)
             used.append(TIME_COLUMN)
         except BomiError:
@@ -316,8 +406,9 @@ def write_recording(path: str | os.PathLike, rec: Recording, rate_hz: float = SA
 
 def write_logger_mat(path: str | os.PathLike, rec: Recording, *, overwrite: bool = False) -> None:
     """Write ``rec`` as the original logger's MATLAB file: its node-less column names for a single node 1
-    (indexed names otherwise), ``Time`` in floating-point seconds, ``Etiquette``; an existing file only
-    if ``overwrite``."""
+    (indexed names otherwise), ``Time`` its int32 millisecond clock (``rec.time`` rounded to the
+    millisecond), ``Etiquette``; an existing file only if ``overwrite``. bomi.logger_layout gives
+    the clock the logger's pauses."""
     path = Path(path)
     if path.exists() and not overwrite:
         raise BomiError(f"{path}: file exists, not overwriting it")
@@ -329,7 +420,7 @@ def write_logger_mat(path: str | os.PathLike, rec: Recording, *, overwrite: bool
             if values is not None:
                 variables.update({name: values[:, k:k + 1] for k, name in enumerate(names)})
     time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
-    variables[TIME_COLUMN] = np.asarray(time, dtype=float)[:, None]
+    variables[TIME_COLUMN] = np.round(np.asarray(time, dtype=float) * LOGGER_TICKS_PER_S).astype(LOGGER_CLOCK_DTYPE)[:, None]
     if rec.labels is not None:
         variables[LABEL_COLUMN] = rec.labels[:, None].astype(float)
     scipy.io.savemat(path, variables)

@@ -22,8 +22,9 @@ import bomi.chain, bomi.compiled
 from bomi.fusion import NodeCalibration, NodeFusion
 rng = np.random.default_rng(7)
 acc, gyro, mag = (rng.integers(-20000, 20000, (500, 3)) for _ in range(3))
-angles = NodeFusion(NodeCalibration()).update_many(acc, gyro, mag)
-print(json.dumps({"compiled": bomi.compiled.COMPILED, "angles": angles.tolist()}))
+fusion = NodeFusion(NodeCalibration())
+angles = fusion.update_many(acc, gyro, mag)
+print(json.dumps({"compiled": bomi.compiled.COMPILED, "angles": angles.tolist(), "state": fusion.state.tolist()}))
 """
 
 
@@ -35,8 +36,10 @@ def test_the_chain_imports_and_fuses_without_numba_as_compiled():
     assert result["compiled"] is False
     rng = np.random.default_rng(7)
     acc, gyro, mag = (rng.integers(-20000, 20000, (500, 3)) for _ in range(3))
-    here = NodeFusion(NodeCalibration()).update_many(acc, gyro, mag)
+    fusion = NodeFusion(NodeCalibration())
+    here = fusion.update_many(acc, gyro, mag)
     assert_same_angles(result["angles"], here)   # floats through JSON: repr, exact
+    assert_same_angles(result["state"], fusion.state)   # the filter's state too (tests/test_fusion.py: why)
 
 
 def test_a_kernel_is_compiled_at_its_first_call_where_numba_is_installed_and_keeps_its_python_function():
@@ -81,3 +84,37 @@ def _sum_of_squares(values: np.ndarray) -> float:
 def test_a_kernel_calls_another_kernel_compiled_or_not():
     values = np.arange(10.0)
     assert _sum_of_squares(values) == 285.0 == interpreted(_sum_of_squares)(values)
+
+
+# BOMI_NO_JIT=1 (numba installed, every kernel run as its Python function): a stream fused sample by
+# sample then in one chunk, as the live loop and a recording do; prints its angles and filter state
+NO_JIT_STREAM = """
+import json
+import numpy as np
+import bomi.compiled
+from bomi.fusion import NodeCalibration, NodeFusion
+rng = np.random.default_rng(11)
+acc, gyro, mag = (rng.integers(-20000, 20000, (800, 3)) for _ in range(3))
+fusion = NodeFusion(NodeCalibration())
+angles = [fusion.update(a, g, m) for a, g, m in zip(acc[:300], gyro[:300], mag[:300])]
+angles += fusion.update_many(acc[300:], gyro[300:], mag[300:]).tolist()
+print(json.dumps({"compiled": bomi.compiled.COMPILED, "angles": angles, "state": fusion.state.tolist()}))
+"""
+
+
+def test_the_filter_state_with_bomi_no_jit_is_the_compiled_one_to_the_filters_tolerance():
+    """The fusion filter's angles and state after a stream, BOMI_NO_JIT=1 against this process (compiled
+    where numba is installed), to FILTER_FORMS_DEG (tests/test_fusion.py: why that tolerance holds)."""
+    from bomi.fusion import NodeCalibration, NodeFusion
+    env = os.environ | {"BOMI_NO_JIT": "1"}
+    done = subprocess.run([sys.executable, "-c", NO_JIT_STREAM], capture_output=True, text=True, env=env, check=True)
+    result = json.loads(done.stdout)
+    assert result["compiled"] is False
+    rng = np.random.default_rng(11)
+    acc, gyro, mag = (rng.integers(-20000, 20000, (800, 3)) for _ in range(3))
+    fusion = NodeFusion(NodeCalibration())
+    angles = [fusion.update(a, g, m) for a, g, m in zip(acc[:300], gyro[:300], mag[:300])]
+    angles += fusion.update_many(acc[300:], gyro[300:], mag[300:]).tolist()
+    assert_same_angles(result["angles"], angles)
+    assert_same_angles(result["state"], fusion.state)
+    assert not np.allclose(fusion.state, 0.0)

@@ -152,7 +152,11 @@ def test_update_many_is_update_sample_by_sample_to_the_bit(seed, cuts):
 
 def test_the_compiled_filter_agrees_with_the_interpreted_one(p1_days):
     """``fuse_samples`` compiled by numba (where installed) and run as the Python function it is: the
-    same angles to FILTER_FORMS_DEG over a real day of P1's three nodes (the published raw columns)."""
+    same angles, and the same filter state after the day (pitch, roll and yaw states, the low-passed
+    pitch and roll: what a stream goes on from), to FILTER_FORMS_DEG over a real day of P1's three
+    nodes (the published raw columns). The state's five values are degrees of the same stable filter
+    as the angles (each decays by 0.92, 0.99 or 0.29 a sample), so the roundings of the two forms stay
+    as far below the tolerance in the state as in the angles."""
     for index, node in p1_days[2].nodes.items():
         cal, raw = NodeCalibration.default_for(index), [np.ascontiguousarray(v, dtype=float) for v in (node.acc, node.gyro, node.mag)]
         compiled_fusion, interpreted_fusion = NodeFusion(cal), NodeFusion(cal)
@@ -160,4 +164,6 @@ def test_the_compiled_filter_agrees_with_the_interpreted_one(p1_days):
         fuse_samples(compiled_fusion.state, compiled_fusion._constants, *raw, out_compiled)
         interpreted(fuse_samples)(interpreted_fusion.state, interpreted_fusion._constants, *raw, out_interpreted)
         assert_same_angles(out_compiled, out_interpreted)
+        assert not np.array_equal(compiled_fusion.state, NodeFusion(cal).state)     # the day moved it
+        assert_same_angles(compiled_fusion.state, interpreted_fusion.state)
 

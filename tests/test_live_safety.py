@@ -301,17 +301,19 @@ def test_a_real_film_process_receives_the_arms_layout_and_writes_a_playable_film
 
     from sim.env import ArmSim
 
-    sim = ArmSim()
-    film = VideoDisplay(sim, tmp_path / "film.mp4")
+    sim, clock = ArmSim(), FakeClock()
+    film = VideoDisplay(sim, tmp_path / "film.mp4", clock=clock)
     for _ in range(5):
         film.sync(lambda: "a | b | c | d | e | f")
-        time.sleep(1.0 / film.fps)
+        deadline = time.monotonic() + 30.0   # the film process takes each frame before the next is due
+        while film._frames.qsize() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        clock.sleep(0.25)                    # the loop's (simulated) clock: a film frame due at every sync
     film.close()
     sim.close()
-    # a frame the busy film process had not taken yet is dropped (never waited for): on a loaded
-    # machine fewer than 5 arrive, but every one that did is in the film
-    assert film.frames + film.dropped == 5 and film.frames >= 1
-    assert iio.imread(tmp_path / "film.mp4").shape[0] >= film.frames
+    # every state sent and none dropped; the film fills each slot up to the last state's time (1.0 s)
+    assert film.frames == 5 and film.dropped == 0
+    assert iio.imread(tmp_path / "film.mp4").shape[0] == math.floor(1.0 * film.fps) + 1
 
 
 def test_a_poll_parses_the_newest_bytes_only_and_counts_the_rest():

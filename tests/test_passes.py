@@ -12,7 +12,8 @@ from bomi.derived import derive_profile
 from bomi.fusion import HEADSET_MOUNTING, IDENTITY, NodeCalibration, angle_disagreement, fuse, fused_recording, mounting_warnings
 from bomi.model_io import load_model
 from bomi.profiles import save_profile
-from bomi.passes import (PassBounds, in_sample_share, join, pass_bounds, passes_text, split_passes,
+from bomi.logger_layout import write_logger_passes
+from bomi.passes import (PassBounds, cut, in_sample_share, join, pass_bounds, passes_text, split_passes,
                          training_digests)
 from bomi.recording import NodeData, Recording, read_recording, write_logger_mat, write_recording
 from tasks.cli import main
@@ -20,7 +21,7 @@ from tasks.cli.chain import most_confused
 from tasks.cli.twin import self_check
 from tasks.stacking.episode import profile_controls
 from tasks.participants.participant import load_participant
-from tasks.participants.population import PASS_GAP_S, draw_person, one_file
+from tasks.participants.population import PASS_GAP_S, draw_person, pass_recordings
 from tasks.operators.stick import arm_profile
 
 PERSON = 5   # six head motions and the neutral posture, one node (benchmarks/two_pass_file.py)
@@ -34,45 +35,58 @@ def clocked(time: np.ndarray, labels: np.ndarray | None = None) -> Recording:
 
 
 def test_a_pause_is_a_new_pass_only_well_beyond_the_moves_and_the_lost_samples():
-    # continuous: 100 rows, 6.2 s pause, 50 rows; two lost samples (a 0.048 s step) inside
-    time = np.r_[np.arange(100) * DT, 99 * DT + 6.2 + np.arange(50) * DT]
-    time[40:] += 2 * DT
-    assert pass_bounds(clocked(time)) == [PassBounds(0, 100), PassBounds(100, 150, "a 6.2 s gap in Time at row 100")]
-    # holds only: a 2.0 s pause at every move (rows 30, 60, 90, 130) is no pass; 6.2 s (row 100) is
-    steps = np.full(159, DT)
-    steps[[29, 59, 89, 129]] = 2.0
-    steps[99] = 6.2
+    # continuous: 1000 rows, 6.2 s pause, 1000 rows; two lost samples (a 0.048 s step) inside
+    time = np.r_[np.arange(1000) * DT, 999 * DT + 6.2 + np.arange(1000) * DT]
+    time[400:] += 2 * DT
+    assert pass_bounds(clocked(time)) == [PassBounds(0, 1000), PassBounds(1000, 2000, "a 6.2 s gap in Time at row 1000")]
+    # holds only: a 2.0 s pause at every move (rows 300, 600, 900, 1300) is no pass; 6.2 s (row 1000) is
+    steps = np.full(1999, DT)
+    steps[[299, 599, 899, 1299]] = 2.0
+    steps[999] = 6.2
     bounds = pass_bounds(clocked(np.r_[0.0, np.cumsum(steps)]))
-    assert [(b.start, b.stop) for b in bounds] == [(0, 100), (100, 160)]
-    # 4.1 s is more than PASS_GAP_S but not twice the moves' 2.0 s: one pass
-    steps[99] = 3.9
+    assert [(b.start, b.stop) for b in bounds] == [(0, 1000), (1000, 2000)]
+    # 3.9 s is more than PASS_GAP_S but not twice the moves' 2.0 s: one pass
+    steps[999] = 3.9
     assert len(pass_bounds(clocked(np.r_[0.0, np.cumsum(steps)]))) == 1
     # a restarted clock; no clock at all
-    restarted = pass_bounds(clocked(np.r_[np.arange(70) * DT, np.arange(30) * DT]))
-    assert [(b.start, b.stop, b.cause) for b in restarted] == [(0, 70, None), (70, 100, "the clock restarts at row 70")]
-    assert pass_bounds(replace(clocked(time), time=None)) == [PassBounds(0, 150)]
+    restarted = pass_bounds(clocked(np.r_[np.arange(1700) * DT, np.arange(1000) * DT]))
+    assert [(b.start, b.stop, b.cause) for b in restarted] == [(0, 1700, None), (1700, 2700, "the clock restarts at row 1700")]
+    assert pass_bounds(replace(clocked(time), time=None)) == [PassBounds(0, 2000)]
+
+
+def test_a_pause_with_fewer_rows_than_a_pass_beside_it_is_no_boundary():
+    # the logger's start: one row (or 900, 14.4 s), a 3 s pause, then the pass; a pause 900 rows before the end
+    for lead in (1, 900):
+        time = np.r_[np.arange(lead) * DT, (lead - 1) * DT + 3.0 + np.arange(2000) * DT]
+        assert pass_bounds(clocked(time)) == [PassBounds(0, lead + 2000)]
+    time = np.r_[np.arange(2000) * DT, 1999 * DT + 6.2 + np.arange(900) * DT]
+    assert pass_bounds(clocked(time)) == [PassBounds(0, 2900)]
+    # 938 rows (15.0 s at 62.5 Hz) on each side are a pass
+    time = np.r_[np.arange(938) * DT, 937 * DT + 6.2 + np.arange(938) * DT]
+    assert pass_bounds(clocked(time)) == [PassBounds(0, 938), PassBounds(938, 1876, "a 6.2 s gap in Time at row 938")]
 
 
 @pytest.fixture(scope="module")
 def two_pass_file(tmp_path_factory):
-    """A synthetic person's two passes in one .mat, as the original logger writes it (a 6.2 s pause);
-    the first 5000 rows of each pass (every motion held at least once)."""
+    """A synthetic person's two passes in one .mat, as the original logger writes it (bomi.logger_layout:
+    int32 ms Time, a 3 s pause after the first row, 6.2 s between the passes); the first 5000 rows of
+    each pass (every motion held at least once)."""
     path = tmp_path_factory.mktemp("person") / "me.mat"
-    write_logger_mat(path, one_file(draw_person(PERSON), rows=5000))
+    write_logger_passes(path, [cut(p, PassBounds(0, 5000), p.source) for p in pass_recordings(draw_person(PERSON))])
     return path
 
 
 def test_a_logger_file_of_two_passes_is_split_where_its_clock_pauses(two_pass_file):
     rec = read_recording(two_pass_file)
     assert rec.node_indices == (1,) and sorted(set(rec.labels.tolist())) == list(range(7))
-    cut = int(np.flatnonzero(np.diff(rec.time) > PASS_GAP_S - 0.01)[0]) + 1
+    boundary = int(np.flatnonzero(np.diff(rec.time) > PASS_GAP_S - 0.01)[0]) + 1
     bounds = pass_bounds(rec)
-    assert [(b.start, b.stop) for b in bounds] == [(0, cut), (cut, len(rec))]
+    assert [(b.start, b.stop) for b in bounds] == [(0, boundary), (boundary, len(rec))]
     assert passes_text(rec, bounds) == (
-        f"{two_pass_file}: 2 passes: rows 0-{cut - 1}, {cut}-{len(rec) - 1} (a 6.2 s gap in Time at row {cut}; the "
+        f"{two_pass_file}: 2 passes: rows 0-{boundary - 1}, {boundary}-{len(rec) - 1} (a 6.2 s gap in Time at row {boundary}; the "
         "same class sequence in each): each is calibrated and counted as one pass")
     first, second = split_passes(rec, bounds)
-    assert first.source == f"{two_pass_file} pass 1 (rows 0-{cut - 1})" and len(second) == len(rec) - cut
+    assert first.source == f"{two_pass_file} pass 1 (rows 0-{boundary - 1})" and len(second) == len(rec) - boundary
     back = join([first, second], rec.source)
     assert np.array_equal(back.nodes[1].angles, rec.nodes[1].angles) and np.array_equal(back.labels, rec.labels)
 
@@ -138,23 +152,23 @@ def test_split_writes_the_passes_and_a_model_of_one_is_out_of_sample_on_the_othe
 
 def test_passes_of_different_class_sets_are_one_error_line(two_pass_file, tmp_path, capsys):
     rec = read_recording(two_pass_file)
-    cut = pass_bounds(rec)[1].start
+    boundary = pass_bounds(rec)[1].start
     labels = rec.labels.copy()
-    labels[cut:][labels[cut:] == 6] = 0   # pass 2 never holds c6
+    labels[boundary:][labels[boundary:] == 6] = 0   # pass 2 never holds c6
     bad = tmp_path / "bad.mat"
     write_logger_mat(bad, replace(rec, labels=labels))
     assert main(["train", str(bad), "--out", str(tmp_path / "m.json")]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith("bomi: error: passes of different class sets in one file (")
-    assert f"{bad} pass 2 (rows {cut}-{len(rec) - 1}): c0, c1, c2, c3, c4, c5)" in err[0]
+    assert f"{bad} pass 2 (rows {boundary}-{len(rec) - 1}): c0, c1, c2, c3, c4, c5)" in err[0]
     assert not (tmp_path / "m.json").exists()
 
 
 def test_fuse_starts_each_pass_afresh_and_says_when_the_mounting_disagrees(p1_days, tmp_path, capsys):
     day = p1_days[1]
-    node = NodeData(**{s: getattr(day.nodes[1], s)[:1500] for s in ("acc", "gyro", "mag", "angles")})
-    time = np.r_[np.arange(1000) * DT, 999 * DT + 10.0 + np.arange(500) * DT]
-    rec = Recording({1: node}, day.labels[:1500], time=time, source="two")
+    node = NodeData(**{s: getattr(day.nodes[1], s)[:2000] for s in ("acc", "gyro", "mag", "angles")})
+    time = np.r_[np.arange(1000) * DT, 999 * DT + 10.0 + np.arange(1000) * DT]
+    rec = Recording({1: node}, day.labels[:2000], time=time, source="two")
     headset = NodeCalibration.default_for(1)
     fused = join([fused_recording(p, {1: headset}) for p in split_passes(rec, pass_bounds(rec))], "two")
     alone = np.column_stack(fuse(node.acc[1000:], node.gyro[1000:], node.mag[1000:], headset))
@@ -170,7 +184,7 @@ def test_fuse_starts_each_pass_afresh_and_says_when_the_mounting_disagrees(p1_da
     write_logger_mat(path, rec)
     assert main(["fuse", str(path), "--out", str(tmp_path / "f.csv")]) == 0
     printed = capsys.readouterr().out
-    assert f"{path}: 2 passes: rows 0-999, 1000-1499 (a 10.0 s gap in Time at row 1000" in printed
+    assert f"{path}: 2 passes: rows 0-999, 1000-1999 (a 10.0 s gap in Time at row 1000" in printed
     assert "fused from its own start" in printed and "warning: " in printed
 
 
