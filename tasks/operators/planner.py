@@ -26,7 +26,8 @@ from tasks.operators.params import OperatorParams
 from tasks.stacking.vocabulary import REST, Controls, Goal, Phase, StickIntent, View
 # the names the CLI, the assistance and the benchmarks import from here (their homes: vocabulary, params, judgement)
 from tasks.operators.judgement import CUBE_SYMMETRY, wrapped_angle  # noqa: F401
-from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator  # noqa: F401
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator, parse_recovery_actions  # noqa: F401
+from tasks.stacking.vocabulary import NO_RECOVERY, RecoveryAction  # noqa: F401
 
 OPENING_PROGRESS = 0.02  # closure the fingers must lose to be seen opening (0 open .. 1 closed)
 

@@ -24,9 +24,12 @@ from bomi.chain import Decision, OnlineChain
 from bomi.frames import ImuFrame
 from bomi.profiles import Profile
 from sim.joystick import JoystickState
-from tasks.stacking.episode import BomiChannel, JoystickChannel, OperatorChannel, intended_direction, operator_user
+from tasks.stacking.channels import BomiChannel, JoystickChannel, OperatorChannel
+from tasks.stacking.episode import intended_direction
+from tasks.stacking.sources import operator_user
 from tasks.participants.participant import ParticipantParams, VirtualParticipant
-from tasks.operators.planner import REST, OperatorParams, StickIntent
+from tasks.operators.params import OperatorParams
+from tasks.stacking.vocabulary import REST, StickIntent
 from tasks.trials.session import Phase, TappedParser, TrialArm
 
 IDLE = {"intended_dir": (0.0, 0.0, 0.0), "pushing": False, "goal": "", "stage": ""}
