@@ -11,3 +11,4 @@ Map (each acts on the task's vocabulary, ``tasks.stacking.vocabulary``):
 - ``assist``: assistance between the decided function and the arm (``assist.toml``).
 - ``recovery``: what a session does when the task stops progressing.
 - ``design``: a person's layout chosen by simulating candidate mappings with their twin.
+"""

@@ -20,3 +20,4 @@ Map (data flows down):
 - ``metrics``: pure functions over a record's arrays (completion, accuracy, drops, phases).
 - ``failures``: why an episode failed or was slow (its stuck span and mechanism).
 - ``timeline``: the paper-style timeline figure of an episode.
+"""
