@@ -1,6 +1,8 @@
 """The stacking task as a Gymnasium environment: gymnasium's own checker, the action -> stick
 conversion, episodes stepped through the raw Gymnasium API against ``run_episode``'s records (to the
 bit), and what ends an episode (terminated: stacked or a cube off the table; truncated: the time limit)."""
+from types import SimpleNamespace
+
 import gymnasium
 import mujoco
 import numpy as np
@@ -10,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 from sim.joystick import THREE_AXIS, JoystickState
 from tasks.stacking.env import ENV_ID, StackingEnv, as_state, stick_state
 from tasks.stacking.episode import JoystickChannel, calibrated_channel, process_arm, run_episode
-from tasks.stacking.sources import Operator, bomi_user, joystick_user
+from tasks.stacking.sources import DeviceSource, Operator, bomi_user, joystick_user
 from tasks.stacking.task import TaskConfig
 from tasks.trials.replay import LoggedStick
 
@@ -39,6 +41,8 @@ def test_an_action_is_the_stick_a_logged_tick_is():
     assert all(type(v) is float for v in state.deflection.values())
     logged = LoggedStick(action["stick"][None, :], action["buttons"][None, :].astype(bool))
     assert logged.read(0.0) == state
+    logged.k = 0  # a device is an action source too: read at the view's time
+    assert DeviceSource(logged).act({"view": SimpleNamespace(t=0.0)}) == state
     assert as_state(state) is state  # the fast path: a stick as it is
     assert stick_state([0.0] * 6, [0, 0]) == JoystickState()
 
@@ -132,3 +136,16 @@ def test_a_stack_at_b_rewards_both_cubes_and_terminates_once_still(env):
     assert terminated and not truncated and info["outcome"].success
     assert rewards == 2.0 and obs["phase"] == 2
     assert ticks == pytest.approx(TaskConfig().still_time / env.sim.dt, abs=2)
+
+
+def test_the_film_is_a_wrapper_that_films_every_nth_tick(tmp_path):
+    """run_episode's film (``wrappers.Filmed``): at 4x, a 60 Hz loop filmed at the render rate keeps
+    every (4 x 60 / fps)-th tick, from the first."""
+    import imageio.v2 as imageio
+
+    sim = process_arm(THREE_AXIS)
+    path = tmp_path / "film.mp4"
+    log = run_episode(JoystickChannel(), operator="joystick", participant="-", seed=1,
+                      task_config=TaskConfig(time_limit=1.0), video=path, video_speedup=4.0)
+    every = max(1, round(4.0 * sim.config.physics.control_hz / sim.config.render.fps))
+    assert imageio.get_reader(path).count_frames() == -(-len(log.t) // every)
