@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
+import numpy as np
+
 from sim.joystick import JoystickState, Layout
 from tasks.operators.human import HumanOperator, load_human
 from tasks.operators.params import DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, OperatorParams, load_operator
@@ -59,13 +61,19 @@ class Operator:
         """The joystick layout the person's controls have (the env's arm must have it too)."""
         return self.channel.controls.layout
 
-    def act(self, info: Mapping[str, Any]) -> JoystickState:
+    def look(self, info: Mapping[str, Any]) -> tuple[StickIntent, np.ndarray | None]:
+        """What the person wants now and the hand's velocity they saw since their last look, as a
+        fraction of full speed (None at the first look)."""
         view = info["view"]
         intent = self.user.stick_intent(view) if self.supervisor is None else self.supervisor.intent(view)
-        # the hand's velocity seen since the last look, as a fraction of full speed (none at the first)
         seen = None if self._previous is None else (view.hand_pos - self._previous) / (info["dt"] * info["full_speed"])
         self._previous = view.hand_pos
         self.intent = intent
+        return intent, seen
+
+    def act(self, info: Mapping[str, Any]) -> JoystickState:
+        intent, seen = self.look(info)
+        view = info["view"]
         return self.channel.command(intent, view.t, view.t + info["dt"], seen, view.mode)
 
 
