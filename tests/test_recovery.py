@@ -12,7 +12,8 @@ from sim.joystick import JoystickState, Mode
 from tasks.cli.task import EpisodeJob, aggregate, comparison, recovery_option, run_job, terminal_table
 from tasks.stacking.episode import summarize
 from tasks.stacking.failures import mechanism_rows
-from tasks.operators.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View, load_operator
+from tasks.operators.params import RecoveryParams, load_operator
+from tasks.stacking.vocabulary import Goal, RecoveryAction, StickIntent, View
 from tasks.operators.recovery import StuckClock, Supervisor, choose
 
 REZERO, BACKOFF, PAUSE = RecoveryAction.REZERO, RecoveryAction.BACKOFF, RecoveryAction.PAUSE

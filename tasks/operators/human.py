@@ -44,7 +44,10 @@ import scipy.stats
 
 from bomi.config_files import check_table, load_toml, number, typed
 from sim.joystick import Kind, Mode
-from tasks.operators.planner import REST, Controls, Memory, OperatorParams, ScriptedUser, StickIntent, View, wrapped_angle
+from tasks.operators.judgement import Memory, wrapped_angle
+from tasks.operators.params import OperatorParams
+from tasks.operators.planner import ScriptedUser
+from tasks.stacking.vocabulary import REST, Controls, StickIntent, View
 
 DEFAULT_HUMAN_FILE = Path(__file__).with_name("human.toml")
 HUMAN_STREAM = 0x4855  # the human's random streams: independent of the task's and the participant's

@@ -18,30 +18,27 @@ through every recovery: its time counts in the completion time.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from sim.joystick import JoystickState
+from tasks.operators.params import RecoveryParams
 from tasks.stacking import failures, metrics
-from tasks.operators.planner import Goal, RecoveryAction, RecoveryParams, StickIntent, View
-
-if TYPE_CHECKING:
-    from tasks.operators.planner import ScriptedUser
+from tasks.stacking.vocabulary import Goal, RecoveryAction, RecoveryEvent, StickIntent, View
 
 # the goal each stopped action logs (no task phase: it interrupts the phase it is in, metrics.task_phase)
 _GOALS = {RecoveryAction.REZERO: Goal("re-zero the neutral"), RecoveryAction.PAUSE: Goal("pause")}
 
 
-@dataclass(frozen=True)
-class RecoveryEvent:
-    """One recovery action: which, and when (task time, s; a backoff lasts until its lift is done,
-    which the log's goals show: its event has start == end)."""
+class Person(Protocol):
+    """The person the supervisor stands in for while it acts (``ScriptedUser``, ``HumanOperator``)."""
 
-    action: RecoveryAction
-    start_s: float
-    end_s: float
-    obeyed: float | None = None  # the share of the stick moves asked that the arm answered before it (None: none asked)
+    def stick_intent(self, view: View) -> StickIntent: ...
+
+    def back_off(self, view: View) -> None: ...
+
+    def resume(self, view: View) -> None: ...
 
 
 class Rezeroable(Protocol):
@@ -109,8 +106,9 @@ class Supervisor:
     """Between the person and the channel in ``run_episode``: watches progress, decides and runs
     the recovery actions (``intent`` replaces ``user.stick_intent``, ``state`` the stick's state)."""
 
-    def __init__(self, params: RecoveryParams, user: "ScriptedUser", channel: Rezeroable, target_pos: np.ndarray,
+    def __init__(self, params: RecoveryParams, user: Person, channel: Rezeroable, target_pos: np.ndarray | None = None,
                  progress_m: float = failures.Rules().progress_m):
+        """``target_pos``: location B on the table top (None: as the first view shows it)."""
         self.params, self.user, self.channel, self.target_pos = params, user, channel, target_pos
         self.watch, self.clock = failures.ProgressWatch(progress_m), StuckClock(params.stuck_s)
         self.phase: str | None = None  # the task phase (metrics.task_phase), carried over goals that interrupt it
@@ -118,8 +116,17 @@ class Supervisor:
         self.obeyed: float | None = None  # what the person saw of the arm when the actions queued were chosen
         self.acting: tuple[RecoveryAction, float, bool] | None = None  # (action, since, the neutral asked for)
         self.events: list[RecoveryEvent] = []
+        self.last_intent: StickIntent | None = None  # what ``intent`` gave last (what ``gate`` judges the stick by)
 
     def intent(self, view: View) -> StickIntent:
+        self.last_intent = self._intent(view)
+        return self.last_intent
+
+    def gate(self, state: JoystickState) -> JoystickState:
+        """``state`` for the intent given last (the loop's hook: ``tasks.stacking.wrappers.Recovering``)."""
+        return self.state(self.last_intent, state)
+
+    def _intent(self, view: View) -> StickIntent:
         if self.acting is None and not self.queue:
             intent = self.user.stick_intent(view)
             self._watch(view, intent)
@@ -143,6 +150,8 @@ class Supervisor:
         self.phase = metrics.task_phase(intent.goal.step) or self.phase
         if self.phase is None:
             return
+        if self.target_pos is None:
+            self.target_pos = np.r_[view.target_xy, view.table_z]
         rest_z = view.table_z + view.cube_size / 2
         distance = failures.phase_distance(self.phase, view.hand_pos, np.array(view.cube_pos), self.target_pos, rest_z)
         if self.watch.update(self.phase, distance):
@@ -155,7 +164,7 @@ class Supervisor:
             if action is RecoveryAction.BACKOFF:  # at once: the lift is the user's own next move
                 self.user.back_off(view)
                 self._done(action, view.t, view)
-                return self.intent(view)
+                return self._intent(view)
             self.acting = (action, view.t, False)
         action, since, asked = self.acting
         if action is RecoveryAction.PAUSE and view.t - since >= self.params.pause_s - 1e-9:
@@ -166,7 +175,7 @@ class Supervisor:
         elif action is RecoveryAction.REZERO and asked and not self.channel.rezeroing:
             self._done(action, since, view)
         if self.acting is None:
-            return self.intent(view)
+            return self._intent(view)
         return StickIntent(goal=_GOALS[action])
 
     def _done(self, action: RecoveryAction, start: float, view: View) -> None:

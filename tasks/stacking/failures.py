@@ -29,10 +29,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tasks.stacking import metrics
-from tasks.operators.planner import NO_RECOVERY
+from tasks.stacking.vocabulary import NO_RECOVERY
 
 if TYPE_CHECKING:
-    from tasks.stacking.episode import EpisodeLog
+    from tasks.stacking.record import EpisodeLog
 
 SLOW_FACTOR = 2.0  # an episode slower than this many times its participant's median needs a mechanism
 

@@ -1,7 +1,7 @@
 """The paper's assembly task: two 5 cm cubes start at A, are carried one by one and stacked at B.
 
 Composer style: the task composes the arm scene (``sim.env.ArmSim``), randomises the cube
-start poses per seed, defines what the operator observes (``planner.View``) and decides
+start poses per seed, defines what the operator observes (``vocabulary.View``) and decides
 success and failure.  Success = the top cube rests on the bottom one at B (xy offset and tilt
 within tolerance), the hand has let go, and both cubes stay still for ``still_time``.
 Failure = the time limit or a cube off the table.
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.env import ArmSim
-from tasks.operators.planner import View
+from tasks.stacking.vocabulary import View
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,7 @@ class Outcome:
     success: bool
     completion_time: float | None  # s: when the finished stack started being still
     failure: str | None
+    timed_out: bool = False  # ended by the time limit (a Gymnasium truncation, not a termination)
 
 
 NOT_DONE = Outcome(False, False, None, None)
@@ -120,22 +121,27 @@ class StackingTask:
             cube_size=self.cube_size,
         )
 
-    def stacked(self, pos: list[list[float]] | None = None) -> bool:
-        """The top cube rests on the bottom one at B and the hand touches neither (``pos``: the cube
-        centres now, ``ArmSim.cube_positions`` as lists, if already read).  On Python floats: the
-        same differences, lengths and order as on arrays."""
-        pos = self.sim.cube_positions.tolist() if pos is None else pos
+    def placed(self, pos: list[list[float]]) -> tuple[int, int]:
+        """(how many cubes stand in place: 0, 1 the lowest at B, 2 the other on it as well; the index
+        of the upper one) from the cube centres ``pos`` (``ArmSim.cube_positions`` as lists).  On
+        Python floats: the same differences, lengths and order as on arrays."""
         heights = [p[2] for p in pos]
         bottom, top = sorted(range(len(pos)), key=heights.__getitem__)[:2]  # np.argsort's order (stable)
         (bx, by, bz), (tx, ty, tz) = pos[bottom], pos[top]
         dx, dy = bx - self._target_xy[0], by - self._target_xy[1]
+        if not math.sqrt(dx * dx + dy * dy) <= self.config.at_b:
+            return 0, top
         ox, oy = tx - bx, ty - by
-        return bool(
-            math.sqrt(dx * dx + dy * dy) <= self.config.at_b
-            and math.sqrt(ox * ox + oy * oy) <= self.config.stack_xy
-            and abs(tz - bz - self.cube_size) <= 0.1 * self.cube_size
-            and cube_tilt_deg(self.sim.cube_quats[top].tolist()) <= self.config.stack_tilt_deg
-            and not self.sim.touching(self.sim.scene.hand_geoms, self._cubes))
+        on_top = (math.sqrt(ox * ox + oy * oy) <= self.config.stack_xy
+                  and abs(tz - bz - self.cube_size) <= 0.1 * self.cube_size)
+        return (2 if on_top else 1), top
+
+    def stacked(self, pos: list[list[float]] | None = None) -> bool:
+        """The top cube rests on the bottom one at B, level, and the hand touches neither (``pos``:
+        the cube centres now, ``ArmSim.cube_positions`` as lists, if already read)."""
+        count, top = self.placed(self.sim.cube_positions.tolist() if pos is None else pos)
+        return bool(count == 2 and cube_tilt_deg(self.sim.cube_quats[top].tolist()) <= self.config.stack_tilt_deg
+                    and not self.sim.touching(self.sim.scene.hand_geoms, self._cubes))
 
     def outcome(self) -> Outcome:
         """Call once per control tick, after the step."""
@@ -155,5 +161,5 @@ class StackingTask:
             if z < self.table_z - self.cube_size or x < lo_x or y < lo_y or x > hi_x or y > hi_y:
                 return Outcome(True, False, None, f"cube {k + 1} knocked off the table")
         if t >= self.config.time_limit:
-            return Outcome(True, False, None, f"time limit {self.config.time_limit:g} s")
+            return Outcome(True, False, None, f"time limit {self.config.time_limit:g} s", timed_out=True)
         return NOT_DONE

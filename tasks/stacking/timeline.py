@@ -20,7 +20,7 @@ from tasks.stacking import failures, metrics  # noqa: E402
 from tasks.stacking.metrics import task_phases  # noqa: E402
 
 if TYPE_CHECKING:
-    from tasks.stacking.episode import EpisodeLog
+    from tasks.stacking.record import EpisodeLog
 
 # The world axes as the joystick moves the hand along them (docs/sim.md): what "hand - B" is per line.
 AXES = (("x", "x: left +, right -", "tab:blue"), ("y", "y: back +, forward -", "tab:orange"),

@@ -5,9 +5,9 @@ Map (data flows down):
 
 - ``live``: the live loop: a base-station stream through the gate, the chain and the stick to the
   arm at its control rate, with the safety path (any input it cannot trust leaves the arm at rest).
-
-- ``session``: the runner. ``TrialArm`` runs N trials on the simulated arm (wait, countdown, the
-  timed trial, next); ``run_bomi`` drives it from the live loop (``tasks.trials.live.run_live``),
+- ``displays``: where a live run is shown and logged (viewer, film process, status line, tick log).
+- ``session``: the runner. ``TrialArm`` runs N trials on the task's environment
+  (``tasks.stacking.env``: wait, countdown, the timed trial, next; reset per trial); ``run_bomi`` drives it from the live loop (``tasks.trials.live.run_live``),
   ``run_joystick`` from an input device; ``TickRecorder`` keeps every tick; ``episode_log`` and
   ``trial_record`` score each trial with ``tasks.stacking.episode.summarize`` (the benchmark's records).
 - ``standin``: a virtual participant at the controls (BoMI: base-station bytes through the live

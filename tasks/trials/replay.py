@@ -22,8 +22,9 @@ from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame
 from bomi.profiles import Profile
 from sim.env import ArmSim
-from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, JoystickState
+from sim.joystick import LAYOUTS, JoystickState
 from tasks.stacking import metrics
+from tasks.stacking.env import stick_state
 from tasks.trials.live import Headless
 from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_model, inside,
                                  read_records)
@@ -49,8 +50,7 @@ class LoggedStick:
             raise LogEnded
         stick, pressed = self.stick[self.k], self.pressed[self.k]
         self.k += 1
-        return JoystickState({f: float(v) for f, v in zip(FUNCTIONS, stick) if v > 0},
-                             frozenset(b for b, p in zip(BUTTONS, pressed) if p))
+        return stick_state(stick, pressed)  # a logged tick is an action of the env's space
 
     def close(self) -> None:
         """Nothing to release."""

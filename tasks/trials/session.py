@@ -34,7 +34,9 @@ from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState, Mode
 from tasks.stacking.episode import DecisionTrace, EpisodeLog, summarize
 from tasks.operators.recovery import RecoveryAction, RecoveryEvent
-from tasks.stacking.task import StackingTask, TaskConfig
+from tasks.stacking.env import Command, StackingEnv
+from tasks.stacking.task import TaskConfig
+from tasks.stacking.vocabulary import View
 
 DEFAULT_TRIALS = 3
 DEFAULT_COUNTDOWN_S = 3.0
@@ -94,15 +96,19 @@ class TrialResult:
 
 
 class TrialArm:
-    """The simulated arm as the control loop sees it (``tasks.trials.live.Arm``), running the trials.
+    """The simulated arm as the control loop sees it (``tasks.trials.live.Arm``), running the trials
+    on the one loop (``tasks.stacking.env.StackingEnv``), reset at each trial's countdown and go.
 
-    Only ticks in the RUN phase pass the stick to the arm; the others step it with a centred stick.
+    Only ticks in the RUN phase pass the stick to the arm; the countdown steps the task with a
+    centred stick, and before the first countdown (WAIT: no task yet) the bare arm holds still.
     The countdown is counted in control ticks, so a replay of the same ticks runs the same trials.
     """
 
     def __init__(self, sim: ArmSim, plan: TrialPlan, ready: bool = False, last_trial: int | None = None):
         self.sim, self.plan = sim, plan
-        self.task = StackingTask(sim, TaskConfig(time_limit=plan.time_limit_s))
+        self.env = StackingEnv(sim, config=TaskConfig(time_limit=plan.time_limit_s))
+        self.task = self.env.task
+        self._view: View | None = None  # what the last reset or step of the task showed (None: no task yet)
         self.dt = sim.dt
         self.ticks = 0
         self.phase = Phase.WAIT
@@ -139,16 +145,19 @@ class TrialArm:
         self.trial += 1
         self.phase = Phase.COUNTDOWN
         self._countdown_end = self.ticks + round(self.plan.countdown_s / self.dt)
-        self.task.reset(self.plan.task_seed(self.trial))
+        self._reset()
 
     def _go(self) -> None:
         self.phase = Phase.RUN
-        self.task.reset(self.plan.task_seed(self.trial))
+        self._reset()
         self.results.append(TrialResult(self.trial, self.plan.task_seed(self.trial), self.ticks))
         self._started = (time.perf_counter(), time.process_time())
 
-    def step(self, state: JoystickState) -> ArmCommand:
-        view = self.task.view()
+    def _reset(self) -> None:
+        self._view = self.env.reset(seed=self.plan.task_seed(self.trial))[1]["view"]
+
+    def step(self, state: JoystickState) -> ArmCommand | Command:
+        view = self.task.view() if self._view is None else self._view
         self.rows.append({"trial": self.trial if self.phase in (Phase.COUNTDOWN, Phase.RUN) else 0,
                           "phase": int(self.phase), "task_t": view.t, "hand_pos": view.hand_pos,
                           "arm_qpos": self.sim.arm_qpos, "closure": view.closure, "mode": view.mode.value,
@@ -158,16 +167,20 @@ class TrialArm:
             self.phase = Phase.DONE
             self.not_ready = (f"the controller was not ready within {self.plan.ready_within_s:g} s (the live loop "
                               f"never took the neutral posture: a node's signal did not settle)")
-        if self.phase is not Phase.RUN:
-            command = self.sim.step(JoystickState())
-            if self.phase is Phase.COUNTDOWN and self.ticks >= self._countdown_end:
+        if self.phase is Phase.WAIT or self.phase is Phase.DONE:  # no task under way: the bare arm holds still
+            self._view = None
+            return self.sim.step(JoystickState())
+        if self.phase is Phase.COUNTDOWN:
+            info = self.env.step(JoystickState())[-1]
+            self._view = info["view"]
+            if self.ticks >= self._countdown_end:
                 self._go()  # the next tick starts the trial, the task at its start (as a person sees it)
-            return command
+            return info["command"]
         result = self.results[-1]
         if result.first_command_s is None and (any(state.deflection.values()) or state.pressed):
             result.first_command_s, result.first_command_tick = view.t, self.ticks - 1
-        command = self.sim.step(state)
-        outcome = self.task.outcome()
+        info = self.env.step(state)[-1]
+        self._view, command, outcome = info["view"], info["command"], info["outcome"]
         if outcome.done:
             result.end_tick = self.ticks
             result.success, result.failure = outcome.success, outcome.failure

@@ -1,14 +1,14 @@
 """The stand-in: a virtual participant at the controls of a trial, where a person would sit.
 
 It watches the simulated arm as a person does (the scripted user of ``tasks.operators.planner``, or the
-human operator model the operator file names, through ``tasks.stacking.episode.operator_user``): holds
+human operator model the operator file names: a ``tasks.stacking.sources.Operator``): holds
 still while the controller gets ready and through the countdown, then does the task.
 
-- BoMI: its body moves as ``tasks.stacking.episode.BomiChannel`` moves a virtual participant's, and the
+- BoMI: its body moves as ``tasks.stacking.channels.BomiChannel`` moves a virtual participant's, and the
   base-station bytes it sends go through the same live path a person's stream does
   (``StandInSource``: bytes -> parser -> chain -> safety -> stick -> arm, in ``tasks.trials.live.run_live``);
   it sees the arm answer the decisions the live loop acted on (``heard``).
-- Joystick: the person's intent straight to the stick (``tasks.stacking.episode.JoystickChannel``).
+- Joystick: the person's intent straight to the stick (``tasks.stacking.channels.JoystickChannel``).
 
 ``seed`` draws the BoMI stand-in's body and noise (one body for the session); the scripted user of
 trial k is that of a simulated episode with the trial's cube-placement seed (its human model's
@@ -24,9 +24,12 @@ from bomi.chain import Decision, OnlineChain
 from bomi.frames import ImuFrame
 from bomi.profiles import Profile
 from sim.joystick import JoystickState
-from tasks.stacking.episode import BomiChannel, JoystickChannel, OperatorChannel, intended_direction, operator_user
+from tasks.stacking.channels import BomiChannel, JoystickChannel, OperatorChannel
+from tasks.stacking.episode import intended_direction
+from tasks.stacking.sources import Operator, operator_user
 from tasks.participants.participant import ParticipantParams, VirtualParticipant
-from tasks.operators.planner import REST, OperatorParams, StickIntent
+from tasks.operators.params import OperatorParams
+from tasks.stacking.vocabulary import REST, StickIntent
 from tasks.trials.session import Phase, TappedParser, TrialArm
 
 IDLE = {"intended_dir": (0.0, 0.0, 0.0), "pushing": False, "goal": "", "stage": ""}
@@ -37,7 +40,8 @@ class StandIn:
 
     def __init__(self, arm: TrialArm, channel: OperatorChannel, operator: OperatorParams):
         self.arm, self.channel, self.operator = arm, channel, operator
-        self._user, self._trial, self._previous = None, 0, None
+        self._person: Operator | None = None
+        self._trial = 0
         self._truth = dict(IDLE)
 
     def look(self) -> tuple[StickIntent, float, np.ndarray | None, object] | None:
@@ -45,17 +49,16 @@ class StandIn:
         trial runs; None otherwise (the person rests)."""
         arm = self.arm
         if arm.phase is not Phase.RUN:
-            self._user, self._truth = None, dict(IDLE)
+            self._person, self._truth = None, dict(IDLE)
             return None
-        if self._user is None or self._trial != arm.trial:  # a new trial: the person starts afresh, with
+        if self._person is None or self._trial != arm.trial:  # a new trial: the person starts afresh, with
             # the human model's draws (if any) of a simulated episode of the trial's seed
-            self._user = operator_user(self.operator, self.channel, arm.plan.task_seed(arm.trial))
-            self._trial, self._previous = arm.trial, None
+            self._person = Operator(operator_user(self.operator, self.channel, arm.plan.task_seed(arm.trial)),
+                                    self.channel)
+            self._trial = arm.trial
         view = arm.task.view()
-        intent = self._user.stick_intent(view)
-        full_speed = arm.sim.config.control.full_speed
-        seen = None if self._previous is None else (view.hand_pos - self._previous) / (arm.dt * full_speed)
-        self._previous = view.hand_pos
+        intent, seen = self._person.look({"view": view, "dt": arm.dt,
+                                          "full_speed": arm.sim.config.control.full_speed})
         self._truth = {"intended_dir": intended_direction(view.mode, intent, arm.sim.layout),
                        "pushing": bool(intent.deflection), "goal": intent.goal.step,
                        "stage": "" if intent.goal.phase is None else intent.goal.phase.value}
