@@ -107,13 +107,13 @@ def markdown(runs: list[Run]) -> str:
         "Held-out seeds used: " + ", ".join(held) + "; and the synthetic people named in",
         "`runs.toml` for those runs (their population seeds).",
         "",
-        "| run | issue | seeds | commit | verdict | result |",
-        "|---|---|---|---|---|---|",
+        "| run | issue | bar | seeds | commit | verdict | result |",
+        "|---|---|---|---|---|---|---|",
     ]
     for run in runs:
         issue = str(run.issue) if run.issue is not None else "-"
         seeds = run.seeds + ("" if run.held_out else " (dev)" if SEEDS.match(run.seeds) else "")
-        lines.append(f"| {run.id} | {issue} | {cell(seeds)} | {cell(run.commit)} | "
+        lines.append(f"| {run.id} | {issue} | {cell(run.bar)} | {cell(seeds)} | {cell(run.commit)} | "
                      f"{run.verdict.value} | {cell(run.result)} |")
     return "\n".join(lines) + "\n"
 
