@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 RUNS = ROOT / "benchmarks" / "results" / "runs.toml"
 TABLE = ROOT / "docs" / "runs.md"
 SEEDS = re.compile(r"^\d+(-\d+)?$")
+PEOPLE = re.compile(r"synthetic (\d+(?:-\d+)?)")
 
 
 class Verdict(str, Enum):
@@ -91,12 +92,17 @@ def load_runs(path: Path) -> list[Run]:
     return runs
 
 
+def first_seed(seeds: str) -> int:
+    return int(seeds.split("-")[0])
+
+
 def cell(text: str) -> str:
     return text.replace("|", "/").replace("\n", " ")
 
 
 def markdown(runs: list[Run]) -> str:
-    held = sorted({r.seeds for r in runs if r.held_out}, key=lambda s: int(s.split("-")[0]))
+    held = sorted({r.seeds for r in runs if r.held_out}, key=first_seed)
+    people = sorted({m for r in runs if r.held_out for m in PEOPLE.findall(r.people)}, key=first_seed)
     lines = [
         "# Runs",
         "",
@@ -104,8 +110,9 @@ def markdown(runs: list[Run]) -> str:
         "`benchmarks/results/runs.toml` (which also holds each run's command and machine).",
         "A miss stays a miss. Held-out seeds are spent: never run them again for a new figure.",
         "",
-        "Held-out seeds used: " + ", ".join(held) + "; and the synthetic people named in",
-        "`runs.toml` for those runs (their population seeds).",
+        "Held-out task seeds used: " + ", ".join(held) + ".",
+        "",
+        "Held-out synthetic people (population seeds) used: " + ", ".join(people) + ".",
         "",
         "| run | issue | bar | seeds | commit | verdict | result |",
         "|---|---|---|---|---|---|---|",
