@@ -128,6 +128,7 @@ def markdown(runs: list[Run]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--print", action="store_true", help="print the table, write nothing")
+    parser.error = lambda message: parser.exit(2, f"bomi: error: {message}\n")   # one line, no usage
     args = parser.parse_args(argv)
     try:
         runs = load_runs(RUNS)
