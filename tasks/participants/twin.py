@@ -40,8 +40,8 @@ from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ
 from bomi.profiles import Profile
 from bomi.recording import Recording, Signal
-from tasks.participants.participant import (SWAY_CUTOFF_HZ, ClassMotion, ColouredNoise, ParticipantParams, Protocol,
-                                            minimum_jerk, sway_filter)
+from tasks.participants.motion import SWAY_CUTOFF_HZ, ColouredNoise, minimum_jerk, sway_filter
+from tasks.participants.params import ClassMotion, ParticipantParams, Protocol
 
 EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
 MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
