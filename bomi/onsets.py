@@ -92,7 +92,7 @@ def cue_move(raw: np.ndarray, smooth: np.ndarray, time: np.ndarray, label: int, 
     # the way along the move, before the cue (back to the baseline) and up to the run's middle
     start, end = baseline, (cue + stop) // 2
     along = (smooth[start:end] - old) @ way / size
-    speed = np.gradient(along, time[start:end])
+    speed = np.gradient(along) * rate   # per row (a row's Time may repeat one, or pause)
     peak = cue - start + int(np.argmax(speed[cue - start:]))
     threshold = SPEED_SHARE * speed[peak]
     slow_before = np.flatnonzero(speed[:peak] < threshold)

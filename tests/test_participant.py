@@ -12,9 +12,9 @@ from bomi.errors import BomiError
 from bomi.frames import FrameParser, RowAssembler, SafetyKey, SampleIndex, encode_safety_key_frame
 from bomi.fusion import DT, WARMUP_S, FusedRows
 from bomi.profiles import load_profile
+from tasks.participants.motion import fir_filter, minimum_jerk, tremor_filter
 from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
-                               fir_filter, load_participant, minimum_jerk, record_stream, session_recording,
-                               tremor_filter)
+                                            load_participant, record_stream, session_recording)
 from helpers import assert_agree, edited_copy
 
 P1_TOML = PARTICIPANT_DIR / "P1.toml"
