@@ -109,6 +109,7 @@ class Holds:
     tremor: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)
     spectra: list[np.ndarray] = field(default_factory=list)
     lengths: list[int] = field(default_factory=list)    # samples of every block measured for noise
+    held: dict[int, list[np.ndarray]] = field(default_factory=dict)  # label -> each hold's samples minus its reference
 
     def add_levels(self, day: int, blocks: list[Block], angles: np.ndarray) -> None:
         """Each block's median posture; a motion's as a delta from the neutral before and after it
@@ -122,7 +123,19 @@ class Holds:
             around = [medians[j] for j in (k - 1, k + 1) if 0 <= j < len(blocks) and blocks[j].label == NEUTRAL_LABEL]
             reference = np.mean(around, axis=0) if around else np.median(neutral, axis=0)
             self.deltas.setdefault((block.label, day), []).append(level - reference)
+            self.held.setdefault(block.label, []).append(angles[block.start:block.stop] - reference)
             self.levels.setdefault((block.label, day), []).append(level)
+
+    def least_share(self, postures: dict[int, np.ndarray], quantile: float) -> float:
+        """The least amplitude the holds show, as a share of the class posture: per class, the
+        ``quantile`` of its held samples' projection on its posture over the posture's length; the
+        median over the classes."""
+        lows = []
+        for label, posture in postures.items():
+            samples = np.concatenate(self.held[label]).reshape(-1, posture.size)
+            way = posture.ravel()
+            lows.append(float(np.quantile(samples @ way / (way @ way), quantile)))
+        return float(np.median(lows))
 
     def add_noise(self, blocks: list[Block], angles: np.ndarray) -> None:
         """Sway and tremor of every usable block and node; the first node's tremor spectrum."""
