@@ -122,7 +122,7 @@ def test_the_twin_of_a_continuous_recording_recovers_the_known_participant(tmp_p
     code, stdout, _ = bomi(capsys, "twin", continuous_csv, "--profile", "P4", "--out", out)
     assert code == 0, stdout
     twin = load_participant(out)
-    assert twin.provenance["onset_s"].startswith("measured") and "transitions" in twin.provenance["onset_s"]
+    assert twin.provenance["onset_s"].startswith("measured") and "moves found in the signals" in twin.provenance["onset_s"]
     # timed on the fused angles: the fusion's lag and the row labelling add a little
     assert twin.onset_s == pytest.approx(known_p4.onset_s, abs=0.15)
     assert twin.reaction_s == pytest.approx(known_p4.reaction_s, abs=0.1)

@@ -132,10 +132,11 @@ class Holds:
         median over the classes."""
         lows = []
         for label, posture in postures.items():
-            samples = np.concatenate(self.held[label]).reshape(-1, posture.size)
             way = posture.ravel()
-            lows.append(float(np.quantile(samples @ way / (way @ way), quantile)))
-        return float(np.median(lows))
+            samples = np.concatenate(self.held.get(label, [np.empty((0, way.size))])).reshape(-1, way.size)
+            if len(samples) and way @ way > 0:
+                lows.append(float(np.quantile(samples @ way / (way @ way), quantile)))
+        return float(np.median(lows)) if lows else 1.0
 
     def add_noise(self, blocks: list[Block], angles: np.ndarray) -> None:
         """Sway and tremor of every usable block and node; the first node's tremor spectrum."""

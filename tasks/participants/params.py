@@ -7,8 +7,10 @@ spread from move to move, gamma-distributed; 0 or absent: fixed), ``max_amplitud
 (the tremor's power spectrum shape); ``[neutral]`` with
 ``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg``; one
 ``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_gain_log_std``, ``day_std_deg``,
-``sway_std_deg``, ``tremor_std_deg``; optional ``[spasm]`` with ``rate_per_s``, ``max_deg``,
-``duration_s``, ``nodes``; ``[feel]`` (``Feel``: how they lean and correct a lean through the BoMI); a twin
+``sway_std_deg``, ``tremor_std_deg`` and optionally ``range_share`` (the share of ``posture_deg`` this
+person reaches); optional ``[spasm]`` (``Spasm``: background bursts) with ``rate_per_s``, ``max_deg``,
+``duration_s``, ``nodes``; optional ``[evoked_spasm]`` (``EvokedSpasm``: spasms some motions set off)
+with ``classes``, ``probability``, ``duration_s`` and ``undo_share`` ([least, most] ranges); ``[feel]`` (``Feel``: how they lean and correct a lean through the BoMI); a twin
 (``tasks.participants.twin``) also has ``[provenance]`` (parameter -> where it comes from) and
 ``[protocol]`` (``Protocol``: the runs of its source recording). Every ``*_deg`` value is a (nodes x 3)
 matrix of (pitch, roll, yaw).
@@ -275,6 +277,16 @@ def _parse_spasm(table: Any, n_nodes: int) -> Spasm:
         raise ValueError(f"[spasm]: 'nodes' must list node positions 1..{n_nodes}")
     return Spasm(number(table, "rate_per_s", "[spasm]", 0.0), number(table, "max_deg", "[spasm]", 0.0, 90.0),
                  number(table, "duration_s", "[spasm]", DT, 10.0), tuple(nodes))
+
+
+def recorded_day(params: ParticipantParams) -> ParticipantParams:
+    """The participant on the day of its recording: no drift between days drawn (each class's posture
+    the fitted one). What a twin is to a model trained on its own source recording: the person of that
+    day, moving within the amplitudes the model learnt (issue 53.4); a twin of one pass otherwise
+    drifts by its prior's drift on every seed's day."""
+    classes = {label: replace(m, day_gain_log_std=0.0, day_std_deg=np.zeros_like(m.day_std_deg))
+               for label, m in params.classes.items()}
+    return replace(params, classes=classes)
 
 
 def check_against_profile(params: ParticipantParams, profile: Profile) -> None:
