@@ -74,15 +74,16 @@ def test_shipped_p1_is_the_twin_of_its_five_days(tmp_path, shared_data, capsys):
     days = [shared_data / f"day{d}_testp.mat" for d in range(1, 6)]
     code, stdout, _ = bomi(capsys, "twin", *days, "--profile", "P1", "--name", "P1", "--prior", "none", "--out", out, "--no-check")
     assert code == 0, stdout
-    # the same file but for the least lean: the fitter now measures it from the holds (issue 53.4), the
-    # shipped P1 keeps the assumed 0.5 its task figures were made with
+    # the same file but for the leans: the fitter now measures them from the holds (issue 53.4), the
+    # shipped P1 keeps the assumed 0.5 (and 1.0) its task figures were made with
     refit = load_participant(out)
     assert 0.8 < refit.feel.least_lean < 0.95, refit.feel.least_lean
     assert refit.provenance["feel.least_lean"].startswith("measured")
     shipped = P1_TOML.read_text()
-    lines = [line for line in out.read_text().splitlines() if not line.startswith('"feel.least_lean" = ')]
-    assert [line for line in lines if not line.startswith(("least_lean = ", "[feel]", '"feel" = '))] == \
-        [line for line in shipped.splitlines() if not line.startswith(("least_lean = ", "[feel]", '"feel" = '))]
+    assert 1.0 < refit.feel.most_lean < 1.2, refit.feel.most_lean
+    measured = ("least_lean = ", "most_lean = ", "[feel]", '"feel" = ', '"feel.least_lean" = ', '"feel.most_lean" = ')
+    assert [line for line in out.read_text().splitlines() if not line.startswith(measured)] == \
+        [line for line in shipped.splitlines() if not line.startswith(measured)]
     params = load_participant(out)
     # the dataset README's day-1 means: c1 head pitch +29, c3 -26, c8 left-shoulder roll +26 (over days: less)
     assert params.classes[1].posture_deg[0, 0] == pytest.approx(29, abs=2)

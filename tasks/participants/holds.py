@@ -126,8 +126,8 @@ class Holds:
             self.held.setdefault(block.label, []).append(angles[block.start:block.stop] - reference)
             self.levels.setdefault((block.label, day), []).append(level)
 
-    def least_share(self, postures: dict[int, np.ndarray], quantile: float) -> float:
-        """The least amplitude the holds show, as a share of the class posture: per class, the
+    def held_share(self, postures: dict[int, np.ndarray], quantile: float) -> float:
+        """An amplitude the holds show, as a share of the class posture: per class, the
         ``quantile`` of its held samples' projection on its posture over the posture's length; the
         median over the classes."""
         lows = []

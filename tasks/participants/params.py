@@ -46,7 +46,7 @@ _CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_gain_log_std", "day_s
 _SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
 _EVOKED_KEYS = {"classes", "probability", "duration_s", "undo_share"}
 _PROTOCOL_KEYS = {"source", "holds_only", "labels", "durations_s"}
-_FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero"}
+_FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero", "most_lean"}
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,7 @@ class Feel:
     too_slow: float          # seen / wanted speed below which the participant leans further
     too_fast: float          # seen / wanted speed above which they lean less far
     max_zero: float          # the learnt zero lean never exceeds this (the least deflection needs less than full range)
+    most_lean: float = 1.0   # the furthest lean, as a share of the class posture (a twin: its recording's largest holds)
 
 
 @dataclass(frozen=True)
@@ -260,14 +261,15 @@ def _parse_protocol(table: Any, labels: set[int]) -> Protocol:
 
 
 def _parse_feel(table: Any) -> Feel:
-    table = check_table(table, "[feel]", _FEEL_KEYS, _FEEL_KEYS)
+    table = check_table(table, "[feel]", _FEEL_KEYS, _FEEL_KEYS - {"most_lean"})
     return Feel(least_lean=number(table, "least_lean", "[feel]", 0.05, 1.0),
                 lean_step=number(table, "lean_step", "[feel]", 0.0, 1.0),
                 watch_s=number(table, "watch_s", "[feel]", 0.0, 60.0),
                 speed_smoothing_s=number(table, "speed_smoothing_s", "[feel]", DT, 60.0),
                 too_slow=number(table, "too_slow", "[feel]", 0.0, 1.0),
                 too_fast=number(table, "too_fast", "[feel]", 1.0),
-                max_zero=number(table, "max_zero", "[feel]", 0.0, 0.99))
+                max_zero=number(table, "max_zero", "[feel]", 0.0, 0.99),
+                most_lean=number(table, "most_lean", "[feel]", 1.0, 2.0, default=1.0))
 
 
 def _parse_spasm(table: Any, n_nodes: int) -> Spasm:

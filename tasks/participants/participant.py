@@ -137,15 +137,17 @@ class VirtualParticipant:
         return self._moves[-1].label, self._moves[-1].amplitude
 
     def set_intent(self, label: int, amplitude: float, t: float) -> float | None:
-        """From sim time ``t``: move (after the reaction time) to ``label``'s posture at ``amplitude`` in [0, 1];
+        """From sim time ``t``: move (after the reaction time) to ``label``'s posture at ``amplitude`` in [0, 1]
+        (up to ``Feel.most_lean``);
         the time the move ends (the posture reached).
 
         Setting the intent already in force does nothing (the posture is held) and returns None.
         """
         if label != NEUTRAL_LABEL and label not in self.params.classes:
             raise ValueError(f"participant {self.params.name} has no class {label}")
-        if not 0.0 <= amplitude <= 1.0:
-            raise ValueError(f"amplitude must be in [0, 1], got {amplitude}")
+        most = max(1.0, self.params.feel.most_lean)
+        if not 0.0 <= amplitude <= most:
+            raise ValueError(f"amplitude must be in [0, {most:g}], got {amplitude}")
         if (label, amplitude) == self.intent or (label == NEUTRAL_LABEL and self.intent[0] == NEUTRAL_LABEL):
             return None
         params = self.params
@@ -333,8 +335,10 @@ class CalibrationSession:
 def calibration_session(params: ParticipantParams, profile: Profile, seed: int, repetitions: int = 3,
                         hold_s: float = 5.0, neutral_s: float = 5.0, amplitudes: Sequence[float] = (1.0,),
                         order: Sequence[tuple[int, float]] | None = None, warmup_s: float = WARMUP_S,
-                        noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()) -> CalibrationSession:
-    """Run the protocol: neutral, then each cued motion held ``hold_s`` with ``neutral_s`` of neutral between.
+                        noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel(),
+                        session: Session = Session.CALIBRATION) -> CalibrationSession:
+    """Run the protocol: neutral, then each cued motion held ``hold_s`` with ``neutral_s`` of neutral between;
+    ``session``: which of the seed's day's sessions (``Session.TASK``: a second recording of the same day).
 
     The participant needs ``reaction_s + onset_s`` after each cue to reach the posture; the
     hold (and the neutral) lasts ``hold_s`` (``neutral_s``) from then. ``order`` overrides the
@@ -344,7 +348,7 @@ def calibration_session(params: ParticipantParams, profile: Profile, seed: int, 
     runs = [(NEUTRAL_LABEL, 0.0, neutral_s)]
     for label, amplitude in motions:
         runs += [(label, amplitude, hold_s), (NEUTRAL_LABEL, 0.0, neutral_s)]
-    return perform_runs(params, profile, seed, runs, warmup_s, noise, link)
+    return perform_runs(params, profile, seed, runs, warmup_s, noise, link, session)
 
 
 def protocol_session(params: ParticipantParams, profile: Profile, seed: int, protocol: Protocol,
@@ -359,11 +363,11 @@ def protocol_session(params: ParticipantParams, profile: Profile, seed: int, pro
 
 
 def perform_runs(params: ParticipantParams, profile: Profile, seed: int, runs: Sequence[tuple[int, float, float]],
-                 warmup_s: float = WARMUP_S, noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel()
-                 ) -> CalibrationSession:
+                 warmup_s: float = WARMUP_S, noise: SensorNoise = SensorNoise(), link: LinkModel = LinkModel(),
+                 session: Session = Session.CALIBRATION) -> CalibrationSession:
     """Runs of (class, amplitude, hold s): the first held from the end of the warm-up, each next one
     cued when the previous hold ends and held ``hold`` s once reached (``reaction_s + onset_s`` after the cue)."""
-    vp = VirtualParticipant(params, profile, seed, noise, link, Session.CALIBRATION)
+    vp = VirtualParticipant(params, profile, seed, noise, link, session)
     settle = params.reaction_s + params.onset_s
     (first, first_amp, first_s), *rest = runs
     cues: list[tuple[float, int]] = [(0.0, first)]

@@ -55,16 +55,19 @@ SETTLE_MARGIN_S = 0.3          # continuous recordings: a block's hold starts th
 # moves of 25-30 deg take 0.5-1 s, simple reaction times are 0.2-0.5 s (docs/virtual_participant.md).
 ASSUMED_ONSET_S = 0.8
 ASSUMED_REACTION_S = 0.4
-# The least lean (``Feel.least_lean``) is where the recording's holds begin: this quantile of each
-# class's held samples along its posture (the median over classes). A model trained on the recording
-# calibrates its speed range from the least to the largest held sample (``bomi.classifier.amplitude_ranges``):
-# a twin leaning less far than the person held would sit below it and never move the arm (issue 53.4).
-LEAST_LEAN_QUANTILE = 0.05
+# The least and the furthest lean (``Feel.least_lean``, ``Feel.most_lean``) are where the recording's
+# holds begin and end: these quantiles of each class's held samples along its posture (the median over
+# classes). A model trained on the recording calibrates its speed range from the least to the largest
+# held sample (``bomi.classifier.amplitude_ranges``): a twin leaning less far than the person held sits
+# below it and never moves the arm, one that never leans further than the median hold never drives it
+# faster than half way (issue 53.4).
+LEAN_QUANTILES = (0.05, 0.95)
 # The rest of how the participant leans through the BoMI (tasks.participants.params.Feel): recordings
 # of holds do not show it; written as assumed, the same as P4's and P5's files.
 FEEL = """
-[feel]   # how the participant drives a proportional class through the BoMI (tasks/stacking/episode.py); least_lean measured, the rest assumed as for P1, P4, P5
+[feel]   # how the participant drives a proportional class through the BoMI (tasks/stacking/episode.py); least_lean and most_lean measured, the rest assumed as for P1, P4, P5
 least_lean = {least_lean:.3f}         # the least lean used, and calibrated with: where the recording's holds begin ([provenance])
+most_lean = {most_lean:.3f}          # the furthest lean (1: the posture): where the recording's holds end ([provenance])
 lean_step = 0.15           # a correction leans this much further (arm too slow or not answering) or less far (too fast)
 watch_s = 1.0              # s: after reaction + move, how long a posture is watched before it is corrected
 speed_smoothing_s = 0.3    # s: the arm's speed is judged over about this long
@@ -267,6 +270,7 @@ class Twin:
     tremor_std: dict[int, np.ndarray]
     protocol: Protocol
     least_lean: float
+    most_lean: float
     provenance: dict[str, str]
     fallbacks: list[str] = field(default_factory=list)   # what could not be measured, said on stdout
 
@@ -436,9 +440,11 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     first = Path(passes[0].source).name
     provenance["neutral.angles_deg"] = f"measured: median of the first pass's neutral holds ({first})"
     provenance["max_amplitude"] = "definition: the postures are measured as performed (full range)"
-    least_lean = float(np.clip(holds.least_share(postures, LEAST_LEAN_QUANTILE), 0.05, 1.0))
-    provenance["feel.least_lean"] = (f"measured: the {LEAST_LEAN_QUANTILE:.0%} quantile of each class's held samples "
-                                     f"along its posture, median over the classes ({names})")
+    least_lean, most_lean = (holds.held_share(postures, q) for q in LEAN_QUANTILES)
+    least_lean, most_lean = float(np.clip(least_lean, 0.05, 1.0)), float(np.clip(most_lean, 1.0, 2.0))
+    for key, quantile in zip(("feel.least_lean", "feel.most_lean"), LEAN_QUANTILES):
+        provenance[key] = (f"measured: the {quantile:.0%} quantile of each class's held samples along its posture, "
+                           f"median over the classes ({names})")
     provenance["feel"] = "assumed: recordings of holds do not show how a person corrects a lean (as P4, P5)"
     provenance["protocol"] = f"the runs of {first}, for bomi synth"
     return Twin(
@@ -447,7 +453,7 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         neutral_deg=np.median(day_neutrals[0], axis=0) if day_neutrals else np.zeros((n_nodes, 3)),
         neutral_rep_std=neutral_rep_std, neutral_sway_std=neutral_sway, neutral_tremor_std=neutral_tremor,
         tremor_spectrum=spectrum, postures=postures, rep_std=rep_std, day_gain_log_std=day_gain, day_std=day_std,
-        sway_std=sway, tremor_std=tremor, protocol=passes[0].protocol(), least_lean=least_lean, provenance=provenance, fallbacks=fallbacks)
+        sway_std=sway, tremor_std=tremor, protocol=passes[0].protocol(), least_lean=least_lean, most_lean=most_lean, provenance=provenance, fallbacks=fallbacks)
 
 
 def prior_nodes(prior: ParticipantParams, profile: Profile, matrix: np.ndarray) -> np.ndarray:
@@ -522,4 +528,4 @@ def twin_toml(twin: Twin, description: str) -> str:
               "(stitched), else every row after the cue",
               "labels = [" + ", ".join(str(v) for v in protocol.labels) + "]",
               "durations_s = [" + ", ".join(f"{v:g}" for v in protocol.durations_s) + "]"]
-    return "\n".join(lines) + "\n" + FEEL.format(least_lean=twin.least_lean)
+    return "\n".join(lines) + "\n" + FEEL.format(least_lean=twin.least_lean, most_lean=twin.most_lean)
