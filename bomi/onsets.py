@@ -65,22 +65,31 @@ def smoothed(x: np.ndarray, rate_hz: float = SAMPLE_RATE_HZ) -> np.ndarray:
     return scipy.signal.filtfilt(b, a, x, axis=0) if len(x) > 3 * max(len(a), len(b)) else x
 
 
+def row_rate(time: np.ndarray) -> float:
+    """Rows per second: the median step of a recording's clock (steps of 0, a row repeated, and the
+    pauses of a logger's clock left aside by the median), else the sample rate."""
+    steps = np.diff(np.asarray(time, dtype=float))
+    steps = steps[steps > 0]
+    return 1.0 / float(np.median(steps)) if len(steps) else SAMPLE_RATE_HZ
+
+
 def find_moves(angles: np.ndarray, time: np.ndarray, labels: np.ndarray) -> list[Move]:
     """The move after every cue of a recording: ``angles`` (n, ...) degrees, ``time`` (n,) s, ``labels``
     (n,) the cue in force at each row."""
     flat = np.asarray(angles, dtype=float).reshape(len(angles), -1)
-    smooth = smoothed(flat)
+    rate = row_rate(time)
+    smooth = smoothed(flat, rate)
     edges = np.r_[0, cue_rows(labels), len(labels)]
-    return [cue_move(flat, smooth, time, int(labels[cue]), int(edges[k - 1]), int(cue), int(edges[k + 1]))
+    baseline = int(round(BASELINE_S * rate))
+    return [cue_move(flat, smooth, time, int(labels[cue]), max(int(cue) - baseline, int(edges[k - 1])), int(cue),
+                     int(edges[k + 1]))
             for k, cue in enumerate(edges[1:-1], start=1)]
 
 
-def cue_move(raw: np.ndarray, smooth: np.ndarray, time: np.ndarray, label: int, previous: int, cue: int,
+def cue_move(raw: np.ndarray, smooth: np.ndarray, time: np.ndarray, label: int, baseline: int, cue: int,
              stop: int) -> Move:
-    """The move of the run ``[cue, stop)`` that follows the run ``[previous, cue)``, in (n, k) ``raw``
-    angles and their ``smooth`` copy."""
-    rate = 1.0 / max(float(np.median(np.diff(time))), 1e-9) if len(time) > 1 else SAMPLE_RATE_HZ
-    baseline = max(cue - int(round(BASELINE_S * rate)), previous)
+    """The move of the run ``[cue, stop)``, its level before the cue held in rows ``[baseline, cue)``, in
+    (n, k) ``raw`` angles and their ``smooth`` copy."""
     old = np.median(raw[baseline:cue], axis=0)
     new = np.median(raw[(cue + stop) // 2:stop], axis=0)
     way = new - old
@@ -92,7 +101,7 @@ def cue_move(raw: np.ndarray, smooth: np.ndarray, time: np.ndarray, label: int, 
     # the way along the move, before the cue (back to the baseline) and up to the run's middle
     start, end = baseline, (cue + stop) // 2
     along = (smooth[start:end] - old) @ way / size
-    speed = np.gradient(along) * rate   # per row (a row's Time may repeat one, or pause)
+    speed = np.gradient(along)   # per row: only its share of the peak counts (a row's Time may repeat, or pause)
     peak = cue - start + int(np.argmax(speed[cue - start:]))
     threshold = SPEED_SHARE * speed[peak]
     slow_before = np.flatnonzero(speed[:peak] < threshold)
