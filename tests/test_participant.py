@@ -442,3 +442,15 @@ def test_the_recorded_day_is_the_fitted_posture_on_every_seed():
         assert all(np.array_equal(days[label], m.posture_deg) for label, m in p1.classes.items())
     drawn = VirtualParticipant(p1, load_profile("P1"), 1).day_postures
     assert not np.array_equal(drawn[1], p1.classes[1].posture_deg)
+
+
+def test_a_participant_leans_up_to_its_most_lean_and_no_further():
+    p1 = load_participant("P1")
+    assert p1.feel.most_lean == 1.0                                  # absent from the file: the posture
+    far = dataclasses.replace(p1, feel=dataclasses.replace(p1.feel, most_lean=1.1))
+    vp = VirtualParticipant(far, load_profile("P1"), seed=1)
+    vp.set_intent(1, 1.1, 0.0)
+    with pytest.raises(ValueError, match=r"amplitude must be in \[0, 1.1\]"):
+        vp.set_intent(2, 1.2, 5.0)
+    with pytest.raises(ValueError, match=r"amplitude must be in \[0, 1\]"):
+        VirtualParticipant(p1, load_profile("P1"), seed=1).set_intent(1, 1.1, 0.0)
