@@ -15,6 +15,9 @@ each measured where the recordings show it and taken from a documented prior oth
   its own move. Post-processed recordings keep only the holds, stitched (the published 5-day set):
   no move to time;
 - the drift of each class between passes (a log-normal gain and an offset), from two passes or more.
+- the least and the furthest lean through the BoMI (``[feel]``: ``least_lean``, ``most_lean``), where
+  the holds' amplitudes begin and end along each class's posture, so that a model trained on the
+  recording, whose speed range spans those amplitudes, drives the twin as it would the person.
 
 What one pass cannot show (its drift between days, timing in a stitched file, noise levels of a
 class whose holds are too short) comes from the prior participant (default P1, fitted by this same
