@@ -12,9 +12,9 @@ from bomi.errors import BomiError
 from bomi.frames import FrameParser, RowAssembler, SafetyKey, SampleIndex, encode_safety_key_frame
 from bomi.fusion import DT, WARMUP_S, FusedRows
 from bomi.profiles import load_profile
+from tasks.participants.motion import fir_filter, minimum_jerk, tremor_filter
 from tasks.participants.participant import (PARTICIPANT_DIR, CalibrationSession, Session, VirtualParticipant, calibration_session,
-                               fir_filter, load_participant, minimum_jerk, record_stream, session_recording,
-                               tremor_filter)
+                                            load_participant, record_stream, session_recording)
 from helpers import assert_agree, edited_copy
 
 P1_TOML = PARTICIPANT_DIR / "P1.toml"
@@ -386,3 +386,71 @@ def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
     for start, label in [(16.0, 1), (21.0, 0), (26.0, 4), (31.0, 0), (36.0, 2), (41.0, 0)]:
         hold = labels[(times > start) & (times < start + 3.0)]
         assert np.mean(hold == label) > 0.9, (label, np.bincount(hold))
+
+
+# ------------------------------------------------------------------- spasms, range, timing (issue 53)
+def test_a_class_range_share_scales_its_posture():
+    p5 = load_participant("P5")
+    assert p5.classes[3].posture_deg.tolist() == [[0.0, 0.0, 0.0], [0.0, 0.3 * 25.0, 0.0]]   # P5.toml: 0.3 x 25 deg
+    assert p5.classes[4].posture_deg.tolist() == [[0.0, 0.0, 0.0], [0.0, -25.0, 0.0]]        # the others as written
+
+
+def test_a_motion_sets_off_its_spasm_once_its_posture_is_reached():
+    from tasks.participants.params import EvokedSpasm
+    p4 = dataclasses.replace(load_participant("P4"), spasm=None, reaction_sd_s=0.0,
+                             evoked_spasm=EvokedSpasm((1,), 1.0, (1.0, 1.0), (0.5, 0.5)))
+    profile = load_profile("P4")
+    vp = VirtualParticipant(p4, profile, seed=2)
+    reached = vp.set_intent(1, 1.0, 1.0)
+    assert reached == pytest.approx(1.0 + p4.reaction_s + p4.onset_s)
+    assert vp.set_intent(2, 1.0, 6.0) is not None and vp.set_intent(2, 1.0, 6.5) is None   # held: nothing new
+    vp.deliveries(9.0)
+    truth = vp.truth()
+    move = vp.moves[1]
+    pitch = truth.angles[:, 0, 0]
+
+    def mean_pitch(start: float, stop: float) -> float:
+        return float(pitch[(truth.time_s >= start) & (truth.time_s < stop)].mean())
+
+    # the raised cosine peaks half-way: half the move's excursion pulled back, around the middle second
+    dip = mean_pitch(reached + 0.45, reached + 0.55) - mean_pitch(reached + 1.2, reached + 2.0)
+    excursion = (move.target - move.start)[0, 0]
+    assert dip == pytest.approx(-0.5 * excursion, abs=2.0)
+    # c2's move sets off nothing: after c1's spasm, only the c2 move
+    assert len(vp._evoked) == 1
+
+
+def test_reaction_and_move_times_vary_as_gamma_draws_of_the_stated_mean_and_spread():
+    params = dataclasses.replace(load_participant("P1"), reaction_s=0.6, reaction_sd_s=0.2, onset_s=1.0, onset_sd_s=0.1)
+    vp = VirtualParticipant(params, load_profile("P1"), seed=4)
+    cues = np.arange(400) * 5.0
+    for k, t in enumerate(cues):
+        vp.set_intent(1 + k % 2, 1.0, float(t))
+    starts = np.array([m.t0 for m in vp.moves[1:]])
+    durations = np.array([m.duration for m in vp.moves[1:]])
+    reactions = starts - cues
+    assert reactions.mean() == pytest.approx(0.6, abs=0.03) and reactions.std() == pytest.approx(0.2, rel=0.15)
+    assert durations.mean() == pytest.approx(1.0, abs=0.02) and durations.std() == pytest.approx(0.1, rel=0.15)
+    assert (reactions > 0).all()
+
+
+def test_the_recorded_day_is_the_fitted_posture_on_every_seed():
+    from tasks.participants.params import recorded_day
+    p1 = load_participant("P1")
+    for seed in (1, 2):
+        days = VirtualParticipant(recorded_day(p1), load_profile("P1"), seed).day_postures
+        assert all(np.array_equal(days[label], m.posture_deg) for label, m in p1.classes.items())
+    drawn = VirtualParticipant(p1, load_profile("P1"), 1).day_postures
+    assert not np.array_equal(drawn[1], p1.classes[1].posture_deg)
+
+
+def test_a_participant_leans_up_to_its_most_lean_and_no_further():
+    p1 = load_participant("P1")
+    assert p1.feel.most_lean == 1.0                                  # absent from the file: the posture
+    far = dataclasses.replace(p1, feel=dataclasses.replace(p1.feel, most_lean=1.1))
+    vp = VirtualParticipant(far, load_profile("P1"), seed=1)
+    vp.set_intent(1, 1.1, 0.0)
+    with pytest.raises(ValueError, match=r"amplitude must be in \[0, 1.1\]"):
+        vp.set_intent(2, 1.2, 5.0)
+    with pytest.raises(ValueError, match=r"amplitude must be in \[0, 1\]"):
+        VirtualParticipant(p1, load_profile("P1"), seed=1).set_intent(1, 1.1, 0.0)

@@ -1,4 +1,4 @@
-"""The twin's timing: measured from a continuous recording's transitions, refused outside plausible bounds."""
+"""The twin's timing: measured from the moves found in a continuous recording, refused outside plausible bounds."""
 from __future__ import annotations
 
 import dataclasses
@@ -20,7 +20,8 @@ def test_the_bounds_say_which_figure_is_out():
 @pytest.fixture(scope="module")
 def continuous():
     """A P4 of known timing (onset 0.6 s, reaction 0.25 s) performing the protocol once, every row kept."""
-    known = dataclasses.replace(load_participant("P4"), onset_s=0.6, reaction_s=0.25, spasm=None)
+    known = dataclasses.replace(load_participant("P4"), onset_s=0.6, reaction_s=0.25, reaction_sd_s=0.0, spasm=None,
+                                evoked_spasm=None)
     profile = load_profile("P4")
     session = calibration_session(known, profile, seed=5, repetitions=1, hold_s=3.0, neutral_s=3.0)
     return known, profile, session_recording(session, profile, holds_only=False)
@@ -36,4 +37,4 @@ def test_a_plausible_timing_is_measured_and_a_stretched_clock_falls_back_to_the_
     slow = fit_twin([dataclasses.replace(rec, time=rec.time * 4.0)], profile, prior, "me")
     assert (slow.onset_s, slow.reaction_s) == (prior.onset_s, prior.reaction_s)
     line, = [f for f in slow.fallbacks if f.startswith("onset_s, reaction_s")]
-    assert "the timing measured from the transitions is not plausible (onset 2." in line
+    assert "the timing measured from the moves found in the signals is not plausible (onset 2." in line

@@ -34,8 +34,8 @@ from bomi.fusion import HEADSET_MOUNTING, NodeCalibration
 from bomi.paper import CLASS_FUNCTIONS
 from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, NEUTRAL_FUNCTION, ClassConfig, NodeConfig, Profile
 from bomi.recording import NodeData, Recording
-from tasks.participants.participant import (ClassMotion, ParticipantParams, Spasm, calibration_session,
-                                            load_participant, session_recording)
+from tasks.participants.params import ClassMotion, ParticipantParams, Spasm, load_participant
+from tasks.participants.participant import calibration_session, session_recording
 
 NODE_COUNTS = (1, 2, 3)
 MOTION_COUNTS = range(3, 9)               # 4..9 classes with the neutral posture

@@ -9,10 +9,15 @@ each measured where the recordings show it and taken from a documented prior oth
   repetition to repetition within a pass, its slow sway and tremor in holds (level per node and
   angle, the sway corrected for what a hold's median takes of it; the tremor's spectrum from the
   first node);
-- the onset (duration of a move) and reaction time (cue to movement), from the transitions of
-  continuous recordings (cue-labelled, every row kept: what `bomi record` writes). Post-processed
-  recordings keep only the holds, stitched (the published 5-day set): no transition to measure;
+- the onset (duration of a move) and reaction time (cue to movement), and their spread from move to
+  move, from each move's onset and offset found in the signals (``bomi.onsets``) of continuous
+  recordings (cue-labelled, every row kept: what `bomi record` writes); there each hold starts after
+  its own move. Post-processed recordings keep only the holds, stitched (the published 5-day set):
+  no move to time;
 - the drift of each class between passes (a log-normal gain and an offset), from two passes or more.
+- the least and the furthest lean through the BoMI (``[feel]``: ``least_lean``, ``most_lean``), where
+  the holds' amplitudes begin and end along each class's posture, so that a model trained on the
+  recording, whose speed range spans those amplitudes, drives the twin as it would the person.
 
 What one pass cannot show (its drift between days, timing in a stitched file, noise levels of a
 class whose holds are too short) comes from the prior participant (default P1, fitted by this same
@@ -25,43 +30,47 @@ performs. ``P1.toml`` is this fitter on the five published days:
 """
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.optimize
-import scipy.signal
 from tqdm import tqdm
 
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ
+from bomi.onsets import SPEED_SHARE, Move, MoveKind, find_moves, keeps_moves
 from bomi.profiles import Profile
 from bomi.recording import Recording, Signal
-from tasks.participants.participant import (SWAY_CUTOFF_HZ, ClassMotion, ColouredNoise, ParticipantParams, Protocol,
-                                            minimum_jerk, sway_filter)
+# (hold_blocks, split_sway_tremor and stacked_angles are imported from here by benchmarks)
+from tasks.participants.holds import (EDGE_SAMPLES, WELCH_SEGMENT, Block, Holds, day_variation, hold_blocks,
+                                     motion_spectrum, isotropic_yaw, split_sway_tremor, stacked_angles,
+                                     within_pass_std)
+from tasks.participants.motion import SWAY_CUTOFF_HZ
+from tasks.participants.params import ClassMotion, ParticipantParams, Protocol
 
-EDGE_SAMPLES = 30              # dropped at both ends of a block before filtering statistics
-MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows are not used for noise
-WELCH_SEGMENT = 128            # samples per Welch segment of the tremor spectrum (0.49 Hz bins)
-SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where it falls below this share of the peak
-MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
 SATURATED_SHARE = 0.1          # a channel at its extreme value for more of the samples is clipped, not a body
 MIN_CLASS_SAMPLES = 31         # 0.5 s: fewer held samples of a class and its posture is not measurable (error)
-MIN_TRANSITIONS = 3            # fewer measurable transitions and onset/reaction come from the prior
-MIN_TRANSITION_DEG = 3.0       # a transition smaller than this (all angles) is not timed
+MIN_TRANSITIONS = 3            # fewer timed moves and onset/reaction come from the prior
 SETTLE_MARGIN_S = 0.3          # continuous recordings: a block's hold starts this long after the measured settle
 # The timing prior when no recording shows a transition (the published ones do not): voluntary head
 # moves of 25-30 deg take 0.5-1 s, simple reaction times are 0.2-0.5 s (docs/virtual_participant.md).
 ASSUMED_ONSET_S = 0.8
 ASSUMED_REACTION_S = 0.4
-# How the participant leans through the BoMI (tasks.participants.participant.Feel): recordings of
-# holds do not show it; written as assumed, the same as P4's and P5's files.
-ASSUMED_FEEL = """
-[feel]   # how the participant drives a proportional class through the BoMI (tasks/stacking/episode.py); assumed, the same for P1, P4, P5
-least_lean = 0.5           # the least lean used, and calibrated with (half the body's range): the calibrated nu range spans the leans used
+# The least and the furthest lean (``Feel.least_lean``, ``Feel.most_lean``) are where the recording's
+# holds begin and end: these quantiles of each class's held samples along its posture (the median over
+# classes). A model trained on the recording calibrates its speed range from the least to the largest
+# held sample (``bomi.classifier.amplitude_ranges``): a twin leaning less far than the person held sits
+# below it and never moves the arm, one that never leans further than the median hold never drives it
+# faster than half way (issue 53.4).
+LEAN_QUANTILES = (0.05, 0.95)
+# The rest of how the participant leans through the BoMI (tasks.participants.params.Feel): recordings
+# of holds do not show it; written as assumed, the same as P4's and P5's files.
+FEEL = """
+[feel]   # how the participant drives a proportional class through the BoMI (tasks/stacking/episode.py); least_lean and most_lean measured, the rest assumed as for P1, P4, P5
+least_lean = {least_lean:.3f}         # the least lean used, and calibrated with: where the recording's holds begin ([provenance])
+most_lean = {most_lean:.3f}          # the furthest lean (1: the posture): where the recording's holds end ([provenance])
 lean_step = 0.15           # a correction leans this much further (arm too slow or not answering) or less far (too fast)
 watch_s = 1.0              # s: after reaction + move, how long a posture is watched before it is corrected
 speed_smoothing_s = 0.3    # s: the arm's speed is judged over about this long
@@ -71,127 +80,33 @@ max_zero = 0.9             # the learnt zero lean never exceeds this: the least 
 """
 
 
-@functools.cache
-def _min_jerk_time(share: float) -> float:
-    """The share of a minimum-jerk move's duration after which it has covered ``share`` of its way."""
-    return float(scipy.optimize.brentq(lambda s: minimum_jerk(np.array([s]))[0] - share, 0.0, 1.0))
-
-
-TIMING_SHARES = (0.1, 0.9)     # a move is timed where it has covered 10 % and 90 % of its way
 # What a fitted timing may be (docs/virtual_participant.md, "Timing a real file supports"): a cued
 # reaction faster than 0.1 s is an anticipation, not a reaction (Luce 1986), and a choice among up to
 # nine cued postures takes well under a second (Hick 1952); voluntary head and limb moves of the
 # protocol's size take 0.2-2 s (head: Zangemeister, Lehman & Stark 1981; arm: Flash & Hogan 1985).
 ONSET_BOUNDS_S = (0.2, 2.0)
 REACTION_BOUNDS_S = (0.1, 1.0)
+MAD_TO_SD = 1.4826             # a normal distribution's SD per median absolute deviation
 
 
-@dataclass(frozen=True)
-class Block:
-    """One run of equal labels of a pass: rows [start, stop)."""
-
-    day: int
-    label: int
-    start: int
-    stop: int
-
-
-def hold_blocks(labels: np.ndarray, day: int) -> list[Block]:
-    """The runs of equal labels of one recording."""
-    edges = np.r_[0, np.flatnonzero(np.diff(labels.astype(int))) + 1, len(labels)]
-    return [Block(day, int(labels[a]), int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
-
-
-def stacked_angles(rec: Recording, nodes: Sequence[int] | None = None) -> np.ndarray:
-    """(n, nodes, 3) fused angles of ``nodes`` (default: every node of the recording), in that order."""
-    return np.stack([rec.nodes[i].angles for i in (nodes or rec.node_indices)], axis=1)
-
-
-def repeated_fraction(x: np.ndarray) -> float:
-    """Share of rows identical to the previous one (the recorder holds a node's last sample on loss)."""
-    return float(np.mean(np.all(np.diff(x, axis=0) == 0, axis=-1))) if len(x) > 1 else 1.0
-
-
-def split_sway_tremor(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A hold's (n, 3) angles -> slow sway around the hold's median and tremor (above SWAY_CUTOFF_HZ), edges dropped."""
-    b, a = scipy.signal.butter(2, SWAY_CUTOFF_HZ, "high", fs=SAMPLE_RATE_HZ)
-    tremor = scipy.signal.filtfilt(b, a, x, axis=0)
-    sway = x - tremor - np.median(x, axis=0)
-    keep = slice(EDGE_SAMPLES, -EDGE_SAMPLES)
-    return sway[keep], tremor[keep]
-
-
-SPLIT_DRAWS = 400             # simulated holds of the model's sway when measuring the split's gain
-
-
-@functools.cache
-def sway_gain(samples: int) -> float:
-    """The median std the sway/tremor split measures over holds of ``samples`` per unit std of the
-    participant model's sway (simulated, fixed seed: deterministic). Below 1: a hold's median takes
-    the slowest sway (0.75 over the published 5 s holds)."""
-    x = ColouredNoise(*sway_filter(), SPLIT_DRAWS, np.random.default_rng(0)).next(samples)
-    return float(np.median(split_sway_tremor(x)[0].std(axis=0)))
-
-
-def motion_spectrum(freqs: np.ndarray, psd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The tremor spectrum relative to its peak, up to where it first falls below SPECTRUM_FLOOR past the peak.
-
-    The fused angles' power beyond is not body motion: the gyroscopes see only 0.8-1.3 deg/s in
-    holds, which the tremor up to there already accounts for (see docs/virtual_participant.md).
-    """
-    relative = psd / psd.max()
-    peak = int(np.argmax(relative))
-    end = peak + int(np.argmax(relative[peak:] < SPECTRUM_FLOOR))
-    return freqs[:end + 1], np.r_[relative[:end], 0.0]
-
-
-def isotropic_yaw(stds: np.ndarray) -> np.ndarray:
-    """(nodes, 3) stds with yaw set to the mean of pitch and roll.
-
-    The recordings' fused yaw is not the host fusion's (dataset README) and its wobble within
-    holds is not seen by the gyroscopes (0.8-1.3 deg/s), so it is not body motion.
-    """
-    out = np.array(stds, dtype=float)
-    out[:, 2] = out[:, :2].mean(axis=1)
-    return out
+def speed_share_time(share: float = SPEED_SHARE) -> float:
+    """The share of a minimum-jerk move's duration after which its speed first reaches ``share`` of its peak:
+    the speed 30 s^2 (1 - s)^2 is 1.875 at its peak, so s (1 - s) = sqrt(share / 16)."""
+    return (1.0 - np.sqrt(1.0 - 4.0 * np.sqrt(share / 16.0))) / 2.0
 
 
 # ------------------------------------------------------------------------------------ timing
 @dataclass(frozen=True)
-class Transition:
-    """A move from one run's level to the next one's: when it covered 10 % and 90 % of its way,
-    in seconds after the cue (the label change); None when the signal jumps (a stitched file)."""
+class Timing:
+    """A participant's timing fitted to the moves found in a recording (``bomi.onsets``): the minimum-jerk
+    move duration (``onset_s``) and cue-to-movement time (``reaction_s``), median over the moves, and
+    their spreads (robust: the median absolute deviation as an SD)."""
 
-    t10: float | None
-    t90: float | None
-
-    @property
-    def stitched(self) -> bool:
-        return self.t10 is None
-
-
-def transition(x: np.ndarray, time: np.ndarray, before: Block, after: Block) -> Transition | None:
-    """The move from ``before``'s level to ``after``'s in the (n, k) flattened angles ``x`` at ``time``
-    (s; levels: medians of each run's second half); None when it is too small or not complete within ``after``."""
-    old = np.median(x[(before.start + before.stop) // 2:before.stop], axis=0)
-    new = np.median(x[(after.start + after.stop) // 2:after.stop], axis=0)
-    way = new - old
-    if np.linalg.norm(way) < MIN_TRANSITION_DEG:
-        return None
-    progress = (x[after.start:(after.start + after.stop) // 2] - old) @ way / (way @ way)
-    if len(progress) < 2:
-        return None
-    if progress[:2].mean() > 0.5:
-        return Transition(None, None)
-    crossed = [np.flatnonzero(progress >= share) for share in TIMING_SHARES]
-    if any(len(c) == 0 for c in crossed):
-        return None
-    t10 = crossed[0][0]
-    later = crossed[1][crossed[1] > t10]
-    if not len(later):
-        return None
-    cue = time[after.start]
-    return Transition(float(time[after.start + t10] - cue), float(time[after.start + later[0]] - cue))
+    onset_s: float
+    reaction_s: float
+    onset_sd_s: float
+    reaction_sd_s: float
+    moves: int
 
 
 def implausible_timing(onset: float, reaction: float) -> str | None:
@@ -202,16 +117,22 @@ def implausible_timing(onset: float, reaction: float) -> str | None:
     return "; ".join(out) or None
 
 
-def timing_from(transitions: Sequence[Transition]) -> tuple[float, float] | None:
-    """(onset_s, reaction_s) of a minimum-jerk move fitted to the median 10 % and 90 % times; None if too few."""
-    timed = [t for t in transitions if not t.stitched]
+def timing_from(moves: Sequence[Move]) -> Timing | None:
+    """The minimum-jerk timing of each timed move (its onset and offset are where its speed crosses
+    SPEED_SHARE of the peak: ``speed_share_time`` of the duration after its start and before its end),
+    summarised; None with fewer than MIN_TRANSITIONS timed moves."""
+    timed = [m for m in moves if m.kind is MoveKind.TIMED]
     if len(timed) < MIN_TRANSITIONS:
         return None
-    t10 = float(np.median([t.t10 for t in timed]))
-    t90 = float(np.median([t.t90 for t in timed]))
-    share10, share90 = (_min_jerk_time(share) for share in TIMING_SHARES)
-    onset = (t90 - t10) / (share90 - share10)
-    return onset, max(t10 - share10 * onset, 0.0)
+    share = speed_share_time()
+    durations = np.array([m.duration_s for m in timed]) / (1.0 - 2.0 * share)
+    reactions = np.array([m.onset_s for m in timed]) - share * durations
+
+    def spread(x: np.ndarray) -> float:
+        return float(MAD_TO_SD * np.median(np.abs(x - np.median(x))))
+
+    return Timing(float(np.median(durations)), max(float(np.median(reactions)), 0.0), spread(durations),
+                  spread(reactions), len(timed))
 
 
 # ------------------------------------------------------------------------------------ a pass
@@ -223,22 +144,24 @@ class Pass:
     angles: np.ndarray              # (n, nodes, 3)
     time: np.ndarray                # (n,) s: the recording's Time, else the row count at the sample rate
     blocks: list[Block]
-    transitions: list[Transition]
+    moves: list[Move]               # the move after each block's cue: blocks[1:]
 
     @property
     def continuous(self) -> bool:
-        """The recording keeps the moves (timed transitions outnumber jumps), not just the holds."""
-        timed = sum(not t.stitched for t in self.transitions)
-        return timed > len(self.transitions) - timed
+        """The recording keeps the moves (timed moves outnumber jumps), not just the holds."""
+        return keeps_moves(self.moves)
 
     def holds(self, settle_s: float) -> list[Block]:
-        """The blocks cut to their holds: in a continuous recording, a block after a change of label
-        starts ``settle_s`` + SETTLE_MARGIN_S later (the move)."""
+        """The blocks cut to their holds: in a continuous recording, a block after a cue starts
+        SETTLE_MARGIN_S after its move's measured offset, or when none was found (too small, still
+        moving at the run's end) ``settle_s`` + SETTLE_MARGIN_S after the cue."""
         if not self.continuous:
             return self.blocks
-        cut = int(np.ceil((settle_s + SETTLE_MARGIN_S) * SAMPLE_RATE_HZ))
-        return [Block(b.day, b.label, min(b.start + (cut if k else 0), b.stop), b.stop)
-                for k, b in enumerate(self.blocks)]
+        margin = int(np.ceil(SETTLE_MARGIN_S * SAMPLE_RATE_HZ))
+        cut = int(np.ceil(settle_s * SAMPLE_RATE_HZ)) + margin
+        starts = [self.blocks[0].start] + [m.offset_row + margin if m.kind is MoveKind.TIMED else b.start + cut
+                                           for b, m in zip(self.blocks[1:], self.moves)]
+        return [Block(b.day, b.label, min(start, b.stop), b.stop) for b, start in zip(self.blocks, starts)]
 
     def protocol(self) -> Protocol:
         """Each run from its first row to the next run's first row (the last: to its last row, and one period)."""
@@ -268,10 +191,8 @@ def read_pass(rec: Recording, day: int, profile: Profile) -> Pass:
                         f"{rec.time[row]:g} s): a twin times the protocol from it")
     angles = stacked_angles(rec, nodes)
     blocks = hold_blocks(labels, day)
-    flat = angles.reshape(len(angles), -1)
     time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
-    moves = [transition(flat, time, a, b) for a, b in zip(blocks[:-1], blocks[1:])]
-    return Pass(rec.source, angles, time, blocks, [t for t in moves if t is not None])
+    return Pass(rec.source, angles, time, blocks, find_moves(angles, time, labels))
 
 
 def dead_channels(rec: Recording, nodes: Sequence[int]) -> list[str]:
@@ -337,6 +258,8 @@ class Twin:
     passes: int
     onset_s: float
     reaction_s: float
+    onset_sd_s: float
+    reaction_sd_s: float
     neutral_deg: np.ndarray
     neutral_rep_std: np.ndarray
     neutral_sway_std: np.ndarray
@@ -349,100 +272,13 @@ class Twin:
     sway_std: dict[int, np.ndarray]
     tremor_std: dict[int, np.ndarray]
     protocol: Protocol
+    least_lean: float
+    most_lean: float
     provenance: dict[str, str]
     fallbacks: list[str] = field(default_factory=list)   # what could not be measured, said on stdout
 
 
-def _typical(stds: list[np.ndarray]) -> np.ndarray:
-    """Median over blocks of per-block standard deviations (robust to the stitching jumps); NaN if none."""
-    return np.median(stds, axis=0) if stds else np.full(3, np.nan)
-
-
-@dataclass
-class _Holds:
-    """What the held postures of every pass show, gathered block by block."""
-
-    n_nodes: int
-    deltas: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)  # (label, day) -> per-repetition deltas
-    levels: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)  # (label, day) -> per-repetition medians
-    neutral_levels: dict[int, list[np.ndarray]] = field(default_factory=dict)      # day -> c0 block medians
-    sway: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)    # (label, node) -> per-block std (3,)
-    tremor: dict[tuple[int, int], list[np.ndarray]] = field(default_factory=dict)
-    spectra: list[np.ndarray] = field(default_factory=list)
-    lengths: list[int] = field(default_factory=list)    # samples of every block measured for noise
-
-    def add_levels(self, day: int, blocks: list[Block], angles: np.ndarray) -> None:
-        """Each block's median posture; a motion's as a delta from the neutral before and after it
-        (robust to the slow yaw drift), or from the pass's median neutral when none is adjacent."""
-        medians = [np.median(angles[b.start:b.stop], axis=0) for b in blocks]
-        neutral = [m for b, m in zip(blocks, medians) if b.label == NEUTRAL_LABEL]
-        for k, (block, level) in enumerate(zip(blocks, medians)):
-            if block.label == NEUTRAL_LABEL:
-                self.neutral_levels.setdefault(day, []).append(level)
-                continue
-            around = [medians[j] for j in (k - 1, k + 1) if 0 <= j < len(blocks) and blocks[j].label == NEUTRAL_LABEL]
-            reference = np.mean(around, axis=0) if around else np.median(neutral, axis=0)
-            self.deltas.setdefault((block.label, day), []).append(level - reference)
-            self.levels.setdefault((block.label, day), []).append(level)
-
-    def add_noise(self, blocks: list[Block], angles: np.ndarray) -> None:
-        """Sway and tremor of every usable block and node; the first node's tremor spectrum."""
-        for block in blocks:
-            for node in range(self.n_nodes):
-                x = angles[block.start:block.stop, node]
-                if len(x) <= 4 * EDGE_SAMPLES or repeated_fraction(x) > MAX_REPEATED_ROWS:
-                    continue
-                s, t = split_sway_tremor(x)
-                self.lengths.append(len(x))
-                self.sway.setdefault((block.label, node), []).append(s.std(axis=0))
-                self.tremor.setdefault((block.label, node), []).append(t.std(axis=0))
-                if node == 0 and len(t) >= WELCH_SEGMENT:
-                    self.spectra.append(
-                        scipy.signal.welch(t, fs=SAMPLE_RATE_HZ, nperseg=WELCH_SEGMENT, axis=0)[1].sum(axis=1))
-
-    def per_node(self, table: dict, label: int) -> np.ndarray:
-        return np.array([_typical(table.get((label, node), [])) for node in range(self.n_nodes)])
-
-    def noise(self, label: int) -> tuple[np.ndarray, np.ndarray]:
-        """A class's (sway, tremor) stds per node (NaN: no hold measured); the sway divided by the
-        split's gain for the typical hold length, so that the twin's sessions, split the same way,
-        show the sway measured here. The tremor is taken as measured (its leak from the sway, and the
-        sway's from it, are left: a weak tremor's spectrum, measured in that band, does not show them)."""
-        sway, tremor = self.per_node(self.sway, label), self.per_node(self.tremor, label)
-        return (sway / sway_gain(int(np.median(self.lengths))) if self.lengths else sway), tremor
-
-    def per_day(self, table: dict, label: int, days: int) -> list[np.ndarray]:
-        return [np.array(table[(label, d)]) for d in range(1, days + 1) if (label, d) in table]
-
-
-def within_pass_std(groups: Sequence[np.ndarray]) -> np.ndarray | None:
-    """The pooled standard deviation of repetitions around their own pass's mean (unbiased: each pass
-    with n repetitions gives n - 1 degrees of freedom); None when no pass repeats."""
-    repeated = [g for g in groups if len(g) > 1]
-    if not repeated:
-        return None
-    squares = sum(np.sum((g - g.mean(axis=0)) ** 2, axis=0) for g in repeated)
-    return np.sqrt(squares / sum(len(g) - 1 for g in repeated))
-
-
-def _day_variation(days: list[np.ndarray], day_means_of: list[np.ndarray], posture: np.ndarray, rep_var: np.ndarray
-                   ) -> tuple[float, np.ndarray]:
-    """(day gain log-std, day offset std) of one class from its per-day repetitions (deltas): a day's
-    mean posture = gain x nominal posture + an offset, the gain log-normal, fitted on the angles the
-    feature vectors use (not the yaw of the second node on, unreliable in the published files)."""
-    reps_per_day = np.mean([len(reps) for reps in days])
-    day_means = np.array(day_means_of)
-    used = np.ones_like(posture)
-    used[1:, 2] = 0.0
-    gains = np.einsum("dij,ij->d", day_means, posture * used) / np.sum((posture * used) ** 2)
-    gains = np.clip(gains, MIN_DAY_GAIN, None)
-    offsets = day_means - gains[:, None, None] * posture
-    # var(day offsets) = day var + rep var / reps per day
-    day_var = np.var(offsets, axis=0, ddof=1) - rep_var / reps_per_day
-    return float(np.std(np.log(gains), ddof=1)), np.sqrt(np.clip(day_var, 0.0, None))
-
-
-def prior_day_variation(prior: ParticipantParams, profile: str, label: int, rep_std: np.ndarray
+def priorday_variation(prior: ParticipantParams, profile: str, label: int, rep_std: np.ndarray
                         ) -> tuple[float, np.ndarray, str]:
     """A class's drift between days when the recordings show one pass: the prior's own class when
     it was fitted for the same profile (the same motion), else its typical drift: the median gain
@@ -484,30 +320,34 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
                            for key in keys})
         fallbacks.append(f"{', '.join(keys)}: {why}; {what}")
 
-    transitions = [t for p in passes for t in p.transitions]
-    timing = timing_from(transitions)
     continuous = [p for p in passes if p.continuous]
-    implausible = None if timing is None else implausible_timing(*timing)
-    if timing is not None and continuous and implausible is None:
-        onset, reaction = timing
-        timed = sum(not t.stitched for t in transitions)
+    timing = timing_from([m for p in continuous for m in p.moves])
+    implausible = None if timing is None else implausible_timing(timing.onset_s, timing.reaction_s)
+    if timing is not None and implausible is None:
+        onset, reaction, onset_sd, reaction_sd = (timing.onset_s, timing.reaction_s, timing.onset_sd_s,
+                                                  timing.reaction_sd_s)
+        how = (f"of the onsets and offsets of {timing.moves} moves found in the signals after their cues "
+               f"(bomi.onsets: {SPEED_SHARE:.0%} of the peak speed), as a minimum-jerk move ({_names(continuous)})")
         for key in ("onset_s", "reaction_s"):
-            provenance[key] = (f"measured: minimum-jerk fit to the median 10 %/90 % times of {timed} transitions "
-                               f"({_names(continuous)})")
+            provenance[key] = f"measured: median {how}"
+        for key in ("onset_sd_s", "reaction_sd_s"):
+            provenance[key] = f"measured: spread (median absolute deviation x {MAD_TO_SD}) {how}"
     else:
         onset, reaction = (ASSUMED_ONSET_S, ASSUMED_REACTION_S) if prior is None else (prior.onset_s, prior.reaction_s)
+        onset_sd, reaction_sd = (0.0, 0.0) if prior is None else (prior.onset_sd_s, prior.reaction_sd_s)
         why = ("the recordings keep only the holds (no transition)" if not continuous
-               else f"fewer than {MIN_TRANSITIONS} measurable transitions" if timing is None
-               else f"the timing measured from the transitions is not plausible ({implausible}; "
-                    "docs/virtual_participant.md): are the labels the cues?")
+               else f"fewer than {MIN_TRANSITIONS} moves timed in the signals" if timing is None
+               else f"the timing measured from the moves found in the signals is not plausible ({implausible}; "
+                    "docs/virtual_participant.md)")
         if prior is None:
             for key in ("onset_s", "reaction_s"):
                 provenance[key] = f"assumed: {why}; voluntary moves take 0.5-1 s, simple reactions 0.2-0.5 s"
         else:
-            from_prior(("onset_s", "reaction_s"), why)
+            from_prior(("onset_s", "reaction_s") + (("onset_sd_s", "reaction_sd_s") if onset_sd or reaction_sd else ()),
+                       why)
 
     n_nodes = len(profile.nodes)
-    holds = _Holds(n_nodes)
+    holds = Holds(n_nodes)
     for p in tqdm(passes, desc="measuring passes", unit="pass", disable=len(passes) < 2):
         blocks = p.holds(reaction + onset)
         holds.add_levels(p.blocks[0].day, blocks, p.angles)
@@ -553,15 +393,15 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     for label in labels:
         days = per_day[label]
         if len(days) >= 2:
-            day_gain[label], day_std[label] = _day_variation(days, [reps.mean(axis=0) for reps in days],
+            day_gain[label], day_std[label] = day_variation(days, [reps.mean(axis=0) for reps in days],
                                                              postures[label], rep_std[label] ** 2)
         elif prior is not None:
-            day_gain[label], day_std[label], _ = prior_day_variation(prior, profile.name, label, rep_std[label])
+            day_gain[label], day_std[label], _ = priorday_variation(prior, profile.name, label, rep_std[label])
     if n_passes >= 2 and not unseen:
         provenance["day_gain_log_std"] = provenance["day_std_deg"] = (
             f"measured: each class's mean posture per pass = gain x posture + offset, over {n_passes} passes ({names})")
     elif n_passes < 2:
-        what = (prior_day_variation(prior, profile.name, labels[0], rep_std[labels[0]])[2]
+        what = (priorday_variation(prior, profile.name, labels[0], rep_std[labels[0]])[2]
                 .replace(f"class c{labels[0]}", "classes") if prior is not None else None)
         from_prior(("day_gain_log_std", "day_std_deg"), "one pass shows no drift between days", what)
 
@@ -603,14 +443,20 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     first = Path(passes[0].source).name
     provenance["neutral.angles_deg"] = f"measured: median of the first pass's neutral holds ({first})"
     provenance["max_amplitude"] = "definition: the postures are measured as performed (full range)"
-    provenance["feel"] = "assumed: recordings of holds do not show how a person leans through the BoMI (as P4, P5)"
+    least_lean, most_lean = (holds.held_share(postures, q) for q in LEAN_QUANTILES)
+    least_lean, most_lean = float(np.clip(least_lean, 0.05, 1.0)), float(np.clip(most_lean, 1.0, 2.0))
+    for key, quantile in zip(("feel.least_lean", "feel.most_lean"), LEAN_QUANTILES):
+        provenance[key] = (f"measured: the {quantile:.0%} quantile of each class's held samples along its posture, "
+                           f"median over the classes ({names})")
+    provenance["feel"] = "assumed: recordings of holds do not show how a person corrects a lean (as P4, P5)"
     provenance["protocol"] = f"the runs of {first}, for bomi synth"
     return Twin(
         name=name, profile=profile_ref or profile.name, passes=n_passes, onset_s=onset, reaction_s=reaction,
+        onset_sd_s=onset_sd, reaction_sd_s=reaction_sd,
         neutral_deg=np.median(day_neutrals[0], axis=0) if day_neutrals else np.zeros((n_nodes, 3)),
         neutral_rep_std=neutral_rep_std, neutral_sway_std=neutral_sway, neutral_tremor_std=neutral_tremor,
         tremor_spectrum=spectrum, postures=postures, rep_std=rep_std, day_gain_log_std=day_gain, day_std=day_std,
-        sway_std=sway, tremor_std=tremor, protocol=passes[0].protocol(), provenance=provenance, fallbacks=fallbacks)
+        sway_std=sway, tremor_std=tremor, protocol=passes[0].protocol(), least_lean=least_lean, most_lean=most_lean, provenance=provenance, fallbacks=fallbacks)
 
 
 def prior_nodes(prior: ParticipantParams, profile: Profile, matrix: np.ndarray) -> np.ndarray:
@@ -651,6 +497,8 @@ def twin_toml(twin: Twin, description: str) -> str:
         f"description = {_toml_string(description)}",
         f"onset_s = {round(twin.onset_s, 3):g}",
         f"reaction_s = {round(twin.reaction_s, 3):g}",
+        *([f"onset_sd_s = {round(twin.onset_sd_s, 3):g}", f"reaction_sd_s = {round(twin.reaction_sd_s, 3):g}"]
+          if twin.onset_sd_s or twin.reaction_sd_s else []),
         "max_amplitude = 1.0",
         "",
         "[tremor]   # power spectrum of the first node's tremor (fused pitch and roll above 1 Hz) in holds",
@@ -683,4 +531,4 @@ def twin_toml(twin: Twin, description: str) -> str:
               "(stitched), else every row after the cue",
               "labels = [" + ", ".join(str(v) for v in protocol.labels) + "]",
               "durations_s = [" + ", ".join(f"{v:g}" for v in protocol.durations_s) + "]"]
-    return "\n".join(lines) + "\n" + ASSUMED_FEEL
+    return "\n".join(lines) + "\n" + FEEL.format(least_lean=twin.least_lean, most_lean=twin.most_lean)
