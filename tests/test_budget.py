@@ -29,23 +29,31 @@ def steps_to_positions(steps: np.ndarray) -> np.ndarray:
     return np.vstack([np.zeros(3), np.cumsum(steps, axis=0)])[:len(steps)]
 
 
-def test_a_joystick_like_record_splits_into_its_parts_by_hand():
-    # 26 ticks of 0.5 s, completed at 12 s (ticks 24 and 25 come after it and do not count).
-    # 0-1 still; 2-7 a push +x: 2-3 unanswered, 4-6 commanded (5 cm a tick), 7 not commanded;
-    # 8-9 let go, the hand coasting 1 cm a tick; the mode changes at tick 12; 14-17 a push +y:
-    # 14 unanswered, 15-17 commanded; 18 let go, coasting; 19 on still.
+def two_pushes(with_decisions: bool) -> EpisodeLog:
+    """26 ticks of 0.5 s, completed at 12 s (ticks 24 and 25 come after it and do not count):
+    0-1 still; 2-7 a push F (+x), read (one decision a tick) at 4-6 only, the hand commanded then
+    (5 cm a tick); 8-9 let go, the hand coasting 1 cm a tick; the mode changes at tick 12; 14-17 a
+    push B (-x), read at 15-17 and commanded then; 18 let go, coasting; 19 on still."""
     n, dt = 26, 0.5
     t = np.arange(n) * dt
     steps = np.zeros((n, 3))
-    steps[4:7, 0], steps[8:10, 0], steps[15:18, 1], steps[18, 1] = 0.05, 0.01, 0.05, 0.01
+    steps[4:7, 0], steps[8:10, 0], steps[15:18, 0], steps[18, 0] = 0.05, 0.01, -0.05, -0.01
     pushing = np.zeros(n, bool)
     pushing[2:8] = pushing[14:18] = True
     direction = np.zeros((n, 3))
-    direction[2:8, 0], direction[14:18, 1] = 1.0, 1.0
+    direction[2:8, 0], direction[14:18, 0] = 1.0, -1.0
     commanded = np.zeros((n, 3))
-    commanded[4:7, 0], commanded[15:18, 1] = 0.1, 0.1
+    commanded[4:7, 0], commanded[15:18, 0] = 0.1, -0.1
+    intended, decided = np.zeros(n, int), np.zeros(n, int)
+    intended[2:8], decided[4:7], intended[14:18], decided[15:18] = 1, 1, 2, 2
+    trace = DecisionTrace(t=t, intended=intended, decided=decided, gamma=np.zeros(n), nu=np.zeros(n))
     mode = ["translation"] * 12 + ["wrist"] * 14
-    log = record(t, steps_to_positions(steps), direction, pushing, commanded, mode, completion_time=12.0)
+    return record(t, steps_to_positions(steps), direction, pushing, commanded, mode, completion_time=12.0,
+                  decisions=trace if with_decisions else None, allowance=2, sample_period=dt)
+
+
+def test_a_bomi_record_splits_into_its_parts_by_hand():
+    log, dt = two_pushes(with_decisions=True), 0.5
     assert task_ticks(log) == 24
     budget = time_budget(log, STILL)
     # the switch's span: from the tick after the last push before the change (8) to the next push (14)
@@ -53,8 +61,15 @@ def test_a_joystick_like_record_splits_into_its_parts_by_hand():
                                     Part.MODE_SWITCH: 6 * dt, Part.REACTION: 3 * dt, Part.MOVEMENT: 6 * dt,
                                     Part.LAPSE: 1 * dt, Part.WAIT: 1 * dt, Part.REST: 7 * dt})
     assert sum(budget.values()) == pytest.approx(12.0)
-    spans = mode_switch_ticks(mode, pushing)
-    assert spans.sum() * dt == pytest.approx(metrics.mode_switch_time(mode, pushing, dt))
+    spans = mode_switch_ticks(log.mode, log.pushing)
+    assert spans.sum() * dt == pytest.approx(metrics.mode_switch_time(log.mode, log.pushing, dt))
+
+
+def test_a_stick_answers_every_push_at_once():
+    budget, dt = time_budget(two_pushes(with_decisions=False), STILL), 0.5
+    assert budget == pytest.approx({Part.RECOVERY: 0.0, Part.MISREAD: 0.0, Part.CORRECTION: 0.0,
+                                    Part.MODE_SWITCH: 6 * dt, Part.REACTION: 0.0, Part.MOVEMENT: 10 * dt,
+                                    Part.LAPSE: 0.0, Part.WAIT: 1 * dt, Part.REST: 7 * dt})
 
 
 def test_a_misread_is_counted_and_its_undoing_is_the_correction():

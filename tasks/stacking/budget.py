@@ -16,19 +16,19 @@ active class that is not the intended one and not ``metrics.excused``.
    has gone back ``|D|`` along D's line (or another push, or the next misread, begins).
 4. ``MODE_SWITCH``: within a mode change's span as ``metrics.mode_switch_time`` counts it (from the
    last tick the stick was pushed before the change to the first tick it is pushed after it).
-5. ``REACTION``: a push held (``pushing``) that the arm has not answered yet: from its first tick
-   to its first tick with a commanded hand velocity (through the BoMI: the body's reaction and
-   move, the window and the vote; through the stick: nothing).
-6. ``MOVEMENT``: a push held, the arm commanded.
-7. ``LAPSE``: a push held, the arm not commanded, after the push had been answered (the chain fell
-   back to neutral during the hold; or a push of a function that moves no hand, e.g. the fingers).
+5. ``REACTION``: a push held (``pushing``) that is not answered yet: from its first tick to its
+   first answered tick. Through the BoMI a tick is answered when the decision in force is the
+   intended class, active (the body's reaction and move, the window and the vote come first);
+   through a stick (no decisions) every pushed tick is answered.
+6. ``MOVEMENT``: a push held and answered.
+7. ``LAPSE``: a push held, not answered, after it had been (the chain fell back to neutral, or to
+   the previous class, during the hold).
 8. ``WAIT``: no push held, the hand commanded (a late decision of the posture let go) or moving
    faster than ``still_speed`` (the person still, watching the arm coast).
 9. ``REST``: no push held, the hand still: the person's own time (choice reactions, checks, looks,
    pauses; a press that changed no mode).
 
-Pushes of functions that move no hand (turning, the fingers) are answered without a commanded hand
-velocity (``commanded`` is the hand's linear velocity): their time is ``REACTION`` then ``LAPSE``.
+``commanded`` is the hand's linear velocity: a turn or a grip coasting after a let-go is ``REST``.
 
 **Irrelevant decisions** (``metrics.irrelevant``: an active class neither intended nor the one
 intended before the last change of intent; neutral is never irrelevant). Each is given the first
@@ -179,16 +179,28 @@ def _undo(hand_pos: np.ndarray, intended_dir: np.ndarray, pushes: list[tuple[int
                 return
 
 
-def push_parts(pushing: np.ndarray, commanded: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def answered_ticks(log: EpisodeLog) -> np.ndarray:
+    """Per tick: the push held is answered (module docstring, part 5): a stick answers every push;
+    through the BoMI the decision in force is the intended class, active."""
+    pushing = np.asarray(log.pushing, dtype=bool)
+    if log.decisions is None:
+        return pushing
+    d = log.decisions
+    if len(d.t) == 0:
+        return np.zeros(len(log.t), dtype=bool)
+    k = decision_in_force(log)
+    read = (d.decided == d.intended) & (d.decided != log.neutral)
+    return pushing & (k >= 0) & read[np.maximum(k, 0)]
+
+
+def push_parts(pushing: np.ndarray, answered: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(reaction, movement, lapse) masks over the ticks of pushes (module docstring, parts 5-7)."""
-    pushing, n = np.asarray(pushing, bool), len(pushing)
-    moving = np.linalg.norm(np.asarray(commanded, float), axis=1) > 0
-    reaction = np.zeros(n, dtype=bool)
+    pushing, answered = np.asarray(pushing, bool), np.asarray(answered, bool) & np.asarray(pushing, bool)
+    reaction = np.zeros(len(pushing), dtype=bool)
     for start, length in metrics.runs(pushing):
-        answered = np.flatnonzero(moving[start:start + length])
-        reaction[start:start + (answered[0] if answered.size else length)] = True
-    movement = pushing & moving
-    return reaction, movement, pushing & ~moving & ~reaction
+        first = np.flatnonzero(answered[start:start + length])
+        reaction[start:start + (first[0] if first.size else length)] = True
+    return reaction, answered, pushing & ~answered & ~reaction
 
 
 def time_budget(log: EpisodeLog, still_speed: float) -> dict[Part, float]:
@@ -207,7 +219,7 @@ def time_budget(log: EpisodeLog, still_speed: float) -> dict[Part, float]:
     recovery = np.zeros(len(log.t), dtype=bool)
     for event in log.recoveries:
         recovery[(log.t >= event.start_s) & (log.t < event.end_s)] = True
-    reaction, movement, lapse = push_parts(pushing, commanded)
+    reaction, movement, lapse = push_parts(pushing, answered_ticks(log))
     moving = (np.linalg.norm(commanded, axis=1) > 0) | (speed > still_speed)
     masks = {
         Part.RECOVERY: recovery,
