@@ -207,6 +207,9 @@ def time_budget(log: EpisodeLog, still_speed: float) -> dict[Part, float]:
     """Seconds per ``Part`` over ``task_ticks`` (the module docstring's definitions); they sum to
     ``task_ticks`` x dt, the completion time to within a tick. ``still_speed``: the hand speed (m/s)
     below which the person sees it at rest (the operator file's ``still_speed``)."""
+    if log.pushing is None or log.commanded is None:
+        raise ValueError(f"the record of {log.participant} {log.operator} seed {log.seed} has no per-tick pushing "
+                         "and commanded arrays: no time budget")
     n = task_ticks(log)
     if n == 0:
         return {part: 0.0 for part in Part}
@@ -243,7 +246,7 @@ def time_budget(log: EpisodeLog, still_speed: float) -> dict[Part, float]:
 
 # ------------------------------------------------------------------------------------ irrelevant outputs
 def button_labels(log: EpisodeLog) -> frozenset[int]:
-    """The labels of the button classes (``class_names[label]`` is B1 or B2)."""
+    """The labels of the button classes: ``class_names`` lists the functions by label, from 0 (neutral)."""
     return frozenset(label for label, name in enumerate(log.class_names) if name in BUTTONS)
 
 
