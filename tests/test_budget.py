@@ -100,9 +100,10 @@ def test_a_misread_is_counted_and_its_undoing_is_the_correction():
 
 
 def context_record() -> EpisodeLog:
-    """35 decisions, one a tick of 16 ms, allowance 3: rest 5, F 6, R 5 (straight from F), a short rest 2,
-    B1 4, a short rest 2, B 5, rest 6; the pushes are the stick classes' runs; the mode changes at 33."""
-    runs = [(0, 5), (1, 6), (3, 5), (0, 2), (7, 4), (0, 2), (2, 5), (0, 6)]
+    """45 decisions, one a tick of 16 ms, allowance 3: rest 5, F 6, R 5 (straight from F), a short rest 2,
+    B1 4, a short rest 2, B 5, rest 6, L 4, a short rest 2, F 4; the pushes are the stick classes'
+    runs; the mode changes at 33."""
+    runs = [(0, 5), (1, 6), (3, 5), (0, 2), (7, 4), (0, 2), (2, 5), (0, 6), (4, 4), (0, 2), (1, 4)]
     intended = np.concatenate([[label] * length for label, length in runs])
     n = len(intended)
     t = np.arange(n) * 0.016
@@ -111,8 +112,9 @@ def context_record() -> EpisodeLog:
     decided[12] = 2         # in the move straight from F to R (F itself, 1, would be late, not irrelevant)
     decided[24:26] = 7      # B1 read on after it was left, across the short rest, into B
     decided[33] = 5         # late in the rest, in the mode change's span
+    decided[41] = 3         # F's onset across the short rest from L
     trace = DecisionTrace(t=t, intended=intended, decided=decided, gamma=np.zeros(n), nu=np.zeros(n))
-    pushing = np.isin(intended, (1, 2, 3))
+    pushing = np.isin(intended, (1, 2, 3, 4))
     mode = ["translation"] * 33 + ["wrist"] * (n - 33)
     return record(t, np.zeros((n, 3)), np.zeros((n, 3)), pushing, np.zeros((n, 3)), mode, decisions=trace,
                   allowance=3)
@@ -121,18 +123,19 @@ def context_record() -> EpisodeLog:
 def test_every_decision_gets_its_context_by_hand():
     C = Context
     expected = ([C.REST_DRIFT] * 5 + [C.ONSET] * 3 + [C.HOLD_DRIFT] * 3 + [C.MOTION_TO_MOTION] * 3
-                + [C.HOLD_DRIFT] * 2 + [C.MOTION_TO_MOTION] * 2 + [C.BUTTON_HOLD] * 4 + [C.BUTTON_EXIT] * 2
-                + [C.BUTTON_EXIT] * 3 + [C.HOLD_DRIFT] * 2 + [C.OFFSET] * 3 + [C.MODE_CHANGE] * 3)
+                + [C.HOLD_DRIFT] * 2 + [C.OFFSET] * 2 + [C.BUTTON_HOLD] * 4 + [C.BUTTON_EXIT] * 2
+                + [C.BUTTON_EXIT] * 3 + [C.HOLD_DRIFT] * 2 + [C.OFFSET] * 3 + [C.MODE_CHANGE] * 3
+                + [C.ONSET] * 3 + [C.HOLD_DRIFT] + [C.OFFSET] * 2 + [C.MOTION_TO_MOTION] * 3 + [C.HOLD_DRIFT])
     assert decision_contexts(context_record()) == expected
 
 
 def test_irrelevant_decisions_are_counted_by_context_and_their_runs_ranked():
     log = context_record()
     counts = irrelevant_by_context(log)
-    assert counts == {**{c: 0 for c in Context}, Context.ONSET: 1, Context.MOTION_TO_MOTION: 1,
+    assert counts == {**{c: 0 for c in Context}, Context.ONSET: 1, Context.MOTION_TO_MOTION: 2,
                       Context.BUTTON_EXIT: 2, Context.MODE_CHANGE: 1}
     runs = irrelevant_runs(log)
-    assert len(runs) == 4
+    assert len(runs) == 5
     assert runs[0] == IrrelevantRun(t=pytest.approx(24 * 0.016), duration_ms=pytest.approx(32.0),
                                     context=Context.BUTTON_EXIT, intended=(2,), decided=(7,))
     assert all(run.duration_ms == pytest.approx(16.0) for run in runs[1:])
@@ -144,7 +147,7 @@ def test_the_vote_effect_compares_the_labels_before_and_after_it():
     raw[24] = 2   # the window read B: the vote made the first B1 output
     raw[8] = 5    # the window read Rr in the F hold: the vote removed it
     effect = vote_effect(log, raw)
-    assert (effect.made, effect.removed, effect.before, effect.after) == (1, 1, 5, 5)
+    assert (effect.made, effect.removed, effect.before, effect.after) == (1, 1, 6, 6)
 
 
 def test_a_record_without_decisions_has_no_misread():

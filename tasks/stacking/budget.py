@@ -38,17 +38,17 @@ and the transition ``allowance`` (``log.allowance`` decisions); a *short rest* i
 shorter than the allowance between two active runs.
 
 1. ``BUTTON_HOLD``: a button class (B1, B2) is entered or held (I).
-2. ``BUTTON_EXIT``: a button class was left within the allowance (P; or Q across a short rest,
-   or inside a short rest after a button).
-3. ``MOTION_TO_MOTION``: within the allowance of an active I entered from another active class
-   straight (P active) or across a short rest (P neutral and short, Q active); or inside such a
-   short rest itself.
-4. ``ONSET``: within the allowance of an active I entered from rest (a neutral P at least the
+2. ``BUTTON_EXIT``: a button class was left within the allowance (P; or Q across a short rest).
+3. ``OFFSET``: within the allowance of a neutral I entered from an active P: the body returning
+   from a hold, whether another motion follows soon or not.
+4. ``MOTION_TO_MOTION``: within the allowance of an active I entered from another active class
+   straight (P active) or across a short rest (P neutral and short, Q active).
+5. ``ONSET``: within the allowance of an active I entered from rest (a neutral P at least the
    allowance long, or the record's first run).
-5. ``OFFSET``: within the allowance of a neutral I entered from an active P (not a short rest).
 6. ``MODE_CHANGE``: past the allowance, at a tick within a mode change's span (part 4 above).
 7. ``HOLD_DRIFT``: past the allowance of an active I: well inside a steady hold.
-8. ``REST_DRIFT``: past the allowance of a neutral I: well inside a steady rest.
+8. ``REST_DRIFT``: past the allowance of a neutral I: well inside a steady rest (the record's
+   first run included).
 
 **The vote** is not a moment of the person's behaviour but a stage of the chain: a majority over
 the last ``vote_length`` labels, a tie going to the most recent of the tied labels
@@ -94,9 +94,9 @@ class Context(str, enum.Enum):
 
     BUTTON_HOLD = "button hold"
     BUTTON_EXIT = "button exit"
+    OFFSET = "offset"
     MOTION_TO_MOTION = "motion to motion"
     ONSET = "onset"
-    OFFSET = "offset"
     MODE_CHANGE = "mode change"
     HOLD_DRIFT = "hold drift"
     REST_DRIFT = "rest drift"
@@ -293,15 +293,14 @@ def decision_contexts(log: EpisodeLog) -> list[Context]:
             left = ({p.label} if p is not None and early else set()) | ({q.label} if across and early else set())
             if run.label in buttons:
                 out.append(Context.BUTTON_HOLD)
-            elif left & buttons or (short_rest(r) and runs[r - 1].label in buttons):
+            elif left & buttons:
                 out.append(Context.BUTTON_EXIT)
-            elif short_rest(r) or (early and run.label != neutral and p is not None
-                                   and (p.label != neutral or across)):
+            elif early and run.label == neutral and p is not None:
+                out.append(Context.OFFSET)
+            elif early and run.label != neutral and p is not None and (p.label != neutral or across):
                 out.append(Context.MOTION_TO_MOTION)
             elif early and run.label != neutral:
                 out.append(Context.ONSET)
-            elif early and p is not None:
-                out.append(Context.OFFSET)
             elif switching[k]:
                 out.append(Context.MODE_CHANGE)
             else:
