@@ -12,8 +12,9 @@ active class that is not the intended one and not ``metrics.excused``.
 2. ``MISREAD``: the stick class is wrong: the arm is driven by a class the person did not intend.
 3. ``CORRECTION``: undoing a misread: after a run of misread ticks that moved the hand by D (at
    least ``CORRECTION_MIN_M``), the first push whose wanted direction points against D
-   (``intended_dir . D / |D| < -0.5``) and the pushes against D straight after it, until the hand
-   has gone back ``|D|`` along D's line (or another push, or the next misread, begins).
+   (``intended_dir . D / |D| < -0.5``) and the pushes against D after it, until the hand has gone
+   back ``|D|`` along D's line, a push not against D begins, or the next misread does. (A misread
+   press, a button class read but not meant, is undone by presses: ``MODE_SWITCH`` time.)
 4. ``MODE_SWITCH``: within a mode change's span as ``metrics.mode_switch_time`` counts it (from the
    last tick the stick was pushed before the change to the first tick it is pushed after it).
 5. ``REACTION``: a push held (``pushing``) that is not answered yet: from its first tick to its
