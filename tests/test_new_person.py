@@ -191,10 +191,10 @@ def test_profile_settings_select_and_scales(tmp_path):
     path.write_text(path.read_text().replace("vote_length = 1", 'vote_length = 1\nrejection_threshold = "select"'))
     profile = load_profile(path)
     assert profile.shrinkage == SELECT and profile.select_rejection and profile.amplitude_scales == (0.75, 0.5)
-    for old, new, message in [("amplitude_scales = [0.75, 0.5]", "amplitude_scales = [1.5]", "amplitude_scales must be fractions"),
-                              ("direction_spread = 30", "direction_spread = 90", r"'direction_spread' must be a number in \[0.0, 89.0\]"),
-                              ('rejection_threshold = "select"', 'rejection_threshold = "best"', "rejection_threshold must be"),
-                              ('shrinkage = "select"', 'shrinkage = "pick"', 'shrinkage must be "select"')]:
+    for old, new, message in [("amplitude_scales = [0.75, 0.5]", "amplitude_scales = [1.5]", r"\[classifier\] amplitude_scales: must be fractions"),
+                              ("direction_spread = 30", "direction_spread = 90", r"\[classifier\] direction_spread: must be in \[0, 89\] degrees"),
+                              ('rejection_threshold = "select"', 'rejection_threshold = "best"', r"\[post_processing\] rejection_threshold: must be"),
+                              ('shrinkage = "select"', 'shrinkage = "pick"', r'\[classifier\] shrinkage: must be "select"')]:
         bad = edited_copy(path, tmp_path / "bad.toml", old, new)
         with pytest.raises(BomiError, match=message):
             load_profile(bad)
