@@ -237,7 +237,7 @@ def test_a_confusion_matrix_is_coloured_by_the_share_of_its_row_and_names_the_cl
     """Neutral's thousands of windows must not hide a rare class's errors: 271 of 294 c8 windows
     called neutral read 92 %, as dark as a perfect neutral row's 100 % nearly."""
     import numpy as np
-    from tasks.cli.figures import confusion_figure
+    from tasks.experiments.figures import confusion_figure
     counts = np.array([[8232, 0, 0], [7, 1753, 4], [271, 0, 23]])
     names = ["c0 neutral posture", "c7 B1: right shoulder", "c8 B2: left shoulder"]
     fig = _drawn(monkeypatch, lambda: confusion_figure(tmp_path / "c.png", [("day3", counts)], names))

@@ -8,7 +8,7 @@ import pytest
 
 from helpers import benchmark_script
 from sim.env import ArmSim
-from tasks.cli.task import EpisodeJob, run_job
+from tasks.experiments.jobs import EpisodeJob, run_job
 
 SEED = 3  # development seed
 
