@@ -114,9 +114,9 @@ def forked(argv: list[str], cwd: Path, timeout: float) -> tuple[int | None, str]
 # value) replaced by one of -1, 0, nan, inf, 1e300, 1e400, a word, an empty value, a huge integer.
 # Every damaged file goes through every command that reads that kind of file; and every numeric
 # option of every command gets -1, 0, nan, inf, 1e308, a word and an empty string. Each run is its
-# own process: a fork of this one, which imported the command line once (what `python -m tasks.cli`
-# runs: ``tasks.cli.main(argv)``, stdout and stderr to files, the exit code its return value; 0.1 s
-# instead of the ~4 s of a fresh interpreter on this machine). Its outcome is one of:
+# own process (``run_bomi``: a fresh interpreter running `python -m tasks.cli`, a few seconds each,
+# where the earlier forks of an interpreter that had imported the command line took 0.1 s; nothing
+# of the command line is imported here). Its outcome is one of:
 #
 # - clean error: exit 2, exactly one stderr line starting ``bomi: error:`` (the last line), no traceback;
 # - accepted: exit 0 (a damage that leaves a valid file, e.g. a flipped digit, is accepted rightly), or
@@ -379,7 +379,7 @@ def bad_input_main(args: argparse.Namespace) -> None:
 # --stand-in P1`, one BoMI and one joystick trial of 8 s, seed 11), a P4 session (another person's
 # model and profile), P1's and P4's synthesised calibration recordings (`bomi synth`), and a
 # participant file. Each case damages a copy of what it needs and runs the commands the issue ran
-# (``tasks.cli.main`` in a forked process, as benchmarks/bad_input_corpus.py does; kill and signal
+# (``run_bomi``, as the bad-input corpus does; kill and signal
 # cases send the signal once the session says "trial 2: go"). A case is counted as:
 #
 # - traceback: a Python traceback or ``bomi: internal error`` on stderr of any of its commands;

@@ -299,12 +299,12 @@ def test_the_sway_gain_is_the_share_of_a_slow_wander_that_a_hold_shows():
 
 
 def _twin_validation():
-    """benchmarks/twin_validation.py as a module (benchmarks/ is not a package)."""
+    """benchmarks/comparisons.py as a module (benchmarks/ is not a package)."""
     import importlib.util
     import sys
     from pathlib import Path
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "twin_validation.py"
-    spec = importlib.util.spec_from_file_location("twin_validation", path)
+    spec = importlib.util.spec_from_file_location("comparisons", path)
     module = sys.modules.setdefault(spec.name, importlib.util.module_from_spec(spec))
     spec.loader.exec_module(module)
     return module

@@ -1,9 +1,14 @@
-"""Out-of-sample check of the twin (`bomi twin`): does a twin fitted on one day predict the next day?
+"""Ours against something else, as distributions: the twin against the person it was fitted to
+(``twin``: the README's row "P1's twin of one real day predicts another day's accuracy"), and two
+`bomi benchmark --json` runs against each other (``outcomes``: a change that alters every
+trajectory, such as the physics, checked to leave the outcomes' distributions alone; also what
+``benchmarks/records_identity.py --no-jit`` uses).
 
-    python benchmarks/twin_validation.py --first-seed S [--pairs M] [--jobs J] [--data DIR]
-                                         [--population N] [--skip-days]
+    python benchmarks/comparisons.py twin --first-seed S [--pairs M] [--jobs J] [--data DIR]
+                                          [--population N] [--skip-days]
+    python benchmarks/comparisons.py outcomes --before before.json --after after.json --out NAME
 
-P1, every ordered pair of days (k, j): the twin fitted on real day k alone (tasks.participants.twin,
+``twin``: P1, every ordered pair of days (k, j): the twin fitted on real day k alone (tasks.participants.twin,
 profile P1), with the drift between days it cannot see taken from a prior fitted on the three
 other days (neither k nor j: nothing of day j enters the prediction), performs M pairs of
 synthetic sessions (`bomi synth`: day k's protocol through simulated frames and the fusion; pair i
@@ -20,6 +25,20 @@ prior P1) against the true parameters (recovery, per parameter) and its pass-to-
 (M session pairs, seeds drawn from the person's seed) against the person's pass 1 -> 2 accuracy.
 
 Writes benchmarks/results/twin_validation_S.{md,json,png} (with --skip-days: ..._S_population.*).
+
+``outcomes``: Did a physics change alter the task's outcomes?  Two ``bomi benchmark --json`` files of the
+same participants, operators and task seeds, one before the change and one after, compared as
+distributions over the seeds (a physics change alters every trajectory, so records cannot be
+identical; what must hold is that the outcomes are drawn from the same distribution).
+
+    bomi benchmark --participants P1 --operators joystick --seeds 60 --first-seed 0 --jobs 1 --json before.json
+    (change; the same command) --json after.json
+    python benchmarks/comparisons.py outcomes --before before.json --after after.json --out NAME
+
+Per operator: success rate (Fisher's exact test), completion time of the successful episodes
+(Mann-Whitney U and two-sample Kolmogorov-Smirnov, scipy), cube drops, mode switches and
+unintended displacement (Mann-Whitney U), and the paired per-seed difference of completion time.
+Writes benchmarks/results/NAME.md, .json and .png (completion time ECDFs).
 """
 from __future__ import annotations
 
@@ -42,6 +61,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy import stats  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from bomi.chain import evaluate  # noqa: E402
@@ -50,7 +70,7 @@ from bomi.errors import BomiError  # noqa: E402
 from bomi.profiles import Profile, load_profile  # noqa: E402
 from bomi.recording import Recording  # noqa: E402
 from bomi.reproduce import DAYS, read_days  # noqa: E402
-from tasks.cli.chain import fit_model  # noqa: E402
+from tasks.experiments.training import fit_model  # noqa: E402
 from tasks.participants.participant import (ParticipantParams, load_participant, protocol_session,  # noqa: E402
                                             session_recording)
 from tasks.participants.population import draw_person, pass_recordings, true_profile  # noqa: E402
@@ -401,23 +421,11 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--first-seed", type=int, required=True,
-                        help="first synthetic-session seed of the day pairs (40 x --pairs are used), and the first "
-                             "synthetic person of --population")
-    parser.add_argument("--data", type=Path, default=None, help="directory of dayN_testp.mat (default: BOMI_DATA_DIR)")
-    parser.add_argument("--population", type=int, default=0, metavar="N", help="also N synthetic people (default 0)")
-    parser.add_argument("--skip-days", action="store_true", help="only the synthetic people")
-    parser.add_argument("--pairs", type=int, default=DEFAULT_PAIRS,
-                        help=f"pairs of synthetic sessions per prediction (default {DEFAULT_PAIRS}, at least 2)")
-    parser.add_argument("--ablation", action="store_true",
-                        help="population: also predict with each group of parameters true (5 more predictions)")
-    parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
-    args = parser.parse_args(argv)
+def twin_main(args: argparse.Namespace) -> int:
+    """The twin's out-of-sample check (day pairs of P1; synthetic people)."""
     for option, value, least in (("--pairs", args.pairs, 2), ("--jobs", args.jobs, 1)):
         if value < least:
-            print(f"twin_validation: error: {option} must be at least {least}, got {value}", file=sys.stderr)
+            print(f"comparisons twin: error: {option} must be at least {least}, got {value}", file=sys.stderr)
             return 2
     started = time.perf_counter()
     directory = args.data or data_dir()
@@ -425,10 +433,10 @@ def main(argv: list[str] | None = None) -> int:
         try:
             read_days(directory)
         except BomiError as exc:
-            print(f"twin_validation: error: {exc}", file=sys.stderr)
+            print(f"comparisons twin: error: {exc}", file=sys.stderr)
             return 2
     name = f"twin_validation_{args.first_seed}"
-    command = " ".join(["python benchmarks/twin_validation.py"] + (argv if argv is not None else sys.argv[1:]))
+    command = " ".join(["python benchmarks/comparisons.py"] + sys.argv[1:])
     RESULTS.mkdir(exist_ok=True)
     record: dict = {"first_seed": args.first_seed, "pairs_per_prediction": args.pairs, "command": command}
     text = ""
@@ -452,6 +460,136 @@ def main(argv: list[str] | None = None) -> int:
     (RESULTS / f"{name}.md").write_text(text)
     print(text)
     return 0
+
+
+# ------------------------------------------------------------- two benchmark runs as distributions
+COUNTS = ("cube_drops", "mode_switches", "unintended_displacement_mm")
+
+
+def fail(message: str) -> None:
+    print(f"bomi: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def benchmark_episodes(path: Path) -> dict[str, dict[int, dict]]:
+    """Per operator, the episodes by seed."""
+    try:
+        records = json.loads(path.read_text())["episodes"]
+        out: dict[str, dict[int, dict]] = {}
+        for episode in records:
+            out.setdefault(episode["operator"], {})[episode["seed"]] = episode
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        fail(f"{path}: not a `bomi benchmark --json` file ({type(exc).__name__}: {exc})")
+    return out
+
+
+def compare(before: dict[int, dict], after: dict[int, dict]) -> dict:
+    if sorted(before) != sorted(after):
+        fail("--before and --after hold different task seeds")
+    seeds = sorted(before)
+    ok_b = [before[s]["success"] for s in seeds]
+    ok_a = [after[s]["success"] for s in seeds]
+    t_b = np.array([before[s]["completion_time"] for s in seeds if before[s]["success"]])
+    t_a = np.array([after[s]["completion_time"] for s in seeds if after[s]["success"]])
+    both = [s for s in seeds if before[s]["success"] and after[s]["success"]]
+    paired = np.array([after[s]["completion_time"] - before[s]["completion_time"] for s in both])
+    row = {"seeds": [seeds[0], seeds[-1]], "n": len(seeds),
+           "successes": [int(sum(ok_b)), int(sum(ok_a))],
+           "success_p_fisher": float(stats.fisher_exact([[sum(ok_b), len(seeds) - sum(ok_b)],
+                                                         [sum(ok_a), len(seeds) - sum(ok_a)]])[1]),
+           "time_median": [float(np.median(t_b)), float(np.median(t_a))],
+           "time_mean": [float(t_b.mean()), float(t_a.mean())],
+           "time_p_mannwhitney": float(stats.mannwhitneyu(t_b, t_a).pvalue),
+           "time_p_ks": float(stats.ks_2samp(t_b, t_a).pvalue),
+           "paired_time_difference_median": float(np.median(paired)) if len(paired) else None,
+           "times": [t_b.tolist(), t_a.tolist()]}
+    for key in COUNTS:
+        b = np.array([before[s][key] for s in seeds], float)
+        a = np.array([after[s][key] for s in seeds], float)
+        same = np.array_equal(np.sort(b), np.sort(a))
+        row[key] = {"total": [float(b.sum()), float(a.sum())], "mean": [float(b.mean()), float(a.mean())],
+                    "p_mannwhitney": 1.0 if same else float(stats.mannwhitneyu(b, a).pvalue)}
+    return row
+
+
+def outcomes_markdown(record: dict) -> str:
+    lines = [f"# Task outcomes before and after a physics change ({record['name']})", "",
+             f"`python benchmarks/comparisons.py outcomes {record['command']} --out {record['name']}`", "", record["note"], "",
+             "| operator | seeds | successes (before / after), Fisher p | completion time median s (before / after) | "
+             "Mann-Whitney p | KS p | paired median difference s | cube drops (total) | mode switches (mean), p | "
+             "unintended displacement mm (mean), p |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for operator, r in record["operators"].items():
+        drops, switches, disp = (r[k] for k in COUNTS)
+        lines.append(
+            f"| {operator} | {r['seeds'][0]}-{r['seeds'][1]} | {r['successes'][0]} / {r['successes'][1]} of {r['n']}, "
+            f"{r['success_p_fisher']:.2f} | {r['time_median'][0]:.2f} / {r['time_median'][1]:.2f} | "
+            f"{r['time_p_mannwhitney']:.2f} | {r['time_p_ks']:.2f} | {r['paired_time_difference_median']:+.2f} | "
+            f"{drops['total'][0]:.0f} / {drops['total'][1]:.0f} | {switches['mean'][0]:.1f} / {switches['mean'][1]:.1f}, "
+            f"{switches['p_mannwhitney']:.2f} | {disp['mean'][0]:.0f} / {disp['mean'][1]:.0f}, {disp['p_mannwhitney']:.2f} |")
+    lines += ["", f"![completion time ECDFs]({record['name']}.png)"]
+    return "\n".join(lines) + "\n"
+
+
+def outcomes_figure(record: dict, path: Path) -> None:
+    operators = record["operators"]
+    fig, axes = plt.subplots(1, len(operators), figsize=(5 * len(operators), 3.6), squeeze=False)
+    for ax, (operator, r) in zip(axes[0], operators.items()):
+        for times, label in zip(r["times"], ("before", "after")):
+            x = np.sort(times)
+            ax.step(x, np.arange(1, len(x) + 1) / len(x), where="post", label=f"{label} (n={len(x)})")
+        ax.set(title=f"{operator}: completion time, seeds {r['seeds'][0]}-{r['seeds'][1]}",
+               xlabel="completion time (s)", ylabel="share of successful episodes")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def outcomes_main(args: argparse.Namespace) -> None:
+    """Two `bomi benchmark --json` runs compared as distributions."""
+    for path in args.before + args.after:
+        if not path.is_file():
+            fail(f"{path}: no such file")
+    before, after = {}, {}
+    for paths, into in ((args.before, before), (args.after, after)):
+        for path in paths:
+            into.update(benchmark_episodes(path))
+    record = {"name": args.out, "note": args.note,
+              "command": " ".join([f"--before {p}" for p in args.before] + [f"--after {p}" for p in args.after]),
+              "operators": {op: compare(before[op], after[op]) for op in before if op in after}}
+    if not record["operators"]:
+        fail("--before and --after share no operator")
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{args.out}.json").write_text(json.dumps(record, indent=1))
+    (RESULTS / f"{args.out}.md").write_text(outcomes_markdown(record))
+    outcomes_figure(record, RESULTS / f"{args.out}.png")
+    print(outcomes_markdown(record))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    groups = parser.add_subparsers(dest="comparison", required=True)
+    twin = groups.add_parser("twin", help="a twin's prediction against the person's real accuracy")
+    twin.add_argument("--first-seed", type=int, required=True,
+                        help="first synthetic-session seed of the day pairs (40 x --pairs are used), and the first "
+                             "synthetic person of --population")
+    twin.add_argument("--data", type=Path, default=None, help="directory of dayN_testp.mat (default: BOMI_DATA_DIR)")
+    twin.add_argument("--population", type=int, default=0, metavar="N", help="also N synthetic people (default 0)")
+    twin.add_argument("--skip-days", action="store_true", help="only the synthetic people")
+    twin.add_argument("--pairs", type=int, default=DEFAULT_PAIRS,
+                        help=f"pairs of synthetic sessions per prediction (default {DEFAULT_PAIRS}, at least 2)")
+    twin.add_argument("--ablation", action="store_true",
+                        help="population: also predict with each group of parameters true (5 more predictions)")
+    twin.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    twin.set_defaults(run=twin_main)
+    outcomes = groups.add_parser("outcomes", help="two bomi benchmark --json runs as distributions")
+    outcomes.add_argument("--before", type=Path, required=True, action="append", help="bomi benchmark --json file(s)")
+    outcomes.add_argument("--after", type=Path, required=True, action="append", help="the same runs after the change")
+    outcomes.add_argument("--out", default="physics_outcomes", help="name of the result files in benchmarks/results")
+    outcomes.add_argument("--note", default="", help="a line saying what changed between the two runs")
+    outcomes.set_defaults(run=outcomes_main)
+    args = parser.parse_args()
+    return args.run(args) or 0
 
 
 if __name__ == "__main__":

@@ -1,8 +1,11 @@
-"""Episode speed, measured fairly: our scene's physics alone (the limit), dm_control's own JACO
-stacking task in steady state, and our joystick and BoMI episodes, in one process on one core,
-the kinds interleaved round after round; then a profile of where a control tick's time goes.
+"""Speed: the README's row "episode speed per CPU second, of the physics-only limit / x dm_control".
+Our scene's physics alone (the limit), dm_control's own JACO stacking task in steady state, and
+our joystick and BoMI episodes, in one process on one core, the kinds interleaved round after
+round; then a profile of where a control tick's time goes (the calibration, the channel, the
+planner, the IK, the physics: the per-stage figures the earlier one-off speed studies measured
+apart, docs/scaling.md).
 
-    python benchmarks/side_by_side.py [--rounds 3] [--first-seed 0] [--profile-seed 0]
+    python benchmarks/speed.py [--rounds 3] [--first-seed 0] [--profile-seed 0]
 
 How each kind is charged (x real time = simulated seconds per second, of wall clock and of this
 process's CPU time, ``time.process_time``):
@@ -62,7 +65,7 @@ from bomi.chain import OnlineChain
 from bomi.frames import FrameParser
 from sim.controller import CartesianVelocityController
 from sim.env import ArmSim
-from tasks.cli.task import EpisodeJob, job_assist, run_job
+from tasks.experiments.jobs import EpisodeJob, job_assist, run_job
 from tasks.stacking.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode
 from tasks.participants.participant import VirtualParticipant, load_participant
 from tasks.operators.planner import ScriptedUser, load_operator
@@ -338,7 +341,7 @@ def markdown(record: dict) -> str:
     lines = [
         f"# Episode speed, measured fairly ({args['rounds']} rounds, seeds {args['first_seed']}-"
         f"{args['first_seed'] + args['rounds'] - 1}, one process pinned to one core)", "",
-        f"`python benchmarks/side_by_side.py --rounds {args['rounds']} --first-seed {args['first_seed']}` at commit "
+        f"`python benchmarks/speed.py --rounds {args['rounds']} --first-seed {args['first_seed']}` at commit "
         f"{record['commit']}. Machine: {m['cpu']}, {m['cpu_count']} cores shared with other work; 1-min load "
         f"average {m['load_before']:.2f} before, {m['load_after']:.2f} after the run. Python {m['python']}, "
         f"mujoco {record['versions']['mujoco']}, dm-control {record['versions']['dm-control']}, "
