@@ -10,6 +10,9 @@ which only parses arguments and prints) and the benchmarks (benchmarks/) both ca
 - ``training``: a person's classifier trained from their recordings, its quality reported.
 - ``twins``: a twin checked against the person it was fitted to; the paper's protocol.
 - ``design``: candidate layouts of a person written as profiles and run by their twin.
+- ``streams``: recording from a base-station stream (nodes, the settle wait, timing, segments).
+- ``trials``: `bomi trial`'s bookkeeping: the directory's lock, the trials to run, each finished
+  trial written as it finishes, scored, and a virtual participant's prediction of them.
 - ``limits``: the largest seeds, seed counts and durations any run accepts.
 - ``engine`` and ``sweep`` (process pool or Ray; grids of settings x seeds, resumable).
 """
