@@ -5,15 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bomi import paper
 from bomi.errors import BomiError
 from bomi.files import atomic_output
 from tasks.cli import add_command
 from tasks.cli.engine import add_engine_arguments, engine_from_args
 from tasks.cli.options import add_force, check_outputs, episode_seconds, positive_int, seed_count
 from tasks.cli.options import seed as seed_option
-from tasks.experiments.jobs import (DEFAULT_VOTE, EpisodeJob, benchmark_jobs, job_assist, run_job, run_many, stage,
-                                    with_recovery)
+from tasks.experiments.demo import DEMO_VIDEO_SPEEDUP, run_demo
+from tasks.experiments.jobs import DEFAULT_VOTE, EpisodeJob, benchmark_jobs, job_assist, run_job, run_many, with_recovery
 from tasks.experiments.summary import aggregate, benchmark_payload, comparison, write_json
 from tasks.experiments.tables import terminal_comparison, terminal_mechanisms, terminal_table
 from tasks.operators.assist import ASSIST_HELP, assist_option
@@ -27,10 +26,6 @@ from tasks.stacking.timeline import timeline_figure
 from tasks.experiments.jobs import EDITABLE_FILES, episode_record  # noqa: F401
 from tasks.experiments.tables import (MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,  # noqa: F401
                                       aligned_table, markdown_table, row_cells, terminal_cells)
-
-# The demo's MP4 plays this many times faster than simulated time: a long BoMI episode stays a
-# short film (and quick to render).
-DEMO_VIDEO_SPEEDUP = 8.0
 
 RECOVERY_HELP = (f"what the scripted user does after a while without progress (docs/task.md, Recovery): "
                  f"{NO_RECOVERY}, or a comma list of {', '.join(a.value for a in RecoveryAction)} "
@@ -136,15 +131,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     figure, video, record = check_outputs({name: (out / name, ()) for name in DEMO_FILES}, force=args.force,
                                           defaults=DEMO_FILES if args.out is None else ()).values()
     participant_controls(args.participant)  # a bad participant or profile fails before simulating
-    joystick = run_job(EpisodeJob("joystick", args.participant, args.seed, args.time_limit, assist=args.assist),
-                       progress=True)
-    with atomic_output(video, overwrite=replace) as temp:
-        bomi = run_job(EpisodeJob("bomi", args.participant, args.seed, args.time_limit, assist=args.assist), video=temp,
-                       video_speedup=DEMO_VIDEO_SPEEDUP, progress=True)
-    summaries = [summarize(joystick), summarize(bomi)]
-    with stage("timeline figure", progress=True), atomic_output(figure, overwrite=replace) as temp:
-        timeline_figure([joystick, bomi], temp)
-    write_json(record, {"paper": paper.TASK, "episodes": summaries}, overwrite=replace)
+    summaries = run_demo(args.participant, args.seed, args.time_limit, args.assist, figure, video, record, replace)
     print(terminal_table(aggregate(summaries)))
     print(f"\nOne seed ({args.seed}), one episode per operator: a single draw of the cube placement and of the "
           f"virtual participant's body and noise. The README's figures are means over 20 seeds "

@@ -6,6 +6,7 @@ which only parses arguments and prints) and the benchmarks (benchmarks/) both ca
 - ``summary``: episode records pooled into rows (``aggregate``: successes and times with 95 %
   intervals, decision metrics), ``comparison`` with the paper, the benchmark's JSON payload.
 - ``tables``: those rows as markdown (files) and as aligned text (the terminal).
+- ``demo``: `bomi demo`'s two episodes on one seed: the film, the timeline, the records.
 - ``figures``: completion times, a metric against a swept setting, confusion matrices.
 - ``training``: a person's classifier trained from their recordings, its quality reported.
 - ``twins``: a twin checked against the person it was fitted to; the paper's protocol.
