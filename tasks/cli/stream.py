@@ -22,7 +22,7 @@ from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import RecordingWriter, read_recording
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamLost
 from tasks.cli import add_command
-from tasks.cli.chain import class_listing, fit_and_report, read_all_passes
+from tasks.experiments.training import class_listing, fit_and_report, read_all_passes
 from tasks.cli.options import (add_force, check_outputs, non_negative_int, non_negative_seconds, positive_float,
                                positive_int, probability, seconds)
 from tasks.operators.stick import arm_profile

@@ -23,7 +23,7 @@ from sim.env import ArmSim
 from sim.joystick import BUTTONS, THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
-from tasks.cli.task import _simulated_time, _stage
+from tasks.experiments.jobs import simulated_time, stage
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.operators.stick import arm_profile, profile_layout
 from tasks.trials.dataset import part_name, replace_atomically, session_files, sync_directory, write_session
@@ -361,7 +361,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
             replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
         if bomi and model is None:
             from tasks.stacking.episode import calibrated_model
-            with _stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
+            with stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
                         f"record does, then bomi train)", progress=True):
                 model = calibrated_model(standin, profile, args.seed)
         sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
@@ -436,7 +436,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                               "simulated")
             sessions.append((session, meta))
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
-            with _simulated_time(f"{standin.name} bomi session", progress=True) as progress:
+            with simulated_time(f"{standin.name} bomi session", progress=True) as progress:
                 def on_tick(tick) -> None:
                     person.heard(tick.decisions)
                     progress(clock.now)
@@ -484,7 +484,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             person = JoystickStandIn(arm, operator)
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
             sessions.append((session, meta))
-            with _simulated_time(f"{standin.name} joystick session", progress=True) as progress:
+            with simulated_time(f"{standin.name} joystick session", progress=True) as progress:
                 def on_tick(now: float) -> None:
                     progress(now)
                     after_tick()
@@ -540,7 +540,7 @@ def _controls_label(profile) -> str:
 def _predictions(args) -> list[tuple[dict, object]]:
     """The named virtual participant's simulated episodes (``bomi benchmark``'s), one per trial, on
     the trials' cube placements: (record, episode log) each."""
-    from tasks.cli.task import EpisodeJob, run_job
+    from tasks.experiments.jobs import EpisodeJob, run_job
     from tasks.stacking.episode import summarize
     out = []
     for controller in args.controller:
