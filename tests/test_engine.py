@@ -6,8 +6,8 @@ import sys
 import pytest
 
 from tasks.cli import main
-from tasks.cli.engine import EpisodeFailed, ProcessPool, RayCluster
-from tasks.cli.task import EpisodeJob, benchmark_jobs, episode_record
+from tasks.experiments.engine import EpisodeFailed, ProcessPool, RayCluster
+from tasks.experiments.jobs import EpisodeJob, benchmark_jobs, episode_record
 
 # how fast the machine ran the episode, not what happened in it
 TIMING_FIELDS = ("wall_time", "cpu_time", "realtime_factor", "realtime_factor_cpu")
