@@ -6,7 +6,7 @@ import sys
 import pytest
 
 from tasks.cli import main
-from tasks.experiments.engine import EpisodeFailed, ProcessPool, RayCluster
+from tasks.experiments.engine import EpisodeFailed, ProcessPool, RayCluster, run_private
 from tasks.experiments.jobs import EpisodeJob, benchmark_jobs, episode_record
 
 # how fast the machine ran the episode, not what happened in it
@@ -52,8 +52,7 @@ def ray_cluster():
 
 def test_ray_gives_the_process_pool_s_records_field_by_field(pool_records):
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
-    from tasks.experiments.private_ray import run_private  # the local Ray `--engine ray` starts
-    results = dict(run_private(episode_record, JOBS, 2))
+    results = dict(run_private(episode_record, JOBS, 2))  # the local Ray `--engine ray` starts
     assert sorted(results) == list(range(len(JOBS)))
     ray_records = [outcome(results[i]) for i in range(len(JOBS))]
     for job, ours, theirs in zip(JOBS, ray_records, pool_records):

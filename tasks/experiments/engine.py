@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import ctypes
 import os
+import pickle
 import signal
 import socket
+import subprocess
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from enum import Enum
+from multiprocessing.connection import Connection
 from typing import Any, Protocol
 
 from tqdm import tqdm
@@ -26,6 +29,8 @@ from tqdm import tqdm
 from bomi.errors import BomiError
 
 RAY_INSTALL = 'pip install -e ".[ray]"'
+PRIVATE_RAY = "tasks.experiments.private_ray"  # the module a private local Ray's driver runs
+STOP_WAIT_S = 60.0  # for a private Ray's driver to shut its Ray down before it is killed
 RAY_CONNECT_TIMEOUT_S = 10.0  # a Ray address that accepts no connection by then is refused
 MAX_JOBS = os.cpu_count() or 1  # more local processes than CPUs only slow every episode down
 
@@ -158,7 +163,6 @@ class RayCluster:
         if ray.is_initialized():  # the caller's own Ray: used as it is, its workers freed after
             yield from ray_results(ray, work, items, cancel_pending=True)
         elif self.address is None:
-            from tasks.experiments.private_ray import run_private
             yield from run_private(work, items, self.cpus)
         else:
             yield from self._on_cluster(ray, work, items)
@@ -177,6 +181,62 @@ class RayCluster:
             yield from ray_results(ray, work, items, cancel_pending=False)
         finally:  # the driver leaves; the cluster ends this job's tasks
             ray.shutdown()
+
+
+# ------------------------------------------------------------------------------------ a private local Ray
+class Message(str, Enum):
+    RESULT = "result"    # (index, result)
+    REPORT = "report"    # a line for the user (a retried episode)
+    FAILED = "failed"    # an episode failed twice: EpisodeFailed's text
+    REFUSED = "refused"  # no private namespace, or Ray did not start: a BomiError's text
+    DONE = "done"
+
+
+def run_private(work: Callable[[Any], Any], items: Sequence[Any], cpus: int | None) -> Iterator[tuple[int, Any]]:
+    """``(index, work(items[index]))`` from a private local Ray of ``cpus`` CPUs (``private_ray``,
+    in a child process), as each finishes (``ray_results``'s retry and failure rules); the child and
+    its Ray end when this generator does (finished, failed or interrupted), or die with this process."""
+    from ray import cloudpickle  # work may be a closure: pickled by value, as Ray does
+
+    ours, theirs = socket.socketpair()
+    env = os.environ | {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}  # the work's modules, found
+    child = subprocess.Popen([sys.executable, "-m", PRIVATE_RAY, str(theirs.fileno()), str(os.getpid())],
+                             pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
+    theirs.close()
+    connection = Connection(ours.detach())
+    try:
+        connection.send_bytes(cloudpickle.dumps((cpus, work, list(items))))
+        while True:
+            try:
+                value, payload = pickle.loads(connection.recv_bytes())
+            except (EOFError, ConnectionError):
+                raise BomiError(f"--engine ray: the private local Ray ended unexpectedly (exit code "
+                                f"{child.wait()}); its logs are in /tmp/ray/session_latest/logs") from None
+            kind = Message(value)
+            if kind is Message.RESULT:
+                yield payload
+            elif kind is Message.REPORT:
+                report(payload)
+            elif kind is Message.FAILED:
+                raise EpisodeFailed(payload)
+            elif kind is Message.REFUSED:
+                raise BomiError(payload)
+            else:
+                return
+    finally:
+        connection.close()
+        _stop(child)
+
+
+def _stop(child: subprocess.Popen) -> None:
+    """The child shuts its Ray down (SIGTERM) or, failing that within STOP_WAIT_S, is killed."""
+    if child.poll() is None:
+        child.send_signal(signal.SIGTERM)
+        try:
+            child.wait(STOP_WAIT_S)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
 
 
 def check_ray_address(address: str, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:

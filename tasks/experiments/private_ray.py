@@ -3,7 +3,7 @@
 Ray 2.60's GCS, raylet, agents, idle workers and driver listen on every interface (its gRPC
 servers bind the wildcard address whatever ``_node_ip_address`` says, and no setting changes
 that), and whoever reaches the GCS can run code.  So the local Ray and its driver run in a child
-process (``python -m tasks.experiments.private_ray``) that first moves into a network namespace of
+process (this module, run by ``engine.run_private``) that first moves into a network namespace of
 its own, holding only the loopback interface: a user namespace with it, so no privilege is needed
 (as root the network namespace alone is the fallback).  Ray's processes start from that child and
 stay in its namespace.  The calling process talks to the child over a socket pair (not the
@@ -18,79 +18,18 @@ import pickle
 import signal
 import socket
 import struct
-import subprocess
 import sys
-from collections.abc import Callable, Iterator, Sequence
-from enum import Enum
 from multiprocessing.connection import Connection
 from typing import Any
 
-from bomi.errors import BomiError
+from tasks.experiments.engine import (EpisodeFailed, Message, die_with, ray_results, restore,
+                                      signal_handlers)
 
 LOOPBACK = "127.0.0.1"
 CLONE_NEWUSER, CLONE_NEWNET = 0x10000000, 0x40000000  # linux/sched.h
 SIOCGIFFLAGS, SIOCSIFFLAGS, IFF_UP = 0x8913, 0x8914, 0x1  # linux/sockios.h, linux/if.h
-STOP_WAIT_S = 60.0  # for the child to shut its Ray down before it is killed
 
 
-class Message(str, Enum):
-    RESULT = "result"    # (index, result)
-    REPORT = "report"    # a line for the user (a retried episode)
-    FAILED = "failed"    # an episode failed twice: EpisodeFailed's text
-    REFUSED = "refused"  # no private namespace, or Ray did not start: a BomiError's text
-    DONE = "done"
-
-
-# ------------------------------------------------------------------------------------ the caller
-def run_private(work: Callable[[Any], Any], items: Sequence[Any], cpus: int | None) -> Iterator[tuple[int, Any]]:
-    """``(index, work(items[index]))`` from a private local Ray of ``cpus`` CPUs, as each finishes
-    (``engine.ray_results``'s retry and failure rules); the child and its Ray end when this
-    generator does (finished, failed or interrupted), or die with this process."""
-    from ray import cloudpickle  # work may be a closure: pickled by value, as Ray does
-
-    from tasks.experiments.engine import EpisodeFailed, report
-    ours, theirs = socket.socketpair()
-    env = os.environ | {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}  # the work's modules, found
-    child = subprocess.Popen([sys.executable, "-m", __name__, str(theirs.fileno()), str(os.getpid())],
-                             pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
-    theirs.close()
-    connection = Connection(ours.detach())
-    try:
-        connection.send_bytes(cloudpickle.dumps((cpus, work, list(items))))
-        while True:
-            try:
-                value, payload = pickle.loads(connection.recv_bytes())
-            except (EOFError, ConnectionError):
-                raise BomiError(f"--engine ray: the private local Ray ended unexpectedly (exit code "
-                                f"{child.wait()}); its logs are in /tmp/ray/session_latest/logs") from None
-            kind = Message(value)
-            if kind is Message.RESULT:
-                yield payload
-            elif kind is Message.REPORT:
-                report(payload)
-            elif kind is Message.FAILED:
-                raise EpisodeFailed(payload)
-            elif kind is Message.REFUSED:
-                raise BomiError(payload)
-            else:
-                return
-    finally:
-        connection.close()
-        _stop(child)
-
-
-def _stop(child: subprocess.Popen) -> None:
-    """The child shuts its Ray down (SIGTERM) or, failing that within STOP_WAIT_S, is killed."""
-    if child.poll() is None:
-        child.send_signal(signal.SIGTERM)
-        try:
-            child.wait(STOP_WAIT_S)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-
-
-# ------------------------------------------------------------------------------------ the child
 def private_network() -> str | None:
     """Move this (still single-threaded) process into a new network namespace whose loopback is
     up; None, or why it could not."""
@@ -124,7 +63,6 @@ def _serve(connection: Connection, parent: int) -> None:
     os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
     import ray  # after the move: nothing below is reachable from the network
 
-    from tasks.experiments.engine import EpisodeFailed, die_with, ray_results, restore, signal_handlers
     die_with(parent, signal.SIGTERM)  # an orphan shuts its Ray down
     cpus, work, items = pickle.loads(connection.recv_bytes())
     handlers = signal_handlers()  # Ray's start-up replaces them with an abort
