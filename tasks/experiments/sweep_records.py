@@ -180,7 +180,7 @@ def record_fault(record: dict, expected: dict[str, Any] | None) -> str | None:
                 f"({settings['time_limit']:g} s)")
     if expected is not None and _canonical(settings) != _canonical(expected):
         differ = sorted(k for k in settings.keys() | expected.keys() if settings.get(k) != expected.get(k))
-        return f"its settings are not the ones its key {record['key']} stands for ({', '.join(differ)} differ)"
+        return f"its settings are not the ones its key {record['key']} stands for (differing: {', '.join(differ)})"
     return None
 
 
