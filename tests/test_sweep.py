@@ -15,10 +15,10 @@ import pytest
 
 from bomi.files import TEMP_MARK
 from tasks.cli import main
-from tasks.cli.engine import ProcessPool
-from tasks.cli.sweep import (FIGURE_METRICS, LOCK_FILE, RESULTS_FILE, cells, job_key, load_grid, read_results,
-                             run_sweep)
+from tasks.experiments.engine import ProcessPool
 from tasks.experiments.summary import aggregate
+from tasks.experiments.sweep import FIGURE_METRICS, LOCK_FILE, cells, job_key, load_grid, run_sweep
+from tasks.experiments.sweep_records import RESULTS_FILE, read_results
 from tasks.participants.participant import PARTICIPANT_DIR
 
 SHORT = 2.0  # s of simulated time: a joystick episode that short costs well under a second

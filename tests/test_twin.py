@@ -238,7 +238,7 @@ def test_holds_too_short_to_measure_fall_back_and_say_so(tmp_path, known_p4, cap
 
 
 def test_a_sweep_grid_names_a_twin_relative_to_itself(tmp_path, shared_data, capsys):
-    from tasks.cli.sweep import cells, check_cells, load_grid
+    from tasks.experiments.sweep import cells, check_cells, load_grid
 
     (tmp_path / "grids").mkdir()
     assert bomi(capsys, "twin", shared_data / "day3_testp.mat", "--profile", "P1", "--out",

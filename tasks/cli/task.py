@@ -21,11 +21,6 @@ from tasks.operators.stick import arm_profile
 from tasks.participants.participant import load_participant
 from tasks.stacking.episode import OPERATORS, participant_controls, summarize
 from tasks.stacking.timeline import timeline_figure
-# what tasks/cli/sweep.py takes from here until it moves to tasks/experiments/ (helper "infra"): it
-# should import them from tasks.experiments.jobs, .summary and .tables, and this line go
-from tasks.experiments.jobs import EDITABLE_FILES, episode_record  # noqa: F401
-from tasks.experiments.tables import (MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS,  # noqa: F401
-                                      aligned_table, markdown_table, row_cells, terminal_cells)
 
 RECOVERY_HELP = (f"what the scripted user does after a while without progress (docs/task.md, Recovery): "
                  f"{NO_RECOVERY}, or a comma list of {', '.join(a.value for a in RecoveryAction)} "
