@@ -29,8 +29,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from tasks.operators.assist import assist_label, parse_assist  # noqa: E402
-from tasks.cli.engine import ProcessPool  # noqa: E402
-from tasks.cli.task import benchmark_jobs, run_many  # noqa: E402
+from tasks.experiments.engine import ProcessPool  # noqa: E402
+from tasks.experiments.jobs import benchmark_jobs, run_many  # noqa: E402
 from tasks.stacking.episode import WRONG_GOAL_WINDOW_S, participant_controls  # noqa: E402
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE  # noqa: E402
 

@@ -34,8 +34,8 @@ import numpy as np  # noqa: E402
 
 from bomi import paper  # noqa: E402
 from tasks.stacking import metrics  # noqa: E402
-from tasks.cli.engine import ProcessPool  # noqa: E402
-from tasks.cli.task import EpisodeJob, run_job  # noqa: E402
+from tasks.experiments.engine import ProcessPool  # noqa: E402
+from tasks.experiments.jobs import EpisodeJob, run_job  # noqa: E402
 from tasks.stacking.episode import participant_controls, summarize  # noqa: E402
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
 from tasks.stacking.timeline import timeline_figure  # noqa: E402

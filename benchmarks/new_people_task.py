@@ -5,7 +5,7 @@ path a new user takes, as commands, with no hand edit.
         [--design-seeds D --design-first-seed 600] [--jobs 2] [--name NAME]
 
 Per person (tasks/participants/population.py; people drawn from ``--first-person`` on): both passes
-of the protocol in one logger .mat file (benchmarks/two_pass_file.py), then
+of the protocol in one logger .mat file (``population.one_file``, ``bomi.recording.write_logger_mat``), then
 
 1. ``bomi twin FILE --out twin.toml``: the passes found, the profile derived, the twin fitted;
 2. ``bomi design twin.toml [--seeds D] --first-seed DS``: the candidate layouts on development seeds,

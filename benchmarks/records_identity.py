@@ -1,21 +1,28 @@
 """Did a change alter the task's episodes?  Two commits run the same development episodes on this
-machine, in one run, and their records are compared field for field.
+machine, each through its own command line, and their stored records are compared field for field.
 
     python benchmarks/records_identity.py BEFORE [AFTER] [--seeds N]   # AFTER: this working tree
     python benchmarks/records_identity.py --no-jit [COMMIT] [--seeds N]
 
 BEFORE (and AFTER, when given) is checked out into a temporary ``git worktree`` (removed
 afterwards, on error and on Ctrl-C too); without AFTER the other side is this working tree as it
-is, uncommitted changes included.  Each side runs in its own subprocess, cwd and PYTHONPATH its
-tree (so each side's own code runs; the subprocess checks that bomi, sim and tasks come from
-there), with the same Python environment, one BLAS thread, one side after the other.  The
-episodes: virtual P1, P4 and P5, joystick and BoMI (calibration, LDA training and task), task
-seeds 0..N-1 (development seeds; N=2 by default: 12 episodes a side).  A record is what
-``bomi benchmark`` stores for an episode (``tasks.stacking.episode.summarize``) without its four timing
-fields, plus a SHA-256 of every array the episode logged (hand and cube trajectories, modes,
-goals, the BoMI's decisions with their gamma and nu): equal digests mean bit-identical
-trajectories, not just equal summaries.  Writes benchmarks/results/records_identity.md (the two
-commits, the machine, "identical: yes/NO" and every differing field); exits 1 if any differ.
+is, uncommitted changes included.  Each side runs its own `bomi benchmark` (``python -m tasks.cli
+benchmark --participants P1,P4,P5 --operators joystick,bomi --seeds N --first-seed 0 --jobs 1
+--json FILE``) in a subprocess whose cwd and PYTHONPATH are its tree, with the same Python
+environment and one BLAS thread, one side after the other; nothing of either side is imported
+here, so the comparison holds across any change of the code's layout, as long as both commits have
+that command.  The episodes: virtual P1, P4 and P5 on the BoMI (calibration, LDA training and
+task), and the joystick once per set of controls (P1's; P4's, which P5 shares: what `bomi
+benchmark` runs), task seeds 0..N-1 (development seeds; N=5 by default: 25 episodes a side).
+
+What is compared: every field of each stored per-episode record (``tasks.stacking.episode.
+summarize``) but the timing ones (wall and CPU time, the real-time factors).  The records of
+5eff363 carry no digest of the logged trajectories, so the trajectories themselves are not
+compared; what is, is already a fingerprint of the episode to the last bit: the completion and
+simulated times, the unintended displacement, the decisions' accuracies, every onset's latency,
+the recoveries and the mode switches (JSON floats round-trip exactly).  Writes
+benchmarks/results/records_identity.md (the two commits, the machine, "identical: yes/NO" and
+every differing field); exits 1 if any differ.
 
 What "identical" means.  The same build on the same machine (same CPU features, the same glibc
 libm, the same numpy and BLAS code paths) gives bit-identical records: that is what this script
@@ -27,18 +34,17 @@ are rounded in another order.  The stacking task is chaotic (one last bit become
 episode), so there only distributions hold: ``--no-jit`` runs COMMIT (default: this working tree)
 compiled and with ``BOMI_NO_JIT=1`` and compares, per operator over all its episodes, the success
 rate (Fisher's exact test) and the completion time of the successful episodes (Mann-Whitney U),
-both two-sided at the 5 % level, with benchmarks/physics_outcomes.py's ``compare``; it writes
+both two-sided at the 5 % level, with benchmarks/comparisons.py's ``compare``; it writes
 benchmarks/results/records_identity_no_jit.md and exits 1 if either test rejects.
 
-Bad input (not a git checkout, an unknown commit, a commit whose code does not import what the
-episodes need, --seeds outside 1-1000) is one ``bomi: error:`` line and exit 2, before any episode
-runs; an episode that fails later is one such line too.  Ctrl-C: "bomi: interrupted", exit 130.
+Bad input (not a git checkout, an unknown commit, a commit whose command line lacks `bomi
+benchmark --json`, --seeds outside 1-1000) is one ``bomi: error:`` line and exit 2, before any
+episode runs; a side whose run fails later is one such line too.  Ctrl-C: "bomi: interrupted", exit 130.
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
-import hashlib
 import json
 import os
 import platform
@@ -52,11 +58,6 @@ from importlib.metadata import version
 from pathlib import Path
 from typing import NamedTuple
 
-import numpy as np
-from tqdm import tqdm
-
-from bomi.errors import BomiError
-
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 TIMING_FIELDS = ("wall_time", "cpu_time", "realtime_factor", "realtime_factor_cpu")
@@ -67,56 +68,8 @@ ALPHA = 0.05  # the --no-jit tests' level (two-sided)
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
-class Episode(NamedTuple):
-    participant: str
-    operator: str
-    seed: int
-
-    def __str__(self) -> str:
-        return f"{self.participant} {self.operator} seed {self.seed}"
-
-
-def episodes(seeds: int) -> list[Episode]:
-    return [Episode(p, op, s) for p in PARTICIPANTS for op in OPERATORS for s in range(seeds)]
-
-
-# ------------------------------------------------------------------ in the subprocess of one tree
-def log_digest(log) -> str:
-    """SHA-256 over every array and sequence the episode logged, in a fixed order."""
-    digest = hashlib.sha256()
-    parts = [log.t, log.hand_pos, log.intended_dir, log.cube_pos, log.touching, log.target_pos, log.pushing,
-             np.array(log.mode), np.array(log.goals), np.array(log.stages)]
-    if log.decisions is not None:
-        d = log.decisions
-        parts += [d.t, d.intended, d.decided, d.gamma, d.nu]
-    for part in parts:
-        array = np.ascontiguousarray(part)
-        digest.update(str(array.dtype).encode() + str(array.shape).encode() + array.tobytes())
-    return digest.hexdigest()
-
-
-def worker(seeds: int, check_only: bool) -> int:
-    """Run the episodes with the code of the current directory; one JSON line each on stdout."""
-    out = os.fdopen(os.dup(1), "w", buffering=1)
-    os.dup2(2, 1)  # whatever the episode code prints goes to stderr, not into the records
-    import bomi
-    import sim
-    import tasks
-    from tasks.cli.task import EpisodeJob, run_job
-    from tasks.stacking.episode import summarize
-
-    here = Path.cwd().resolve()
-    for module in (bomi, sim, tasks):
-        if here not in Path(module.__file__).resolve().parents:
-            print(f"{module.__name__} imported from {module.__file__}, not from {here}", file=sys.stderr)
-            return 3
-    if check_only:
-        return 0
-    for episode in episodes(seeds):
-        log = run_job(EpisodeJob(episode.operator, episode.participant, episode.seed))
-        summary = {k: v for k, v in summarize(log).items() if k not in TIMING_FIELDS}
-        out.write(json.dumps({"episode": str(episode), "record": summary | {"log_sha256": log_digest(log)}}) + "\n")
-    return 0
+class Failed(Exception):
+    """Bad input or a side that cannot run: one ``bomi: error:`` line."""
 
 
 # ------------------------------------------------------------------------------ the two trees
@@ -128,28 +81,31 @@ class Side(NamedTuple):
     path: Path
     env: tuple[tuple[str, str], ...] = ()
 
+    def environment(self) -> dict[str, str]:
+        return os.environ | ONE_THREAD | dict(self.env) | {"PYTHONPATH": str(self.path)}
+
 
 def git(*args: str) -> str:
     done = subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
     if done.returncode != 0:
-        raise BomiError(done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"git {args[0]} failed")
+        raise Failed(done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"git {args[0]} failed")
     return done.stdout.strip()
 
 
 def check_git_checkout() -> None:
     try:
         git("rev-parse", "--show-toplevel")
-    except (BomiError, FileNotFoundError) as exc:
-        raise BomiError(f"{ROOT}: not a git checkout (records_identity checks commits out with git "
-                        f"worktree): {exc}") from None
+    except (Failed, FileNotFoundError) as exc:
+        raise Failed(f"{ROOT}: not a git checkout (records_identity checks commits out with git "
+                     f"worktree): {exc}") from None
 
 
 def resolve(name: str, what: str) -> str:
     """The full hash of commit ``name``."""
     try:
         return git("rev-parse", "--verify", "--quiet", f"{name}^{{commit}}")
-    except BomiError:
-        raise BomiError(f"{what}: {name!r} is not a commit of {ROOT}") from None
+    except Failed:
+        raise Failed(f"{what}: {name!r} is not a commit of {ROOT}") from None
 
 
 def describe(sha: str) -> str:
@@ -174,50 +130,48 @@ def checked_out(name: str, sha: str) -> Iterator[Side]:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(path)], capture_output=True)
 
 
-def worker_command(side: Side, seeds: int, check_only: bool) -> tuple[list[str], dict[str, str]]:
-    env = os.environ | ONE_THREAD | dict(side.env) | {"PYTHONPATH": str(side.path)}
-    command = [sys.executable, str(Path(__file__).resolve()), "--worker", "--seeds", str(seeds)]
-    return command + (["--check"] if check_only else []), env
+def benchmark_command(seeds: int, out: Path) -> list[str]:
+    return [sys.executable, "-m", "tasks.cli", "benchmark", "--participants", ",".join(PARTICIPANTS),
+            "--operators", ",".join(OPERATORS), "--seeds", str(seeds), "--first-seed", "0", "--jobs", "1",
+            "--json", str(out)]
 
 
-def check_side(side: Side, seeds: int) -> None:
-    """The side's code imports from its tree and has what the episodes need (before any episode)."""
-    command, env = worker_command(side, seeds, check_only=True)
-    done = subprocess.run(command, env=env, cwd=side.path, capture_output=True, text=True)
-    if done.returncode != 0:
-        last = done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}"
-        raise BomiError(f"{side.label}: its code cannot run these episodes: {last}")
+def check_side(side: Side) -> None:
+    """The side's packages import from its tree, and its `bomi benchmark` has the options used (before any episode)."""
+    where = subprocess.run([sys.executable, "-c", "import bomi, sim, tasks; print(bomi.__file__, sim.__file__, "
+                            "tasks.__file__)"], env=side.environment(), cwd=side.path, capture_output=True, text=True)
+    tree = side.path.resolve()
+    if where.returncode != 0 or not all(tree in Path(f).resolve().parents for f in where.stdout.split()):
+        raise Failed(f"{side.label}: its packages do not import from {tree}: {where.stdout.strip() or where.stderr}")
+    usage = subprocess.run([sys.executable, "-m", "tasks.cli", "benchmark", "--help"], env=side.environment(),
+                           cwd=side.path, capture_output=True, text=True).stdout
+    missing = [o for o in benchmark_command(1, Path("x"))[4:] if o.startswith("--") and o not in usage]
+    if missing:
+        raise Failed(f"{side.label}: its `bomi benchmark` lacks {', '.join(missing)}")
 
 
-def run_side(side: Side, seeds: int, bar: tqdm) -> dict[str, dict]:
-    """The records of one side, episode by episode, from its subprocess."""
-    command, env = worker_command(side, seeds, check_only=False)
-    records = {}
-    with tempfile.TemporaryFile("w+") as errors:
-        proc = subprocess.Popen(command, env=env, cwd=side.path, stdout=subprocess.PIPE, stderr=errors, text=True)
-        try:
-            for line in proc.stdout:
-                item = json.loads(line)
-                records[item["episode"]] = item["record"]
-                bar.set_postfix_str(f"{side.name}: {item['episode']}")
-                bar.update()
-            proc.wait()
-        except BaseException:
-            proc.kill()
-            proc.wait()
-            raise
-        if proc.returncode != 0:
-            errors.seek(0)
-            raise BomiError(f"{side.label}: an episode failed (exit {proc.returncode}): "
-                            f"{(errors.read().strip().splitlines() or [''])[-1]}")
-    return records
+def episode_key(record: dict) -> str:
+    return f"{record['participant']} {record['operator']} seed {record['seed']}"
 
 
-def run_sides(sides: list[Side], seeds: int) -> list[dict[str, dict]]:
-    for side in sides:
-        check_side(side, seeds)
-    with tqdm(total=len(sides) * len(episodes(seeds)), desc="episodes", unit="episode", file=sys.stderr) as bar:
-        return [run_side(side, seeds, bar) for side in sides]
+def stored_records(episodes: list[dict]) -> dict[str, dict]:
+    """The records of a `bomi benchmark --json` file by episode, without their timing fields."""
+    return {episode_key(r): {k: v for k, v in r.items() if k not in TIMING_FIELDS} for r in episodes}
+
+
+def run_side(side: Side, seeds: int) -> dict[str, dict]:
+    """The records of one side, from its own `bomi benchmark` run."""
+    with tempfile.TemporaryDirectory(prefix="records_identity_out_") as tmp:
+        out = Path(tmp) / "benchmark.json"
+        print(f"{side.name}: {' '.join(benchmark_command(seeds, out)[1:])} in {side.path}", file=sys.stderr)
+        with tempfile.TemporaryFile("w+") as errors:
+            done = subprocess.run(benchmark_command(seeds, out), env=side.environment(), cwd=side.path,
+                                  stdout=subprocess.DEVNULL, stderr=errors, text=True)
+            if done.returncode != 0 or not out.exists():
+                errors.seek(0)
+                last = [line for line in errors.read().splitlines() if line.strip()]
+                raise Failed(f"{side.label}: its benchmark failed (exit {done.returncode}): {(last or [''])[-1]}")
+        return stored_records(json.loads(out.read_text())["episodes"])
 
 
 # -------------------------------------------------------------------------------- comparing
@@ -246,6 +200,7 @@ def same_episode(key: str, records: list[dict[str, dict]]) -> bool:
 
 def machine() -> str:
     """The CPU and the run-time code paths that decide the last bits: libm, numpy SIMD, BLAS kernel."""
+    import numpy as np
     from numpy._core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
     from threadpoolctl import threadpool_info
 
@@ -254,14 +209,12 @@ def machine() -> str:
         cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                    if line.startswith("model name"))
     found = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
-    missing = [f for f in __cpu_dispatch__ if not __cpu_features__.get(f)]
     flags = ", ".join(f"{f} {'yes' if __cpu_features__.get(f) else 'no'}" for f in ("FMA3", "AVX2", "AVX512F"))
     blas = "; ".join(f"{lib['internal_api']} {lib['version']} (kernel {lib.get('architecture', '?')})"
                      for lib in threadpool_info() if lib["user_api"] == "blas")
-    libc = " ".join(platform.libc_ver()) or "?"
     return (f"{cpu} ({platform.machine()}, {os.cpu_count()} CPUs), {platform.system()} {platform.release()}, "
-            f"libc {libc}; numpy {np.__version__} SIMD baseline {' '.join(__cpu_baseline__)}, dispatch found "
-            f"{' '.join(found) or 'none'}, not found {' '.join(missing) or 'none'} ({flags}); BLAS {blas}; "
+            f"libc {' '.join(platform.libc_ver()) or '?'}; numpy {np.__version__} SIMD baseline "
+            f"{' '.join(__cpu_baseline__)}, dispatch found {' '.join(found) or 'none'} ({flags}); BLAS {blas}; "
             f"numba {version('numba')}, mujoco {version('mujoco')}, Python {platform.python_version()}")
 
 
@@ -278,10 +231,10 @@ def episode_table(sides: list[Side], records: list[dict[str, dict]]) -> list[str
     return lines
 
 
-def scope(seeds: int) -> str:
-    return (f"{len(episodes(seeds))} episodes a side: {', '.join(PARTICIPANTS)}, joystick and BoMI, task seeds "
-            f"0-{seeds - 1}; every field of each record but the four timing ones, and a SHA-256 of every logged "
-            f"array.")
+def scope(records: dict[str, dict], seeds: int) -> str:
+    return (f"{len(records)} episodes a side: {', '.join(PARTICIPANTS)} on the BoMI, the joystick once per set of "
+            f"controls, task seeds 0-{seeds - 1}, each side through its own `bomi benchmark`; every stored field "
+            f"of each record but the timing ones ({', '.join(TIMING_FIELDS)}).")
 
 
 def identity_report(sides: list[Side], records: list[dict[str, dict]], seeds: int, command: str,
@@ -290,7 +243,7 @@ def identity_report(sides: list[Side], records: list[dict[str, dict]], seeds: in
     text = "\n".join([
         "# Records of two commits, run on one machine", "", f"`{command}` ({minutes:.1f} min)", "",
         f"- before: {sides[0].label}", f"- after: {sides[1].label}", f"- machine: {machine()}",
-        f"- {scope(seeds)}", "",
+        f"- {scope(records[0], seeds)}", "",
         f"**Identical: {'yes' if not diff else 'NO'}** ({len(diff)} differing fields).", "",
         *(f"- {d}" for d in diff), *([""] if diff else []),
         *episode_table(sides, records), "",
@@ -301,7 +254,7 @@ def identity_report(sides: list[Side], records: list[dict[str, dict]], seeds: in
 
 def no_jit_report(sides: list[Side], records: list[dict[str, dict]], seeds: int, command: str,
                   minutes: float) -> tuple[str, bool]:
-    from physics_outcomes import compare  # beside this script; imports scipy and matplotlib
+    from comparisons import compare  # beside this script; imports scipy
 
     rows, held = [], True
     for operator in OPERATORS:
@@ -320,10 +273,10 @@ def no_jit_report(sides: list[Side], records: list[dict[str, dict]], seeds: int,
     same = sum(same_episode(key, records) for key in records[0])
     text = "\n".join([
         "# Compiled kernels against BOMI_NO_JIT=1, as distributions", "", f"`{command}` ({minutes:.1f} min)", "",
-        f"- code: {sides[0].label}", f"- machine: {machine()}", f"- {scope(seeds)}", "",
+        f"- code: {sides[0].label}", f"- machine: {machine()}", f"- {scope(records[0], seeds)}", "",
         f"Per operator over its episodes (participants pooled, paired by participant and seed): success rate by "
         f"Fisher's exact test, completion time of the successful episodes by Mann-Whitney U, both two-sided at "
-        f"the {ALPHA:.0%} level (benchmarks/physics_outcomes.py's `compare`). Bit-identical episodes: "
+        f"the {ALPHA:.0%} level (benchmarks/comparisons.py's `compare`). Bit-identical episodes: "
         f"{same} of {len(records[0])} (not required: the two forms round in another order).", "",
         "| operator | episodes | successes (compiled / no JIT) | Fisher p | completion time median s | "
         "Mann-Whitney p | verdict |", "|---|---|---|---|---|---|---|", *rows, "",
@@ -337,17 +290,15 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("commits", nargs="*", metavar="COMMIT",
                         help="BEFORE [AFTER] (AFTER: this working tree); with --no-jit, [COMMIT]")
-    parser.add_argument("--seeds", type=int, default=2, help="task seeds 0..N-1 per cell (default 2; at most 1000)")
+    parser.add_argument("--seeds", type=int, default=5, help="task seeds 0..N-1 per cell (default 5; at most 1000)")
     parser.add_argument("--no-jit", action="store_true",
                         help="compare compiled and BOMI_NO_JIT=1 episodes of one commit, as distributions")
-    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--check", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if not 1 <= args.seeds <= DEVELOPMENT_SEEDS:
-        raise BomiError(f"--seeds: {args.seeds}: give 1-{DEVELOPMENT_SEEDS} (development task seeds 0-999)")
-    if not args.worker and not (0 if args.no_jit else 1) <= len(args.commits) <= (1 if args.no_jit else 2):
-        raise BomiError(f"COMMIT: {' '.join(args.commits) or 'none'}: give "
-                        f"{'at most one commit with --no-jit' if args.no_jit else 'BEFORE [AFTER]'}")
+        raise Failed(f"--seeds: {args.seeds}: give 1-{DEVELOPMENT_SEEDS} (development task seeds 0-999)")
+    if not (0 if args.no_jit else 1) <= len(args.commits) <= (1 if args.no_jit else 2):
+        raise Failed(f"COMMIT: {' '.join(args.commits) or 'none'}: give "
+                     f"{'at most one commit with --no-jit' if args.no_jit else 'BEFORE [AFTER]'}")
     return args
 
 
@@ -365,7 +316,9 @@ def compare_commits(args: argparse.Namespace, command: str) -> int:
                                                                    (("BOMI_NO_JIT", "1"),))]
         else:
             sides = trees if len(trees) == 2 else [trees[0], working_tree()]
-        records = run_sides(sides, args.seeds)
+        for side in sides:
+            check_side(side)
+        records = [run_side(side, args.seeds) for side in sides]
     report = no_jit_report if args.no_jit else identity_report
     text, held = report(sides, records, args.seeds, command, (time.monotonic() - start) / 60)
     RESULTS.mkdir(exist_ok=True)
@@ -377,11 +330,8 @@ def compare_commits(args: argparse.Namespace, command: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     command = "python benchmarks/records_identity.py " + " ".join(sys.argv[1:] if argv is None else argv)
     try:
-        args = parse(argv)
-        if args.worker:
-            return worker(args.seeds, args.check)
-        return compare_commits(args, command)
-    except BomiError as exc:
+        return compare_commits(parse(argv), command)
+    except Failed as exc:
         print(f"bomi: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # the worktrees are removed by then

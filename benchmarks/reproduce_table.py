@@ -1,4 +1,7 @@
-"""The paper's "reliability over days" table beside ours (same code as `bomi reproduce`).
+"""The paper's "reliability over days" table beside ours (same code as `bomi reproduce`): the README's
+rows "day-1 model on real P1 days 2, 3, 4, 5" and "every ordered pair of the five real days".
+
+    python benchmarks/reproduce_table.py [--data DIR]
 
 Writes benchmarks/results/reproduce.md, reproduce.json, reproduce.png (the day-1 model) and
 reproduce_day_pairs.png (the 5 x 5 day-pair matrices). Every setting is chosen on the training day alone
@@ -6,6 +9,7 @@ reproduce_day_pairs.png (the 5 x 5 day-pair matrices). Every setting is chosen o
 """
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -74,7 +78,10 @@ def save_day_pairs_figure(record: dict, path: Path) -> None:
 
 
 def main() -> None:
-    profile, recordings = load_profile("P1"), read_days(data_dir())
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, help="dataset directory (default: BOMI_DATA_DIR or ../shared/data/...)")
+    args = parser.parse_args()
+    profile, recordings = load_profile("P1"), read_days(args.data or data_dir())
     record = reproduction_record(reproduce(recordings, profile), day_pairs(recordings, profile))
     table = reproduction_markdown(record)
     RESULTS.mkdir(exist_ok=True)

@@ -26,7 +26,6 @@ from tqdm import tqdm
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from derived_default_task import people_range  # noqa: E402  (this folder)
 
 from bomi.chain import evaluate, rest_offset_scores, train  # noqa: E402
 from bomi.dataset import data_dir  # noqa: E402
@@ -36,6 +35,14 @@ from bomi.reproduce import DAYS, read_days  # noqa: E402
 from tasks.participants.population import draw_person, pass_recordings  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
+
+
+def people_range(text: str) -> list[int]:
+    """'400-417' or '400,403' -> the population seeds."""
+    if "-" in text:
+        first, last = (int(part) for part in text.split("-"))
+        return list(range(first, last + 1))
+    return [int(part) for part in text.split(",")]
 
 
 def people_report(people: list[int], argv: list[str]) -> str:

@@ -5,7 +5,7 @@
 
 The knobs are the documented settings of ``tasks/operators/operator.toml`` ([learning], [planner]), of
 ``tasks/participants/P1.toml`` ([feel]) and the majority vote (``vote_length``, whose default is
-``tasks.cli.task.DEFAULT_VOTE``).  Seeds 0-999 are for development; the reported table uses a
+``tasks.experiments.jobs.DEFAULT_VOTE``).  Seeds 0-999 are for development; the reported table uses a
 held-out range distinct from the headline's (2000-2009), run once the knobs are frozen.  Writes
 benchmarks/results/sensitivity.md and .json.
 """
@@ -16,8 +16,9 @@ import json
 import tomllib
 from pathlib import Path
 
-from tasks.cli.engine import ProcessPool
-from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, aggregate, run_many
+from tasks.experiments.engine import ProcessPool
+from tasks.experiments.jobs import DEFAULT_VOTE, EpisodeJob, run_many
+from tasks.experiments.summary import aggregate
 from bomi.errors import BomiError
 from tasks.participants.participant import PARTICIPANT_DIR, load_participant
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator

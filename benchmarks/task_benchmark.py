@@ -23,9 +23,11 @@ from bomi import paper
 from bomi.chain import OnlineChain
 from bomi.classifier import PostProcessing
 from bomi.frames import FrameParser, imu_index
-from tasks.cli.engine import ProcessPool
-from tasks.cli.figures import accuracy_allowance_figure, completion_time_figure
-from tasks.cli.task import DEFAULT_VOTE, JOYSTICK_ANYONE, EpisodeJob, aggregate, benchmark_jobs, comparison, markdown_tables, run_job, run_many
+from tasks.experiments.engine import ProcessPool
+from tasks.experiments.figures import accuracy_allowance_figure, completion_time_figure
+from tasks.experiments.jobs import DEFAULT_VOTE, JOYSTICK_ANYONE, EpisodeJob, benchmark_jobs, run_job, run_many
+from tasks.experiments.summary import aggregate, comparison
+from tasks.experiments.tables import markdown_tables
 from tasks.stacking.episode import calibrated_channel, summarize
 from tasks.participants.participant import VirtualParticipant, load_participant
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE

@@ -15,7 +15,7 @@ from tasks.operators.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, Lea
                           step_of_move, time_to_goal)
 from tasks.cli import main
 from tasks.stacking.episode import JoystickChannel, run_episode, summarize
-from tasks.operators.planner import Goal, StickIntent, View
+from tasks.operators.planner import View
 
 CUBE = 0.05
 A1, A2 = np.array([-0.14, -0.51, CUBE / 2]), np.array([-0.14, -0.39, CUBE / 2])
@@ -650,19 +650,6 @@ def test_the_assist_benchmark_merges_under_a_name_and_averages_the_refusals(tmp_
     monkeypatch.setattr(sys, "argv", ["assist_benchmark.py", "--name", "../elsewhere", "--figure-only"])
     with pytest.raises(SystemExit):
         bench.main()
-
-
-def test_the_switch_ceiling_makes_the_users_presses_free_switches_of_the_arm():
-    ceiling = benchmark_script("switch_ceiling")
-    arm = FakeArm(Mode.TRANSLATION)
-    free = ceiling.FreeSwitches(JoystickChannel(), arm)
-    # a press meant to reach the height mode: the arm is put there, the stick sees the person at rest
-    out = free.command(StickIntent(button="B1", goal=Goal("reach cube 1", mode=Mode.HEIGHT)), 0.0, 1 / 60)
-    assert arm.switched == [Mode.HEIGHT] and out == JoystickState() and free.free_switches == 1
-    # held on while the arm is there already: nothing more; a move passes untouched
-    free.command(StickIntent(button="B1", goal=Goal("reach cube 1", mode=Mode.HEIGHT)), 1 / 60, 2 / 60)
-    moved = free.command(StickIntent({"F": 0.4}), 2 / 60, 3 / 60)
-    assert arm.switched == [Mode.HEIGHT] and free.free_switches == 1 and moved == JoystickState({"F": 0.4})
 
 
 def test_a_user_who_leaves_the_height_mode_to_travel_low_where_a_rise_was_expected_is_not_kept_there_again():

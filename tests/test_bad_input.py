@@ -1,7 +1,7 @@
 """Bad input, class by class (issue 10): every case is exit 2 with exactly one stderr line
 ``bomi: error: ...`` naming the file or option, no traceback, every file in the directory unchanged
 byte for byte and no temporary file left behind. How long each takes, and a larger corpus made
-outside the repository: benchmarks/bad_input_corpus.py.
+outside the repository: `python benchmarks/faults.py bad-input`.
 
 Each case runs in a directory holding a tiny P1 recording (950 rows of day 1: classes 0, 2, 4),
 a model trained on the whole of day 1 (a P1 model needs every class of the profile, issue 26), and

@@ -189,15 +189,15 @@ def test_demo_writes_its_figure_film_and_record_and_replaces_only_its_own_direct
     episodes stop unfinished, everything is still written); run again it replaces demo_out (the second
     run's episodes are the first run's logs: what is tested is the replacing, not the simulation);
     demo_out named with --out is refused without --force."""
-    import tasks.cli.task as task_cli
+    import tasks.experiments.demo as demo
 
     monkeypatch.chdir(tmp_path)
-    logs, simulate = {}, task_cli.run_job
+    logs, simulate = {}, demo.run_job
 
     def kept(job, **options):
         logs[job.operator] = simulate(job, **options)
         return logs[job.operator]
-    monkeypatch.setattr(task_cli, "run_job", kept)
+    monkeypatch.setattr(demo, "run_job", kept)
     assert main(["demo", "--time-limit", "3"]) == 0
     out = tmp_path / "demo_out"
     assert (out / "timeline.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -212,7 +212,7 @@ def test_demo_writes_its_figure_film_and_record_and_replaces_only_its_own_direct
         if video is not None:
             Path(video).write_bytes(film)
         return logs[job.operator]
-    monkeypatch.setattr(task_cli, "run_job", replayed)
+    monkeypatch.setattr(demo, "run_job", replayed)
     (out / "demo.json").write_text("stale")
     assert main(["demo", "--time-limit", "3"]) == 0
     assert json.loads((out / "demo.json").read_text())["episodes"]
@@ -237,7 +237,7 @@ def test_a_confusion_matrix_is_coloured_by_the_share_of_its_row_and_names_the_cl
     """Neutral's thousands of windows must not hide a rare class's errors: 271 of 294 c8 windows
     called neutral read 92 %, as dark as a perfect neutral row's 100 % nearly."""
     import numpy as np
-    from tasks.cli.figures import confusion_figure
+    from tasks.experiments.figures import confusion_figure
     counts = np.array([[8232, 0, 0], [7, 1753, 4], [271, 0, 23]])
     names = ["c0 neutral posture", "c7 B1: right shoulder", "c8 B2: left shoulder"]
     fig = _drawn(monkeypatch, lambda: confusion_figure(tmp_path / "c.png", [("day3", counts)], names))

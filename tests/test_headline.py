@@ -5,7 +5,7 @@ is a development seed (0-999); the reported figures come from held-out seeds (RE
 import pytest
 
 from bomi import paper
-from tasks.cli.task import DEFAULT_VOTE, EpisodeJob, run_job
+from tasks.experiments.jobs import DEFAULT_VOTE, EpisodeJob, run_job
 from tasks.stacking.episode import summarize
 
 DEV_SEED = 0

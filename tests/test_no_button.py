@@ -9,7 +9,7 @@ from bomi.derived import derive_profile
 from bomi.errors import BomiError
 from sim.joystick import ONE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks.operators.assist import Assist, Assistance, load_assist, presses
-from tasks.cli.task import EpisodeJob, job_assist
+from tasks.experiments.jobs import EpisodeJob, job_assist
 from tasks.stacking.episode import JoystickChannel, process_arm, profile_controls, run_episode
 from tasks.operators.planner import Controls, ScriptedUser
 from tasks.stacking.task import TaskConfig

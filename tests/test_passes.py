@@ -17,8 +17,8 @@ from bomi.passes import (PassBounds, cut, in_sample_share, join, pass_bounds, pa
                          training_digests)
 from bomi.recording import NodeData, Recording, read_recording, write_logger_mat, write_recording
 from tasks.cli import main
-from tasks.cli.chain import most_confused
-from tasks.cli.twin import self_check
+from tasks.experiments.training import most_confused
+from tasks.experiments.twins import self_check
 from tasks.stacking.episode import profile_controls
 from tasks.participants.participant import load_participant
 from tasks.participants.population import PASS_GAP_S, draw_person, pass_recordings

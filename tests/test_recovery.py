@@ -9,7 +9,10 @@ import pytest
 
 from bomi.errors import BomiError
 from sim.joystick import JoystickState, Mode
-from tasks.cli.task import EpisodeJob, aggregate, comparison, recovery_option, run_job, terminal_table
+from tasks.experiments.jobs import EpisodeJob, run_job
+from tasks.experiments.summary import aggregate, comparison
+from tasks.cli.task import recovery_option
+from tasks.experiments.tables import terminal_table
 from tasks.stacking.episode import summarize
 from tasks.stacking.failures import mechanism_rows
 from tasks.operators.params import RecoveryParams, load_operator

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from helpers import benchmark_script
-from tasks.cli.task import EpisodeJob, run_job
+from tasks.experiments.jobs import EpisodeJob, run_job
 
 TIMING = {"wall_time", "cpu_time"}  # the only fields allowed to differ between two runs
 

@@ -410,7 +410,7 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
 
 
 def test_rows_read_in_a_bunch_are_timed_back_one_sample_period_apart():
-    from tasks.cli.stream import sample_times
+    from tasks.experiments.streams import sample_times
 
     period = 1 / 62.5
     np.testing.assert_allclose(sample_times(1.0, 3, 0.5), [1.0 - 2 * period, 1.0 - period, 1.0])
@@ -427,14 +427,14 @@ def test_recording_clock_starts_at_the_first_read_and_never_runs_ahead_of_it():
     labelled with the next prompt)."""
     from tqdm import tqdm
 
-    from tasks.cli.stream import _timed_rows
+    from tasks.experiments.streams import timed_rows
 
     def frames(n, first):
         return [ImuFrame(10, 16, (first + k) % 256, (0, 0, 0), (0, 0, 0), (0, 0, 1000)) for k in range(n)]
 
     batches = [(0.5, frames(40, 0)), (0.52, frames(1, 40)), (1.5, frames(10, 41))]  # a backlog, then a stall
     source = SimpleNamespace(parser=FrameParser(), url="test")
-    timed = list(_timed_rows(iter(batches), RowAssembler((10,)), source, tqdm(disable=True)))
+    timed = list(timed_rows(iter(batches), RowAssembler((10,)), source, tqdm(disable=True)))
     times = [t for t, _ in timed]
     period = 1 / 62.5
     assert times[:40] == [0.5] * 40  # what waited in the port's buffer belongs to the first prompt

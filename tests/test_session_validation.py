@@ -234,7 +234,7 @@ def _grid(directory: Path, participant: str) -> Path:
 
 
 def test_a_sweep_key_follows_the_twin_s_content_not_its_path(tmp_path, monkeypatch):
-    from tasks.cli.sweep import cells, job_key, load_grid
+    from tasks.experiments.sweep import cells, job_key, load_grid
     from tasks.participants.participant import PARTICIPANT_DIR
     twin = tmp_path / "g" / "twin.toml"
     grid = _grid(tmp_path / "g", "twin.toml")
@@ -256,7 +256,7 @@ def test_a_sweep_key_follows_the_twin_s_content_not_its_path(tmp_path, monkeypat
 
 
 def test_a_grid_participant_is_a_shipped_name_or_a_toml_file_beside_the_grid(tmp_path):
-    from tasks.cli.sweep import load_grid
+    from tasks.experiments.sweep import load_grid
     with pytest.raises(BomiError, match="'../../../tmp/x' is neither a shipped participant"):
         load_grid(_grid(tmp_path, "../../../tmp/x"))
     assert load_grid(_grid(tmp_path, "t.toml")).participants == (str(tmp_path / "t.toml"),)
@@ -265,16 +265,17 @@ def test_a_grid_participant_is_a_shipped_name_or_a_toml_file_beside_the_grid(tmp
 def test_jobs_beyond_the_cpus_are_refused(monkeypatch):
     import argparse
 
-    from tasks.cli import engine
+    from tasks.cli.engine import engine_from_args
+    from tasks.experiments import engine
     monkeypatch.setattr(engine, "MAX_JOBS", 2)
     args = argparse.Namespace(jobs=3, engine="local", address=None)
     with pytest.raises(BomiError, match="--jobs 3: at most 2"):
-        engine.engine_from_args(args)
-    assert engine.engine_from_args(argparse.Namespace(jobs=2, engine="local", address=None)).workers == 2
+        engine_from_args(args)
+    assert engine_from_args(argparse.Namespace(jobs=2, engine="local", address=None)).workers == 2
 
 
 def test_a_ray_address_nobody_answers_is_one_line_at_once():
-    from tasks.cli.engine import check_ray_address
+    from tasks.experiments.engine import check_ray_address
     with socket.socket() as s:  # a port bound but not listening: refused at once
         s.bind(("127.0.0.1", 0))
         address = f"127.0.0.1:{s.getsockname()[1]}"
@@ -288,35 +289,6 @@ def test_a_ray_address_nobody_answers_is_one_line_at_once():
         check_ray_address(f"ray://127.0.0.1:{s.getsockname()[1]}")
 
 
-class FakeRay:
-    """What RayCluster asks of ray, recorded: no Ray is started."""
-
-    class exceptions:
-        RayError = RuntimeError
-
-    def __init__(self):
-        self.init_kwargs = None
-
-    def is_initialized(self):
-        return False
-
-    def init(self, **kwargs):
-        self.init_kwargs = kwargs
-        raise ConnectionError("stop here")
-
-    def shutdown(self):
-        pass
-
-
-def test_a_local_ray_binds_its_node_to_the_loopback(monkeypatch):
-    from tasks.cli import engine
-    fake = FakeRay()
-    monkeypatch.setattr(engine, "import_ray", lambda: fake)
-    with pytest.raises(BomiError, match="--engine ray: Ray did not start \\(stop here\\)"):
-        list(engine.RayCluster(None, 2).run(str, ["a"]))
-    assert fake.init_kwargs["_node_ip_address"] == "127.0.0.1" and fake.init_kwargs["num_cpus"] == 2
-
-
 def _sigterm_handler(_):
     return signal.getsignal(signal.SIGTERM) == signal.SIG_DFL and signal.getsignal(signal.SIGHUP) == signal.SIG_DFL
 
@@ -324,7 +296,7 @@ def _sigterm_handler(_):
 def test_pool_workers_do_not_inherit_the_driver_s_sigterm_handler():
     """A driver that turns SIGTERM into KeyboardInterrupt (a sweep) must not have its workers print
     that traceback when it stops them (the full-disk case)."""
-    from tasks.cli.engine import ProcessPool
-    from tasks.cli.sweep import signals_interrupt
+    from tasks.experiments.engine import ProcessPool
+    from tasks.experiments.sweep import signals_interrupt
     with signals_interrupt():
         assert os.getpid() and dict(ProcessPool(1).run(_sigterm_handler, [0])) == {0: True}

@@ -15,10 +15,10 @@ import pytest
 
 from bomi.files import TEMP_MARK
 from tasks.cli import main
-from tasks.cli.engine import ProcessPool
-from tasks.cli.sweep import (FIGURE_METRICS, LOCK_FILE, RESULTS_FILE, cells, job_key, load_grid, read_results,
-                             run_sweep)
-from tasks.cli.task import aggregate
+from tasks.experiments.engine import ProcessPool
+from tasks.experiments.summary import aggregate
+from tasks.experiments.sweep import FIGURE_METRICS, LOCK_FILE, cells, job_key, load_grid, run_sweep
+from tasks.experiments.sweep_records import RESULTS_FILE, read_results
 from tasks.participants.participant import PARTICIPANT_DIR
 
 SHORT = 2.0  # s of simulated time: a joystick episode that short costs well under a second
@@ -412,7 +412,7 @@ def test_summary_is_the_benchmark_aggregation_per_cell_with_figures(tmp_path):
 def test_the_sweep_figure_has_units_and_a_log_axis_for_thresholds(tmp_path):
     """A threshold's 0.9, 0.99, 0.999 are evenly spaced (log of 1 - threshold), the axes say what
     and in which unit; no error bar for fewer than 5 episodes."""
-    from tasks.cli.figures import metric_figure
+    from tasks.experiments.figures import metric_figure
     import matplotlib.pyplot as plt
     captured = {}
     real_savefig = plt.Figure.savefig

@@ -12,7 +12,8 @@ from bomi.profiles import PROFILE_DIR, load_profile
 from helpers import assert_agree, edited_copy
 from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
-from tasks.cli.task import aggregate, benchmark_jobs, comparison
+from tasks.experiments.summary import aggregate, comparison
+from tasks.experiments.jobs import benchmark_jobs
 from tasks.stacking.episode import JoystickChannel, calibrated_channel, process_arm, profile_controls, run_episode, summarize
 from tasks.operators.planner import Controls
 from tasks.stacking.task import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses

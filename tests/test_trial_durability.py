@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from tasks.cli import main
-from tasks.cli.options import MAX_SEED
+from tasks.experiments.limits import MAX_SEED
 
 
 def trial_args(model: Path, out: Path, trials: int = 2) -> list[str]:

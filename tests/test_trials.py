@@ -226,7 +226,7 @@ def test_the_joystick_stand_in_does_what_the_simulated_episode_of_its_seed_does(
     """An independent path to the same trial: `bomi run-task`'s episode (tasks.stacking.episode.run_episode)
     with the trial's seed moves the hand exactly as the trial did; only the clock differs (the trial
     is timed from the first command, the episode from its start)."""
-    from tasks.cli.task import EpisodeJob, run_job
+    from tasks.experiments.jobs import EpisodeJob, run_job
     episode = run_job(EpisodeJob("joystick", "P1", 12, 30.0))
     record = _records(joystick_dir)[0]
     with h5py.File(joystick_dir / "joystick.h5") as f:

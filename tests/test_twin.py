@@ -227,7 +227,7 @@ def test_holds_too_short_to_measure_fall_back_and_say_so(tmp_path, known_p4, cap
 
 
 def test_a_sweep_grid_names_a_twin_relative_to_itself(tmp_path, shared_data, capsys):
-    from tasks.cli.sweep import cells, check_cells, load_grid
+    from tasks.experiments.sweep import cells, check_cells, load_grid
 
     (tmp_path / "grids").mkdir()
     assert bomi(capsys, "twin", shared_data / "day3_testp.mat", "--profile", "P1", "--out",
@@ -287,13 +287,13 @@ def test_the_sway_gain_is_the_share_of_a_slow_wander_that_a_hold_shows():
     assert 0.7 < gains[1] < 0.8
 
 
-def _twin_validation():
-    """benchmarks/twin_validation.py as a module (benchmarks/ is not a package)."""
+def _comparisons():
+    """benchmarks/comparisons.py as a module (benchmarks/ is not a package)."""
     import importlib.util
     import sys
     from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "twin_validation.py"
-    spec = importlib.util.spec_from_file_location("twin_validation", path)
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "comparisons.py"
+    spec = importlib.util.spec_from_file_location("comparisons", path)
     module = sys.modules.setdefault(spec.name, importlib.util.module_from_spec(spec))
     spec.loader.exec_module(module)
     return module
@@ -302,7 +302,7 @@ def _twin_validation():
 def test_a_prediction_is_the_mean_over_disjoint_session_pairs_with_its_standard_error(tmp_path):
     import scipy.stats
     from tasks.participants.population import draw_person, pass_recordings
-    tv = _twin_validation()
+    tv = _comparisons()
     person = draw_person(304)                      # one node, three motions: quick sessions
     twin = tv.as_participant(twin_module.fit_twin([pass_recordings(person)[0]], person.profile,
                                                   load_participant("P1"), "t", person.profile.name), tmp_path)

@@ -235,6 +235,7 @@ def _run(argv: list[str]) -> int:
     except BrokenPipeError:
         raise
     except SystemError as exc:
+        from tasks.experiments.engine import is_interruption
         if not is_interruption(exc):
             return _internal_error(exc, args, argv)
         print("bomi: interrupted", file=sys.stderr)
@@ -245,13 +246,6 @@ def _run(argv: list[str]) -> int:
         return 2
     except Exception as exc:
         return _internal_error(exc, args, argv)
-
-
-def is_interruption(exc: BaseException) -> bool:
-    """A Ctrl-C (or SIGTERM/SIGHUP, which the long commands turn into one): a KeyboardInterrupt, or
-    the SystemError a compiled (numba) call returns when the KeyboardInterrupt is raised while it runs."""
-    return isinstance(exc, KeyboardInterrupt) or (isinstance(exc, SystemError)
-                                                  and isinstance(exc.__cause__, KeyboardInterrupt))
 
 
 def _internal_error(exc: Exception, args, argv: list[str]) -> int:

@@ -7,11 +7,9 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
-from bomi.chain import (Evaluation, Selection, check_training_data, evaluate, leave_one_pass_out, require_for,
-                        select_settings, train)
+from bomi.chain import Evaluation, evaluate, require_for
 from bomi.classifier import Model, PostProcessing
 from bomi.dataset import data_dir
 from bomi.derived import derive_profile, describe
@@ -20,21 +18,17 @@ from bomi.features import FEATURE_KINDS, FeatureSpec
 from bomi.files import atomic_output, check_input, write_text
 from bomi.fusion import NodeCalibration, fused_recording, mounting_warnings
 from bomi.model_io import SUFFIXES, check_model_for, load_model, save_model
-from bomi.passes import check_class_sets, in_sample_share, join, pass_bounds, passes_text, split_passes
-from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, SELECT, Profile, save_profile
-from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, read_recording, write_recording
+from bomi.passes import in_sample_share, join, pass_bounds, passes_text, split_passes
+from bomi.profiles import DEFAULT_NEUTRAL_SAMPLES, Profile, save_profile
+from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, write_recording
 from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
 from tasks.cli.options import add_force, check_outputs, open_unit_interval, positive_int
+from tasks.experiments.training import class_listing, fit_and_report, fit_model, read, read_all_passes, read_passes
 from tasks.operators.stick import arm_profile
 
 
 DEFAULT_CONFUSION = "confusion.png"  # evaluate's own output when --png names none
-# Below this cross-validated accuracy a classifier is flagged to the clinician: the paper's three
-# participants read 89-98 % offline (Table I), and at 85 % one window in seven is a wrong command.
-POOR_ACCURACY = 0.85
-CONFUSIONS_SHOWN = 3    # the most confused pairs of classes a warning names
-CONFUSION_FLOOR = 0.05  # ... each read as the other in at least this share of its windows
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -97,42 +91,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 # --------------------------------------------------------------------------------------- helpers
-def read(path: str | Path, verbose: bool) -> Recording:
-    """``read_recording``; with ``verbose``, what it holds and the variables the chain ignores."""
-    rec = read_recording(path)
-    if verbose:
-        print(rec.describe())
-        if rec.ignored:
-            print(f"{rec.source}: ignored {len(rec.ignored)} variable(s): {', '.join(rec.ignored)}")
-    return rec
-
-
-def read_passes(path: str | Path, verbose: bool) -> list[Recording]:
-    """The passes of the protocol in one labelled recording (bomi.passes), said when there are several;
-    a BomiError when they hold different classes."""
-    rec = read(path, verbose)
-    bounds = pass_bounds(rec)
-    if len(bounds) > 1:
-        print(passes_text(rec, bounds))
-    passes = split_passes(rec, bounds)
-    check_class_sets(passes)
-    return passes
-
-
-def read_all_passes(paths: Sequence[str | Path], verbose: bool) -> list[Recording]:
-    """Every pass of every recording, in order."""
-    return [p for path in paths for p in read_passes(path, verbose)]
-
 
 def _spec(profile: Profile, kind: str | None) -> FeatureSpec:
     return replace(profile.spec, kind=kind) if kind else profile.spec
-
-
-def class_listing(profile: Profile, labels: Sequence[int]) -> str:
-    """The classes a model knows, one per line, by label, joystick function and name."""
-    by_label = {cls.label: cls for cls in profile.classes}
-    return f"{len(labels)} classes:\n" + "\n".join(
-        f"  c{label} {by_label[label].function}: {by_label[label].name}" for label in labels)
 
 
 def confusion_text(evaluation: Evaluation, classes: Sequence[int]) -> str:
@@ -149,7 +110,7 @@ def save_confusion_figure(path: Path, evaluations: Sequence[Evaluation], classes
                           names: Sequence[str]) -> None:
     from sklearn.metrics import confusion_matrix
 
-    from tasks.cli.figures import confusion_figure
+    from tasks.experiments.figures import confusion_figure
     confusion_figure(path, [(f"{Path(ev.source).name}: accuracy {100 * ev.accuracy:.2f} % of {len(ev.truth):,} windows",
                              confusion_matrix(ev.truth, ev.predicted, labels=list(classes))) for ev in evaluations],
                      names)
@@ -170,72 +131,6 @@ def class_names(classes: Sequence[int], profile: Profile | None) -> list[str]:
 
 
 # -------------------------------------------------------------------------------------- commands
-def fit_model(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
-              allow_missing_classes: bool = False) -> Model:
-    """Train ``profile``'s model, first checking every recording (``check_training_data``: a class of
-    the profile without windows is an error unless ``allow_missing_classes``) and choosing (and
-    printing) what the profile leaves to the person's own data."""
-    return _fit(recordings, profile, spec, allow_missing_classes)[0]
-
-
-def _fit(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec,
-         allow_missing_classes: bool = False) -> tuple[Model, Selection | None]:
-    check_training_data(recordings, profile, spec, allow_missing_classes)
-    selection = None
-    if profile.shrinkage == SELECT or profile.select_rejection:
-        print("choosing the classifier settings on the training recording (cross-validation) ...", flush=True)
-        selection = select_settings(recordings, profile, spec)
-        print(selection.explain())
-    return train(recordings, profile, spec, selection=selection, allow_missing_classes=allow_missing_classes), selection
-
-
-def most_confused(truth: np.ndarray, decided: np.ndarray) -> list[tuple[int, int, float]]:
-    """(class, read as, share of the class's windows) of the CONFUSIONS_SHOWN largest confusions of at
-    least CONFUSION_FLOOR, largest first."""
-    pairs = []
-    for label in np.unique(truth):
-        mine = decided[truth == label]
-        for other, n in zip(*np.unique(mine[mine != label], return_counts=True)):
-            if n / len(mine) >= CONFUSION_FLOOR:
-                pairs.append((int(label), int(other), float(n / len(mine))))
-    return sorted(pairs, key=lambda p: -p[2])[:CONFUSIONS_SHOWN]
-
-
-def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureSpec,
-                   allow_missing_classes: bool = False) -> Model:
-    """``fit_model``, then the one figure that says how good the classifier is, printed: with several
-    passes, each decided by a model trained on the others (leave-one-pass-out); with one, the
-    cross-validation within it. A warning, naming the classes most confused, when it is below POOR_ACCURACY."""
-    model, selection = _fit(passes, profile, spec, allow_missing_classes)
-    same_classes = len({tuple(sorted(set(p.labels.tolist()))) for p in passes}) == 1
-    why = ("the passes hold different classes" if len(passes) > 1
-           else "one pass: record a second for a figure on a pass the model has not seen")
-    out = None
-    if same_classes:
-        try:
-            out = leave_one_pass_out(passes, profile, model)
-        except BomiError as exc:   # the passes but one cannot train every class: the within-pass figure
-            why = f"no leave-one-pass-out figure: {exc}"
-    if out is not None:
-        accuracy, headline = out.accuracy, out.text()
-        truth = np.concatenate([ev.truth for ev in out.evaluations])
-        decided = np.concatenate([ev.predicted for ev in out.evaluations])
-    elif selection is not None and selection.held_out is not None:
-        accuracy, (truth, decided) = selection.accuracy, selection.held_out
-        headline = f"cross-validated accuracy {100 * accuracy:.2f} % (whole holds held out within each pass; {why})"
-    else:
-        print("how good is this classifier: not estimated (no cross-validation: too little data or fixed settings)")
-        return model
-    print(f"how good is this classifier: {headline}")
-    if accuracy < POOR_ACCURACY:
-        confused = ", ".join(f"c{a} read as c{b} in {100 * share:.0f} % of its windows"
-                             for a, b, share in most_confused(truth, decided))
-        print(f"warning: accuracy {100 * accuracy:.2f} % is below {100 * POOR_ACCURACY:g} %: about one window in "
-              f"{max(2, round(1 / (1 - accuracy)))} would be a wrong command. Most confused: {confused or 'no single pair'}. "
-              "Make those motions more distinct (or drop one), then record again")
-    return model
-
-
 def settings_text(model: Model) -> str:
     """The classifier settings a model was trained with, in words."""
     rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold

@@ -9,11 +9,12 @@ from bomi.profiles import save_profile
 from tasks.cli import add_command
 from tasks.cli.engine import add_engine_arguments, engine_from_args
 from tasks.cli.options import add_force, check_outputs, episode_seconds, seed, seed_count
-from tasks.cli.task import EpisodeJob, run_many, write_json
-from tasks.operators.design import Against, Score, candidates, ranked, recommend
-from tasks.stacking.episode import profile_controls
-from tasks.participants.participant import load_participant
+from tasks.experiments.design import candidate_jobs, design_payload
+from tasks.experiments.jobs import run_many
+from tasks.experiments.summary import write_json
+from tasks.operators.design import Score, candidates, ranked, recommend
 from tasks.operators.stick import arm_profile
+from tasks.participants.participant import load_participant
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -46,14 +47,10 @@ def design_command(args: argparse.Namespace) -> int:
           f"({seeds.start}-{seeds.stop - 1}), the derived default first:")
     with tempfile.TemporaryDirectory(prefix="bomi-design-") as directory:
         jobs = []
-        for k, option in enumerate(options, start=1):
-            path = Path(directory) / f"candidate{k}.toml"
-            profile = option.profile(base)
-            save_profile(path, profile)
-            profile_controls(arm_profile(path))   # a candidate the stacking user cannot drive fails here, unrun
+        for k, (option, episodes) in enumerate(candidate_jobs(args.twin, base, options, seeds, args.time_limit,
+                                                              Path(directory)), start=1):
             print(f"  {k}. {option.name}: {', '.join(f'c{label} {f}' for label, f in option.functions)}")
-            jobs += [EpisodeJob("bomi", str(Path(args.twin).resolve()), seed, args.time_limit,
-                                overrides=(("participant.profile", str(path)),)) for seed in seeds]
+            jobs += episodes
         records = run_many(jobs, engine)
     scores = [Score.of(option, records[k * len(seeds):(k + 1) * len(seeds)]) for k, option in enumerate(options)]
     order = ranked(scores)
@@ -67,12 +64,6 @@ def design_command(args: argparse.Namespace) -> int:
     print(f"wrote {outputs['--out']} (use it: bomi twin RECORDING --profile {outputs['--out']} "
           f"--out TWIN.toml, bomi train RECORDING --profile {outputs['--out']} ...)")
     if outputs["--json"]:
-        write_json(outputs["--json"], {
-            "twin": args.twin, "seeds": list(seeds), "recommended": best.name, "reason": reason,
-            "candidates": [{"name": s.candidate.name, "functions": dict(s.candidate.functions),
-                            "episodes": s.episodes, "successes": s.successes, "success_ci95": s.success_ci95,
-                            "completion_time_mean": s.time_mean, "completion_time_ci95": s.time_ci95,
-                            "against_default": vars(Against.of(scores[0], s)),
-                            "records": records[k * len(seeds):(k + 1) * len(seeds)]}
-                           for k, s in enumerate(scores)]}, overwrite=args.force)
+        write_json(outputs["--json"], design_payload(args.twin, seeds, best, reason, scores, records),
+                   overwrite=args.force)
     return 0

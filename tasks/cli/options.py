@@ -13,6 +13,7 @@ from pathlib import Path
 
 from bomi.errors import BomiError
 from bomi.files import check_output
+from tasks.experiments.limits import MAX_SECONDS, MAX_SEED, MAX_SEEDS, MIN_TIME_LIMIT_S
 
 
 def _number(text: str, kind: type) -> float | int:
@@ -39,9 +40,6 @@ def _ranged(name: str, kind: type, *checks: tuple[Callable[[float], bool], str])
     return parse
 
 
-# Longest time any option may ask for: a day, longer than any session, capture or episode; it keeps
-# arithmetic on times (sample counts, schedules) finite.
-MAX_SECONDS = 86_400.0
 _AT_MOST_A_DAY = (lambda v: v <= MAX_SECONDS, f"at most {MAX_SECONDS:g} s (a day)")
 _POSITIVE = (lambda v: v > 0, "must be above 0")
 _NON_NEGATIVE = (lambda v: v >= 0, "must not be negative")
@@ -51,16 +49,9 @@ non_negative_int = _ranged("non_negative_int", int, _NON_NEGATIVE)
 positive_float = _ranged("positive_float", float, _POSITIVE)
 non_negative_float = _ranged("non_negative_float", float, _NON_NEGATIVE)
 seconds = _ranged("seconds", float, _POSITIVE, _AT_MOST_A_DAY)  # a duration in seconds
-# The shortest episode worth simulating: a second (the scripted user's reaction alone takes 0.3 s);
-# shorter ones (1e-300 s) are typing mistakes, not experiments.
-MIN_TIME_LIMIT_S = 1.0
 episode_seconds = _ranged("episode_seconds", float, (lambda v: v >= MIN_TIME_LIMIT_S, f"at least {MIN_TIME_LIMIT_S:g} s"),
                      _AT_MOST_A_DAY)  # of simulated time per episode
 non_negative_seconds = _ranged("non_negative_seconds", float, _NON_NEGATIVE, _AT_MOST_A_DAY)
-# Seeds: numpy's and MuJoCo's are 32-bit; no run of this project needs more than ten thousand of them
-# (far beyond what this machine, or a cluster in a week, runs), and more would exhaust memory listing them.
-MAX_SEED = 2**32 - 1
-MAX_SEEDS = 10_000
 seed = _ranged("seed", int, _NON_NEGATIVE, (lambda v: v <= MAX_SEED, f"at most {MAX_SEED}"))
 seed_count = _ranged("seed_count", int, (lambda v: 1 <= v <= MAX_SEEDS, f"must be in [1, {MAX_SEEDS}]"))
 # a posterior threshold

@@ -3,44 +3,36 @@
 from __future__ import annotations
 
 import argparse
-import fcntl
 import json
 import os
 import shutil
 import signal
-import sys
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from bomi.chain import OnlineChain
 from bomi.errors import BomiError
 from bomi.files import check_input
-from bomi.model_io import check_model_for, load_model, save_model
-from bomi.profiles import save_profile
+from bomi.model_io import check_model_for, load_model
 from bomi.serial_source import BASE_STATION_BAUD, RetryPolicy, SerialSource, StreamReader
 from sim.env import ArmSim
-from sim.joystick import BUTTONS, THREE_AXIS
+from sim.joystick import THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
-from tasks.cli.task import _simulated_time, _stage
+from tasks.experiments.jobs import simulated_time, stage
+from tasks.experiments.trials import Committer, controls_label, lock_session, predictions, remaining_plans, say
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.operators.stick import arm_profile, profile_layout
-from tasks.trials.dataset import part_name, replace_atomically, session_files, sync_directory, write_session
+from tasks.trials.dataset import part_name, replace_atomically, session_files
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
-                                  TrialStatusLine,
-                                  episode_log, node1_id, run_bomi, run_joystick, trial_record)
+                                  TrialStatusLine, node1_id, run_bomi, run_joystick)
 
 SETTINGS_FILE = "session.json"   # the session's settings, what --resume continues with
-LOCK_FILE = ".lock"               # held (flock) by the one bomi trial writing to the directory
 # the options a session is run with, as session.json keeps them (--out, --force, --resume aside)
 SETTINGS = ("stand_in", "port", "controller", "profile", "model", "gamepad", "trials", "countdown", "time_limit",
             "seed", "predict", "operator_file", "headless", "baud", "retries")
 
 
-def _say(line: str) -> None:
-    print(f"trial: {line}", file=sys.stderr, flush=True)
 
 
 def _controllers(text: str) -> list[Controller]:
@@ -148,16 +140,6 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
-def _lock(out: Path) -> int:
-    """The directory's lock (flock on DIR/.lock), held until the process ends; refused if another holds it."""
-    out.mkdir(exist_ok=True)
-    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        os.close(fd)
-        raise BomiError(f"{out}: another bomi trial is writing to this directory (it holds {out / LOCK_FILE})") from None
-    return fd
 
 
 def _interrupt(signum, frame) -> None:
@@ -209,83 +191,8 @@ def _resumed(directory: Path) -> tuple[argparse.Namespace, list[dict]]:
     return args, records
 
 
-def _plans(args: argparse.Namespace, done: int) -> list[tuple[Controller, TrialPlan]]:
-    """Each controller's trials still to run after the first ``done`` trials of the session (numbered from 1
-    in session order; the k-th trial of a controller keeps the cube placement of seed + k - 1)."""
-    plans = []
-    for k, controller in enumerate(args.controller):
-        first = 1 + k * args.trials
-        start = max(first, done + 1)
-        if start <= first + args.trials - 1:
-            plans.append((controller, TrialPlan(first + args.trials - start, args.countdown, args.time_limit,
-                                                args.seed + start - first, start)))
-    return plans
 
 
-@dataclass
-class Committer:
-    """Every trial written as it finishes: the session files (HDF5), the model and profile, then the
-    records (trials.jsonl) last, each replaced atomically (``tasks.trials.dataset.replace_atomically``),
-    so a kill at any instant leaves every finished trial whole. Under --force the session is written
-    to a staging directory inside DIR until its first trial has finished; the earlier session is then
-    moved aside (DIR.old-TIME) and the new one into DIR."""
-
-    final: Path                      # --out
-    target: Path                     # where the files go now (a staging directory, or --out)
-    sessions: list
-    profile: object
-    model: object
-    intent_known: bool
-    previous: list[dict] = field(default_factory=list)   # the records of a resumed session
-    committed: int = 0
-    failed: bool = False
-    aside: Path | None = None
-
-    def finished(self) -> int:
-        return sum(len(session.finished) for session, _ in self.sessions)
-
-    def after_tick(self, *_) -> None:
-        if self.finished() > self.committed:
-            self.commit()
-
-    def commit(self) -> tuple[list[dict], dict]:
-        """Write what has finished; the records and episode logs of this run's trials."""
-        records, logs = _score(self.sessions, self.intent_known)
-        if self.failed or self.finished() == self.committed:
-            return records, logs
-        try:
-            if self.model is not None and any(s.controller is Controller.BOMI for s, _ in self.sessions):
-                for name, save in (("model.json", save_model), ("profile.toml", save_profile)):
-                    what = self.model if name == "model.json" else self.profile
-                    replace_atomically(self.target / name, lambda partial: save(partial, what))
-            for session, meta in self.sessions:
-                if session.finished:
-                    write_session(self.target / meta["file"], session, meta["attrs"])
-            lines = "".join(json.dumps(record) + "\n" for record in self.previous + records)
-            replace_atomically(self.target / "trials.jsonl", lambda partial: partial.write_text(lines, "utf-8"))
-        except (BomiError, OSError) as exc:
-            self.failed = True
-            why = str(exc) if isinstance(exc, BomiError) else f"{exc.filename}: {exc.strerror}"
-            kept = f"trials up to {self.committed} kept" if self.committed else "no trial had finished"
-            raise BomiError(f"{why}; the session stops, {kept}") from None
-        self.committed = self.finished()
-        if self.target != self.final:
-            self._swap()
-        return records, logs
-
-    def _swap(self) -> None:
-        self.aside = self.final.with_name(f"{self.final.name}.old-{time.strftime('%Y%m%d-%H%M%S')}")
-        self.aside.mkdir()
-        for entry in list(self.final.iterdir()):
-            if entry.name != LOCK_FILE and entry != self.target:
-                entry.rename(self.aside / entry.name)
-        for entry in list(self.target.iterdir()):
-            entry.rename(self.final / entry.name)
-        self.target.rmdir()
-        self.target = self.final
-        sync_directory(self.final)
-        sync_directory(self.final.parent)
-        _say(f"the earlier session in {self.final} is now in {self.aside}")
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
@@ -318,7 +225,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
     if bomi and args.port is not None and args.model is None:
         raise BomiError("--model: a person's BoMI needs a model trained for the profile (bomi record / bomi train)")
     profile = arm_profile(profile_name) if profile_name is not None else None
-    plans = _plans(args, len(previous))
+    plans = remaining_plans(args.controller, args.trials, args.countdown, args.time_limit, args.seed,
+                            len(previous))
     if not plans:
         raise BomiError(f"{out}: every trial of this session has finished; nothing to resume")
     if standin is not None and profile is not None:
@@ -345,7 +253,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
                 device.close()
             raise
     try:
-        lock = _lock(out)  # before calibration: a second session on this directory is refused here
+        lock = lock_session(out)  # before calibration: a second session on this directory is refused here
     except BomiError:
         if device is not None:
             device.close()
@@ -361,7 +269,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
             replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
         if bomi and model is None:
             from tasks.stacking.episode import calibrated_model
-            with _stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
+            with stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
                         f"record does, then bomi train)", progress=True):
                 model = calibrated_model(standin, profile, args.seed)
         sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
@@ -383,11 +291,12 @@ def cmd_trial(args: argparse.Namespace) -> int:
                 stream.stop()
             records, logs = writer.commit()  # a trial cut short by a lost input is written too
         records = previous + records
-        predictions = _predictions(args) if args.predict is not None else []
+        predicted = (predictions(args.controller, args.trials, args.predict, args.seed, args.time_limit)
+                     if args.predict is not None else [])
         from tasks.trials.report import write_report
         note = (f"Stand-in {standin.name} (seed {args.seed}), simulated clock." if standin is not None
                 else f"A person; stream {args.port}.")
-        written = write_report(out, records, logs, predictions, note)
+        written = write_report(out, records, logs, predicted, note)
         for r in records:
             verdict = f"{r['completion_time']:.2f} s" if r["success"] else f"failed ({r['failure']})"
             acc = r.get("accuracy_all_decisions")
@@ -398,19 +307,10 @@ def cmd_trial(args: argparse.Namespace) -> int:
     finally:
         if target != out and target.exists():  # no trial finished: the earlier session stays as it was
             shutil.rmtree(target, ignore_errors=True)
-            _say(f"no trial finished: the earlier session in {out} is kept as it was")
+            say(f"no trial finished: the earlier session in {out} is kept as it was")
         os.close(lock)
 
 
-def _score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[list[dict], dict]:
-    """Every finished trial's record (trials.jsonl) and episode log (the figures)."""
-    records, logs = [], {}
-    for session, meta in sessions:
-        for result in session.finished:
-            log = episode_log(session.recorder, result, **meta["log"])
-            logs[result.number] = log
-            records.append(trial_record(log, result.number, intent_known))
-    return records, logs
 
 
 def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source, sessions, meta: dict,
@@ -420,7 +320,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
     chain = OnlineChain(model, profile)
     arm = TrialArm(sim, plan)
     who = standin.name if standin is not None else "person"
-    meta.update({"log": {"operator": "bomi", "participant": who, "controls": _controls_label(profile),
+    meta.update({"log": {"operator": "bomi", "participant": who, "controls": controls_label(profile),
                          "class_names": tuple(c.function for c in sorted(profile.classes, key=lambda c: c.label)),
                          "neutral": 0, "amplitude": profile.amplitude},
                  "attrs": {"profile": profile.name, "participant": who, "layout": sim.layout.name,
@@ -436,12 +336,12 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                               "simulated")
             sessions.append((session, meta))
             meta["log"]["allowance"] = meta["attrs"]["allowance"] = person.allowance
-            with _simulated_time(f"{standin.name} bomi session", progress=True) as progress:
+            with simulated_time(f"{standin.name} bomi session", progress=True) as progress:
                 def on_tick(tick) -> None:
                     person.heard(tick.decisions)
                     progress(clock.now)
                     after_tick()
-                run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, _say), on_tick=on_tick,
+                run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, say), on_tick=on_tick,
                          clock=clock, sleep=clock.sleep)
             if arm.not_ready is not None:
                 raise BomiError(f"{standin.name}: {arm.not_ready}")
@@ -449,7 +349,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             session = Session(Controller.BOMI, arm, TickRecorder(arm, source.parser, None, node1_id(chain)), "wall")
             sessions.append((session, meta))
             meta["attrs"]["allowance"] = 0
-            status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, _say)
+            status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, say)
             try:
                 source.discard()  # what arrived while getting ready is old: never acted upon, nor logged
                 run_bomi(session, source, chain, display=display, status=status, on_tick=after_tick)
@@ -462,7 +362,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             if source.error is not None or not session.arm.finished:
                 why = "stream lost" if source.error is not None else "the viewer was closed"
                 session.cut_short(why)
-                _say(f"{why}: the session stops here, the running trial fails; what was recorded is written "
+                say(f"{why}: the session stops here, the running trial fails; what was recorded is written "
                      f"to {args.out}")
                 if source.error is not None:
                     raise source.error
@@ -484,30 +384,30 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             person = JoystickStandIn(arm, operator)
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm, watcher=person), "simulated")
             sessions.append((session, meta))
-            with _simulated_time(f"{standin.name} joystick session", progress=True) as progress:
+            with simulated_time(f"{standin.name} joystick session", progress=True) as progress:
                 def on_tick(now: float) -> None:
                     progress(now)
                     after_tick()
-                run_joystick(session, person, display=TrialDisplay(Headless(), arm, _say), clock=clock,
+                run_joystick(session, person, display=TrialDisplay(Headless(), arm, say), clock=clock,
                              sleep=clock.sleep, on_tick=on_tick)
         else:
             from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")
             sessions.append((session, meta))
             keys = device if isinstance(device, ViewerKeys) else None
-            display = TrialDisplay(_viewer(args.headless, sim, keys), arm, _say)
+            display = TrialDisplay(_viewer(args.headless, sim, keys), arm, say)
             try:
                 run_joystick(session, device, display=display, on_tick=after_tick)
             except BomiError:
                 session.cut_short("input lost")
-                _say(f"the joystick was lost: the session stops here, the running trial fails; what was "
+                say(f"the joystick was lost: the session stops here, the running trial fails; what was "
                      f"recorded is written to {args.out}")
                 raise
             finally:
                 display.close()
             if not arm.finished:
                 session.cut_short("the viewer was closed")
-                _say(f"the viewer was closed: the session stops here; what was recorded is written to {args.out}")
+                say(f"the viewer was closed: the session stops here; what was recorded is written to {args.out}")
     finally:
         sim.close()
 
@@ -526,28 +426,12 @@ def _person_stick(index: int | None, headless: bool):
         if headless or not (has_display() and display_opens()):
             raise BomiError(f"the joystick condition needs a gamepad or the viewer's keys: {exc}, and "
                             f"{'--headless' if headless else 'no display opens'}") from None
-        _say("no gamepad: the joystick is the viewer's keys (arrows F/B/L/R, Q/E twist, 1/2 buttons)")
+        say("no gamepad: the joystick is the viewer's keys (arrows F/B/L/R, Q/E twist, 1/2 buttons)")
         return ViewerKeys(time.monotonic)
 
 
-def _controls_label(profile) -> str:
-    """The layout and buttons a profile's classes give (``tasks.operators.planner.Controls.label``)."""
-    functions = {cls.function for cls in profile.classes}
-    buttons = tuple(b for b in BUTTONS if b in functions)
-    return Controls(profile_layout(profile), buttons).label if buttons else profile_layout(profile).name
 
 
-def _predictions(args) -> list[tuple[dict, object]]:
-    """The named virtual participant's simulated episodes (``bomi benchmark``'s), one per trial, on
-    the trials' cube placements: (record, episode log) each."""
-    from tasks.cli.task import EpisodeJob, run_job
-    from tasks.stacking.episode import summarize
-    out = []
-    for controller in args.controller:
-        for k in range(args.trials):
-            log = run_job(EpisodeJob(controller.value, args.predict, args.seed + k, args.time_limit), progress=True)
-            out.append((summarize(log), log))
-    return out
 
 
 # ---------------------------------------------------------------------------------- bomi replay

@@ -5,27 +5,21 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from bomi.chain import PLAIN, cross_validate
-from bomi.classifier import NEUTRAL_LABEL
 from bomi.files import check_input, write_text
 from bomi.derived import derive_profile, describe
 from bomi.frames import SAMPLE_RATE_HZ
 from bomi.profiles import Profile, save_profile
-from bomi.protocol import protocol_order
 from bomi.recording import Recording, write_recording
 from tasks.cli import add_command
-from tasks.cli.chain import read_all_passes
+from tasks.experiments.training import read_all_passes
 from tasks.cli.options import add_force, check_outputs, non_negative_int
 from bomi.errors import BomiError
-from tasks.participants.participant import (Protocol, load_participant, parse_participant_text, protocol_session,
-                                            session_recording)
+from tasks.experiments.twins import PAPER_HOLD_S, paper_protocol, self_check
+from tasks.participants.participant import load_participant, parse_participant_text, protocol_session, session_recording
 from tasks.participants.twin import fit_twin, same_person, twin_toml
 from tasks.operators.stick import arm_profile
 
-TWIN_MARGIN = 0.10   # the twin's calibration may read this far (share of windows) from the person's own: else a warning
 PROFILE_SUFFIX = ".profile.toml"   # a derived profile is written beside the twin: P.toml -> P.profile.toml
-PAPER_HOLD_S = 5.0                 # the paper's protocol, for a participant with no recording of its own
-PAPER_REPETITIONS = 3
 NO_PRIOR = "none"
 
 
@@ -113,31 +107,6 @@ def twin_command(args: argparse.Namespace) -> int:
     print(f"its sessions: bomi synth --participant {outputs['--out']} --seed N --out session.csv; its episodes: "
           f"bomi run-task --operator bomi --participant {outputs['--out']}")
     return 0
-
-
-def self_check(twin_file: Path, recordings: list[Recording], profile: Profile) -> str:
-    """The twin checked against the person: its own calibration (the first pass's protocol, seed 0)
-    and the person's passes, each cross-validated as `bomi train` does (plain LDA, whole holds held
-    out); both figures, and a warning when they differ by more than TWIN_MARGIN."""
-    params = load_participant(twin_file)
-    session = protocol_session(params, profile, 0, params.protocol)
-    synthetic = session_recording(session, profile, holds_only=params.protocol.holds_only)
-    plain = replace(profile, direction_spread=0.0)
-    twin, person = (cross_validate(recs, plain, profile.spec, [PLAIN])[0].accuracy for recs in ([synthetic], recordings))
-    text = (f"self-check: the twin's calibration reads {100 * twin:.1f} %, the person's own {100 * person:.1f} % "
-            "(cross-validated, plain LDA, whole holds held out)")
-    if abs(twin - person) > TWIN_MARGIN:
-        text = (f"warning: {text}: more than {100 * TWIN_MARGIN:g} points apart; its episodes will not predict this "
-                "person's (see the [provenance] of what was not measured)")
-    return text
-
-
-def paper_protocol(classes: list[int]) -> Protocol:
-    """The paper's calibration: neutral, then each motion held 5 s three times, 5 s of neutral between."""
-    runs = [NEUTRAL_LABEL]
-    for label, _ in protocol_order(classes, PAPER_REPETITIONS, (1.0,)):
-        runs += [label, NEUTRAL_LABEL]
-    return Protocol(tuple(runs), (PAPER_HOLD_S,) * len(runs), True, "the paper's calibration")
 
 
 def synth_command(args: argparse.Namespace) -> int:

@@ -23,7 +23,7 @@ from bomi.errors import BomiError
 from bomi.model_io import check_model_for
 from bomi.profiles import Profile
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS
-from tasks.cli.options import MAX_SEED
+from tasks.experiments.limits import MAX_SEED
 from tasks.trials.session import UNKNOWN, Controller, Phase, TrialPlan
 
 CLOCKS = ("simulated", "wall")
