@@ -31,8 +31,9 @@ import numpy as np  # noqa: E402
 from tasks.operators.assist import assist_label, parse_assist  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
 from tasks.experiments.jobs import benchmark_jobs, run_many  # noqa: E402
-from tasks.stacking.episode import WRONG_GOAL_WINDOW_S, participant_controls  # noqa: E402
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE  # noqa: E402
+from tasks.stacking.summary import WRONG_GOAL_WINDOW_S
+from tasks.stacking.channels import participant_controls
+from tasks.operators.params import DEFAULT_OPERATOR_FILE
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TIME_LIMIT = 600.0

@@ -36,7 +36,8 @@ from bomi import paper  # noqa: E402
 from tasks.stacking import metrics  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
 from tasks.experiments.jobs import EpisodeJob, run_job  # noqa: E402
-from tasks.stacking.episode import participant_controls, summarize  # noqa: E402
+from tasks.stacking.channels import participant_controls
+from tasks.stacking.summary import summarize
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
 from tasks.stacking.timeline import timeline_figure  # noqa: E402
 

@@ -21,7 +21,7 @@ from tasks.experiments.jobs import DEFAULT_VOTE, EpisodeJob, run_many
 from tasks.experiments.summary import aggregate
 from bomi.errors import BomiError
 from tasks.participants.participant import PARTICIPANT_DIR, load_participant
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PARTICIPANT = "P1"

@@ -66,9 +66,11 @@ from bomi.frames import FrameParser
 from sim.controller import CartesianVelocityController
 from sim.env import ArmSim
 from tasks.experiments.jobs import EpisodeJob, job_assist, run_job
-from tasks.stacking.episode import JoystickChannel, calibrated_channel, profile_controls, run_episode
+from tasks.stacking.channels import JoystickChannel, calibrated_channel, profile_controls
+from tasks.stacking.episode import run_episode
 from tasks.participants.participant import VirtualParticipant, load_participant
-from tasks.operators.planner import ScriptedUser, load_operator
+from tasks.operators.planner import ScriptedUser
+from tasks.operators.params import load_operator
 from tasks.stacking.task import StackingTask, TaskConfig
 from tasks.operators.stick import arm_profile
 

@@ -28,9 +28,10 @@ from tasks.experiments.figures import accuracy_allowance_figure, completion_time
 from tasks.experiments.jobs import DEFAULT_VOTE, JOYSTICK_ANYONE, EpisodeJob, benchmark_jobs, run_job, run_many
 from tasks.experiments.summary import aggregate, comparison
 from tasks.experiments.tables import markdown_tables
-from tasks.stacking.episode import calibrated_channel, summarize
+from tasks.stacking.channels import calibrated_channel
+from tasks.stacking.summary import summarize
 from tasks.participants.participant import VirtualParticipant, load_participant
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE
+from tasks.operators.params import DEFAULT_OPERATOR_FILE
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TIME_LIMIT = 600.0

@@ -14,8 +14,10 @@ from tasks.operators.assist import (DEFAULT_ASSIST_FILE, Assist, Assistance, Lea
                           load_assist, next_step_modes, parse_assist, path_order, presses, profile_assist, revisit_scale,
                           step_of_move, time_to_goal)
 from tasks.cli import main
-from tasks.stacking.episode import JoystickChannel, run_episode, summarize
-from tasks.operators.planner import View
+from tasks.stacking.channels import JoystickChannel
+from tasks.stacking.episode import run_episode
+from tasks.stacking.summary import summarize
+from tasks.stacking.vocabulary import View
 
 CUBE = 0.05
 A1, A2 = np.array([-0.14, -0.51, CUBE / 2]), np.array([-0.14, -0.39, CUBE / 2])

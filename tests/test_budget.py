@@ -5,7 +5,7 @@ import pytest
 from tasks.stacking import metrics
 from tasks.stacking.budget import (Context, IrrelevantRun, Part, decision_contexts, irrelevant_by_context,
                                    irrelevant_runs, mode_switch_ticks, task_ticks, time_budget, vote_effect)
-from tasks.stacking.episode import DecisionTrace, EpisodeLog
+from tasks.stacking.record import DecisionTrace, EpisodeLog
 
 NAMES = ("neutral", "F", "B", "R", "L", "Rr", "Lr", "B1", "B2")  # P1's classes: 7 and 8 are the buttons
 STILL = 0.005  # m/s

@@ -10,7 +10,7 @@ from bomi.derived import (button_motions, derive_profile, derived_layout, descri
                           whitened, within_class_covariance)
 from bomi.errors import BomiError
 from bomi.recording import NodeData, Recording
-from tasks.stacking.episode import profile_controls
+from tasks.stacking.channels import profile_controls
 
 
 def motions(count: int) -> Recording:

@@ -7,7 +7,7 @@ import pytest
 from bomi.derived import derive_profile
 from tasks.operators.design import (LABEL_ORDER, OPPOSITES, Against, Candidate, Score, candidates, opposite_order, ranked,
                                     recommend)
-from tasks.stacking.episode import profile_controls
+from tasks.stacking.channels import profile_controls
 from tests.test_derived_layout import motions
 
 

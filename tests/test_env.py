@@ -11,7 +11,8 @@ from gymnasium.utils.env_checker import check_env
 
 from sim.joystick import THREE_AXIS, JoystickState
 from tasks.stacking.env import ENV_ID, StackingEnv, as_state, stick_state
-from tasks.stacking.episode import JoystickChannel, calibrated_channel, process_arm, run_episode
+from tasks.stacking.channels import JoystickChannel, calibrated_channel
+from tasks.stacking.episode import process_arm, run_episode
 from tasks.stacking.sources import DeviceSource, Operator, bomi_user, joystick_user
 from tasks.stacking.task import TaskConfig
 from tasks.trials.replay import LoggedStick

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tasks.stacking.episode import DecisionTrace, EpisodeLog
+from tasks.stacking.record import DecisionTrace, EpisodeLog
 from tasks.stacking.failures import (Mechanism, Rules, blocked_ticks, classify, longest_gap, mechanism_rows, needs_mechanism,
                             phase_distance, progress_ticks, stuck_period)
 

@@ -6,7 +6,7 @@ import pytest
 
 from bomi import paper
 from tasks.experiments.jobs import DEFAULT_VOTE, EpisodeJob, run_job
-from tasks.stacking.episode import summarize
+from tasks.stacking.summary import summarize
 
 DEV_SEED = 0
 

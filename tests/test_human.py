@@ -10,7 +10,9 @@ from sim.joystick import THREE_AXIS, TRANSLATION_AXES, TWO_AXIS, Mode
 from tasks.operators.human import (DEFAULT_HUMAN_FILE, Eyes, HumanOperator, HumanTiming, InterfaceModel, alternatives,
                          choice_time, fitts_time, judgement_error, load_human)
 from helpers import assert_one_line_error, benchmark_script
-from tasks.operators.planner import REST, Controls, StickIntent, View, deflection_for, load_operator, placed_cubes
+from tasks.stacking.vocabulary import REST, Controls, StickIntent, View
+from tasks.operators.judgement import deflection_for, placed_cubes
+from tasks.operators.params import load_operator
 
 H = load_human()
 P = load_operator()
@@ -153,8 +155,10 @@ def test_bad_human_file_is_one_clear_error(tmp_path, text, fault):
 
 
 def test_the_operator_file_names_the_human_model(tmp_path):
-    from tasks.stacking.episode import JoystickChannel, operator_user
-    from tasks.operators.planner import DEFAULT_OPERATOR_FILE, ScriptedUser
+    from tasks.stacking.channels import JoystickChannel
+    from tasks.stacking.sources import operator_user
+    from tasks.operators.params import DEFAULT_OPERATOR_FILE
+    from tasks.operators.planner import ScriptedUser
     assert isinstance(operator_user(P, JoystickChannel(), seed=0), ScriptedUser)  # model = "none"
     humane = load_operator(DEFAULT_OPERATOR_FILE, {"human.model": "human"})
     person = operator_user(humane, JoystickChannel(), seed=0)

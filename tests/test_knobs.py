@@ -4,7 +4,7 @@ import pytest
 
 from helpers import benchmark_script
 from tasks.participants.participant import load_participant
-from tasks.operators.planner import load_operator
+from tasks.operators.params import load_operator
 
 sensitivity = benchmark_script("sensitivity")
 

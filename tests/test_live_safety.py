@@ -18,7 +18,8 @@ import pytest
 from bomi.fusion import DT, NodeCalibration, NodeFusion
 from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_ratio, raw_defect, settle_change
 from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
-from tasks.trials.live import LiveLoop, TickLog, VideoDisplay
+from tasks.trials.live import LiveLoop
+from tasks.trials.displays import TickLog, VideoDisplay
 from tests.test_live import QUICK_GATE, SETTLE, FakeClock, ScriptedChain, StickArm, decision, still_frame
 
 STILL = still_frame(0)

@@ -10,8 +10,10 @@ from bomi.errors import BomiError
 from sim.joystick import ONE_AXIS, TWO_AXIS, JoystickState, Mode
 from tasks.operators.assist import Assist, Assistance, load_assist, presses
 from tasks.experiments.jobs import EpisodeJob, job_assist
-from tasks.stacking.episode import JoystickChannel, process_arm, profile_controls, run_episode
-from tasks.operators.planner import Controls, ScriptedUser
+from tasks.stacking.channels import JoystickChannel, profile_controls
+from tasks.stacking.episode import process_arm, run_episode
+from tasks.stacking.vocabulary import Controls
+from tasks.operators.planner import ScriptedUser
 from tasks.stacking.task import TaskConfig
 from tasks.operators.stick import arm_profile
 from test_assist import A1, FakeArm, view

@@ -19,7 +19,7 @@ from bomi.recording import NodeData, Recording, read_recording, write_logger_mat
 from tasks.cli import main
 from tasks.experiments.training import most_confused
 from tasks.experiments.twins import self_check
-from tasks.stacking.episode import profile_controls
+from tasks.stacking.channels import profile_controls
 from tasks.participants.participant import load_participant
 from tasks.participants.population import PASS_GAP_S, draw_person, pass_recordings
 from tasks.operators.stick import arm_profile

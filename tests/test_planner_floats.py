@@ -8,8 +8,11 @@ import numpy as np
 
 from helpers import disagreement
 from tasks.operators import planner
-from tasks.operators.planner import (Action, Memory, Phase, View, _approach, _close, _move, _open, _turn, cube_to_take,
-                           held_cube, load_operator, missed_grasp, placed_cubes, xy_distance, yaw_error)
+from tasks.operators.planner import Action, _approach, _close, _move, _open, _turn
+from tasks.operators.judgement import (Memory, cube_to_take, held_cube, missed_grasp, placed_cubes, xy_distance,
+                                       yaw_error)
+from tasks.stacking.vocabulary import Phase, View
+from tasks.operators.params import load_operator
 from sim.joystick import Mode
 
 P = load_operator()

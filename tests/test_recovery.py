@@ -13,7 +13,7 @@ from tasks.experiments.jobs import EpisodeJob, run_job
 from tasks.experiments.summary import aggregate, comparison
 from tasks.cli.task import recovery_option
 from tasks.experiments.tables import terminal_table
-from tasks.stacking.episode import summarize
+from tasks.stacking.summary import summarize
 from tasks.stacking.failures import mechanism_rows
 from tasks.operators.params import RecoveryParams, load_operator
 from tasks.stacking.vocabulary import Goal, RecoveryAction, StickIntent, View

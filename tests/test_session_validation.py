@@ -216,7 +216,7 @@ def test_synth_s_validator_refuses_what_no_person_holds(old, new, fault):
 
 # ------------------------------------------------------------------------------------ files named in files
 def test_an_operator_file_s_human_model_is_beside_it_not_in_the_working_directory(tmp_path, monkeypatch):
-    from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator
+    from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
     (tmp_path / "conf").mkdir()
     head = DEFAULT_OPERATOR_FILE.read_text().partition("[human]")[0]
     (tmp_path / "conf" / "op.toml").write_text(head + '[human]\nmodel = "h.toml"\n')

@@ -14,8 +14,10 @@ from sim.env import ArmSim
 from sim.joystick import THREE_AXIS, TWO_AXIS, JoystickState
 from tasks.experiments.summary import aggregate, comparison
 from tasks.experiments.jobs import benchmark_jobs
-from tasks.stacking.episode import JoystickChannel, calibrated_channel, process_arm, profile_controls, run_episode, summarize
-from tasks.operators.planner import Controls
+from tasks.stacking.channels import JoystickChannel, calibrated_channel, profile_controls
+from tasks.stacking.episode import process_arm, run_episode
+from tasks.stacking.summary import summarize
+from tasks.stacking.vocabulary import Controls
 from tasks.stacking.task import StackingTask, TaskConfig, cube_tilt_deg, levelling_rotation, start_poses
 
 

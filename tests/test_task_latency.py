@@ -11,9 +11,9 @@ import pytest
 
 from bomi.fusion import DT
 from tasks.stacking import metrics
-from tasks.stacking.episode import calibrated_channel
+from tasks.stacking.channels import calibrated_channel
 from tasks.participants.participant import load_participant
-from tasks.operators.planner import StickIntent
+from tasks.stacking.vocabulary import StickIntent
 
 SEED = 3
 MOVE_SAMPLES = 4

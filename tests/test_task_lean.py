@@ -6,9 +6,9 @@ import pytest
 from bomi.chain import OnlineChain, train
 from bomi.classifier import PostProcessing
 from sim.joystick import THREE_AXIS, Kind, Mode
-from tasks.stacking.episode import BomiChannel, LeanFeel, calibration_order
+from tasks.stacking.channels import BomiChannel, LeanFeel, calibration_order
 from tasks.participants.participant import VirtualParticipant, calibration_session, load_participant, session_recording
-from tasks.operators.planner import StickIntent
+from tasks.stacking.vocabulary import StickIntent
 from tasks.operators.stick import arm_profile
 
 SEED = 4

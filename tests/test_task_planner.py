@@ -8,9 +8,11 @@ import pytest
 from bomi.errors import BomiError
 from helpers import assert_agree, assert_one_line_error
 from sim.joystick import THREE_AXIS, TWO_AXIS, Kind, Mode
-from tasks.operators.planner import (DEFAULT_OPERATOR_FILE, Controls, FixedTiming, Goal, Memory, Phase, ScriptedUser, View,
-                           _updated, cube_to_take, deflection_for, hand_velocity, held_cube, load_operator,
-                           mode_button, norm, placed_cubes, plan, turn_deflection_for, xy_distance)
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.stacking.vocabulary import Controls, Goal, Phase, View
+from tasks.operators.planner import FixedTiming, ScriptedUser, _updated, hand_velocity, mode_button, plan
+from tasks.operators.judgement import (Memory, cube_to_take, deflection_for, held_cube, norm, placed_cubes,
+                                       turn_deflection_for, xy_distance)
 
 P = load_operator()
 TWO_AXIS_B1 = Memory(controls=Controls(TWO_AXIS, ("B1",)))  # P4, P5: four directions and one button

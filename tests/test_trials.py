@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from tasks.cli import main
-from tasks.stacking.episode import DecisionTrace, EpisodeLog, summarize
+from tasks.stacking.record import DecisionTrace, EpisodeLog
+from tasks.stacking.summary import summarize
 
 BOMI_ARGS = ["trial", "--stand-in", "P1", "--profile", "P1", "--controller", "bomi", "--trials", "2",
              "--seed", "11", "--headless", "--time-limit", "8", "--countdown", "0.5"]

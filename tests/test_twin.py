@@ -11,7 +11,7 @@ from bomi.fusion import DT
 from bomi.profiles import load_profile
 from bomi.recording import Recording, read_recording, write_recording
 from tasks.cli import main
-from tasks.stacking.episode import profile_controls
+from tasks.stacking.channels import profile_controls
 from tasks.participants import holds as holds_module, twin as twin_module
 from tasks.participants.participant import (PARTICIPANT_DIR, VirtualParticipant, calibration_session, load_participant,
                                             session_recording)

@@ -16,8 +16,9 @@ from sim.joystick import BUTTONS
 from tasks.operators.assist import ASSIST_HELP, Assistance, assist_option, profile_assist
 from tasks.cli import add_command
 from tasks.cli.options import non_negative_int, positive_int, seconds
-from tasks.trials.live import (Displays, Headless, PassiveViewer, StatusLine, TickLog, VideoDisplay, display_opens,
-                        has_display, open_log, run_live)
+from tasks.trials.displays import (Displays, Headless, PassiveViewer, StatusLine, TickLog, VideoDisplay, display_opens,
+                                   has_display, open_log)
+from tasks.trials.live import run_live
 from tasks.stacking.task import StackingTask
 from tasks.operators.stick import arm_profile, profile_layout
 

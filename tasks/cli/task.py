@@ -16,10 +16,13 @@ from tasks.experiments.jobs import DEFAULT_VOTE, EpisodeJob, benchmark_jobs, job
 from tasks.experiments.summary import aggregate, benchmark_payload, comparison, write_json
 from tasks.experiments.tables import terminal_comparison, terminal_mechanisms, terminal_table
 from tasks.operators.assist import ASSIST_HELP, assist_option
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE, NO_RECOVERY, RecoveryAction, load_operator, parse_recovery_actions
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator, parse_recovery_actions
+from tasks.stacking.vocabulary import NO_RECOVERY, RecoveryAction
 from tasks.operators.stick import arm_profile
 from tasks.participants.participant import load_participant
-from tasks.stacking.episode import OPERATORS, participant_controls, summarize
+from tasks.stacking.episode import OPERATORS
+from tasks.stacking.channels import participant_controls
+from tasks.stacking.summary import summarize
 from tasks.stacking.timeline import timeline_figure
 
 RECOVERY_HELP = (f"what the scripted user does after a while without progress (docs/task.md, Recovery): "

@@ -20,7 +20,8 @@ from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.experiments.jobs import simulated_time, stage
 from tasks.experiments.trials import Committer, controls_label, lock_session, predictions, remaining_plans, say
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.stacking.vocabulary import Controls
 from tasks.operators.stick import arm_profile, profile_layout
 from tasks.trials.dataset import part_name, replace_atomically, session_files
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
@@ -136,7 +137,7 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
     from tasks.cli.live import _viewer as live_viewer
     if keys is None:
         return live_viewer(headless, sim)
-    from tasks.trials.live import PassiveViewer
+    from tasks.trials.displays import PassiveViewer
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
@@ -268,7 +269,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
             settings = json.dumps({"argv": _settings_argv(args)}, indent=1) + "\n"
             replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
         if bomi and model is None:
-            from tasks.stacking.episode import calibrated_model
+            from tasks.stacking.channels import calibrated_model
             with stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
                         f"record does, then bomi train)", progress=True):
                 model = calibrated_model(standin, profile, args.seed)
@@ -315,7 +316,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
 
 def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, source, sessions, meta: dict,
                   after_tick) -> None:
-    from tasks.trials.live import Headless, StatusLine
+    from tasks.trials.displays import Headless, StatusLine
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
     arm = TrialArm(sim, plan)
@@ -378,7 +379,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
                  "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}})
     try:
         if standin is not None:
-            from tasks.trials.live import Headless
+            from tasks.trials.displays import Headless
             from tasks.trials.standin import JoystickStandIn
             clock = SimulatedClock()
             person = JoystickStandIn(arm, operator)
@@ -416,7 +417,7 @@ def _person_stick(index: int | None, headless: bool):
     """A person's joystick: gamepad ``index``; by default gamepad 0, else the viewer's keys."""
     import time
 
-    from tasks.trials.live import display_opens, has_display
+    from tasks.trials.displays import display_opens, has_display
     from tasks.trials.devices import Gamepad, ViewerKeys
     if index is not None:
         return Gamepad(index)

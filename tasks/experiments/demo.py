@@ -9,7 +9,7 @@ from bomi.files import atomic_output
 from tasks.experiments.jobs import EpisodeJob, run_job, stage
 from tasks.experiments.summary import write_json
 from tasks.operators.assist import Assist
-from tasks.stacking.episode import summarize
+from tasks.stacking.summary import summarize
 from tasks.stacking.timeline import timeline_figure
 
 # The demo's MP4 plays this many times faster than simulated time: a long BoMI episode stays a

@@ -9,7 +9,7 @@ from bomi.profiles import Profile, save_profile
 from tasks.experiments.jobs import EpisodeJob
 from tasks.operators.design import Against, Candidate, Score
 from tasks.operators.stick import arm_profile
-from tasks.stacking.episode import profile_controls
+from tasks.stacking.channels import profile_controls
 
 
 def candidate_jobs(twin: str | Path, base: Profile, options: list[Candidate], seeds: range, time_limit: float,

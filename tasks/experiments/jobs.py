@@ -11,11 +11,12 @@ from typing import TYPE_CHECKING, Any
 from tqdm import tqdm
 
 from tasks.operators.assist import Assist, assist_label, profile_assist
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.operators.stick import arm_profile
 from tasks.participants.participant import load_participant
-from tasks.stacking.episode import (JoystickChannel, calibrated_channel, participant_controls, profile_controls,
-                                    run_episode, summarize)
+from tasks.stacking.channels import JoystickChannel, calibrated_channel, participant_controls, profile_controls
+from tasks.stacking.episode import run_episode
+from tasks.stacking.summary import summarize
 from tasks.stacking.task import TaskConfig
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ from bomi import paper
 from bomi.files import write_text
 from tasks.experiments.jobs import JOYSTICK_ANYONE
 from tasks.operators.assist import NONE
-from tasks.operators.planner import NO_RECOVERY
+from tasks.stacking.vocabulary import NO_RECOVERY
 from tasks.stacking import failures, metrics
 
 

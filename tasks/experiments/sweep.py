@@ -36,10 +36,11 @@ from tasks.experiments.summary import aggregate
 from tasks.experiments.sweep_records import RESULTS_FILE, ResultsFile, check_records, read_results
 from tasks.experiments.tables import (MIN_EPISODES_FOR_INTERVAL, ROW_COLUMNS, TERMINAL_COLUMNS, aligned_table,
                                       markdown_table, row_cells, terminal_cells)
-from tasks.operators.planner import load_operator
+from tasks.operators.params import load_operator
 from tasks.operators.stick import arm_profile
 from tasks.participants.participant import PARTICIPANT_DIR, load_participant
-from tasks.stacking.episode import OPERATORS, profile_controls
+from tasks.stacking.episode import OPERATORS
+from tasks.stacking.channels import profile_controls
 
 # EpisodeJob fields a grid may vary, beside the EDITABLE_FILES' keys
 JOB_SETTINGS = {"time_limit": (int, float), "vote_length": int}

@@ -6,7 +6,7 @@ import json
 
 from tasks.experiments.summary import comparison
 from tasks.operators.assist import NONE
-from tasks.operators.planner import NO_RECOVERY
+from tasks.stacking.vocabulary import NO_RECOVERY
 from tasks.stacking import failures
 
 

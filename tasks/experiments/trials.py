@@ -16,9 +16,9 @@ from bomi.model_io import save_model
 from bomi.profiles import save_profile
 from sim.joystick import BUTTONS
 from tasks.experiments.jobs import EpisodeJob, run_job
-from tasks.operators.planner import Controls
+from tasks.stacking.vocabulary import Controls
 from tasks.operators.stick import profile_layout
-from tasks.stacking.episode import summarize
+from tasks.stacking.summary import summarize
 from tasks.trials.dataset import replace_atomically, sync_directory, write_session
 from tasks.trials.session import Controller, Session, TrialPlan, episode_log, trial_record
 

@@ -24,10 +24,6 @@ from tasks.operators.judgement import (Memory, Pace, cube_to_take, deflection_fo
                                        missed_grasp, norm, placed_cubes, turn_deflection_for, xy_distance, yaw_error)
 from tasks.operators.params import OperatorParams
 from tasks.stacking.vocabulary import REST, Controls, Goal, Phase, StickIntent, View
-# the names the CLI, the assistance and the benchmarks import from here (their homes: vocabulary, params, judgement)
-from tasks.operators.judgement import CUBE_SYMMETRY, wrapped_angle  # noqa: F401
-from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator, parse_recovery_actions  # noqa: F401
-from tasks.stacking.vocabulary import NO_RECOVERY, RecoveryAction  # noqa: F401
 
 OPENING_PROGRESS = 0.02  # closure the fingers must lose to be seen opening (0 open .. 1 closed)
 

@@ -70,7 +70,7 @@ from sim.joystick import BUTTONS
 from tasks.stacking import metrics
 
 if TYPE_CHECKING:
-    from tasks.stacking.episode import EpisodeLog
+    from tasks.stacking.record import EpisodeLog
 
 CORRECTION_MIN_M = 0.001  # a misread that moved the hand less than this has nothing to undo
 AGAINST = -0.5  # a push undoes a misread's displacement D when its direction . D / |D| is below this

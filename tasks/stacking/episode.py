@@ -22,17 +22,10 @@ from tasks.operators.params import DEFAULT_OPERATOR_FILE, OperatorParams, load_o
 from tasks.stacking.env import StackingEnv
 from tasks.stacking.record import EpisodeLog
 from tasks.stacking.sources import Operator, operator_at
+from tasks.stacking.channels import OperatorChannel
 from tasks.stacking.task import TaskConfig
 from tasks.stacking.vocabulary import Phase, StickIntent, View
 from tasks.stacking.wrappers import Assisted, Filmed, Recovering
-# the names the CLI, the benchmarks and the trials import from here (their homes: channels, record, summary, sources)
-from tasks.stacking.channels import (BomiChannel, JoystickChannel, LeanFeel, OperatorChannel,  # noqa: F401
-                                     calibrated_channel, calibrated_model, calibration_order, participant_controls,
-                                     profile_controls)
-from tasks.stacking.record import DecisionTrace  # noqa: F401
-from tasks.stacking.sources import operator_user  # noqa: F401
-from tasks.stacking.summary import ALLOWANCE_CURVE_S, WRONG_GOAL_WINDOW_S, summarize  # noqa: F401
-from tasks.operators.stick import arm_profile  # noqa: F401
 
 OPERATORS = ("joystick", "bomi")
 _MODE_VALUE = {mode: mode.value for mode in Mode}  # what a log records of a mode and a stage, looked up

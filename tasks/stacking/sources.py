@@ -21,7 +21,8 @@ import numpy as np
 from sim.joystick import JoystickState, Layout
 from tasks.operators.human import HumanOperator, load_human
 from tasks.operators.params import DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, OperatorParams, load_operator
-from tasks.operators.planner import Memory, ScriptedUser
+from tasks.operators.judgement import Memory
+from tasks.operators.planner import ScriptedUser
 from tasks.operators.recovery import Supervisor
 from tasks.stacking.channels import JoystickChannel, OperatorChannel, calibrated_channel, participant_controls
 from tasks.stacking.vocabulary import StickIntent

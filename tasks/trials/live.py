@@ -80,8 +80,6 @@ from bomi.profiles import NEUTRAL_FUNCTION
 from sim.joystick import BUTTONS, ArmCommand, JoystickState
 from tasks.operators.stick import DecisionStick
 from tasks.trials.displays import Display, Headless, StatusLine, TickLog
-# the names the CLI and the tests import from here (their home: tasks.trials.displays)
-from tasks.trials.displays import Displays, PassiveViewer, VideoDisplay, display_opens, has_display, open_log  # noqa: F401
 
 WATCHDOG_TIMEOUT_S = 0.1
 LOOKAHEAD_TICKS = 1.5  # the watchdog and the gate judge a tick at its time + this many periods (see LiveLoop.tick)

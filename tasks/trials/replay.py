@@ -25,7 +25,7 @@ from sim.env import ArmSim
 from sim.joystick import LAYOUTS, JoystickState
 from tasks.stacking import metrics
 from tasks.stacking.env import stick_state
-from tasks.trials.live import Headless
+from tasks.trials.displays import Headless
 from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_model, inside,
                                  read_records)
 from tasks.trials.dataset import SessionData

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from bomi import paper
-from tasks.stacking.episode import EpisodeLog
+from tasks.stacking.record import EpisodeLog
 from tasks.stacking.timeline import timeline_figure
 
 

@@ -32,7 +32,8 @@ from bomi.chain import Decision
 from bomi.frames import SAMPLE_PERIOD_S, FrameParser, ImuFrame, SampleIndex, imu_node_id
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, ArmCommand, JoystickState, Mode
-from tasks.stacking.episode import DecisionTrace, EpisodeLog, summarize
+from tasks.stacking.record import DecisionTrace, EpisodeLog
+from tasks.stacking.summary import summarize
 from tasks.operators.recovery import RecoveryAction, RecoveryEvent
 from tasks.stacking.env import Command, StackingEnv
 from tasks.stacking.task import TaskConfig

@@ -17,7 +17,7 @@ from tasks.operators.assist.params import AssistParams, load_assist
 from tasks.operators.assist.path import (EITHER_ORDER, PATH_ORDER, PathStep, next_step_modes, next_step_shares,
                                         path_steps, revisit_scale, rise_error, step_errors, step_of_move,
                                         time_to_goal, user_order, yaw_offset)
-from tasks.operators.planner import View
+from tasks.stacking.vocabulary import View
 
 
 @dataclass(frozen=True)

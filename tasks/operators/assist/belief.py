@@ -10,7 +10,7 @@ from sim.joystick import JoystickState, Kind, Layout, combine
 from tasks.operators.assist.goals import Goal
 from tasks.operators.assist.params import AutoModeParams, PathParams
 from tasks.operators.assist.path import yaw_offset
-from tasks.operators.planner import View
+from tasks.stacking.vocabulary import View
 
 
 @dataclass

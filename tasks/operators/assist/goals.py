@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tasks.operators.assist.params import AssistParams
-from tasks.operators.planner import View
+from tasks.stacking.vocabulary import View
 
 
 @dataclass(frozen=True)

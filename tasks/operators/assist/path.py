@@ -12,7 +12,8 @@ import numpy as np
 from sim.joystick import Kind, Layout, Mode
 from tasks.operators.assist.goals import Goal
 from tasks.operators.assist.params import PathParams
-from tasks.operators.planner import CUBE_SYMMETRY, View, wrapped_angle
+from tasks.operators.judgement import CUBE_SYMMETRY, wrapped_angle
+from tasks.stacking.vocabulary import View
 
 
 def _needed(error: float, tolerance: float, softness: float) -> float:
