@@ -12,7 +12,7 @@ period byte and a counter 1..``MAX_COUNTER_GAP`` ahead of the previous one. The 
 confirm a node are delivered then, and every frame in arrival order (a clean stream loses nothing
 and keeps its interleaving); a confirmed node's frame that breaks the rule starts a new probation,
 so a phantom cannot inject a node or, beyond one frame whose counter happens to fit, a sample.
-Measured in benchmarks/parser_fuzz.py.
+Measured by the hypothesis tests of tests/test_frames.py (rates: docs/runs.md, parser-fuzz).
 
 Safety-key events (node 40) are guarded fail-safe. STANDBY, which holds the arm, acts at once, from
 any frame. Every other event (CONTROL ends a standby; CALIBRATION retakes the neutral posture, and a
@@ -27,7 +27,7 @@ event while held acts at the latest on its second frame (one key period); one th
 frame per press acts at once when its counter counts sent frames (the previous press vouches), except
 for the first press after start, and otherwise (its counter counts periods) needs the press twice
 within ``MAX_COUNTER_GAP`` counters. Dropped events are counted (``key_events_unconfirmed``, in ``summary``). Phantom key
-frames accepted (``python benchmarks/parser_fuzz.py``, 100,000 per pattern, seed 0): 100 % without
+frames accepted (a fuzz of 100,000 frames per pattern, seed 0; docs/runs.md): 100 % without
 the guard, 0.017-0.030 % with it (expected 16/65,536); costs per pattern in docs/signal_chain.md.
 """
 from __future__ import annotations

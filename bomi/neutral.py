@@ -1,7 +1,7 @@
 """How far a person's rests scatter: the one measure of the neutral posture beyond its mean.
 
 A person never comes back to quite the same rest between motions (P1's real days: the rests' levels
-spread by 0.9-1.5 deg on the median angle, ``python benchmarks/rest_jitter.py --p1``); the chain
+spread by 0.9-1.5 deg on the median angle, docs/runs.md); the chain
 measures every motion from the one rest it calibrated on, so a later session's motions carry the
 difference of two rests. ``rest_spread`` measures the scatter from a labelled recording;
 ``bomi.chain.rest_offsets`` turns it into training copies.

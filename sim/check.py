@@ -1,6 +1,6 @@
 """Drive the arm through each joystick function and mode and measure what it achieves.
 
-Used by ``bomi sim-check`` and ``benchmarks/sim_speed.py``. Every run starts from the home pose,
+Used by ``bomi sim-check``. Every run starts from the home pose,
 reaches the mode with the real B1 presses, holds one function for a while and measures the
 steady part (after ``settle`` seconds). ``verdict`` says whether a function reaches its commanded
 speed, and if not whether a joint speed limit is the cause.

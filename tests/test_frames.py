@@ -262,7 +262,7 @@ def test_guard_needs_the_same_period_and_counters_that_follow():
 
 def test_well_formed_random_frames_in_noise_are_all_refused():
     """2000 frames that pass the start/end check (random IMU id, period, counter) amid random bytes:
-    the framing rule alone takes every one, the guard none (rates: benchmarks/parser_fuzz.py)."""
+    the framing rule alone takes every one, the guard none (rates: docs/runs.md)."""
     import numpy as np
     rng = np.random.default_rng(3)
     pieces = []

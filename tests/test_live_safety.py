@@ -1,6 +1,6 @@
 """The live path's safety (issue 27 item 1): the gate by hand, the loop on an injected clock, the
 reader when the stream goes away, the log when the disk is full, the film when it falls behind.
-End-to-end numbers: benchmarks/live_safety.py."""
+End-to-end numbers: python benchmarks/faults.py live."""
 from __future__ import annotations
 
 import errno

@@ -24,7 +24,7 @@ from tasks.participants.participant import load_participant
 from tasks.participants.population import PASS_GAP_S, draw_person, pass_recordings
 from tasks.operators.stick import arm_profile
 
-PERSON = 5   # six head motions and the neutral posture, one node (benchmarks/two_pass_file.py)
+PERSON = 5   # six head motions and the neutral posture, one node (bomi.logger_layout writes its two passes in the logger layout)
 DT = 0.016
 
 

@@ -6,7 +6,7 @@ rule: the plain LDA (no shrinkage, no copies, no rejection) unless the person's 
 over the held-out holds (the simplest option within CONSISTENCY, 2, standard errors of the best,
 ``choose_option``), one extra at a time: shrinkage, then the smaller copies, then rejection. A
 within-pass CV cannot see the drift to the next recording; gains made on a few holds did not carry to
-it on development people (benchmarks/new_people_candidates.py, docs/signal_chain.md). ``bomi train``
+it on development people (docs/signal_chain.md; runs in docs/runs.md). ``bomi train``
 and ``bomi evaluate`` print what was chosen, the gain and its standard error.
 """
 from __future__ import annotations
@@ -201,7 +201,7 @@ THRESHOLD_GRID = (0.5, 0.9, 0.99, 0.999, 0.9999)
 # to the next recording. The margin, set on development people 0-16 (at 1 point, person 2 took
 # shrinkage 0.1 + copies for +1.09 points of CV and lost 7.6 points on pass 2), stands for what a
 # cross-validation within one recording cannot see: the drift to the next one. Development people
-# 100-139 and 200-299 (benchmarks/new_people_candidates.py, docs/signal_chain.md) show both are needed.
+# 100-139 and 200-299 (docs/signal_chain.md; runs in docs/runs.md) show both are needed.
 REQUIRED_GAIN = 0.02
 CONSISTENCY = 2.0
 
@@ -211,7 +211,7 @@ def choose_option(options: Sequence[HoldScores], consistency: float = CONSISTENC
     """Index of the option (simplest first, each scored on the same held-out holds) the rule above
     takes: the simplest within ``consistency`` standard errors of the best (the first best on a tie),
     unless it gains less than ``required_gain`` over the first option, which is then kept. (0: the best,
-    the rule before the standard errors; other values only to replay it, benchmarks/new_people_candidates.py.)"""
+    the rule before the standard errors; other values only to replay it.)"""
     best = max(range(len(options)), key=lambda i: options[i].accuracy)
 
     def within(i: int) -> bool:

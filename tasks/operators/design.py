@@ -32,8 +32,7 @@ cube or a stall adds 100-300 s), which a few seeds do not show. Either needs 5 s
 (all won, or all faster: p = 1/32), hence the 5 seeds of `bomi design`. A layout the person must
 learn anew is not worth a difference a few seeds may show by chance: on two held-out runs the best
 ranked of 3 seeds, taken as it came, had 50 successes where the default had 51 of 62 episodes, and
-a Student-t interval of 3 paired times below 0 let through layouts that were then slower (17330;
-docs/results_history.md).
+a Student-t interval of 3 paired times below 0 let through layouts that were then slower (run new-people-task-17330 in docs/runs.md).
 """
 from __future__ import annotations
 
