@@ -40,6 +40,7 @@ from tasks.stacking.channels import participant_controls
 from tasks.stacking.summary import summarize
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
 from tasks.stacking.timeline import timeline_figure  # noqa: E402
+from tasks.statistics import mean_interval, wilson_interval
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PAPER_JOYSTICK_S = paper.TASK["joystick_time_s"]
@@ -64,8 +65,8 @@ def run(jobs: list[EpisodeJob], workers: int) -> list[dict]:
 
 
 def mean_ci(values: list[float]) -> tuple[float, float]:
-    """Mean and half-width of its 95 % Student-t interval (``metrics.mean_ci95``; nan below two values)."""
-    interval = metrics.mean_ci95(values)
+    """Mean and half-width of its 95 % Student-t interval (``tasks.statistics.mean_interval``; nan below two values)."""
+    interval = mean_interval(values)
     m = statistics.fmean(values) if values else float("nan")
     return m, float("nan") if interval is None else (interval[1] - interval[0]) / 2
 
@@ -161,7 +162,7 @@ def predict(args: argparse.Namespace) -> None:
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
         m, h = mean_ci(times) if times else (float("nan"), float("nan"))
-        low, high = metrics.success_ci95(len(done), len(rs))
+        low, high = wilson_interval(len(done), len(rs))
         share = statistics.fmean(r["mode_switch_time"] / r["completion_time"] for r in done) if done else float("nan")
         phases = {k: statistics.fmean(r["phase_times"][k] for r in done) if done else float("nan") for k in PHASES}
         ref = paper_times.get(name)

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from tasks.stacking import metrics
+from tasks.statistics import mean_interval, wilson_interval
 
 # intended: neutral x3, class 2 x6, neutral x3 ; decided lags by 2 and has one error to class 5
 # and one error to neutral in the settled part
@@ -132,17 +133,17 @@ def test_irrelevant_outputs_fit_neither_the_previous_nor_the_new_intent():
 
 def test_success_interval_is_wilson():
     # Wilson score interval for 20/20 at 95 %: [n / (n + z^2), 1] with z = 1.959964
-    low, high = metrics.success_ci95(20, 20)
+    low, high = wilson_interval(20, 20)
     assert low == pytest.approx(20 / (20 + 1.959964 ** 2), abs=1e-6) and high == pytest.approx(1.0)
     # 5/10: centre 0.5, half width z sqrt(p(1-p)/n + z^2/4n^2) / (1 + z^2/n)
     z, n = 1.959964, 10
     half = z * np.sqrt(0.25 / n + z ** 2 / (4 * n ** 2)) / (1 + z ** 2 / n)
-    assert metrics.success_ci95(5, 10) == pytest.approx((0.5 - half, 0.5 + half), abs=1e-6)
+    assert wilson_interval(5, 10) == pytest.approx((0.5 - half, 0.5 + half), abs=1e-6)
 
 
 def test_completion_time_interval_is_student_t():
     # mean 2, sample sd 1, n = 3: 2 +- t(0.975, 2) x 1 / sqrt(3) with t = 4.302653
-    assert metrics.mean_ci95([1.0, 2.0, 3.0]) == pytest.approx((2 - 4.302653 / np.sqrt(3), 2 + 4.302653 / np.sqrt(3)),
+    assert mean_interval([1.0, 2.0, 3.0]) == pytest.approx((2 - 4.302653 / np.sqrt(3), 2 + 4.302653 / np.sqrt(3)),
                                                                 abs=1e-5)
-    assert metrics.mean_ci95([4.0]) is None
-    assert metrics.mean_ci95([4.0, 4.0]) == (4.0, 4.0)
+    assert mean_interval([4.0]) is None
+    assert mean_interval([4.0, 4.0]) == (4.0, 4.0)

@@ -14,6 +14,7 @@ from tasks.experiments.jobs import JOYSTICK_ANYONE
 from tasks.operators.assist import NONE
 from tasks.stacking.vocabulary import NO_RECOVERY
 from tasks.stacking import failures, metrics
+from tasks.statistics import mean_interval, wilson_interval
 
 
 def _mean(values: list) -> float | None:
@@ -57,12 +58,12 @@ def aggregate(records: list[dict]) -> list[dict]:
     for (participant, operator, layout, assist, recovery), rs in sorted(groups.items()):
         done = [r for r in rs if r["success"]]
         times = [r["completion_time"] for r in done]
-        ci = metrics.mean_ci95(times)
+        ci = mean_interval(times)
         row = {
             "participant": participant, "operator": operator, "layout": layout, "assist": assist,
             "recovery": recovery, "episodes": len(rs),
             "seeds": [r["seed"] for r in rs], "successes": len(done),
-            "success_rate": len(done) / len(rs), "success_ci95": list(metrics.success_ci95(len(done), len(rs))),
+            "success_rate": len(done) / len(rs), "success_ci95": list(wilson_interval(len(done), len(rs))),
             "completion_time_mean": _mean(times),
             "completion_time_sd": statistics.stdev(times) if len(times) > 1 else None,
             "completion_time_ci95": None if ci is None else list(ci),

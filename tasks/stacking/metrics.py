@@ -16,7 +16,6 @@ import re
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.stats
 
 from bomi.classifier import NEUTRAL_LABEL
 
@@ -197,25 +196,6 @@ def cube_drops(cube_z: np.ndarray, touching: np.ndarray, fall_m: float = 0.02) -
             untouched = cube_z[release:later[0] if later.size else len(cube_z), k]
             drops += int(cube_z[release, k] - untouched.min() > fall_m)
     return drops
-
-
-def success_ci95(successes: int, episodes: int) -> tuple[float, float]:
-    """Wilson score 95 % interval of a success proportion (scipy's binomtest)."""
-    ci = scipy.stats.binomtest(successes, episodes).proportion_ci(confidence_level=0.95, method="wilson")
-    return float(ci.low), float(ci.high)
-
-
-def mean_ci95(values: list[float] | np.ndarray) -> tuple[float, float] | None:
-    """Student-t 95 % confidence interval of the mean (None below two values; a zero spread gives
-    the mean twice)."""
-    values = np.asarray(values, dtype=float)
-    if values.size < 2:
-        return None
-    mean, sem = float(values.mean()), float(scipy.stats.sem(values))
-    if sem == 0.0:
-        return mean, mean
-    low, high = scipy.stats.t.interval(0.95, values.size - 1, loc=mean, scale=sem)
-    return float(low), float(high)
 
 
 class TaskPhase(str, enum.Enum):
