@@ -20,4 +20,6 @@ Map (data flows down):
 - ``metrics``: pure functions over a record's arrays (completion, accuracy, drops, phases).
 - ``failures``: why an episode failed or was slow (its stuck span and mechanism).
 - ``timeline``: the paper-style timeline figure of an episode.
+- ``budget``: where an episode's time and its irrelevant outputs go (time budget by part,
+  irrelevant decisions by context, the vote's effect).
 """
