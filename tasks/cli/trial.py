@@ -19,6 +19,7 @@ from sim.joystick import THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.experiments.jobs import simulated_time, stage
+from tasks.experiments.stop import StopRequest
 from tasks.experiments.trials import Committer, controls_label, lock_session, predictions, remaining_plans, say
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.operators.stick import arm_profile, profile_layout
@@ -142,10 +143,6 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
 
 
 
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt(signal.Signals(signum).name)
-
-
 def _settings_argv(args: argparse.Namespace) -> list[str]:
     """The session's options as a command line (paths made absolute, so that a resume from elsewhere reads them)."""
     argv = []
@@ -196,6 +193,12 @@ def _resumed(directory: Path) -> tuple[argparse.Namespace, list[dict]]:
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
+    # SIGTERM, SIGHUP (a session manager, a closed terminal) and Ctrl-C end the session, always (tasks.experiments.stop)
+    with StopRequest().installed() as stop:
+        return _trial(args, stop)
+
+
+def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
     previous: list[dict] = []
     if args.resume is not None:
         if args.force:
@@ -209,8 +212,6 @@ def cmd_trial(args: argparse.Namespace) -> int:
                         f"above {MAX_SEED}")
     if args.resume is None:
         _check_out(out, args.force)
-    for signum in (signal.SIGTERM, signal.SIGHUP):   # a closed terminal, a session manager: as Ctrl-C
-        signal.signal(signum, _interrupt)
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # a file-size limit: EFBIG (one line), not a dead process
     from tasks.participants.participant import check_against_profile, load_participant
     standin = load_participant(args.stand_in) if args.stand_in is not None else None
@@ -274,28 +275,36 @@ def cmd_trial(args: argparse.Namespace) -> int:
                 model = calibrated_model(standin, profile, args.seed)
         sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
         writer = Committer(out, target, sessions, profile, model, standin is not None, previous)
+
+        def after_tick(*_) -> None:
+            stop.check()  # every tick: a signal whose raise was swallowed still ends the session
+            writer.after_tick()
+
         try:
             for controller, plan in plans:
+                stop.check()
                 part = len(session_files(out, controller.value)) + 1
                 meta = {"file": part_name(controller.value, part)}
                 if controller is Controller.BOMI:
-                    _bomi_session(args, plan, profile, model, standin, operator, stream, sessions, meta, writer.after_tick)
+                    _bomi_session(args, plan, profile, model, standin, operator, stream, sessions, meta, after_tick)
                 else:
-                    _joystick_session(args, plan, standin, operator, device, sessions, meta, writer.after_tick)
+                    _joystick_session(args, plan, standin, operator, device, sessions, meta, after_tick)
                 if sessions and sessions[-1][0].stopped:
                     break  # the person closed the viewer: the session ends here
         finally:
-            if device is not None:
-                device.close()
-            if stream is not None:
-                stream.stop()
-            records, logs = writer.commit()  # a trial cut short by a lost input is written too
+            with stop.shielded():  # a second signal does not cut the closing and the writing of the trials
+                if device is not None:
+                    device.close()
+                if stream is not None:
+                    stream.stop()
+                records, logs = writer.commit()  # a trial cut short by a lost input is written too
         records = previous + records
         predicted = (predictions(args.controller, args.trials, args.predict, args.seed, args.time_limit)
                      if args.predict is not None else [])
         from tasks.trials.report import write_report
         note = (f"Stand-in {standin.name} (seed {args.seed}), simulated clock." if standin is not None
                 else f"A person; stream {args.port}.")
+        stop.check()
         written = write_report(out, records, logs, predicted, note)
         for r in records:
             verdict = f"{r['completion_time']:.2f} s" if r["success"] else f"failed ({r['failure']})"
@@ -305,10 +314,11 @@ def cmd_trial(args: argparse.Namespace) -> int:
         print(f"wrote {out / 'trials.jsonl'}, " + ", ".join(str(p) for p in written))
         return 0
     finally:
-        if target != out and target.exists():  # no trial finished: the earlier session stays as it was
-            shutil.rmtree(target, ignore_errors=True)
-            say(f"no trial finished: the earlier session in {out} is kept as it was")
-        os.close(lock)
+        with stop.shielded():
+            if target != out and target.exists():  # no trial finished: the earlier session stays as it was
+                shutil.rmtree(target, ignore_errors=True)
+                say(f"no trial finished: the earlier session in {out} is kept as it was")
+            os.close(lock)
 
 
 
