@@ -105,8 +105,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay = add_command(
         subparsers, "replay",
         description="Re-run a logged trial of a `bomi trial` directory from its logged frames (BoMI) or stick "
-                    "(joystick) through the chain and the simulated arm, and compare the hand's path with the "
-                    "logged one; with --model, re-score the trial's decisions offline with another model.")
+                    "(joystick) through the chain and the simulated arm, and compare the hand's path and the "
+                    "decisions with the logged ones (DIR/model.json and DIR/profile.toml must be the files the "
+                    "trial ran with: their SHA-256 is in its record); with --model, re-score the trial's "
+                    "decisions offline with another model.")
     replay.add_argument("dir", type=Path, help="a `bomi trial` output directory")
     replay.add_argument("--trial", type=positive_int, required=True, help="the trial's number (trials.jsonl)")
     replay.add_argument("--model", type=Path, help="re-score the decisions with this model instead (accuracy only)")
@@ -465,11 +467,20 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"replay: offline only: these decisions never drove an arm; with {args.model} at the controls the "
               f"arm's path would have differed (and the person's corrections with it)")
         return 0
+    if profile is not None:
+        print(f"replay: trial {args.trial}: model {args.dir / 'model.json'}, sha256 {logged.model_sha256} as logged"
+              if logged.model_sha256 is not None else
+              f"replay: trial {args.trial}: the record keeps no model hash (a session from an older bomi): the model "
+              f"cannot be checked, only the decisions it makes against the logged ones")
     result = replay_trial(data, args.trial, profile, model)
     same = "the same" if result.success == result.logged_success else "NOT the same"
     print(f"replay: trial {args.trial} ({controller}): {result.ticks} ticks replayed ({result.logged_ticks} logged), "
           f"{'success' if result.success else 'failure'}, {same} outcome as logged")
     print(f"replay: max hand deviation {result.max_deviation_m:.3g} m")
+    if (decisions := result.decisions) is not None:
+        verdict = ("the same as logged (labels, gamma and nu to the bit)" if decisions.same else
+                   f"NOT the same as logged: {decisions.alike} alike; first difference: {decisions.first_difference}")
+        print(f"replay: decisions: {decisions.replayed} replayed, {decisions.logged} logged, {verdict}")
     return 0
 
 

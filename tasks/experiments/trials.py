@@ -19,7 +19,7 @@ from tasks.experiments.jobs import EpisodeJob, run_job
 from tasks.operators.planner import Controls
 from tasks.operators.stick import profile_layout
 from tasks.stacking.episode import summarize
-from tasks.trials.dataset import replace_atomically, sync_directory, write_session
+from tasks.trials.dataset import file_sha256, replace_atomically, sync_directory, write_session
 from tasks.trials.session import Controller, Session, TrialPlan, episode_log, trial_record
 
 LOCK_FILE = ".lock"               # held (flock) by the one bomi trial writing to the directory
@@ -75,6 +75,7 @@ class Committer:
     committed: int = 0
     failed: bool = False
     aside: Path | None = None
+    digests: dict[str, str] = field(default_factory=dict)  # model_sha256, profile_sha256 of the files written
 
     def finished(self) -> int:
         return sum(len(session.finished) for session, _ in self.sessions)
@@ -87,12 +88,14 @@ class Committer:
         """Write what has finished; the records and episode logs of this run's trials."""
         records, logs = score(self.sessions, self.intent_known)
         if self.failed or self.finished() == self.committed:
-            return records, logs
+            return self._stamped(records), logs
         try:
             if self.model is not None and any(s.controller is Controller.BOMI for s, _ in self.sessions):
                 for name, save in (("model.json", save_model), ("profile.toml", save_profile)):
                     what = self.model if name == "model.json" else self.profile
                     replace_atomically(self.target / name, lambda partial: save(partial, what))
+                    self.digests[f"{name.split('.')[0]}_sha256"] = file_sha256(self.target / name)
+            records = self._stamped(records)
             for session, meta in self.sessions:
                 if session.finished:
                     write_session(self.target / meta["file"], session, meta["attrs"])
@@ -107,6 +110,12 @@ class Committer:
         if self.target != self.final:
             self._swap()
         return records, logs
+
+    def _stamped(self, records: list[dict]) -> list[dict]:
+        """The BoMI trials' records with the SHA-256 of the model and profile files they ran with
+        (`bomi replay` refuses other files)."""
+        return [{**record, **self.digests} if record["operator"] == Controller.BOMI.value else record
+                for record in records]
 
     def _swap(self) -> None:
         self.aside = self.final.with_name(f"{self.final.name}.old-{time.strftime('%Y%m%d-%H%M%S')}")
