@@ -20,9 +20,13 @@ from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.experiments.jobs import simulated_time, stage
 from tasks.experiments.stop import StopRequest
-from tasks.experiments.trials import Committer, controls_label, lock_session, predictions, remaining_plans, say
+from tasks.experiments.trials import (Committer, controls_label, lock_session, predictions, remaining_plans, say,
+                                     session_assist)
+from tasks.operators.assist import ASSIST_HELP, Assist, assist_label, assist_option
 from tasks.operators.planner import DEFAULT_OPERATOR_FILE, Controls, load_operator
 from tasks.operators.stick import arm_profile, profile_layout
+from tasks.stacking.channels import profile_controls
+from tasks.trials.assisted import TrialAssistance
 from tasks.trials.dataset import part_name, replace_atomically, session_files
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
@@ -31,7 +35,7 @@ from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEF
 SETTINGS_FILE = "session.json"   # the session's settings, what --resume continues with
 # the options a session is run with, as session.json keeps them (--out, --force, --resume aside)
 SETTINGS = ("stand_in", "port", "controller", "profile", "model", "gamepad", "trials", "countdown", "time_limit",
-            "seed", "predict", "operator_file", "headless", "baud", "retries")
+            "seed", "predict", "operator_file", "headless", "baud", "retries", "assist")
 
 
 
@@ -69,6 +73,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     trial.add_argument("--model", type=Path, help="the BoMI's model file (.json/.npz) for the profile (with "
                                                   "--port: required; with --stand-in: default, the stand-in "
                                                   "calibrates through its stream first)")
+    trial.add_argument("--assist", type=assist_option,
+                       help=ASSIST_HELP.replace("joystick: none", "joystick: none; logged in each trial's record"))
     trial.add_argument("--gamepad", type=non_negative_int, metavar="N",
                        help="a person's joystick: gamepad N (pygame's numbering; needs bomi-jaco[gamepad]; "
                             "default: gamepad 0 if there is one, else the viewer's keys)")
@@ -158,6 +164,8 @@ def _settings_argv(args: argparse.Namespace) -> list[str]:
             continue
         if name == "controller":
             value = ",".join(c.value for c in value)
+        elif name == "assist":
+            value = assist_label(value)
         elif isinstance(value, Path) or (name == "profile" and Path(value).is_file()):
             value = Path(value).resolve()
         argv += [option, str(value)]
@@ -236,6 +244,10 @@ def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
         check_against_profile(standin, profile)
     if args.model is not None and profile is None:
         raise BomiError("--model: give the --profile it was trained for")
+    if bomi and standin is not None and not profile_controls(profile).buttons \
+            and Assist.AUTO_MODE not in session_assist(Controller.BOMI, args.assist, profile):
+        raise BomiError(f"--assist: profile {profile.name}'s controls change mode only by the automatic mode "
+                        f"switching: the stand-in needs --assist {Assist.AUTO_MODE.value}")
     if args.gamepad is not None and standin is not None:
         raise BomiError("--gamepad: the stand-in drives its own stick; a gamepad is for a person (--port)")
     model = None
@@ -331,13 +343,16 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
     arm = TrialArm(sim, plan)
+    assist = TrialAssistance(session_assist(Controller.BOMI, args.assist, profile), arm, sim.layout,
+                             profile_controls(profile).buttons)
     who = standin.name if standin is not None else "person"
     meta.update({"log": {"operator": "bomi", "participant": who, "controls": controls_label(profile),
                          "class_names": tuple(c.function for c in sorted(profile.classes, key=lambda c: c.label)),
                          "neutral": 0, "amplitude": profile.amplitude},
                  "attrs": {"profile": profile.name, "participant": who, "layout": sim.layout.name,
                            "classes": {str(c.label): f"{c.function} ({c.name})" for c in profile.classes},
-                           "plan": vars(plan), "seed": args.seed}})
+                           "plan": vars(plan), "seed": args.seed, "assist": assist.label},
+                 "assistance": assist})
     try:
         if standin is not None:
             from tasks.trials.standin import BomiStandIn, StandInSource
@@ -354,7 +369,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                     progress(clock.now)
                     after_tick()
                 run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, say), on_tick=on_tick,
-                         clock=clock, sleep=clock.sleep)
+                         clock=clock, sleep=clock.sleep, assist=assist)
             if arm.not_ready is not None:
                 raise BomiError(f"{standin.name}: {arm.not_ready}")
         else:
@@ -364,7 +379,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, say)
             try:
                 source.discard()  # what arrived while getting ready is old: never acted upon, nor logged
-                run_bomi(session, source, chain, display=display, status=status, on_tick=after_tick)
+                run_bomi(session, source, chain, display=display, status=status, on_tick=after_tick, assist=assist)
             finally:
                 source.stop()
                 status.close()
@@ -385,9 +400,13 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
 def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions, meta: dict, after_tick) -> None:
     sim = ArmSim(layout=THREE_AXIS)
     arm = TrialArm(sim, plan, ready=True)
+    controls = Controls()  # the JACO's joystick
+    assist = TrialAssistance(session_assist(Controller.JOYSTICK, args.assist, None), arm, sim.layout, controls.buttons)
     who = standin.name if standin is not None else "person"
-    meta.update({"log": {"operator": "joystick", "participant": who, "controls": Controls().label},  # the JACO's
-                 "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}})
+    meta.update({"log": {"operator": "joystick", "participant": who, "controls": controls.label},
+                 "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed,
+                           "assist": assist.label},
+                 "assistance": assist})
     try:
         if standin is not None:
             from tasks.trials.live import Headless
@@ -401,7 +420,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
                     progress(now)
                     after_tick()
                 run_joystick(session, person, display=TrialDisplay(Headless(), arm, say), clock=clock,
-                             sleep=clock.sleep, on_tick=on_tick)
+                             sleep=clock.sleep, on_tick=on_tick, assist=assist)
         else:
             from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")
@@ -409,7 +428,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             keys = device if isinstance(device, ViewerKeys) else None
             display = TrialDisplay(_viewer(args.headless, sim, keys), arm, say)
             try:
-                run_joystick(session, device, display=display, on_tick=after_tick)
+                run_joystick(session, device, display=display, on_tick=after_tick, assist=assist)
             except BomiError:
                 session.cut_short("input lost")
                 say(f"the joystick was lost: the session stops here, the running trial fails; what was "

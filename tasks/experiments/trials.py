@@ -8,7 +8,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from bomi.errors import BomiError
@@ -16,6 +16,7 @@ from bomi.model_io import save_model
 from bomi.profiles import save_profile
 from sim.joystick import BUTTONS
 from tasks.experiments.jobs import EpisodeJob, run_job
+from tasks.operators.assist import Assist, profile_assist
 from tasks.operators.planner import Controls
 from tasks.operators.stick import profile_layout
 from tasks.stacking.episode import summarize
@@ -134,15 +135,28 @@ class Committer:
 
 
 def score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[list[dict], dict]:
-    """Every finished trial's record (trials.jsonl) and episode log (the figures)."""
+    """Every finished trial's record (trials.jsonl) and episode log (the figures), with what the
+    session's assistance (``meta["assistance"]``, a ``tasks.trials.assisted.TrialAssistance``) did in it."""
     records, logs = [], {}
     for session, meta in sessions:
+        assistance = meta.get("assistance")
         for result in session.finished:
             log = episode_log(session.recorder, result, **meta["log"])
+            if assistance is not None:
+                log = replace(log, **vars(assistance.of_trial(result.number)))
             logs[result.number] = log
             records.append(trial_record(log, result.number, intent_known))
     return records, logs
 
+
+
+def session_assist(controller: Controller, chosen: frozenset[Assist] | None, profile) -> frozenset[Assist]:
+    """A controller's assistances, as `bomi benchmark` chooses an episode's (``jobs.job_assist``): the
+    ``--assist`` given, else the profile's ``[assist] options`` for the BoMI and none for the joystick
+    (the JACO's joystick has its mode buttons)."""
+    if chosen is not None:
+        return chosen
+    return profile_assist(profile) if controller is Controller.BOMI else frozenset()
 
 
 def controls_label(profile) -> str:

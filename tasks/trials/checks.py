@@ -24,6 +24,7 @@ from bomi.model_io import check_model_for
 from bomi.profiles import Profile
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS
 from tasks.experiments.limits import MAX_SEED
+from tasks.operators.assist import parse_assist
 from tasks.trials.session import UNKNOWN, Controller, Phase, TrialPlan
 
 CLOCKS = ("simulated", "wall")
@@ -136,6 +137,12 @@ def check_attrs(attrs: dict) -> None:
             raise Fault(f"attribute {key}", f"must be {json.dumps(expected)} (the columns this bomi replays)")
     check_plan(_json_attr(attrs, "plan"))
     check_neutral(_json_attr(attrs, "neutral"))
+    if "assist" in attrs:   # a file from before the assistance was logged ran without
+        assist = _attr(attrs, "assist", str)
+        try:
+            parse_assist(assist, "")
+        except BomiError as exc:
+            raise Fault("attribute assist", str(exc)) from None
     if controller == Controller.BOMI.value:
         _attr(attrs, "profile", str, lambda v: bool(v), "a profile name")
         _attr(attrs, "allowance", int, lambda v: 0 <= v <= 10_000, "a number of decisions in [0, 10000]")

@@ -26,11 +26,13 @@ from bomi.frames import FrameParser, ImuFrame
 from bomi.profiles import Profile
 from sim.env import ArmSim
 from sim.joystick import LAYOUTS, JoystickState
+from tasks.operators.assist import NONE, parse_assist
 from tasks.stacking import metrics
 from tasks.stacking.env import stick_state
 from tasks.trials.live import Headless
 from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_digest, check_logged_model,
                                  inside, read_records)
+from tasks.trials.assisted import TrialAssistance
 from tasks.trials.dataset import SessionData
 from tasks.trials.session import (UNKNOWN, Controller, Session, SimulatedClock, TickRecorder, TrialArm, TrialDisplay,
                                   TrialPlan, run_joystick)
@@ -88,7 +90,8 @@ class Replayed:
 Made = tuple[int, int, float, float]   # a decision: tick, label, gamma, nu
 
 
-def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain, made: list[Made]) -> None:
+def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain, made: list[Made],
+                 assist: TrialAssistance) -> None:
     """The logged bytes of each tick through the live loop's tick (``tasks.trials.live.LiveLoop``, which is
     deterministic given its inputs) at the logged tick time, until the arm's last trial is over; the
     decisions the loop acted on, appended to ``made``."""
@@ -97,7 +100,7 @@ def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain, made: lis
     def keep(tick) -> None:
         made.extend((tick.tick, d.label, d.gamma, d.nu) for d in tick.decisions)
 
-    loop = LiveLoop(chain, arm, on_neutral=arm.ready, observers=[keep])
+    loop = LiveLoop(chain, arm, on_neutral=arm.ready, observers=[keep], assist=assist)
     parser, seen = FrameParser(), 0
     reconnected = data.ticks.get("reconnected", np.zeros(len(data.ticks["t"]), dtype=bool)).tolist()
     for t, chunk, again in zip(data.ticks["t"].tolist(), data.tick_bytes(), reconnected):
@@ -107,6 +110,16 @@ def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain, made: lis
         events = parser.safety_events[seen:]
         seen += len(events)
         loop.tick(t, frames, events, again)
+
+
+def logged_assistance(data: SessionData, arm: TrialArm, profile: Profile | None) -> TrialAssistance:
+    """The assistance the session ran with (its ``assist`` attribute; none in a file from before it was
+    logged), on the replayed arm with the controls it had."""
+    from tasks.operators.planner import Controls
+    from tasks.stacking.channels import profile_controls
+    options = parse_assist(data.attrs.get("assist", NONE), f"{data.path}: attribute assist")
+    buttons = (profile_controls(profile) if profile is not None else Controls()).buttons
+    return TrialAssistance(options, arm, arm.sim.layout, buttons)
 
 
 def session_plan(data: SessionData) -> TrialPlan:
@@ -128,14 +141,15 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
         controller = Controller(data.attrs["controller"])
         arm = TrialArm(sim, session_plan(data), ready=controller is Controller.JOYSTICK, last_trial=number)
         made: list[Made] = []
+        assist = logged_assistance(data, arm, profile)
         if controller is Controller.BOMI:
-            _replay_bomi(data, arm, OnlineChain(model, profile), made)
+            _replay_bomi(data, arm, OnlineChain(model, profile), made, assist)
         else:
             session = Session(controller, arm, TickRecorder(arm), "replay")
             clock = SimulatedClock()  # the joystick's ticks depend on nothing but their order
             try:
                 run_joystick(session, LoggedStick(data.ticks["stick"], data.ticks["pressed"]),
-                             display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep)
+                             display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep, assist=assist)
             except LogEnded:
                 pass  # a trial cut short: replayed up to where its log ends
     finally:
