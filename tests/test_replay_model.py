@@ -112,3 +112,34 @@ def test_a_digest_that_is_not_one_is_one_line(session_dir, tmp_path, capsys):
     assert main(["replay", str(out), "--trial", "1"]) == 2
     assert capsys.readouterr().err == (f"bomi: error: {out / 'trials.jsonl'}: line 1: model_sha256: 'abc' is not a "
                                        f"SHA-256 digest (64 hexadecimal digits)\n")
+
+
+def test_a_resumed_session_keeps_its_model_and_profile_files_byte_for_byte(p1_model_file, tmp_path, monkeypatch,
+                                                                          capsys):
+    """A session interrupted in trial 2 and resumed: its model.json and profile.toml are not rewritten (a
+    profile saved again from its loaded copy differs in its bytes), so every record's digests are the
+    files' and trial 1 still replays."""
+    import signal
+
+    from tasks.trials.standin import BomiStandIn
+    heard, calls = BomiStandIn.heard, []
+
+    def heard_then_signal(self, decisions):
+        calls.append(1)
+        if len(calls) == 1500:                       # trial 2 (each trial: 12 + 120 ticks after the warm-up)
+            signal.raise_signal(signal.SIGTERM)
+        return heard(self, decisions)
+
+    monkeypatch.setattr(BomiStandIn, "heard", heard_then_signal)
+    out = tmp_path / "session"
+    assert main(["trial", "--stand-in", "P1", "--profile", "P1", "--model", str(p1_model_file), "--controller", "bomi",
+                 "--trials", "3", "--seed", "11", "--headless", "--time-limit", "4", "--countdown", "0.2",
+                 "--out", str(out)]) == 130
+    before = [r["trial"] for r in records(out)]
+    monkeypatch.setattr(BomiStandIn, "heard", heard)
+    assert main(["trial", "--resume", str(out)]) == 0
+    assert before and [r["trial"] for r in records(out)] == [1, 2, 3]
+    assert {(r["model_sha256"], r["profile_sha256"]) for r in records(out)} == \
+        {(sha256(out / "model.json"), sha256(out / "profile.toml"))}
+    assert main(["replay", str(out), "--trial", "1"]) == 0
+    assert "decisions:" in capsys.readouterr().out

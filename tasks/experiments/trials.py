@@ -60,8 +60,8 @@ def remaining_plans(controllers: list[Controller], trials: int, countdown: float
 
 @dataclass
 class Committer:
-    """Every trial written as it finishes: the session files (HDF5), the model and profile, then the
-    records (trials.jsonl) last, each replaced atomically (``tasks.trials.dataset.replace_atomically``),
+    """Every trial written as it finishes: the session files (HDF5), the model and profile (once: their
+    SHA-256 goes into each BoMI trial's record), then the records (trials.jsonl) last, each replaced atomically (``tasks.trials.dataset.replace_atomically``),
     so a kill at any instant leaves every finished trial whole. Under --force the session is written
     to a staging directory inside DIR until its first trial has finished; the earlier session is then
     moved aside (DIR.old-TIME) and the new one into DIR."""
@@ -93,9 +93,10 @@ class Committer:
         try:
             if self.model is not None and any(s.controller is Controller.BOMI for s, _ in self.sessions):
                 for name, save in (("model.json", save_model), ("profile.toml", save_profile)):
-                    what = self.model if name == "model.json" else self.profile
-                    replace_atomically(self.target / name, lambda partial: save(partial, what))
-                    self.digests[f"{name.split('.')[0]}_sha256"] = file_sha256(self.target / name)
+                    what, path = self.model if name == "model.json" else self.profile, self.target / name
+                    if not path.exists():  # written once: a resumed session keeps its own files byte for byte
+                        replace_atomically(path, lambda partial: save(partial, what))
+                    self.digests[f"{name.split('.')[0]}_sha256"] = file_sha256(path)
             records = self._stamped(records)
             for session, meta in self.sessions:
                 if session.finished:
