@@ -82,6 +82,30 @@ def test_a_swallowed_signal_still_ends_the_session_on_its_tick(tmp_path, monkeyp
     assert records(out) == [1, 2, 3]
 
 
+def test_a_swallowed_signal_ends_a_bomi_session_on_its_tick(p1_model_file, tmp_path, monkeypatch, capsys):
+    """The same through the live loop: the raise swallowed inside an observer of tick 1500 (after the warm-up,
+    within trials 2-3 of 4 s): the session ends there, the trials finished before it kept, not the last."""
+    from tasks.trials.standin import BomiStandIn
+    heard, calls = BomiStandIn.heard, []
+
+    def heard_swallowing(self, decisions):
+        calls.append(1)
+        if len(calls) == 1500:
+            try:
+                signal.raise_signal(signal.SIGTERM)
+            except KeyboardInterrupt:
+                pass
+        return heard(self, decisions)
+
+    monkeypatch.setattr(BomiStandIn, "heard", heard_swallowing)
+    out = tmp_path / "session"
+    assert main(["trial", "--stand-in", "P1", "--profile", "P1", "--model", str(p1_model_file), "--controller", "bomi",
+                 "--trials", "3", "--seed", "11", "--headless", "--time-limit", "4", "--countdown", "0.2",
+                 "--out", str(out)]) == 130
+    assert len(calls) == 1500 and capsys.readouterr().err.strip().splitlines()[-1] == "bomi: interrupted"
+    assert 1 in records(out) and 3 not in records(out) and not (out / "report.md").exists()
+
+
 SERVER = r"""
 import os, random, signal, sys, time
 import tqdm
