@@ -73,8 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     trial.add_argument("--model", type=Path, help="the BoMI's model file (.json/.npz) for the profile (with "
                                                   "--port: required; with --stand-in: default, the stand-in "
                                                   "calibrates through its stream first)")
-    trial.add_argument("--assist", type=assist_option,
-                       help=ASSIST_HELP.replace("joystick: none", "joystick: none; logged in each trial's record"))
+    trial.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     trial.add_argument("--gamepad", type=non_negative_int, metavar="N",
                        help="a person's joystick: gamepad N (pygame's numbering; needs bomi-jaco[gamepad]; "
                             "default: gamepad 0 if there is one, else the viewer's keys)")
