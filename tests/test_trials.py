@@ -59,7 +59,8 @@ def test_a_stand_in_session_writes_the_benchmark_records(bomi_dir, joystick_dir)
     bomi, joystick = _records(bomi_dir), _records(joystick_dir)
     assert [r["trial"] for r in bomi] == [1, 2] and [r["trial"] for r in joystick] == [1]
     for r in bomi:
-        assert set(r) - {"trial"} == _summary_keys(with_decisions=True)
+        # and the model and profile files it ran with (tests/test_replay_model.py)
+        assert set(r) - {"trial", "model_sha256", "profile_sha256"} == _summary_keys(with_decisions=True)
         assert r["operator"] == "bomi" and r["participant"] == "P1" and r["decisions"] > 100
         assert 0.0 <= r["accuracy_all_decisions"] <= 1.0
     assert set(joystick[0]) - {"trial"} == _summary_keys(with_decisions=False)

@@ -19,10 +19,15 @@ from sim.joystick import THREE_AXIS
 from tasks.cli import add_command
 from tasks.cli.options import MAX_SEED, add_force, non_negative_int, non_negative_seconds, positive_int, seconds, seed
 from tasks.experiments.jobs import simulated_time, stage
-from tasks.experiments.trials import Committer, controls_label, lock_session, predictions, remaining_plans, say
-from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.experiments.stop import StopRequest
+from tasks.experiments.trials import (Committer, controls_label, lock_session, predictions, remaining_plans, say,
+                                     session_assist)
+from tasks.operators.assist import ASSIST_HELP, Assist, assist_label, assist_option
+from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking.vocabulary import Controls
 from tasks.operators.stick import arm_profile, profile_layout
+from tasks.stacking.channels import profile_controls
+from tasks.trials.assisted import TrialAssistance
 from tasks.trials.dataset import part_name, replace_atomically, session_files
 from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEFAULT_TRIALS, Controller, Session,
                                   SimulatedClock, TappedParser, TickRecorder, TrialArm, TrialDisplay, TrialPlan,
@@ -31,7 +36,7 @@ from tasks.trials.session import (DEFAULT_COUNTDOWN_S, DEFAULT_TIME_LIMIT_S, DEF
 SETTINGS_FILE = "session.json"   # the session's settings, what --resume continues with
 # the options a session is run with, as session.json keeps them (--out, --force, --resume aside)
 SETTINGS = ("stand_in", "port", "controller", "profile", "model", "gamepad", "trials", "countdown", "time_limit",
-            "seed", "predict", "operator_file", "headless", "baud", "retries")
+            "seed", "predict", "operator_file", "headless", "baud", "retries", "assist")
 
 
 
@@ -69,6 +74,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     trial.add_argument("--model", type=Path, help="the BoMI's model file (.json/.npz) for the profile (with "
                                                   "--port: required; with --stand-in: default, the stand-in "
                                                   "calibrates through its stream first)")
+    trial.add_argument("--assist", type=assist_option, help=ASSIST_HELP)
     trial.add_argument("--gamepad", type=non_negative_int, metavar="N",
                        help="a person's joystick: gamepad N (pygame's numbering; needs bomi-jaco[gamepad]; "
                             "default: gamepad 0 if there is one, else the viewer's keys)")
@@ -105,8 +111,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     replay = add_command(
         subparsers, "replay",
         description="Re-run a logged trial of a `bomi trial` directory from its logged frames (BoMI) or stick "
-                    "(joystick) through the chain and the simulated arm, and compare the hand's path with the "
-                    "logged one; with --model, re-score the trial's decisions offline with another model.")
+                    "(joystick) through the chain and the simulated arm, and compare the hand's path and the "
+                    "decisions with the logged ones (DIR/model.json and DIR/profile.toml must be the files the "
+                    "trial ran with: their SHA-256 is in its record); with --model, re-score the trial's "
+                    "decisions offline with another model.")
     replay.add_argument("dir", type=Path, help="a `bomi trial` output directory")
     replay.add_argument("--trial", type=positive_int, required=True, help="the trial's number (trials.jsonl)")
     replay.add_argument("--model", type=Path, help="re-score the decisions with this model instead (accuracy only)")
@@ -137,14 +145,10 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
     from tasks.cli.live import _viewer as live_viewer
     if keys is None:
         return live_viewer(headless, sim)
-    from tasks.trials.displays import PassiveViewer
+    from tasks.trials.live import PassiveViewer
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
-
-
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def _settings_argv(args: argparse.Namespace) -> list[str]:
@@ -160,6 +164,8 @@ def _settings_argv(args: argparse.Namespace) -> list[str]:
             continue
         if name == "controller":
             value = ",".join(c.value for c in value)
+        elif name == "assist":
+            value = assist_label(value)
         elif isinstance(value, Path) or (name == "profile" and Path(value).is_file()):
             value = Path(value).resolve()
         argv += [option, str(value)]
@@ -197,6 +203,12 @@ def _resumed(directory: Path) -> tuple[argparse.Namespace, list[dict]]:
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
+    # SIGTERM, SIGHUP (a session manager, a closed terminal) and Ctrl-C end the session, always (tasks.experiments.stop)
+    with StopRequest().installed() as stop:
+        return _trial(args, stop)
+
+
+def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
     previous: list[dict] = []
     if args.resume is not None:
         if args.force:
@@ -210,8 +222,6 @@ def cmd_trial(args: argparse.Namespace) -> int:
                         f"above {MAX_SEED}")
     if args.resume is None:
         _check_out(out, args.force)
-    for signum in (signal.SIGTERM, signal.SIGHUP):   # a closed terminal, a session manager: as Ctrl-C
-        signal.signal(signum, _interrupt)
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # a file-size limit: EFBIG (one line), not a dead process
     from tasks.participants.participant import check_against_profile, load_participant
     standin = load_participant(args.stand_in) if args.stand_in is not None else None
@@ -234,6 +244,10 @@ def cmd_trial(args: argparse.Namespace) -> int:
         check_against_profile(standin, profile)
     if args.model is not None and profile is None:
         raise BomiError("--model: give the --profile it was trained for")
+    if bomi and standin is not None and not profile_controls(profile).buttons \
+            and Assist.AUTO_MODE not in session_assist(Controller.BOMI, args.assist, profile):
+        raise BomiError(f"--assist: profile {profile.name}'s controls change mode only by the automatic mode "
+                        f"switching: the stand-in needs --assist {Assist.AUTO_MODE.value}")
     if args.gamepad is not None and standin is not None:
         raise BomiError("--gamepad: the stand-in drives its own stick; a gamepad is for a person (--port)")
     model = None
@@ -269,34 +283,42 @@ def cmd_trial(args: argparse.Namespace) -> int:
             settings = json.dumps({"argv": _settings_argv(args)}, indent=1) + "\n"
             replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
         if bomi and model is None:
-            from tasks.stacking.channels import calibrated_model
+            from tasks.stacking.episode import calibrated_model
             with stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
                         f"record does, then bomi train)", progress=True):
                 model = calibrated_model(standin, profile, args.seed)
         sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
         writer = Committer(out, target, sessions, profile, model, standin is not None, previous)
+
+        def after_tick(*_) -> None:
+            stop.check()  # every tick: a signal whose raise was swallowed still ends the session
+            writer.after_tick()
+
         try:
             for controller, plan in plans:
+                stop.check()
                 part = len(session_files(out, controller.value)) + 1
                 meta = {"file": part_name(controller.value, part)}
                 if controller is Controller.BOMI:
-                    _bomi_session(args, plan, profile, model, standin, operator, stream, sessions, meta, writer.after_tick)
+                    _bomi_session(args, plan, profile, model, standin, operator, stream, sessions, meta, after_tick)
                 else:
-                    _joystick_session(args, plan, standin, operator, device, sessions, meta, writer.after_tick)
+                    _joystick_session(args, plan, standin, operator, device, sessions, meta, after_tick)
                 if sessions and sessions[-1][0].stopped:
                     break  # the person closed the viewer: the session ends here
         finally:
-            if device is not None:
-                device.close()
-            if stream is not None:
-                stream.stop()
-            records, logs = writer.commit()  # a trial cut short by a lost input is written too
+            with stop.shielded():  # a second signal does not cut the closing and the writing of the trials
+                if device is not None:
+                    device.close()
+                if stream is not None:
+                    stream.stop()
+                records, logs = writer.commit()  # a trial cut short by a lost input is written too
         records = previous + records
         predicted = (predictions(args.controller, args.trials, args.predict, args.seed, args.time_limit)
                      if args.predict is not None else [])
         from tasks.trials.report import write_report
         note = (f"Stand-in {standin.name} (seed {args.seed}), simulated clock." if standin is not None
                 else f"A person; stream {args.port}.")
+        stop.check()
         written = write_report(out, records, logs, predicted, note)
         for r in records:
             verdict = f"{r['completion_time']:.2f} s" if r["success"] else f"failed ({r['failure']})"
@@ -306,10 +328,11 @@ def cmd_trial(args: argparse.Namespace) -> int:
         print(f"wrote {out / 'trials.jsonl'}, " + ", ".join(str(p) for p in written))
         return 0
     finally:
-        if target != out and target.exists():  # no trial finished: the earlier session stays as it was
-            shutil.rmtree(target, ignore_errors=True)
-            say(f"no trial finished: the earlier session in {out} is kept as it was")
-        os.close(lock)
+        with stop.shielded():
+            if target != out and target.exists():  # no trial finished: the earlier session stays as it was
+                shutil.rmtree(target, ignore_errors=True)
+                say(f"no trial finished: the earlier session in {out} is kept as it was")
+            os.close(lock)
 
 
 
@@ -320,13 +343,16 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
     sim = ArmSim(layout=profile_layout(profile))
     chain = OnlineChain(model, profile)
     arm = TrialArm(sim, plan)
+    assist = TrialAssistance(session_assist(Controller.BOMI, args.assist, profile), arm, sim.layout,
+                             profile_controls(profile).buttons)
     who = standin.name if standin is not None else "person"
     meta.update({"log": {"operator": "bomi", "participant": who, "controls": controls_label(profile),
                          "class_names": tuple(c.function for c in sorted(profile.classes, key=lambda c: c.label)),
                          "neutral": 0, "amplitude": profile.amplitude},
                  "attrs": {"profile": profile.name, "participant": who, "layout": sim.layout.name,
                            "classes": {str(c.label): f"{c.function} ({c.name})" for c in profile.classes},
-                           "plan": vars(plan), "seed": args.seed}})
+                           "plan": vars(plan), "seed": args.seed, "assist": assist.label},
+                 "assistance": assist})
     try:
         if standin is not None:
             from tasks.trials.standin import BomiStandIn, StandInSource
@@ -343,7 +369,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
                     progress(clock.now)
                     after_tick()
                 run_bomi(session, source, chain, display=TrialDisplay(Headless(), arm, say), on_tick=on_tick,
-                         clock=clock, sleep=clock.sleep)
+                         clock=clock, sleep=clock.sleep, assist=assist)
             if arm.not_ready is not None:
                 raise BomiError(f"{standin.name}: {arm.not_ready}")
         else:
@@ -353,7 +379,7 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
             status, display = TrialStatusLine(arm, StatusLine()), TrialDisplay(_viewer(args.headless, sim), arm, say)
             try:
                 source.discard()  # what arrived while getting ready is old: never acted upon, nor logged
-                run_bomi(session, source, chain, display=display, status=status, on_tick=after_tick)
+                run_bomi(session, source, chain, display=display, status=status, on_tick=after_tick, assist=assist)
             finally:
                 source.stop()
                 status.close()
@@ -374,9 +400,13 @@ def _bomi_session(args, plan: TrialPlan, profile, model, standin, operator, sour
 def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions, meta: dict, after_tick) -> None:
     sim = ArmSim(layout=THREE_AXIS)
     arm = TrialArm(sim, plan, ready=True)
+    controls = Controls()  # the JACO's joystick
+    assist = TrialAssistance(session_assist(Controller.JOYSTICK, args.assist, None), arm, sim.layout, controls.buttons)
     who = standin.name if standin is not None else "person"
-    meta.update({"log": {"operator": "joystick", "participant": who, "controls": Controls().label},  # the JACO's
-                 "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed}})
+    meta.update({"log": {"operator": "joystick", "participant": who, "controls": controls.label},
+                 "attrs": {"participant": who, "layout": sim.layout.name, "plan": vars(plan), "seed": args.seed,
+                           "assist": assist.label},
+                 "assistance": assist})
     try:
         if standin is not None:
             from tasks.trials.displays import Headless
@@ -390,7 +420,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
                     progress(now)
                     after_tick()
                 run_joystick(session, person, display=TrialDisplay(Headless(), arm, say), clock=clock,
-                             sleep=clock.sleep, on_tick=on_tick)
+                             sleep=clock.sleep, on_tick=on_tick, assist=assist)
         else:
             from tasks.trials.devices import ViewerKeys
             session = Session(Controller.JOYSTICK, arm, TickRecorder(arm), "wall")
@@ -398,7 +428,7 @@ def _joystick_session(args, plan: TrialPlan, standin, operator, device, sessions
             keys = device if isinstance(device, ViewerKeys) else None
             display = TrialDisplay(_viewer(args.headless, sim, keys), arm, say)
             try:
-                run_joystick(session, device, display=display, on_tick=after_tick)
+                run_joystick(session, device, display=display, on_tick=after_tick, assist=assist)
             except BomiError:
                 session.cut_short("input lost")
                 say(f"the joystick was lost: the session stops here, the running trial fails; what was "
@@ -417,7 +447,7 @@ def _person_stick(index: int | None, headless: bool):
     """A person's joystick: gamepad ``index``; by default gamepad 0, else the viewer's keys."""
     import time
 
-    from tasks.trials.displays import display_opens, has_display
+    from tasks.trials.live import display_opens, has_display
     from tasks.trials.devices import Gamepad, ViewerKeys
     if index is not None:
         return Gamepad(index)
@@ -456,11 +486,20 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"replay: offline only: these decisions never drove an arm; with {args.model} at the controls the "
               f"arm's path would have differed (and the person's corrections with it)")
         return 0
+    if profile is not None:
+        print(f"replay: trial {args.trial}: model {args.dir / 'model.json'}, sha256 {logged.model_sha256} as logged"
+              if logged.model_sha256 is not None else
+              f"replay: trial {args.trial}: the record keeps no model hash (a session from an older bomi): the model "
+              f"cannot be checked, only the decisions it makes against the logged ones")
     result = replay_trial(data, args.trial, profile, model)
     same = "the same" if result.success == result.logged_success else "NOT the same"
     print(f"replay: trial {args.trial} ({controller}): {result.ticks} ticks replayed ({result.logged_ticks} logged), "
           f"{'success' if result.success else 'failure'}, {same} outcome as logged")
     print(f"replay: max hand deviation {result.max_deviation_m:.3g} m")
+    if (decisions := result.decisions) is not None:
+        verdict = ("the same as logged (labels, gamma and nu to the bit)" if decisions.same else
+                   f"NOT the same as logged: {decisions.alike} alike; first difference: {decisions.first_difference}")
+        print(f"replay: decisions: {decisions.replayed} replayed, {decisions.logged} logged, {verdict}")
     return 0
 
 

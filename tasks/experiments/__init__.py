@@ -14,6 +14,8 @@ which only parses arguments and prints) and the benchmarks (benchmarks/) both ca
 - ``streams``: recording from a base-station stream (nodes, the settle wait, timing, segments).
 - ``trials``: `bomi trial`'s bookkeeping: the directory's lock, the trials to run, each finished
   trial written as it finishes, scored, and a virtual participant's prediction of them.
+- ``stop``: termination signals kept as a request that every tick checks (a swallowed raise still
+  ends the session).
 - ``limits``: the largest seeds, seed counts and durations any run accepts.
 - ``engine`` and ``sweep`` (process pool or Ray; grids of settings x seeds, resumable).
 """

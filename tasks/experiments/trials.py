@@ -8,7 +8,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from bomi.errors import BomiError
@@ -16,10 +16,11 @@ from bomi.model_io import save_model
 from bomi.profiles import save_profile
 from sim.joystick import BUTTONS
 from tasks.experiments.jobs import EpisodeJob, run_job
+from tasks.operators.assist import Assist, profile_assist
 from tasks.stacking.vocabulary import Controls
 from tasks.operators.stick import profile_layout
-from tasks.stacking.summary import summarize
-from tasks.trials.dataset import replace_atomically, sync_directory, write_session
+from tasks.stacking.episode import summarize
+from tasks.trials.dataset import file_sha256, replace_atomically, sync_directory, write_session
 from tasks.trials.session import Controller, Session, TrialPlan, episode_log, trial_record
 
 LOCK_FILE = ".lock"               # held (flock) by the one bomi trial writing to the directory
@@ -59,8 +60,8 @@ def remaining_plans(controllers: list[Controller], trials: int, countdown: float
 
 @dataclass
 class Committer:
-    """Every trial written as it finishes: the session files (HDF5), the model and profile, then the
-    records (trials.jsonl) last, each replaced atomically (``tasks.trials.dataset.replace_atomically``),
+    """Every trial written as it finishes: the session files (HDF5), the model and profile (once: their
+    SHA-256 goes into each BoMI trial's record), then the records (trials.jsonl) last, each replaced atomically (``tasks.trials.dataset.replace_atomically``),
     so a kill at any instant leaves every finished trial whole. Under --force the session is written
     to a staging directory inside DIR until its first trial has finished; the earlier session is then
     moved aside (DIR.old-TIME) and the new one into DIR."""
@@ -75,6 +76,7 @@ class Committer:
     committed: int = 0
     failed: bool = False
     aside: Path | None = None
+    digests: dict[str, str] = field(default_factory=dict)  # model_sha256, profile_sha256 of the files written
 
     def finished(self) -> int:
         return sum(len(session.finished) for session, _ in self.sessions)
@@ -87,12 +89,15 @@ class Committer:
         """Write what has finished; the records and episode logs of this run's trials."""
         records, logs = score(self.sessions, self.intent_known)
         if self.failed or self.finished() == self.committed:
-            return records, logs
+            return self._stamped(records), logs
         try:
             if self.model is not None and any(s.controller is Controller.BOMI for s, _ in self.sessions):
                 for name, save in (("model.json", save_model), ("profile.toml", save_profile)):
-                    what = self.model if name == "model.json" else self.profile
-                    replace_atomically(self.target / name, lambda partial: save(partial, what))
+                    what, path = self.model if name == "model.json" else self.profile, self.target / name
+                    if not path.exists():  # written once: a resumed session keeps its own files byte for byte
+                        replace_atomically(path, lambda partial: save(partial, what))
+                    self.digests[f"{name.split('.')[0]}_sha256"] = file_sha256(path)
+            records = self._stamped(records)
             for session, meta in self.sessions:
                 if session.finished:
                     write_session(self.target / meta["file"], session, meta["attrs"])
@@ -107,6 +112,12 @@ class Committer:
         if self.target != self.final:
             self._swap()
         return records, logs
+
+    def _stamped(self, records: list[dict]) -> list[dict]:
+        """The BoMI trials' records with the SHA-256 of the model and profile files they ran with
+        (`bomi replay` refuses other files)."""
+        return [{**record, **self.digests} if record["operator"] == Controller.BOMI.value else record
+                for record in records]
 
     def _swap(self) -> None:
         self.aside = self.final.with_name(f"{self.final.name}.old-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -125,15 +136,28 @@ class Committer:
 
 
 def score(sessions: list[tuple[Session, dict]], intent_known: bool) -> tuple[list[dict], dict]:
-    """Every finished trial's record (trials.jsonl) and episode log (the figures)."""
+    """Every finished trial's record (trials.jsonl) and episode log (the figures), with what the
+    session's assistance (``meta["assistance"]``, a ``tasks.trials.assisted.TrialAssistance``) did in it."""
     records, logs = [], {}
     for session, meta in sessions:
+        assistance = meta.get("assistance")
         for result in session.finished:
             log = episode_log(session.recorder, result, **meta["log"])
+            if assistance is not None:
+                log = replace(log, **vars(assistance.of_trial(result.number)))
             logs[result.number] = log
             records.append(trial_record(log, result.number, intent_known))
     return records, logs
 
+
+
+def session_assist(controller: Controller, chosen: frozenset[Assist] | None, profile) -> frozenset[Assist]:
+    """A controller's assistances, as `bomi benchmark` chooses an episode's (``jobs.job_assist``): the
+    ``--assist`` given, else the profile's ``[assist] options`` for the BoMI and none for the joystick
+    (the JACO's joystick has its mode buttons)."""
+    if chosen is not None:
+        return chosen
+    return profile_assist(profile) if controller is Controller.BOMI else frozenset()
 
 
 def controls_label(profile) -> str:

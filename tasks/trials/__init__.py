@@ -10,6 +10,8 @@ Map (data flows down):
   (``tasks.stacking.env``: wait, countdown, the timed trial, next; reset per trial); ``run_bomi`` drives it from the live loop (``tasks.trials.live.run_live``),
   ``run_joystick`` from an input device; ``TickRecorder`` keeps every tick; ``episode_log`` and
   ``trial_record`` score each trial with ``tasks.stacking.episode.summarize`` (the benchmark's records).
+- ``assisted``: the assistance (automatic mode switching, grasp help) on a session's trials, as the
+  benchmark applies it to an episode; logged per trial, applied again by a replay.
 - ``standin``: a virtual participant at the controls (BoMI: base-station bytes through the live
   path; joystick: the scripted user's stick), on a simulated clock.
 - ``devices``: a person's joystick: a gamepad (pygame) or the viewer's keys.

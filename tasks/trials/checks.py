@@ -24,6 +24,7 @@ from bomi.model_io import check_model_for
 from bomi.profiles import Profile
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS
 from tasks.experiments.limits import MAX_SEED
+from tasks.operators.assist import parse_assist
 from tasks.trials.session import UNKNOWN, Controller, Phase, TrialPlan
 
 CLOCKS = ("simulated", "wall")
@@ -136,6 +137,12 @@ def check_attrs(attrs: dict) -> None:
             raise Fault(f"attribute {key}", f"must be {json.dumps(expected)} (the columns this bomi replays)")
     check_plan(_json_attr(attrs, "plan"))
     check_neutral(_json_attr(attrs, "neutral"))
+    if "assist" in attrs:   # a file from before the assistance was logged ran without
+        assist = _attr(attrs, "assist", str)
+        try:
+            parse_assist(assist, "")
+        except BomiError as exc:
+            raise Fault("attribute assist", str(exc)) from None
     if controller == Controller.BOMI.value:
         _attr(attrs, "profile", str, lambda v: bool(v), "a profile name")
         _attr(attrs, "allowance", int, lambda v: 0 <= v <= 10_000, "a number of decisions in [0, 10000]")
@@ -239,12 +246,16 @@ RECORDS_FILE = "trials.jsonl"
 
 @dataclass(frozen=True)
 class TrialRecord:
-    """What a reader takes from a trial's line of trials.jsonl."""
+    """What a reader takes from a trial's line of trials.jsonl. A BoMI trial's record keeps the SHA-256
+    of the session's model.json and profile.toml as they were when it ran (None: a session written
+    before this bomi logged them)."""
 
     number: int
     controller: Controller
     success: bool
     seed: int
+    model_sha256: str | None = None
+    profile_sha256: str | None = None
 
 
 def read_records(directory: Path) -> dict[int, TrialRecord]:
@@ -287,7 +298,17 @@ def _record(record: Any, seen: dict[int, TrialRecord]) -> TrialRecord:
     seed = record.get("seed")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise Fault("seed", f"{seed!r:.40} is not a seed in [0, {MAX_SEED}]")
-    return TrialRecord(number, Controller(operator), record["success"], seed)
+    digests = {key: _digest(record, key) for key in ("model_sha256", "profile_sha256")}
+    return TrialRecord(number, Controller(operator), record["success"], seed, **digests)
+
+
+def _digest(record: dict, key: str) -> str | None:
+    """A SHA-256 digest field (64 lowercase hexadecimal digits), or None when the record has none."""
+    value = record.get(key)
+    if value is not None and not (isinstance(value, str) and len(value) == 64
+                                  and all(c in "0123456789abcdef" for c in value)):
+        raise Fault(key, f"{value!r:.80} is not a SHA-256 digest (64 hexadecimal digits)")
+    return value
 
 
 def inside(directory: Path, name: str) -> Path:
@@ -308,6 +329,13 @@ def check_against_record(path: Path, record: TrialRecord, trials: dict[str, np.n
     if (record.success, record.seed) != logged:
         raise BomiError(f"{path}: trial {record.number}: success {logged[0]}, seed {logged[1]}; trials.jsonl says "
                         f"success {record.success}, seed {record.seed}: the files are of different sessions")
+
+
+def check_logged_digest(path: Path, what: str, logged: str | None, now: str) -> None:
+    """The session's file ``path`` is the one its trials ran with: its SHA-256 ``now`` is the ``logged``
+    one (None: not logged, nothing to check)."""
+    if logged is not None and logged != now:
+        raise BomiError(f"{path}: not the {what} the trials were run with (sha256 {logged} logged, {now} now)")
 
 
 def check_logged_model(path: Path, attrs: dict, profile: Profile, model: Model, model_path: Path) -> None:

@@ -12,6 +12,7 @@ the file is (``format``, ``version``) and how the session ran.
 """
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
@@ -144,6 +145,11 @@ def replace_atomically(path: Path, write: Callable[[Path], None]) -> None:
         partial.unlink(missing_ok=True)
         raise
     sync_directory(path.parent)
+
+
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex): what a trial record keeps of the model and profile it ran with."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def write_session(path: Path, session: Session, attrs: dict) -> None:

@@ -1,7 +1,10 @@
 """Replaying a logged trial: its session's logged bytes (BoMI) or stick (joystick), tick by tick at
 the logged tick times, through the same loop, chain and simulated arm, up to the end of the trial;
-then the hand's path is set against the logged one. The simulation is deterministic, so the
-deviation is 0 up to floating point.
+then the hand's path and (BoMI) the decisions are set against the logged ones. The simulation is
+deterministic, so the deviation is 0 up to floating point, and the decisions are the logged ones,
+labels, gamma and nu to the bit. The trial must have run with the session's model.json and
+profile.toml: their SHA-256 against the trial record's (``load_trial``; a session from before
+the records kept them can only be judged by its decisions).
 
 With another model, the trial's decisions are re-scored offline: the logged frames through a
 chain of that model (the logged neutral offsets), each decision against the class the stand-in
@@ -23,11 +26,13 @@ from bomi.frames import FrameParser, ImuFrame
 from bomi.profiles import Profile
 from sim.env import ArmSim
 from sim.joystick import LAYOUTS, JoystickState
+from tasks.operators.assist import NONE, parse_assist
 from tasks.stacking import metrics
 from tasks.stacking.env import stick_state
 from tasks.trials.displays import Headless
-from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_model, inside,
-                                 read_records)
+from tasks.trials.checks import (RECORDS_FILE, check_against_record, check_logged_digest, check_logged_model,
+                                 inside, read_records)
+from tasks.trials.assisted import TrialAssistance
 from tasks.trials.dataset import SessionData
 from tasks.trials.session import (UNKNOWN, Controller, Session, SimulatedClock, TickRecorder, TrialArm, TrialDisplay,
                                   TrialPlan, run_joystick)
@@ -57,6 +62,21 @@ class LoggedStick:
 
 
 @dataclass(frozen=True)
+class DecisionsCompared:
+    """A trial's replayed decisions against its logged ones, in order (tick, label, gamma, nu; gamma
+    and nu compared bit for bit). ``first_difference``: the first pair that differs, described."""
+
+    replayed: int
+    logged: int
+    alike: int
+    first_difference: str | None = None
+
+    @property
+    def same(self) -> bool:
+        return self.first_difference is None
+
+
+@dataclass(frozen=True)
 class Replayed:
     number: int
     ticks: int
@@ -64,14 +84,23 @@ class Replayed:
     max_deviation_m: float
     success: bool
     logged_success: bool
+    decisions: DecisionsCompared | None = None   # None: a joystick trial
 
 
-def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
+Made = tuple[int, int, float, float]   # a decision: tick, label, gamma, nu
+
+
+def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain, made: list[Made],
+                 assist: TrialAssistance) -> None:
     """The logged bytes of each tick through the live loop's tick (``tasks.trials.live.LiveLoop``, which is
-    deterministic given its inputs) at the logged tick time, until the arm's last trial is over."""
+    deterministic given its inputs) at the logged tick time, until the arm's last trial is over; the
+    decisions the loop acted on, appended to ``made``."""
     from tasks.trials.live import LiveLoop
 
-    loop = LiveLoop(chain, arm, on_neutral=arm.ready)
+    def keep(tick) -> None:
+        made.extend((tick.tick, d.label, d.gamma, d.nu) for d in tick.decisions)
+
+    loop = LiveLoop(chain, arm, on_neutral=arm.ready, observers=[keep], assist=assist)
     parser, seen = FrameParser(), 0
     reconnected = data.ticks.get("reconnected", np.zeros(len(data.ticks["t"]), dtype=bool)).tolist()
     for t, chunk, again in zip(data.ticks["t"].tolist(), data.tick_bytes(), reconnected):
@@ -81,6 +110,16 @@ def _replay_bomi(data: SessionData, arm: TrialArm, chain: OnlineChain) -> None:
         events = parser.safety_events[seen:]
         seen += len(events)
         loop.tick(t, frames, events, again)
+
+
+def logged_assistance(data: SessionData, arm: TrialArm, profile: Profile | None) -> TrialAssistance:
+    """The assistance the session ran with (its ``assist`` attribute; none in a file from before it was
+    logged), on the replayed arm with the controls it had."""
+    from tasks.stacking.vocabulary import Controls
+    from tasks.stacking.channels import profile_controls
+    options = parse_assist(data.attrs.get("assist", NONE), f"{data.path}: attribute assist")
+    buttons = (profile_controls(profile) if profile is not None else Controls()).buttons
+    return TrialAssistance(options, arm, arm.sim.layout, buttons)
 
 
 def session_plan(data: SessionData) -> TrialPlan:
@@ -101,14 +140,16 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
     try:
         controller = Controller(data.attrs["controller"])
         arm = TrialArm(sim, session_plan(data), ready=controller is Controller.JOYSTICK, last_trial=number)
+        made: list[Made] = []
+        assist = logged_assistance(data, arm, profile)
         if controller is Controller.BOMI:
-            _replay_bomi(data, arm, OnlineChain(model, profile))
+            _replay_bomi(data, arm, OnlineChain(model, profile), made, assist)
         else:
             session = Session(controller, arm, TickRecorder(arm), "replay")
             clock = SimulatedClock()  # the joystick's ticks depend on nothing but their order
             try:
                 run_joystick(session, LoggedStick(data.ticks["stick"], data.ticks["pressed"]),
-                             display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep)
+                             display=TrialDisplay(Headless(), arm), clock=clock, sleep=clock.sleep, assist=assist)
             except LogEnded:
                 pass  # a trial cut short: replayed up to where its log ends
     finally:
@@ -122,8 +163,32 @@ def replay_trial(data: SessionData, number: int, profile: Profile | None, model:
     logged = data.ticks["hand_pos"][go:end]
     common = min(len(replayed), len(logged))
     deviation = float(np.max(np.linalg.norm(replayed[:common] - logged[:common], axis=1))) if common else float("nan")
+    decisions = compare_decisions(data, made, go, min(end, stop)) if controller is Controller.BOMI else None
     return Replayed(number, stop - result.go_tick, end - go, deviation, result.success,
-                    bool(data.trials["success"][row]))
+                    bool(data.trials["success"][row]), decisions)
+
+
+def compare_decisions(data: SessionData, made: list[Made], go: int, end: int) -> DecisionsCompared:
+    """The decisions replayed in ticks [go, end) against the logged ones of those ticks, pair by pair."""
+    d = data.decisions
+    span = (d["tick"] >= go) & (d["tick"] < end)
+    logged = list(zip(d["tick"][span].tolist(), d["label"][span].tolist(), d["gamma"][span].tolist(),
+                      d["nu"][span].tolist()))
+    replayed = [m for m in made if go <= m[0] < end]
+    alike, first = 0, None
+    for k, (a, b) in enumerate(zip(logged, replayed)):
+        if a[:2] == b[:2] and _bits(a[2:]) == _bits(b[2:]):
+            alike += 1
+        elif first is None:
+            first = (f"decision {k + 1} (tick {a[0]}): logged c{a[1]} gamma {a[2]!r} nu {a[3]!r}, replayed "
+                     f"c{b[1]} gamma {b[2]!r} nu {b[3]!r} (tick {b[0]})")
+    if first is None and len(logged) != len(replayed):
+        first = f"{len(logged)} logged, {len(replayed)} replayed"
+    return DecisionsCompared(len(replayed), len(logged), alike, first)
+
+
+def _bits(values: tuple[float, ...]) -> bytes:
+    return np.array(values, dtype=np.float64).tobytes()
 
 
 @dataclass(frozen=True)
@@ -186,13 +251,16 @@ def rescore_trial(data: SessionData, number: int, profile: Profile, model: Model
 @dataclass(frozen=True)
 class LoggedTrial:
     """A trial of a session directory, every file it needs read and checked: its session file, and
-    for the BoMI the logged profile and the model, which must be the ones the session ran."""
+    for the BoMI the logged profile and the model, which must be the ones the session ran
+    (``model_sha256``: the model file's digest as the trial record logged it and the file still has;
+    None: the record predates the digests, and the model could not be checked)."""
 
     number: int
     controller: Controller
     data: SessionData
     profile: Profile | None = None
     model: Model | None = None
+    model_sha256: str | None = None
 
 
 def load_trial(directory: Path, number: int) -> LoggedTrial:
@@ -200,7 +268,7 @@ def load_trial(directory: Path, number: int) -> LoggedTrial:
     from bomi.files import check_input
     from bomi.model_io import load_model
     from tasks.operators.stick import arm_profile
-    from tasks.trials.dataset import read_session, trial_file
+    from tasks.trials.dataset import file_sha256, read_session, trial_file
     if not directory.is_dir():
         raise BomiError(f"{directory}: not a directory (a `bomi trial` output directory)")
     records = read_records(directory)
@@ -219,7 +287,10 @@ def load_trial(directory: Path, number: int) -> LoggedTrial:
     if record.controller is not Controller.BOMI:
         return LoggedTrial(number, record.controller, data)
     profile_path, model_path = inside(directory, "profile.toml"), inside(directory, "model.json")
+    for file, what, logged in ((model_path, "model", record.model_sha256),
+                               (profile_path, "profile", record.profile_sha256)):
+        check_logged_digest(file, what, logged, file_sha256(check_input(file, what)))
     profile = arm_profile(check_input(profile_path, "profile"))
     model = load_model(check_input(model_path, "model"))
     check_logged_model(path, data.attrs, profile, model, model_path)
-    return LoggedTrial(number, record.controller, data, profile, model)
+    return LoggedTrial(number, record.controller, data, profile, model, record.model_sha256)

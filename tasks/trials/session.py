@@ -466,27 +466,30 @@ class Session:
 
 def run_bomi(session: Session, source, chain, *, display, on_tick: Callable[[object], None] | None = None,
              status=None, clock: Callable[[], float] = time.monotonic,
-             sleep: Callable[[float], None] = time.sleep) -> None:
+             sleep: Callable[[float], None] = time.sleep,
+             assist: Callable[[JoystickState], JoystickState] | None = None) -> None:
     """The BoMI's trials through the live loop (``tasks.trials.live.run_live``: gate, chain, safety):
     ``source`` is a ``tasks.trials.live.Source`` whose parser is a ``TappedParser``; ``on_tick`` is told
-    every tick after it is recorded (a stand-in watching the arm answer the tick's decisions)."""
+    every tick after it is recorded (a stand-in watching the arm answer the tick's decisions); ``assist``:
+    the live loop's (``tasks.trials.assisted.TrialAssistance``)."""
     from tasks.trials.live import run_live  # the live loop (imports the viewer's machinery)
 
     observers = [session.recorder.observe] + ([on_tick] if on_tick is not None else [])
     run_live(source, chain, session.arm, status=status, display=display, on_neutral=session.arm.ready,
-             clock=clock, sleep=sleep, observers=observers)
+             clock=clock, sleep=sleep, observers=observers, assist=assist)
 
 
 def run_joystick(session: Session, device: StickDevice, *, display, clock: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep, on_tick: Callable[[float], None] | None = None) -> None:
-    """The joystick's trials: every tick, the device's stick to the arm, paced as the live loop is;
-    ``on_tick`` is told the session's time after every tick (a progress bar)."""
+                 sleep: Callable[[float], None] = time.sleep, on_tick: Callable[[float], None] | None = None,
+                 assist: Callable[[JoystickState], JoystickState] | None = None) -> None:
+    """The joystick's trials: every tick, the device's stick (through ``assist``, when given) to the arm,
+    paced as the live loop is; ``on_tick`` is told the session's time after every tick (a progress bar)."""
     from tasks.trials.live import paced_ticks
 
     arm, start = session.arm, clock()
     for now, _ in paced_ticks(arm.dt, display, clock, sleep, start, None):
-        state = device.read(now)
-        command = arm.step(state)
+        state = device.read(now)  # logged as read: a replay gives it to the assistance again
+        command = arm.step(assist(state) if assist is not None else state)
         session.recorder.record(now - start, state, command)
         if on_tick is not None:
             on_tick(now - start)
