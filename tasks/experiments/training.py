@@ -4,7 +4,7 @@ naming the most confused classes below POOR_ACCURACY). Used by `bomi train`, `bo
 `bomi twin` and the benchmarks."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +88,38 @@ def most_confused(truth: np.ndarray, decided: np.ndarray) -> list[tuple[int, int
             if n / len(mine) >= CONFUSION_FLOOR:
                 pairs.append((int(label), int(other), float(n / len(mine))))
     return sorted(pairs, key=lambda p: -p[2])[:CONFUSIONS_SHOWN]
+
+
+def misread_classes(truth: np.ndarray, decided: np.ndarray) -> list[tuple[int, float, list[tuple[int, float]]]]:
+    """(class, share of its windows read as itself, [(read as, share), ...]) of every class read as
+    itself in fewer than POOR_ACCURACY of its windows (the floor of the whole classifier, per class: a
+    class below it is a wrong command in more than one window in seven), worst first; what it is read
+    as: the other classes taking at least CONFUSION_FLOOR of its windows, most first."""
+    out = []
+    for label in np.unique(truth):
+        mine = decided[truth == label]
+        recall = float(np.mean(mine == label))
+        if recall < POOR_ACCURACY:
+            others, counts = np.unique(mine[mine != label], return_counts=True)
+            read_as = sorted(((int(o), float(n / len(mine))) for o, n in zip(others, counts)
+                              if n / len(mine) >= CONFUSION_FLOOR), key=lambda p: -p[1])
+            out.append((int(label), recall, read_as))
+    return sorted(out, key=lambda c: c[1])
+
+
+def misread_warning(truth: np.ndarray, decided: np.ndarray, names: Mapping[int, str], source: str) -> str | None:
+    """One warning line naming each class ``source`` reads as another (``misread_classes``), or None."""
+    misread = misread_classes(truth, decided)
+    if not misread:
+        return None
+    each = "; ".join(f"{names.get(label, f'c{label}')} read as itself in {100 * recall:.0f} % of its "
+                     f"{np.count_nonzero(truth == label)} windows"
+                     + (", as " + ", ".join(f"{names.get(o, f'c{o}')} in {100 * share:.0f} %" for o, share in read_as)
+                        if read_as else "")
+                     for label, recall, read_as in misread)
+    return (f"warning: {source}: {len(misread)} class(es) below {100 * POOR_ACCURACY:g} % of their windows: {each}. "
+            "The person makes these motions differently here than in the training recording (retrain on both, "
+            "or record the motion again)")
 
 
 def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureSpec,
