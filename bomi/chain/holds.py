@@ -87,9 +87,10 @@ class MoveAllowances:
 
     def text(self) -> str:
         """The allowance in words, for the output."""
-        return (f"each cue to its move's offset found in the signals ({self.timed} of {len(self.rows)} moves timed, "
-                f"the others the median; median {np.median(self.seconds):.2f} s, "
-                f"{self.seconds.min():.2f}-{self.seconds.max():.2f} s, at most {MAX_MOVE_END_S:g} s)")
+        others = "" if self.timed == len(self.rows) else ", the others the median"
+        return (f"each cue to its move's offset found in the signals ({self.timed} of {len(self.rows)} moves timed"
+                f"{others}; median {np.median(self.seconds):.2f} s, {self.seconds.min():.2f}-{self.seconds.max():.2f} s, "
+                f"at most {MAX_MOVE_END_S:g} s)")
 
 
 def _rate(rec: Recording) -> float:
