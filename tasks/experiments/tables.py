@@ -72,14 +72,16 @@ def terminal_table(rows: list[dict]) -> str:
 
 
 def terminal_comparison(rows: list[dict]) -> str:
-    """The comparison with the paper, like for like, within 100 columns."""
+    """The comparison with the paper within 100 columns, like beside like: each paper figure right of
+    ours in the same sense (the paper's real-time accuracy is the share of relevant outputs,
+    ``metrics.irrelevant``); our accuracies, which the paper does not report, after them."""
     return aligned_table(
-        ["participant", "assist", "BoMI/joy time", "paper", "acc. all", "acc. exc.", "paper",
-         "err. run ms", "paper"],
+        ["participant", "assist", "BoMI/joy time", "paper", "relevant", "paper", "err. run ms", "paper",
+         "acc. all", "acc. exc."],
         [[c["participant"], c["assist"], _fmt(c["time_ratio"], ".2f"), f"{c['paper_time_ratio']:.2f}",
-          _pct(c["accuracy_all_decisions"]), _pct(c["accuracy_excused_transitions"]),
-          _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
-          f"{c['paper_longest_error_run_ms']:.0f}"] for c in comparison(rows)])
+          _pct(c["relevant_share"]), _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
+          f"{c['paper_longest_error_run_ms']:.0f}", _pct(c["accuracy_all_decisions"]),
+          _pct(c["accuracy_excused_transitions"])] for c in comparison(rows)])
 
 
 # The mechanism table's short column names (within 100 columns), in ``failures.Mechanism``'s order
@@ -129,17 +131,22 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 
 def markdown_tables(rows: list[dict]) -> str:
     """The benchmark table and the comparison with the paper."""
-    lines = [markdown_table(["participant", "operator", *ROW_COLUMNS],
-                            [[r["participant"], r["operator"], *row_cells(r)] for r in rows])]
-    lines += ["", "| participant | layout | assist | BoMI / joystick time (same layout and assist) | paper "
-              "| relevant outputs | accuracy, all decisions | accuracy, transitions excused | paper real-time accuracy "
-              "| longest misclassified run (ms) | paper longest error run (ms) | longest irrelevant run (ms) |",
+    return "\n".join([markdown_table(["participant", "operator", *ROW_COLUMNS],
+                                     [[r["participant"], r["operator"], *row_cells(r)] for r in rows]), "",
+                      markdown_comparison(rows)])
+
+
+def markdown_comparison(rows: list[dict]) -> str:
+    """The comparison with the paper, every column, like beside like (``terminal_comparison``)."""
+    lines = ["| participant | layout | assist | BoMI / joystick time (same layout and assist) | paper "
+              "| relevant outputs | paper real-time accuracy (relevant outputs) | longest misclassified run (ms) "
+              "| paper longest error run (ms) | accuracy, all decisions | accuracy, transitions excused "
+              "| longest irrelevant run (ms) |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in comparison(rows):
         lines.append(f"| {c['participant']} | {c['layout']} | {c['assist']} | {_fmt(c['time_ratio'], '.2f')} "
-                     f"| {c['paper_time_ratio']:.2f} "
-                     f"| {_pct(c['relevant_share'])} | {_pct(c['accuracy_all_decisions'])} "
-                     f"| {_pct(c['accuracy_excused_transitions'])} | {_pct(c['paper_realtime_accuracy'])} "
-                     f"| {_fmt(c['longest_error_run_ms'], '.0f')} | {c['paper_longest_error_run_ms']:.0f} "
-                     f"| {_fmt(c['irrelevant_longest_run_ms'], '.0f')} |")
+                     f"| {c['paper_time_ratio']:.2f} | {_pct(c['relevant_share'])} "
+                     f"| {_pct(c['paper_realtime_accuracy'])} | {_fmt(c['longest_error_run_ms'], '.0f')} "
+                     f"| {c['paper_longest_error_run_ms']:.0f} | {_pct(c['accuracy_all_decisions'])} "
+                     f"| {_pct(c['accuracy_excused_transitions'])} | {_fmt(c['irrelevant_longest_run_ms'], '.0f')} |")
     return "\n".join(lines)
