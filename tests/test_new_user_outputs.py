@@ -30,3 +30,36 @@ def test_the_paper_real_time_accuracy_stands_beside_our_share_of_relevant_output
     head, _, row = (line.split("|")[1:-1] for line in markdown_comparison(ROWS).splitlines())
     assert head[5].strip() == "relevant outputs" and head[6].strip().startswith("paper real-time accuracy")
     assert (row[5].strip(), row[6].strip()) == ("98.1 %", "99.2 %")
+
+
+@pytest.mark.parametrize("low, high, expected", [(70.0, 106.0, ["70", "80", "90", "100"]),
+                                                 (40.0, 300.0, ["50", "70", "100", "200", "300"])])
+def test_a_log_time_axis_labels_a_narrow_range_at_readable_ticks(low, high, expected):
+    import matplotlib.pyplot as plt
+
+    from tasks.experiments.figures import label_log_axis
+    fig, ax = plt.subplots()
+    ax.set_yscale("log")
+    ax.scatter([0, 1], [low, high])
+    label_log_axis(ax.yaxis, low, high)
+    fig.canvas.draw()
+    shown = [t.get_text() for t in ax.get_yticklabels() if low * 0.9 <= t.get_position()[1] <= high * 1.1]
+    plt.close(fig)
+    assert shown == expected
+
+
+def test_the_failure_table_shows_only_the_settings_a_sweep_varied():
+    from tasks.experiments.tables import terminal_mechanisms
+
+    common = {"participant": "P1", "operator": "bomi", "time_limit": 300.0, "operator_file": "operator",
+              "participant.spasm.rate_per_min": 0.5, "profile.some_long_setting_name": [1, 2, 3]}
+    records = [{"participant": "P1", "operator": "bomi", "seed": seed, "success": seed != 2, "completion_time": 90.0,
+                "sim_time": 300.0 if seed == 2 else 90.0, "recovery": NO_RECOVERY,
+                "stuck": {"mechanism": "cube lost"} if seed == 2 else None,
+                "settings": common | {"seed": seed, "profile.vote_length": vote}}
+               for vote in (1, 3) for seed in (1, 2, 3)]
+    header, _, *rows = terminal_mechanisms(records).splitlines()[1:]
+    assert len(rows) == 2   # one per cell, its seeds pooled
+    assert [row.split()[:3] for row in rows] == [["P1", "bomi", "vote_length=1"], ["P1", "bomi", "vote_length=3"]]
+    assert all(row.split()[3:5] == ["1/3", "0/3"] for row in rows)
+    assert header.index("failed") - header.index("settings") == len("vote_length=1") + 2   # the column's width

@@ -90,16 +90,36 @@ MECHANISM_COLUMNS = {failures.Mechanism.CUBE_LOST: "cube lost", failures.Mechani
                      failures.Mechanism.PLANNER_STUCK: "planner", failures.Mechanism.MISREAD_MOTION: "misread"}
 
 
+# Settings a record keeps that the failure table shows elsewhere (its own columns) or pools over (the seed)
+POOLED_SETTINGS = ("participant", "operator", "seed")
+
+
+def differing_settings(records: list[dict]) -> list[dict]:
+    """The records with only the settings in which they differ (a sweep's swept ones), by their short
+    names (``profile.vote_length`` -> ``vote_length``): the seed pooled, participant and operator left
+    to their columns."""
+    keys = {k for r in records for k in r.get("settings", {})} - set(POOLED_SETTINGS)
+    differ = sorted(k for k in keys if len({json.dumps(r.get("settings", {}).get(k)) for r in records}) > 1)
+    return [r | {"settings": {k.rsplit(".", 1)[-1]: r["settings"].get(k) for k in differ}} if "settings" in r else r
+            for r in records]
+
+
+def settings_cell(settings: dict) -> str:
+    """A row's differing settings as ``name=value`` pairs."""
+    return " ".join(f"{k}={json.dumps(v)}" for k, v in settings.items()) or "-"
+
+
 def terminal_mechanisms(records: list[dict]) -> str:
     """Why episodes failed or were slow (more than ``failures.SLOW_FACTOR`` x their median time): per
-    participant and operator (and a sweep's settings), how many each mechanism explains."""
-    rows = failures.mechanism_rows(records)
+    participant and operator (and a sweep's settings that differ: ``differing_settings``), how many each
+    mechanism explains."""
+    rows = failures.mechanism_rows(differing_settings(records))
     settings = any(r["settings"] for r in rows)
     recovery = any(r["recovery"] != NO_RECOVERY for r in rows)
     unrecorded = any(r["mechanisms"].get(failures.NOT_RECORDED) for r in rows)
     header = ["participant", "operator", *(["settings"] if settings else []), *(["recovery"] if recovery else []),
               "failed", "slow", *MECHANISM_COLUMNS.values(), *([failures.NOT_RECORDED] if unrecorded else [])]
-    cells = [[r["participant"], r["operator"], *([json.dumps(r["settings"])] if settings else []),
+    cells = [[r["participant"], r["operator"], *([settings_cell(r["settings"])] if settings else []),
               *([r["recovery"]] if recovery else []),
               f"{r['failed']}/{r['episodes']}", f"{r['slow']}/{r['episodes']}",
               *(str(len(r["mechanisms"][m.value])) for m in MECHANISM_COLUMNS),
