@@ -63,3 +63,41 @@ def test_the_failure_table_shows_only_the_settings_a_sweep_varied():
     assert [row.split()[:3] for row in rows] == [["P1", "bomi", "vote_length=1"], ["P1", "bomi", "vote_length=3"]]
     assert all(row.split()[3:5] == ["1/3", "0/3"] for row in rows)
     assert header.index("failed") - header.index("settings") == len("vote_length=1") + 2   # the column's width
+
+
+def test_files_are_shown_by_name_in_tables_and_figures(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from tasks.experiments import figures
+    from tasks.experiments.summary import shown_name
+    twin = str(tmp_path / "people" / "me_twin.toml")   # a sweep resolves a grid's files to absolute paths
+    assert shown_name(twin) == "me_twin.toml" and shown_name("P1") == "P1"
+    rows = [{**row, "participant": twin} for row in ROWS]
+    assert terminal_comparison(rows).splitlines()[2].startswith("me_twin.toml ")
+    seen = {}
+    original = plt.Axes.set_xticks
+
+    def spy(self, ticks, labels=None, **kwargs):
+        seen["labels"] = labels
+        return original(self, ticks, labels, **kwargs)
+
+    record = {"operator": "bomi", "success": True, "completion_time": 80.0, "sim_time": 80.0}
+    plt.Axes.set_xticks = spy
+    try:
+        figures.completion_time_figure([(f"{twin}\nbomi", [record])], tmp_path / "t.png", "t")
+    finally:
+        plt.Axes.set_xticks = original
+    assert seen["labels"] == ["me_twin.toml\nbomi"]
+
+
+def test_a_twin_names_its_profile_relative_to_its_own_file(tmp_path):
+    import argparse
+
+    from tasks.cli.twin import _profile_for
+    (tmp_path / "layouts").mkdir()
+    profile = tmp_path / "layouts" / "best.toml"
+    from bomi.profiles import load_profile, save_profile
+    save_profile(profile, load_profile("P1"))
+    args = argparse.Namespace(profile=str(profile), out=tmp_path / "twins" / "me_twin.toml")
+    _, reference = _profile_for(args, [], None)
+    assert reference == "../layouts/best.toml"

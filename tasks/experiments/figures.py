@@ -13,6 +13,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import ticker  # noqa: E402
 
+from tasks.experiments.summary import shown_name  # noqa: E402
+
 
 def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: Path, title: str,
                            references: Mapping[str, float] | None = None) -> None:
@@ -33,7 +35,8 @@ def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: P
     for label, seconds in (references or {}).items():
         ax.axhline(seconds, color="gray", linestyle="--", linewidth=0.8)
         ax.text(len(groups) - 0.5, seconds, f"{label} {seconds:.0f} s", ha="right", va="bottom", fontsize=8)
-    ax.set_xticks(range(len(groups)), [label for label, _ in groups], fontsize=7 if len(groups) > 8 else 9)
+    labels = ["\n".join(shown_name(line) for line in label.split("\n")) for label, _ in groups]   # files by name
+    ax.set_xticks(range(len(groups)), labels, fontsize=7 if len(groups) > 8 else 9)
     ax.set_yscale("log")
     values = [v for _, records in groups for r in records for v in (r["completion_time"] if r["success"]
                                                                      else r["sim_time"],) if v and v > 0]
@@ -105,7 +108,8 @@ def metric_figure(series: Mapping[str, Sequence[tuple[object, float | None, tupl
         ys = [y for _, y, _ in points]
         lows = [y - ci[0] if ci else 0.0 for _, y, ci in points]
         highs = [ci[1] - y if ci else 0.0 for _, y, ci in points]
-        ax.errorbar(xs, ys, yerr=[lows, highs], marker="o", capsize=3, label=label)
+        ax.errorbar(xs, ys, yerr=[lows, highs], marker="o", capsize=3,
+                    label=" ".join(shown_name(word) for word in label.split(" ")))   # files by name
     if toward_one:
         ax.set_xscale("log")
         ticks = sorted(set(values))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from tasks.experiments.summary import comparison
+from tasks.experiments.summary import comparison, shown_name
 from tasks.operators.assist import NONE
 from tasks.operators.planner import NO_RECOVERY
 from tasks.stacking import failures
@@ -67,7 +67,7 @@ def terminal_table(rows: list[dict]) -> str:
     the transitions excused; err. run ms: the longest run of misclassified outputs)."""
     extra = [key for key, off in (("assist", NONE), ("recovery", NO_RECOVERY)) if any(r[key] != off for r in rows)]
     return aligned_table(["participant", "operator", *extra, *TERMINAL_COLUMNS],
-                         [[r["participant"], r["operator"], *(r[key] for key in extra), *terminal_cells(r)]
+                         [[shown_name(r["participant"]), r["operator"], *(r[key] for key in extra), *terminal_cells(r)]
                           for r in rows])
 
 
@@ -78,7 +78,7 @@ def terminal_comparison(rows: list[dict]) -> str:
     return aligned_table(
         ["participant", "assist", "BoMI/joy time", "paper", "relevant", "paper", "err. run ms", "paper",
          "acc. all", "acc. exc."],
-        [[c["participant"], c["assist"], _fmt(c["time_ratio"], ".2f"), f"{c['paper_time_ratio']:.2f}",
+        [[shown_name(c["participant"]), c["assist"], _fmt(c["time_ratio"], ".2f"), f"{c['paper_time_ratio']:.2f}",
           _pct(c["relevant_share"]), _pct(c["paper_realtime_accuracy"]), _fmt(c["longest_error_run_ms"], ".0f"),
           f"{c['paper_longest_error_run_ms']:.0f}", _pct(c["accuracy_all_decisions"]),
           _pct(c["accuracy_excused_transitions"])] for c in comparison(rows)])
@@ -119,7 +119,7 @@ def terminal_mechanisms(records: list[dict]) -> str:
     unrecorded = any(r["mechanisms"].get(failures.NOT_RECORDED) for r in rows)
     header = ["participant", "operator", *(["settings"] if settings else []), *(["recovery"] if recovery else []),
               "failed", "slow", *MECHANISM_COLUMNS.values(), *([failures.NOT_RECORDED] if unrecorded else [])]
-    cells = [[r["participant"], r["operator"], *([settings_cell(r["settings"])] if settings else []),
+    cells = [[shown_name(r["participant"]), r["operator"], *([settings_cell(r["settings"])] if settings else []),
               *([r["recovery"]] if recovery else []),
               f"{r['failed']}/{r['episodes']}", f"{r['slow']}/{r['episodes']}",
               *(str(len(r["mechanisms"][m.value])) for m in MECHANISM_COLUMNS),
@@ -152,7 +152,7 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 def markdown_tables(rows: list[dict]) -> str:
     """The benchmark table and the comparison with the paper."""
     return "\n".join([markdown_table(["participant", "operator", *ROW_COLUMNS],
-                                     [[r["participant"], r["operator"], *row_cells(r)] for r in rows]), "",
+                                     [[shown_name(r["participant"]), r["operator"], *row_cells(r)] for r in rows]), "",
                       markdown_comparison(rows)])
 
 
@@ -164,7 +164,7 @@ def markdown_comparison(rows: list[dict]) -> str:
               "| longest irrelevant run (ms) |",
               "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in comparison(rows):
-        lines.append(f"| {c['participant']} | {c['layout']} | {c['assist']} | {_fmt(c['time_ratio'], '.2f')} "
+        lines.append(f"| {shown_name(c['participant'])} | {c['layout']} | {c['assist']} | {_fmt(c['time_ratio'], '.2f')} "
                      f"| {c['paper_time_ratio']:.2f} | {_pct(c['relevant_share'])} "
                      f"| {_pct(c['paper_realtime_accuracy'])} | {_fmt(c['longest_error_run_ms'], '.0f')} "
                      f"| {c['paper_longest_error_run_ms']:.0f} | {_pct(c['accuracy_all_decisions'])} "
