@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bomi.chain import (MAX_MOVE_END_S, MoveAllowances, as_held, evaluate, held_labels, recording_moves, train,
-                        training_windows)
+from bomi.chain import (MAX_MOVE_END_S, MoveAllowances, as_held, evaluate, held_labels, leave_one_pass_out,
+                        recording_moves, train, training_windows)
 from bomi.onsets import Move, MoveKind
 from bomi.profiles import load_profile
 from tasks.experiments.training import misread_classes, misread_warning
@@ -107,3 +107,13 @@ def test_misread_classes_by_hand():
     assert line.startswith("warning: day3.mat: 2 class(es) below 85 % of their windows: c8 (B1) read as itself in 0 % "
                            "of its 10 windows, as c5 (L) in 100 %; c4 read as itself in 80 % of its 10 windows, as c0 in 20 %")
     assert misread_warning(truth, truth, {}, "x") is None
+
+
+def test_leave_one_pass_out_judges_the_holds(slow_person):
+    """`bomi train`'s headline on two continuous passes: the holds figure beside the all-window one, and
+    the warning judged on it (P1's published days: the same windows, tests above)."""
+    _, recs, profile = slow_person
+    out = leave_one_pass_out(recs, profile, train(recs, profile))
+    assert out.holds_accuracy > out.accuracy
+    assert out.text().endswith(f"; on the holds {100 * out.holds_accuracy:.2f} %, each transition from its cue to "
+                               "the end of its move found in the signals left out")

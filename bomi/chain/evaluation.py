@@ -86,10 +86,18 @@ class PassOut:
         """Over every held-out window of every pass (pooled)."""
         return float(np.mean(np.concatenate([ev.predicted == ev.truth for ev in self.evaluations])))
 
+    @property
+    def holds_accuracy(self) -> float:
+        """Over the held-out windows on the holds (``Evaluation.holds``), pooled."""
+        return float(np.mean(np.concatenate([(ev.predicted == ev.truth)[ev.holds] for ev in self.evaluations])))
+
     def text(self) -> str:
         each = ", ".join(f"{100 * ev.accuracy:.2f} %" for ev in self.evaluations)
+        holds = ("" if all(ev.allowances is None for ev in self.evaluations) else
+                 f"; on the holds {100 * self.holds_accuracy:.2f} %, each transition from its cue to the end of its "
+                 "move found in the signals left out")
         return (f"leave-one-pass-out accuracy {100 * self.accuracy:.2f} % (each of {len(self.evaluations)} passes "
-                f"decided by a model trained on the others: {each})")
+                f"decided by a model trained on the others: {each}){holds}")
 
 
 def leave_one_pass_out(passes: Sequence[Recording], profile: Profile, model: Model) -> PassOut | None:

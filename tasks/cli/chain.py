@@ -26,7 +26,7 @@ from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdow
 from tasks.cli import add_command
 from tasks.cli.options import add_force, check_outputs, open_unit_interval, positive_int
 from tasks.experiments.training import (class_listing, fit_and_report, fit_model, misread_warning, read,
-                                       read_all_passes, read_passes)
+                                       read_all_passes, read_passes, short_names)
 from tasks.operators.stick import arm_profile
 
 
@@ -130,11 +130,6 @@ def class_names(classes: Sequence[int], profile: Profile | None) -> list[str]:
             name = cls.name if len(cls.name) <= 18 else cls.name[:17] + "…"
             names.append(f"c{label} {cls.function}: {name}" if cls.function != "neutral" else f"c{label} {name}")
     return names
-
-
-def short_names(profile: Profile | None) -> dict[int, str]:
-    """``c<label> (<function>)`` of each class of the profile (empty without one: ``c<label>``)."""
-    return {cls.label: f"c{cls.label} ({cls.function})" for cls in profile.classes} if profile else {}
 
 
 def holds_text(ev: Evaluation) -> str:
