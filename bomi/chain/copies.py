@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import hadamard
 
+from bomi.chain.holds import as_held
 from bomi.chain.windows import NODE_WIDTH, PreparedRecording, TrainingWindows, prepare, window_features
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.features import FeatureSpec, feature_columns
@@ -107,7 +108,10 @@ def training_windows(rec: Recording, spec: FeatureSpec, neutral_samples: int,
     same motion made in a somewhat other direction; the gyroscope, whose axes are not the angles',
     is left as recorded). Features are computed as for a recorded window. Neutral windows are not
     copied so; the rest-offset copies (``MotionCopies.rest_offsets``) take every single-label window.
+    Where the recording keeps its moves, a window is labelled by the posture held (``holds.as_held``):
+    the rows between a cue and the person's measured movement onset are the posture before the cue.
     """
+    rec = as_held(rec, spec.nodes)
     prepared = prepare(rec, spec, neutral_samples)
     pure = prepared.pure
     parts = [(prepared.features[pure], prepared.labels[pure], prepared.ends[pure], True)]

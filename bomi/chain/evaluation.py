@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from bomi.chain.holds import MoveAllowances
 from bomi.chain.selection import CONSISTENCY, HoldScores, choose_option
 from bomi.chain.training import train
 from bomi.chain.windows import prepare
@@ -25,6 +26,20 @@ class Evaluation:
     truth: np.ndarray
     predicted: np.ndarray    # after post-processing (a rejected window is predicted neutral)
     rejected: np.ndarray
+    on_hold: np.ndarray | None = None          # the scored windows on the holds, where the recording keeps
+    allowances: MoveAllowances | None = None   # its moves (and the transitions left out); None: all are holds
+
+    @property
+    def holds(self) -> np.ndarray:
+        """(m,) the scored windows on the holds: all of them in a recording that keeps only its holds."""
+        return np.ones(len(self.truth), dtype=bool) if self.on_hold is None else self.on_hold
+
+    @property
+    def holds_accuracy(self) -> float:
+        """Accuracy over the windows on the holds (the transitions left out): the classifier's own errors,
+        not the person's reaction to the cue."""
+        holds = self.holds
+        return float(np.mean(self.predicted[holds] == self.truth[holds])) if holds.any() else float("nan")
 
     @property
     def accuracy(self) -> float:
@@ -42,7 +57,8 @@ class Evaluation:
 
 
 def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProcessing | None = None) -> Evaluation:
-    """Decide every window in time order (as the stream does), then score the single-label ones."""
+    """Decide every window in time order (as the stream does), then score the single-label ones against
+    the cue; where the recording keeps its moves, also tell which lie on the holds (``holds``)."""
     unknown = sorted(set(rec.require_labels().tolist()) - set(model.classes.tolist()))
     if unknown:
         raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of the model {model.classes.tolist()}")
@@ -51,7 +67,12 @@ def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProce
     if not pure.any():
         raise BomiError(f"{rec.source}: no {model.spec.window}-sample window lies within one label; nothing to score")
     decisions = classify_windows(model, prepared.features, post)
-    return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure])
+    allowances = MoveAllowances.of(rec, model.spec.nodes)
+    on_hold = None
+    if allowances is not None:   # a hold's part after its transition is a suffix of its run: its first row decides
+        on_hold = allowances.on_hold(len(rec))[prepared.ends[pure] - (model.spec.window - 1)]
+    return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure], on_hold,
+                      allowances)
 
 
 @dataclass(frozen=True)
@@ -65,10 +86,18 @@ class PassOut:
         """Over every held-out window of every pass (pooled)."""
         return float(np.mean(np.concatenate([ev.predicted == ev.truth for ev in self.evaluations])))
 
+    @property
+    def holds_accuracy(self) -> float:
+        """Over the held-out windows on the holds (``Evaluation.holds``), pooled."""
+        return float(np.mean(np.concatenate([(ev.predicted == ev.truth)[ev.holds] for ev in self.evaluations])))
+
     def text(self) -> str:
         each = ", ".join(f"{100 * ev.accuracy:.2f} %" for ev in self.evaluations)
+        holds = ("" if all(ev.allowances is None for ev in self.evaluations) else
+                 f"; on the holds {100 * self.holds_accuracy:.2f} %, each transition from its cue to the end of its "
+                 "move found in the signals left out")
         return (f"leave-one-pass-out accuracy {100 * self.accuracy:.2f} % (each of {len(self.evaluations)} passes "
-                f"decided by a model trained on the others: {each})")
+                f"decided by a model trained on the others: {each}){holds}")
 
 
 def leave_one_pass_out(passes: Sequence[Recording], profile: Profile, model: Model) -> PassOut | None:

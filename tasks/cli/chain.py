@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from bomi.chain import Evaluation, evaluate, require_for
@@ -24,7 +25,8 @@ from bomi.recording import RAW_SIGNALS, RECORDING_SUFFIXES, Recording, write_rec
 from bomi.reproduce import day_pairs, read_days, reproduce, reproduction_markdown, reproduction_record
 from tasks.cli import add_command
 from tasks.cli.options import add_force, check_outputs, open_unit_interval, positive_int
-from tasks.experiments.training import class_listing, fit_and_report, fit_model, read, read_all_passes, read_passes
+from tasks.experiments.training import (class_listing, fit_and_report, fit_model, misread_warning, read,
+                                       read_all_passes, read_passes, short_names)
 from tasks.operators.stick import arm_profile
 
 
@@ -130,6 +132,15 @@ def class_names(classes: Sequence[int], profile: Profile | None) -> list[str]:
     return names
 
 
+def holds_text(ev: Evaluation) -> str:
+    """The accuracy on the holds, the transitions left out said (or that there is nothing to leave out)."""
+    if ev.allowances is None:
+        return (f"on the holds: {100 * ev.holds_accuracy:.2f} %, the same windows (the recording keeps only its "
+                "holds: no move to leave out)")
+    return (f"on the holds: {100 * ev.holds_accuracy:.2f} % over {int(ev.holds.sum())} windows, the transitions "
+            f"left out: {ev.allowances.text()}; the all-window figure scores the person's reaction to each cue too")
+
+
 # -------------------------------------------------------------------------------------- commands
 def settings_text(model: Model) -> str:
     """The classifier settings a model was trained with, in words."""
@@ -224,9 +235,19 @@ def evaluate_command(args: argparse.Namespace) -> int:
             line += (f"; rejected {100 * ev.rejected_share:.2f} %, accuracy of accepted windows "
                      f"{100 * ev.accepted_accuracy:.2f} %")
         print(line)
+        print(f"  {holds_text(ev)}")
         print(confusion_text(ev, model.classes.tolist()))
+        warning = misread_warning(ev.truth[ev.holds], ev.predicted[ev.holds], short_names(profile), rec.source)
+        if warning:
+            print(warning)
+        allowance = None if ev.allowances is None else ev.allowances.seconds
         results.append({"test": rec.source, "accuracy": ev.accuracy, "in_sample_share": in_sample,
                         "cv_estimate": model.cv_accuracy,
+                        "holds_accuracy": ev.holds_accuracy, "hold_windows": int(ev.holds.sum()),
+                        "transition_allowance_s": None if allowance is None else {
+                            "median": float(np.median(allowance)), "min": float(allowance.min()),
+                            "max": float(allowance.max()), "moves_timed": ev.allowances.timed,
+                            "cues": len(allowance)},
                         "windows": int(len(ev.truth)),
                         "rejected_share": ev.rejected_share, "accepted_accuracy": ev.accepted_accuracy})
     with atomic_output(outputs["--png"], overwrite=args.force or not png_named) as temp:

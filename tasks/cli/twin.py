@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -60,12 +61,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _profile_for(args: argparse.Namespace, recordings: list[Recording], derived: Path | None) -> tuple[Profile, str]:
-    """(profile, what the participant file names as its profile): the one given (a file by its absolute
-    path), else the one the recordings imply (as `bomi train` derives it, printed), written to ``derived``."""
+    """(profile, what the participant file names as its profile): the one given (a file by its path
+    relative to the twin's file, which reads it so: the two move together), else the one the recordings
+    imply (as `bomi train` derives it, printed), written to ``derived``."""
     if derived is None:
         reference = args.profile
         if Path(args.profile).suffix.lower() == ".toml":
-            reference = str(Path(args.profile).resolve())
+            reference = Path(os.path.relpath(Path(args.profile).resolve(), args.out.resolve().parent)).as_posix()
         return arm_profile(args.profile), reference
     profile = derive_profile(recordings)
     print(describe(profile))

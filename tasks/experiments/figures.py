@@ -13,6 +13,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import ticker  # noqa: E402
 
+from tasks.experiments.summary import shown_name  # noqa: E402
+
 
 def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: Path, title: str,
                            references: Mapping[str, float] | None = None) -> None:
@@ -33,15 +35,36 @@ def completion_time_figure(groups: Sequence[tuple[str, Sequence[dict]]], path: P
     for label, seconds in (references or {}).items():
         ax.axhline(seconds, color="gray", linestyle="--", linewidth=0.8)
         ax.text(len(groups) - 0.5, seconds, f"{label} {seconds:.0f} s", ha="right", va="bottom", fontsize=8)
-    ax.set_xticks(range(len(groups)), [label for label, _ in groups], fontsize=7 if len(groups) > 8 else 9)
+    labels = ["\n".join(shown_name(line) for line in label.split("\n")) for label, _ in groups]   # files by name
+    ax.set_xticks(range(len(groups)), labels, fontsize=7 if len(groups) > 8 else 9)
     ax.set_yscale("log")
-    ax.yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))  # 20, 50, 100 s, not 2 x 10^1
-    ax.yaxis.set_minor_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
+    values = [v for _, records in groups for r in records for v in (r["completion_time"] if r["success"]
+                                                                     else r["sim_time"],) if v and v > 0]
+    values += [v for v in (references or {}).values() if v > 0]
+    if values:
+        label_log_axis(ax.yaxis, min(values), max(values))
     ax.set_ylabel("completion time (s, log scale)\nx: where a failed episode stopped")
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def log_subs(low: float, high: float) -> tuple[float, ...]:
+    """The leading digits of a log axis's labelled ticks over [low, high]: every digit within a factor
+    of 5 (70, 80, 90, 100 s), 1-2-3-5-7 within two decades, 1-2-5 beyond."""
+    span = np.log10(high / low)
+    return (tuple(float(d) for d in range(1, 10)) if span < np.log10(5.0)
+            else (1.0, 2.0, 3.0, 5.0, 7.0) if span < 2.0 else (1.0, 2.0, 5.0))
+
+
+def label_log_axis(axis, low: float, high: float) -> None:
+    """Labelled ticks (plain numbers: 70, 80, 100, not 7 x 10^1) on a log axis showing [low, high]: at
+    least three on any range (``log_subs``), the other digits as unlabelled minor ticks."""
+    axis.set_major_locator(ticker.LogLocator(base=10.0, subs=log_subs(low, high)))
+    axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_locator(ticker.LogLocator(base=10.0, subs=tuple(float(d) for d in range(1, 10))))
+    axis.set_minor_formatter(ticker.NullFormatter())
 
 
 # What each summary column plotted against a setting is, with its unit
@@ -85,7 +108,8 @@ def metric_figure(series: Mapping[str, Sequence[tuple[object, float | None, tupl
         ys = [y for _, y, _ in points]
         lows = [y - ci[0] if ci else 0.0 for _, y, ci in points]
         highs = [ci[1] - y if ci else 0.0 for _, y, ci in points]
-        ax.errorbar(xs, ys, yerr=[lows, highs], marker="o", capsize=3, label=label)
+        ax.errorbar(xs, ys, yerr=[lows, highs], marker="o", capsize=3,
+                    label=" ".join(shown_name(word) for word in label.split(" ")))   # files by name
     if toward_one:
         ax.set_xscale("log")
         ticks = sorted(set(values))

@@ -17,6 +17,12 @@ from tasks.stacking import failures, metrics
 from tasks.statistics import mean_interval, wilson_interval
 
 
+def shown_name(reference: str) -> str:
+    """A participant (or any configuration file) as tables and figures show it: a TOML file by its file
+    name (a sweep resolves the grid's files to absolute paths), a shipped name as it is."""
+    return Path(reference).name if Path(reference).suffix.lower() == ".toml" else reference
+
+
 def _mean(values: list) -> float | None:
     values = [v for v in values if v is not None]
     return statistics.fmean(values) if values else None

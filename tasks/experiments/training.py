@@ -4,7 +4,7 @@ naming the most confused classes below POOR_ACCURACY). Used by `bomi train`, `bo
 `bomi twin` and the benchmarks."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +90,43 @@ def most_confused(truth: np.ndarray, decided: np.ndarray) -> list[tuple[int, int
     return sorted(pairs, key=lambda p: -p[2])[:CONFUSIONS_SHOWN]
 
 
+def short_names(profile: Profile | None) -> dict[int, str]:
+    """``c<label> (<function>)`` of each class of the profile (empty without one: ``c<label>``)."""
+    return {cls.label: f"c{cls.label} ({cls.function})" for cls in profile.classes} if profile else {}
+
+
+def misread_classes(truth: np.ndarray, decided: np.ndarray) -> list[tuple[int, float, list[tuple[int, float]]]]:
+    """(class, share of its windows read as itself, [(read as, share), ...]) of every class read as
+    itself in fewer than POOR_ACCURACY of its windows (the floor of the whole classifier, per class: a
+    class below it is a wrong command in more than one window in seven), worst first; what it is read
+    as: the other classes taking at least CONFUSION_FLOOR of its windows, most first."""
+    out = []
+    for label in np.unique(truth):
+        mine = decided[truth == label]
+        recall = float(np.mean(mine == label))
+        if recall < POOR_ACCURACY:
+            others, counts = np.unique(mine[mine != label], return_counts=True)
+            read_as = sorted(((int(o), float(n / len(mine))) for o, n in zip(others, counts)
+                              if n / len(mine) >= CONFUSION_FLOOR), key=lambda p: -p[1])
+            out.append((int(label), recall, read_as))
+    return sorted(out, key=lambda c: c[1])
+
+
+def misread_warning(truth: np.ndarray, decided: np.ndarray, names: Mapping[int, str], source: str) -> str | None:
+    """One warning line naming each class ``source`` reads as another (``misread_classes``), or None."""
+    misread = misread_classes(truth, decided)
+    if not misread:
+        return None
+    each = "; ".join(f"{names.get(label, f'c{label}')} read as itself in {100 * recall:.0f} % of its "
+                     f"{np.count_nonzero(truth == label)} windows"
+                     + (", as " + ", ".join(f"{names.get(o, f'c{o}')} in {100 * share:.0f} %" for o, share in read_as)
+                        if read_as else "")
+                     for label, recall, read_as in misread)
+    return (f"warning: {source}: {len(misread)} class(es) below {100 * POOR_ACCURACY:g} % of their windows: {each}. "
+            "The person makes these motions differently here than in the training recording (retrain on both, "
+            "or record the motion again)")
+
+
 def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureSpec,
                    allow_missing_classes: bool = False) -> Model:
     """``fit_model``, then the one figure that says how good the classifier is, printed: with several
@@ -105,10 +142,10 @@ def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureS
             out = leave_one_pass_out(passes, profile, model)
         except BomiError as exc:   # the passes but one cannot train every class: the within-pass figure
             why = f"no leave-one-pass-out figure: {exc}"
-    if out is not None:
-        accuracy, headline = out.accuracy, out.text()
-        truth = np.concatenate([ev.truth for ev in out.evaluations])
-        decided = np.concatenate([ev.predicted for ev in out.evaluations])
+    if out is not None:   # judged on the holds: the person's reaction to each cue is no error of the classifier
+        accuracy, headline = out.holds_accuracy, out.text()
+        truth = np.concatenate([ev.truth[ev.holds] for ev in out.evaluations])
+        decided = np.concatenate([ev.predicted[ev.holds] for ev in out.evaluations])
     elif selection is not None and selection.held_out is not None:
         accuracy, (truth, decided) = selection.accuracy, selection.held_out
         headline = f"cross-validated accuracy {100 * accuracy:.2f} % (whole holds held out within each pass; {why})"
@@ -116,6 +153,10 @@ def fit_and_report(passes: Sequence[Recording], profile: Profile, spec: FeatureS
         print("how good is this classifier: not estimated (no cross-validation: too little data or fixed settings)")
         return model
     print(f"how good is this classifier: {headline}")
+    if out is not None:   # each pass read by the others' model: a class another pass reads as another, named
+        warning = misread_warning(truth, decided, short_names(profile), "leave-one-pass-out")
+        if warning:
+            print(warning)
     if accuracy < POOR_ACCURACY:
         confused = ", ".join(f"c{a} read as c{b} in {100 * share:.0f} % of its windows"
                              for a, b, share in most_confused(truth, decided))
