@@ -36,7 +36,7 @@ def cell_row(participant: str, operator: str, seeds: range) -> dict:
             contexts.update({c.value: n for c, n in budget.irrelevant_by_context(log).items()})
             decisions += len(log.decisions.t)
         print(json.dumps({k: record.get(k) for k in ("participant", "operator", "seed", "success", "completion_time",
-                                                       "irrelevant_decisions", "irrelevant_longest_run_ms")}),
+                                                       "irrelevant_decisions", "irrelevant_longest_run_ms", "stuck")}, default=str),
               file=sys.stderr, flush=True)
     times = [r["completion_time"] for r in records if r["success"]]
     row = {"cell": f"{participant} {operator}", "seeds": f"{seeds.start}-{seeds.stop - 1}",
