@@ -159,6 +159,10 @@ class BomiChannel:
     calibration happen before the task's clock starts.  One class at a time: the participant
     holds a posture for as long as the same function is wanted, starting from the lean their feel
     gives for the wanted deflection and correcting it while watching the arm (``_corrected_lean``).
+    From one motion into another the body goes through rest, and a motion taken up from rest starts
+    a reaction time after the return has ended at the earliest (``_take_up``: the psychological
+    refractory period); a lean held at its furthest for ``Feel.give_up_s`` without the arm
+    answering is let go of and taken up anew (``_gives_up``).
     """
 
     combine_axes = False
