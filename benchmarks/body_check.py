@@ -4,6 +4,7 @@ are relevant (not ``metrics.irrelevant``), the longest irrelevant run, and the i
 context (``tasks.stacking.budget``).  One episode at a time (the machine is shared).
 
     python benchmarks/body_check.py --seeds 0-9 --cells P1:joystick P1:bomi P4:bomi P5:bomi
+    python benchmarks/body_check.py --seeds 0-9 --cells P1:bomi P4:bomi P5:bomi --recovery rezero,backoff,pause
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from collections import Counter
 
 import numpy as np
 
-from tasks.cli.task import EpisodeJob, run_job
+from tasks.cli.task import RECOVERY_KEY, EpisodeJob, run_job
 from tasks.stacking import budget
 from tasks.stacking.summary import summarize
 
@@ -26,10 +27,11 @@ def seed_range(text: str) -> range:
     return range(int(first), int(last or first) + 1)
 
 
-def cell_row(participant: str, operator: str, seeds: range) -> dict:
+def cell_row(participant: str, operator: str, seeds: range, recovery: str | None = None) -> dict:
     records, contexts, decisions = [], Counter(), 0
+    overrides = HUMAN_ON + (((RECOVERY_KEY, recovery),) if recovery else ())
     for seed in seeds:
-        log = run_job(EpisodeJob(operator, participant, seed, overrides=HUMAN_ON))
+        log = run_job(EpisodeJob(operator, participant, seed, overrides=overrides))
         record = summarize(log)
         records.append(record)
         if operator == "bomi":
@@ -39,7 +41,7 @@ def cell_row(participant: str, operator: str, seeds: range) -> dict:
                                                        "irrelevant_decisions", "irrelevant_longest_run_ms", "stuck")}, default=str),
               file=sys.stderr, flush=True)
     times = [r["completion_time"] for r in records if r["success"]]
-    row = {"cell": f"{participant} {operator}", "seeds": f"{seeds.start}-{seeds.stop - 1}",
+    row = {"cell": f"{participant} {operator}", "recovery": recovery or "none", "seeds": f"{seeds.start}-{seeds.stop - 1}",
            "success": f"{len(times)}/{len(records)}", "mean_time_s": round(float(np.mean(times)), 1) if times else None}
     if operator == "bomi":
         wild = sum(r["irrelevant_decisions"] for r in records)
@@ -54,10 +56,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", required=True, help="first-last, e.g. 0-9")
     parser.add_argument("--cells", nargs="+", default=["P1:joystick", "P1:bomi", "P4:bomi", "P5:bomi"])
+    parser.add_argument("--recovery", help='recovery actions, e.g. "rezero,backoff,pause" (default: none)')
     args = parser.parse_args()
     for cell in args.cells:
         participant, operator = cell.split(":")
-        print(json.dumps(cell_row(participant, operator, seed_range(args.seeds))), flush=True)
+        print(json.dumps(cell_row(participant, operator, seed_range(args.seeds), args.recovery)), flush=True)
 
 
 if __name__ == "__main__":
