@@ -21,13 +21,14 @@ P1_TOML = PARTICIPANT_DIR / "P1.toml"
 
 
 def still(params, **changes):
-    """The participant without any variability, sway, tremor or spasm (exact postures)."""
+    """The participant without any variability, sway, tremor or spasm (exact postures and timing)."""
     def quiet(motion):
         zero = np.zeros_like(motion.posture_deg)
         return dataclasses.replace(motion, rep_std_deg=zero, day_gain_log_std=0.0, day_std_deg=zero, sway_std_deg=zero,
                                    tremor_std_deg=zero)
     return dataclasses.replace(params, neutral=quiet(params.neutral),
-                               classes={k: quiet(m) for k, m in params.classes.items()}, spasm=None, **changes)
+                               classes={k: quiet(m) for k, m in params.classes.items()}, spasm=None,
+                               **{"onset_sd_s": 0.0, "reaction_sd_s": 0.0, **changes})
 
 
 @pytest.fixture(scope="module")
@@ -274,6 +275,7 @@ def test_stream_parses_with_about_nine_percent_loss_and_nothing_from_the_future(
 @pytest.fixture(scope="module")
 def session(p1) -> CalibrationSession:
     params, profile = p1
+    params = dataclasses.replace(params, reaction_sd_s=0.0, onset_sd_s=0.0)   # the layout's hold lengths: fixed timing
     return calibration_session(params, profile, seed=3, repetitions=2, hold_s=3.0, neutral_s=3.0,
                                amplitudes=(1.0, 0.5))
 

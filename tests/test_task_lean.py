@@ -1,5 +1,7 @@
 """The virtual participant's feel for proportional control: how far to lean for how fast, how the
 lean is corrected while watching the arm, and the calibration order that makes nu span the leans."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -130,3 +132,58 @@ def test_a_move_that_ran_on_much_too_fast_after_letting_go_makes_the_next_one_le
     assert after_overshoot < first  # the arm overshot at four times the wanted speed: lean less next time
     first, after_right = _let_go_while_the_arm_runs_on(model, params, profile, 1.0)
     assert after_right == pytest.approx(first)  # it went at the wanted speed: nothing to learn
+
+
+def test_a_twin_that_leans_past_its_posture_uses_its_whole_range():
+    """A twin whose recording's holds reach most_lean = 1.4 of the class posture: full speed asks that
+    far, corrections stop there, a learnt zero keeps lean_for(d) the lean that worked, and the
+    calibration holds both ends of that range (hand values)."""
+    feel = LeanFeel(dataclasses.replace(FEEL, least_lean=0.4, most_lean=1.4))
+    assert feel.lean_for(0.0) == pytest.approx(0.4) and feel.lean_for(1.0) == pytest.approx(1.4)
+    assert feel.lean_for(0.5) == pytest.approx(0.4 + (1.4 - 0.4) * 0.5)
+    assert feel.corrected(1.35, further=True) == pytest.approx(1.4)
+    feel.learn(lean=1.0, deflection=0.5)  # zero = (1.0 - 1.4 x 0.5) / 0.5 = 0.6
+    assert feel.zero == pytest.approx(0.6) and feel.lean_for(0.5) == pytest.approx(1.0)
+
+
+def _gone_through(channel, intents: list[tuple[StickIntent, float]]) -> None:
+    t = 0.0
+    for intent, hold in intents:
+        for _ in range(int(hold / TICK)):
+            channel.command(intent, t, t + TICK)
+            t += TICK
+
+
+def test_from_one_motion_into_the_next_the_body_goes_through_rest_and_dwells_there(p1_model):
+    """Asked for L straight after F, the body first returns to rest; the move to L begins no earlier
+    than a reaction time after the return has ended (the psychological refractory period)."""
+    params, profile, _, model = p1_model
+    params = dataclasses.replace(params, reaction_sd_s=0.0, onset_sd_s=0.0)
+    channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
+    _gone_through(channel, [(StickIntent({"F": 1.0}), 3.0), (StickIntent({"L": 1.0}), 4.0)])
+    moves = channel.participant.moves
+    labels = [m.label for m in moves]
+    label_of = {cls.function: cls.label for cls in profile.classes}
+    assert labels == [0, label_of["F"], 0, label_of["L"]]
+    back, onward = moves[2], moves[3]
+    assert onward.t0 >= back.t0 + back.duration + params.reaction_s - 1e-9
+    assert onward.t0 == pytest.approx(back.t0 + back.duration + params.reaction_s, abs=2 * TICK)
+
+
+def test_a_lean_the_arm_never_answers_is_let_go_of_and_tried_again(p1_model):
+    """At its furthest lean with the chain not answering (the body's F posture is the neutral one
+    today: the chain reads neutral), the participant relaxes to rest after give_up_s and leans again."""
+    params, profile, _, model = p1_model
+    forward = next(cls.label for cls in profile.classes if cls.function == "F")
+    motion = params.classes[forward]
+    numb = dataclasses.replace(motion, posture_deg=np.zeros_like(motion.posture_deg), day_gain_log_std=0.0,
+                               day_std_deg=np.zeros_like(motion.day_std_deg))
+    params = dataclasses.replace(params, reaction_sd_s=0.0, onset_sd_s=0.0, classes={**params.classes, forward: numb})
+    channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
+    _gone_through(channel, [(StickIntent({"F": 1.0}), 30.0)])
+    moves = channel.participant.moves
+    rests = [m for m in moves[1:] if m.label == 0]
+    assert rests, "never let go of an unanswered lean"
+    first_full = next(m for m in moves if m.label == forward and m.amplitude == params.feel.most_lean)
+    assert rests[0].t0 >= first_full.t0 + params.feel.give_up_s  # held the full lean give_up_s first
+    assert moves[-1].label == forward or moves[-2].label == forward  # and tried again

@@ -45,8 +45,9 @@ _CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_gain_log_std", "day_s
                "tremor_std_deg", "range_share"}
 _SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
 _EVOKED_KEYS = {"classes", "probability", "duration_s", "undo_share"}
-_PROTOCOL_KEYS = {"source", "holds_only", "labels", "durations_s"}
-_FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero", "most_lean"}
+_PROTOCOL_KEYS = {"source", "holds_only", "labels", "durations_s", "run_digests"}
+_FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero", "most_lean",
+              "give_up_s"}
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,7 @@ class Feel:
     too_fast: float          # seen / wanted speed above which they lean less far
     max_zero: float          # the learnt zero lean never exceeds this (the least deflection needs less than full range)
     most_lean: float = 1.0   # the furthest lean, as a share of the class posture (a twin: its recording's largest holds)
+    give_up_s: float = 10.0  # the arm not answering the furthest lean this long, the participant relaxes and tries again
 
 
 @dataclass(frozen=True)
@@ -110,6 +112,7 @@ class Protocol:
     durations_s: tuple[float, ...]
     holds_only: bool
     source: str
+    run_digests: tuple[str, ...] = ()   # of every run of the source recordings (bomi.passes.run_digests)
 
 
 @dataclass(frozen=True)
@@ -248,7 +251,7 @@ def _parse_tremor(table: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _parse_protocol(table: Any, labels: set[int]) -> Protocol:
-    table = check_table(table, "[protocol]", _PROTOCOL_KEYS, _PROTOCOL_KEYS)
+    table = check_table(table, "[protocol]", _PROTOCOL_KEYS, _PROTOCOL_KEYS - {"run_digests"})
     runs, durations = table["labels"], table["durations_s"]
     if (not isinstance(runs, list) or not runs or not all(isinstance(v, int) and v in labels for v in runs)
             or not isinstance(durations, list) or len(durations) != len(runs)
@@ -257,11 +260,15 @@ def _parse_protocol(table: Any, labels: set[int]) -> Protocol:
                          "'durations_s' as many durations in (0, 3600] s")
     if not isinstance(table["holds_only"], bool) or not isinstance(table["source"], str):
         raise ValueError("[protocol]: 'holds_only' must be true or false and 'source' a string")
-    return Protocol(tuple(runs), tuple(float(v) for v in durations), table["holds_only"], table["source"])
+    digests = table.get("run_digests", [])
+    if not isinstance(digests, list) or not all(isinstance(v, str) for v in digests):
+        raise ValueError("[protocol]: 'run_digests' must be a list of strings")
+    return Protocol(tuple(runs), tuple(float(v) for v in durations), table["holds_only"], table["source"],
+                    tuple(digests))
 
 
 def _parse_feel(table: Any) -> Feel:
-    table = check_table(table, "[feel]", _FEEL_KEYS, _FEEL_KEYS - {"most_lean"})
+    table = check_table(table, "[feel]", _FEEL_KEYS, _FEEL_KEYS - {"most_lean", "give_up_s"})
     return Feel(least_lean=number(table, "least_lean", "[feel]", 0.05, 1.0),
                 lean_step=number(table, "lean_step", "[feel]", 0.0, 1.0),
                 watch_s=number(table, "watch_s", "[feel]", 0.0, 60.0),
@@ -269,7 +276,8 @@ def _parse_feel(table: Any) -> Feel:
                 too_slow=number(table, "too_slow", "[feel]", 0.0, 1.0),
                 too_fast=number(table, "too_fast", "[feel]", 1.0),
                 max_zero=number(table, "max_zero", "[feel]", 0.0, 0.99),
-                most_lean=number(table, "most_lean", "[feel]", 1.0, 2.0, default=1.0))
+                most_lean=number(table, "most_lean", "[feel]", 1.0, 2.0, default=1.0),
+                give_up_s=number(table, "give_up_s", "[feel]", 0.0, 3600.0, default=10.0))
 
 
 def _parse_spasm(table: Any, n_nodes: int) -> Spasm:

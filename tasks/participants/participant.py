@@ -136,6 +136,12 @@ class VirtualParticipant:
     def intent(self) -> tuple[int, float]:
         return self._moves[-1].label, self._moves[-1].amplitude
 
+    @property
+    def settled_at(self) -> float:
+        """Sim time at which the latest move ends (the posture asked for last is reached)."""
+        last = self._moves[-1]
+        return last.t0 + last.duration
+
     def set_intent(self, label: int, amplitude: float, t: float) -> float | None:
         """From sim time ``t``: move (after the reaction time) to ``label``'s posture at ``amplitude`` in [0, 1]
         (up to ``Feel.most_lean``);

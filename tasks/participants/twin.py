@@ -31,7 +31,7 @@ performs. ``P1.toml`` is this fitter on the five published days:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,7 @@ from bomi.classifier import NEUTRAL_LABEL
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ
 from bomi.onsets import SPEED_SHARE, Move, MoveKind, find_moves, keeps_moves
+from bomi.passes import run_digests
 from bomi.profiles import Profile
 from bomi.recording import Recording, Signal
 # (hold_blocks, split_sway_tremor and stacked_angles are imported from here by benchmarks)
@@ -77,6 +78,7 @@ speed_smoothing_s = 0.3    # s: the arm's speed is judged over about this long
 too_slow = 0.5             # seen / wanted speed below which the participant leans further
 too_fast = 2.0             # seen / wanted speed above which the participant leans less far
 max_zero = 0.9             # the learnt zero lean never exceeds this: the least deflection needs less than full range
+give_up_s = 10.0           # s: the arm not answering the furthest lean this long, the participant relaxes to rest and tries again: the limit of a person's attention to a system that does not respond (Nielsen 1993, Usability Engineering, 5.5; Miller 1968)
 """
 
 
@@ -145,6 +147,7 @@ class Pass:
     time: np.ndarray                # (n,) s: the recording's Time, else the row count at the sample rate
     blocks: list[Block]
     moves: list[Move]               # the move after each block's cue: blocks[1:]
+    run_digests: tuple[str, ...] = ()   # every run's (bomi.passes.run_digests): a model trained on it names them
 
     @property
     def continuous(self) -> bool:
@@ -192,7 +195,8 @@ def read_pass(rec: Recording, day: int, profile: Profile) -> Pass:
     angles = stacked_angles(rec, nodes)
     blocks = hold_blocks(labels, day)
     time = rec.time if rec.time is not None else np.arange(len(rec)) / SAMPLE_RATE_HZ
-    return Pass(rec.source, angles, time, blocks, find_moves(angles, time, labels))
+    return Pass(rec.source, angles, time, blocks, find_moves(angles, time, labels),
+                tuple(digest for _, _, digest in run_digests(rec)))
 
 
 def dead_channels(rec: Recording, nodes: Sequence[int]) -> list[str]:
@@ -456,7 +460,7 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         neutral_deg=np.median(day_neutrals[0], axis=0) if day_neutrals else np.zeros((n_nodes, 3)),
         neutral_rep_std=neutral_rep_std, neutral_sway_std=neutral_sway, neutral_tremor_std=neutral_tremor,
         tremor_spectrum=spectrum, postures=postures, rep_std=rep_std, day_gain_log_std=day_gain, day_std=day_std,
-        sway_std=sway, tremor_std=tremor, protocol=passes[0].protocol(), least_lean=least_lean, most_lean=most_lean, provenance=provenance, fallbacks=fallbacks)
+        sway_std=sway, tremor_std=tremor, protocol=replace(passes[0].protocol(), run_digests=tuple(sorted({d for p in passes for d in p.run_digests}))), least_lean=least_lean, most_lean=most_lean, provenance=provenance, fallbacks=fallbacks)
 
 
 def prior_nodes(prior: ParticipantParams, profile: Profile, matrix: np.ndarray) -> np.ndarray:
@@ -530,5 +534,7 @@ def twin_toml(twin: Twin, description: str) -> str:
               f"holds_only = {'true' if protocol.holds_only else 'false'}   # the recording kept only the holds "
               "(stitched), else every row after the cue",
               "labels = [" + ", ".join(str(v) for v in protocol.labels) + "]",
-              "durations_s = [" + ", ".join(f"{v:g}" for v in protocol.durations_s) + "]"]
+              "durations_s = [" + ", ".join(f"{v:g}" for v in protocol.durations_s) + "]",
+              "run_digests = [" + ", ".join(_toml_string(v) for v in protocol.run_digests) + "]   # its source "
+              "recordings' runs: a model trained on them was trained on this person's day (tasks.trials.standin)"]
     return "\n".join(lines) + "\n" + FEEL.format(least_lean=twin.least_lean, most_lean=twin.most_lean)

@@ -88,10 +88,11 @@ class JoystickChannel:
 @dataclass
 class LeanFeel:
     """The participant's feel for one proportional class: a wanted deflection d asks for a lean of
-    zero + (1 - zero) x d, never below the least lean calibrated (``Feel.least_lean``).  ``zero``
-    (the lean at which the arm would just not move; at first the least lean) is learnt from the
-    leans that worked: after correcting a move to ``lean`` for a wanted ``d``, the next move of that
-    class starts from there."""
+    zero + (most - zero) x d, within the range calibrated (``Feel.least_lean`` to ``Feel.most_lean``,
+    ``most``: 1 is the class posture; a twin leans as far as its recording's holds).  ``zero`` (the
+    lean at which the arm would just not move; at first the least lean) is learnt from the leans
+    that worked: after correcting a move to ``lean`` for a wanted ``d``, the next move of that class
+    starts from there."""
 
     feel: Feel
     zero: float | None = None
@@ -101,16 +102,19 @@ class LeanFeel:
             self.zero = self.feel.least_lean
 
     def lean_for(self, deflection: float) -> float:
-        return clip(self.zero + (1.0 - self.zero) * deflection, self.feel.least_lean, 1.0)
+        most = self.feel.most_lean
+        return clip(self.zero + (most - self.zero) * deflection, self.feel.least_lean, most)
 
     def learn(self, lean: float, deflection: float) -> None:
+        """The zero that makes ``lean_for(deflection)`` the ``lean`` that worked."""
         if deflection < 1.0:
-            self.zero = float(np.clip((lean - deflection) / (1.0 - deflection), 0.0, self.feel.max_zero))
+            zero = (lean - self.feel.most_lean * deflection) / (1.0 - deflection)
+            self.zero = float(np.clip(zero, 0.0, self.feel.max_zero))
 
     def corrected(self, lean: float, further: bool) -> float:
         """The lean one correction of ``lean`` takes (``lean_step`` further, or less far)."""
         step = self.feel.lean_step if further else -self.feel.lean_step
-        return clip(lean + step, self.feel.least_lean, 1.0)
+        return clip(lean + step, self.feel.least_lean, self.feel.most_lean)
 
 
 @dataclass
@@ -155,6 +159,10 @@ class BomiChannel:
     calibration happen before the task's clock starts.  One class at a time: the participant
     holds a posture for as long as the same function is wanted, starting from the lean their feel
     gives for the wanted deflection and correcting it while watching the arm (``_corrected_lean``).
+    From one motion into another the body goes through rest, and a motion taken up from rest starts
+    a reaction time after the return has ended at the earliest (``_take_up``: the psychological
+    refractory period); a lean held at its furthest for ``Feel.give_up_s`` without the arm
+    answering is let go of and taken up anew (``_gives_up``).
     """
 
     combine_axes = False
@@ -173,6 +181,7 @@ class BomiChannel:
         self.feel = {cls.label: LeanFeel(participant.params.feel) for cls in profile.classes
                      if cls.function in FUNCTIONS}
         self._watched: Watched | None = None  # the proportional posture taken up last
+        self._unanswered_since: float | None = None  # since when the furthest lean has gone unanswered
         # what _watch reads every tick, made once: per mode, the hand axis each stick function moves along
         # (as Python floats), and the share of a tick in the speed's smoothing
         layout = self.controls.layout
@@ -272,12 +281,18 @@ class BomiChannel:
         held, held_amplitude = self.participant.intent
         wanted = float(next(iter(intent.deflection.values()), 0.0))
         judged = self._watch(seen, mode)
-        if label != held:
+        if label != held and NEUTRAL_LABEL not in (label, held):
+            self._take_up(NEUTRAL_LABEL, 0.0, t)   # from one motion into the next through rest
+        elif label != held:
             self._take_up(label, amplitude, t)
+            self._unanswered_since = None
             if label in self.feel:
                 self._watched = Watched(label, amplitude, wanted)
         elif label in self.feel:
             self._watched.wanted = wanted
+            if self._gives_up(label, held_amplitude, t):
+                self._take_up(NEUTRAL_LABEL, 0.0, t)   # relaxes; the next look takes the posture up anew
+                return
             lean = self._corrected_lean(label, held_amplitude, t, judged)
             if lean != held_amplitude:
                 self._take_up(label, lean, t)
@@ -306,8 +321,26 @@ class BomiChannel:
         return f"c{label} {cls.function} ({cls.name.split(' (')[0]})"
 
     def _take_up(self, label: int, amplitude: float, t: float) -> None:
-        self.participant.set_intent(label, amplitude, self.clock_offset + t)
+        """Ask the body for ``label``'s posture at ``amplitude`` at task time ``t``.  A motion taken up
+        from rest is prepared only once the return to rest has ended: the next response's selection
+        waits for the previous one to be done (the psychological refractory period, Welford 1952;
+        Pashler 1994's central bottleneck), so the body dwells at rest for a reaction time at least."""
+        now = self.clock_offset + t
+        if label != NEUTRAL_LABEL and self.participant.intent[0] == NEUTRAL_LABEL:
+            now = max(now, self.participant.settled_at)
+        self.participant.set_intent(label, amplitude, now)
         self._since = t
+
+    def _gives_up(self, label: int, lean: float, t: float) -> bool:
+        """The arm has not answered the class held at the furthest lean for ``Feel.give_up_s``: a person
+        does not hold a lean for minutes at a machine that does not respond; they relax and try again."""
+        feel = self.participant.params.feel
+        if self.stick.function == self._function_of[label] or lean < feel.most_lean:
+            self._unanswered_since = None
+            return False
+        if self._unanswered_since is None:
+            self._unanswered_since = t
+        return t - self._unanswered_since >= feel.give_up_s
 
     def _watch(self, seen: np.ndarray | None, mode: Mode) -> bool:
         """Follow the arm's speed along the watched posture's direction while the arm answers that
@@ -381,12 +414,13 @@ class BomiChannel:
 
 
 def calibration_order(params: ParticipantParams, profile: Profile, repetitions: int = 3) -> list[tuple[int, float]]:
-    """The protocol's (class, amplitude) sequence: proportional classes at both ends of the body
-    range (so gamma's calibrated range spans the leans used), button classes at full range only
+    """The protocol's (class, amplitude) sequence: proportional classes at both ends of the lean
+    range (``Feel.least_lean``, ``Feel.most_lean``: so gamma's calibrated range spans the leans used), button classes at full range only
     (they are always pressed that way; half-range examples would bring them near neutral)."""
     functions = {cls.label: cls.function for cls in profile.classes}
     return [(label, amplitude) for _ in range(repetitions) for label in sorted(params.classes)
-            for amplitude in ((params.feel.least_lean, 1.0) if functions[label] in FUNCTIONS else (1.0,))]
+            for amplitude in ((params.feel.least_lean, params.feel.most_lean) if functions[label] in FUNCTIONS
+                              else (1.0,))]
 
 
 def calibrated_channel(participant: str | ParticipantParams, seed: int, post: PostProcessing | None = None,

@@ -27,6 +27,7 @@ from sim.joystick import JoystickState
 from tasks.stacking.channels import BomiChannel, JoystickChannel, OperatorChannel
 from tasks.stacking.episode import intended_direction
 from tasks.stacking.sources import Operator, operator_user
+from tasks.participants.params import recorded_day
 from tasks.participants.participant import ParticipantParams, VirtualParticipant
 from tasks.operators.params import OperatorParams
 from tasks.stacking.vocabulary import REST, StickIntent
@@ -68,11 +69,21 @@ class StandIn:
         return self._truth
 
 
+def trained_on_its_recording(params: ParticipantParams, chain: OnlineChain) -> bool:
+    """The chain's model was trained on runs of the twin's own source recordings (their digests meet):
+    the twin is then the person of that recording's day, moving within the amplitudes the model learnt
+    (issue 53.4), not a person of another day drawn from its drift."""
+    protocol = params.protocol
+    return protocol is not None and not set(protocol.run_digests).isdisjoint(chain.model.training_runs)
+
+
 class BomiStandIn(StandIn):
     """A virtual participant sending base-station frames; the live loop's chain decides."""
 
     def __init__(self, arm: TrialArm, params: ParticipantParams, profile: Profile, chain: OnlineChain,
                  operator: OperatorParams, seed: int):
+        if trained_on_its_recording(params, chain):
+            params = recorded_day(params)
         participant = VirtualParticipant(params, profile, seed)
         super().__init__(arm, BomiChannel(participant, chain, profile, calibrate=False), operator)
         self.participant = participant
