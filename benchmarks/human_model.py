@@ -2,6 +2,7 @@
 
     python benchmarks/human_model.py calibrate [--seeds 20] [--slopes 0.35,0.5,0.65] [--jobs 1]
     python benchmarks/human_model.py predict [--participants P1,P4,P5] [--seeds 5] [--first-seed 0] [--name N] [--jobs 1]
+    python benchmarks/human_model.py check --seeds A-B [--cells P1:joystick,P1:bomi,P4:bomi,P5:bomi] [--recovery R]
     python benchmarks/human_model.py sensitivity [--params K,K] [--seeds 5] [--first-seed 0] [--jobs 1]
 
 ``calibrate`` runs the joystick operator (tasks/operators/human.toml, only ``timing.fitts_slope`` varied) on
@@ -15,6 +16,10 @@ BoMI/joystick ratio, time per phase, the share of time spent switching modes (He
 benchmarks/results/N.{md,json,png}, N_phases.png, N_best.png.  Development seeds by default; a
 held-out range (a fresh one of 10000-19999; 1000-4999 are spent) only once the model is frozen.
 
+``check`` (issue 53) runs each participant:operator cell with the human model on, one episode at a time,
+and prints one JSON row per cell: successes, mean time, the share of relevant decisions (not
+``metrics.irrelevant``), the longest irrelevant run, the irrelevant decisions by context (``tasks.stacking.budget``).
+
 ``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
 benchmarks/results/human_sensitivity.{md,json}.
 """
@@ -23,6 +28,8 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import sys
+from collections import Counter
 import tempfile
 from pathlib import Path
 
@@ -35,7 +42,8 @@ import numpy as np  # noqa: E402
 from bomi import paper  # noqa: E402
 from tasks.stacking import metrics  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
-from tasks.experiments.jobs import EpisodeJob, run_job  # noqa: E402
+from tasks.experiments.jobs import RECOVERY_KEY, EpisodeJob, run_job  # noqa: E402
+from tasks.stacking import budget  # noqa: E402
 from tasks.stacking.channels import participant_controls
 from tasks.stacking.summary import summarize
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
@@ -274,6 +282,45 @@ def sensitivity(args: argparse.Namespace) -> None:
     print("\n".join(lines))
 
 
+HUMAN_ON = (("operator.human.model", "human"),)
+
+
+def seed_range(text: str) -> range:
+    first, _, last = text.partition("-")
+    return range(int(first), int(last or first) + 1)
+
+
+def cell_row(participant: str, operator: str, seeds: range, recovery: str | None = None) -> dict:
+    records, contexts, decisions = [], Counter(), 0
+    overrides = HUMAN_ON + (((RECOVERY_KEY, recovery),) if recovery else ())
+    for seed in seeds:
+        log = run_job(EpisodeJob(operator, participant, seed, overrides=overrides))
+        record = summarize(log)
+        records.append(record)
+        if operator == "bomi":
+            contexts.update({c.value: n for c, n in budget.irrelevant_by_context(log).items()})
+            decisions += len(log.decisions.t)
+        print(json.dumps({k: record.get(k) for k in ("participant", "operator", "seed", "success", "completion_time",
+                                                       "irrelevant_decisions", "irrelevant_longest_run_ms", "stuck")}, default=str),
+              file=sys.stderr, flush=True)
+    times = [r["completion_time"] for r in records if r["success"]]
+    row = {"cell": f"{participant} {operator}", "recovery": recovery or "none", "seeds": f"{seeds.start}-{seeds.stop - 1}",
+           "success": f"{len(times)}/{len(records)}", "mean_time_s": round(float(np.mean(times)), 1) if times else None}
+    if operator == "bomi":
+        wild = sum(r["irrelevant_decisions"] for r in records)
+        row.update({"relevant_pct": round(100.0 * (1.0 - wild / decisions), 2),
+                    "longest_irrelevant_ms_max": max(r["irrelevant_longest_run_ms"] for r in records),
+                    "longest_irrelevant_ms_mean": round(float(np.mean([r["irrelevant_longest_run_ms"] for r in records])), 1),
+                    "irrelevant_by_context": dict(contexts)})
+    return row
+
+def check(args: argparse.Namespace) -> None:
+    """One JSON row per cell: the body's check (``cell_row``), printed as it comes."""
+    for cell in args.cells.split(","):
+        participant, operator = cell.split(":")
+        print(json.dumps(cell_row(participant, operator, seed_range(args.seeds), args.recovery)), flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -286,13 +333,18 @@ def main() -> None:
     sens = sub.add_parser("sensitivity", help="each human parameter at 50 %% and 150 %%, joystick and P1 BoMI")
     sens.add_argument("--params", default=",".join(SENSITIVE), help="parameters varied (default: the timing, "
                       "perception and slip parameters)")
+    chk = sub.add_parser("check", help="the BoMI user's body: success, time, relevant outputs, longest irrelevant run, "
+                         "irrelevant decisions by context, per cell (issue 53)")
+    chk.add_argument("--seeds", required=True, help="first-last, e.g. 0-9")
+    chk.add_argument("--cells", default="P1:joystick,P1:bomi,P4:bomi,P5:bomi", help="participant:operator, comma list")
+    chk.add_argument("--recovery", help='recovery actions, e.g. "rezero,backoff,pause" (default: none)')
     for p in (pred, sens):
         p.add_argument("--seeds", type=int, default=5, help="episodes per condition (default 5)")
         p.add_argument("--first-seed", type=int, default=0, help="first seed (default 0: development seeds)")
     for p in (cal, pred, sens):
         p.add_argument("--jobs", type=int, default=1, help="parallel episodes (default 1)")
     args = parser.parse_args()
-    {"calibrate": calibrate, "predict": predict, "sensitivity": sensitivity}[args.command](args)
+    {"calibrate": calibrate, "predict": predict, "sensitivity": sensitivity, "check": check}[args.command](args)
 
 
 if __name__ == "__main__":

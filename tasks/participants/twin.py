@@ -44,9 +44,8 @@ from bomi.onsets import SPEED_SHARE, Move, MoveKind, find_moves, keeps_moves
 from bomi.passes import run_digests
 from bomi.profiles import Profile
 from bomi.recording import Recording, Signal
-# (hold_blocks, split_sway_tremor and stacked_angles are imported from here by benchmarks)
 from tasks.participants.holds import (EDGE_SAMPLES, WELCH_SEGMENT, Block, Holds, day_variation, hold_blocks,
-                                     motion_spectrum, isotropic_yaw, split_sway_tremor, stacked_angles,
+                                     motion_spectrum, isotropic_yaw, stacked_angles,
                                      within_pass_std)
 from tasks.participants.motion import SWAY_CUTOFF_HZ
 from tasks.participants.params import ClassMotion, ParticipantParams, Protocol
