@@ -1,9 +1,12 @@
 """The live loop: a base-station stream drives the simulated arm at its 60 Hz control rate.
 
-    StreamReader (own thread) -> poll -> Gate + fusion -> OnlineChain -> sanitizer -> button evidence
-    -> DecisionStick -> Watchdog -> ArmSim.step
+    StreamReader (own thread) -> poll -> the live person (``tasks.trials.person.LivePerson``: Gate +
+    fusion -> OnlineChain -> sanitizer -> button evidence -> DecisionStick) -> the safety hold
+    (``SafetyHold``: watchdog, gate, standby, re-zero) -> [assistance] -> the env, stepped once a tick
 
-The arm never knows where the stick came from. Ticks are paced by the wall clock and never wait on
+The env is the one loop's (``tasks.stacking.env.StackingEnv``): without a task for ``bomi live``
+(``FreeArm``: free mode, the arm at home and the cubes at A, no outcome judged), running trials for
+``bomi trial`` (``tasks.trials.session.TrialArm``). The arm never knows where the stick came from. Ticks are paced by the wall clock and never wait on
 I/O: a thread reads the port (and reconnects, with its backoff) while each tick takes whatever
 has arrived (``StreamReader.poll``). ``LiveLoop`` is the loop as a library: ``tick(now, frames,
 key_events)`` runs one control tick and tells every observer its ``Tick`` (``bomi trial`` and
