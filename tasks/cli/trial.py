@@ -366,6 +366,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
                 model = calibrated_model(standin, profile, args.seed)
         sessions: list[tuple[Session, dict]] = []  # each as soon as it exists: a lost input loses nothing
         writer = Committer(out, target, sessions, profile, model, standin is not None, previous)
+        lost: BomiError | None = None   # the input that cut the session short: raised once it is reported
         try:
             for controller, plan in plans:
                 part = len(session_files(out, controller.value)) + 1
@@ -376,12 +377,18 @@ def cmd_trial(args: argparse.Namespace) -> int:
                     _joystick_session(args, plan, standin, operator, device, sessions, meta, writer.after_tick)
                 if sessions and sessions[-1][0].stopped:
                     break  # the person closed the viewer: the session ends here
+        except BomiError as exc:
+            if not (sessions and sessions[-1][0].stopped):
+                raise
+            lost = exc  # a lost stream or joystick cut the session short: its trials are reported too
         finally:
             if device is not None:
                 device.close()
             if stream is not None:
                 stream.stop()
             records, logs = writer.commit()  # a trial cut short by a lost input is written too
+        if lost is not None and not records:
+            raise lost  # no trial of this run ended: nothing to report
         records = previous + records
         predictions = _predictions(args) if args.predict is not None else []
         from tasks.trials.report import write_report
@@ -394,6 +401,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
             print(f"trial {r['trial']} {r['operator']}: {verdict}, {r['mode_switches']} mode switches"
                   + (f", accuracy {100 * acc:.1f} %" if acc is not None else ""))
         print(f"wrote {out / 'trials.jsonl'}, " + ", ".join(str(p) for p in written))
+        if lost is not None:
+            raise lost
         return 0
     finally:
         if target != out and target.exists():  # no trial finished: the earlier session stays as it was

@@ -188,10 +188,14 @@ class TrialArm:
             result.success, result.failure = outcome.success, outcome.failure
             if outcome.success:
                 result.completion_time = outcome.completion_time - (result.first_command_s or 0.0)
-            result.wall_time = time.perf_counter() - self._started[0]
-            result.cpu_time = time.process_time() - self._started[1]
+            self.clock_out(result)
             self._count_down()
         return command
+
+    def clock_out(self, result: TrialResult) -> None:
+        """The trial's wall and CPU time, from its go to now (its end, or the tick a lost input cut it short)."""
+        result.wall_time = time.perf_counter() - self._started[0]
+        result.cpu_time = time.process_time() - self._started[1]
 
     def status(self) -> str:
         """The trial's part of the status line."""
@@ -458,10 +462,11 @@ class Session:
         return [r for r in self.arm.results if r.end_tick >= 0]
 
     def cut_short(self, why: str) -> None:
-        """The input went away: the running trial ends here as a failure."""
+        """The input went away: the running trial ends here as a failure, timed to here."""
         if self.arm.phase is Phase.RUN and self.arm.results and self.arm.results[-1].end_tick < 0:
             result = self.arm.results[-1]
             result.end_tick, result.failure = len(self.recorder.ticks), why
+            self.arm.clock_out(result)
         self.arm.phase, self.stopped = Phase.DONE, why
 
 
