@@ -94,6 +94,7 @@ class FailingStick:
         """Nothing to release."""
 
 
+@pytest.mark.real_time
 def test_a_session_cut_short_by_a_lost_joystick_writes_its_times_and_report(tmp_path, monkeypatch, capsys):
     """A person's joystick lost 1 s into trial 1 (real time, 1.5 s): the command ends with one error
     line, and the cut-short trial is in trials.jsonl with its wall and CPU time, and in report.md."""
