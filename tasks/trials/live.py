@@ -6,11 +6,12 @@
 
 The env is the one loop's (``tasks.stacking.env.StackingEnv``): without a task for ``bomi live``
 (``FreeArm``: free mode, the arm at home and the cubes at A, no outcome judged), running trials for
-``bomi trial`` (``tasks.trials.session.TrialArm``). The arm never knows where the stick came from. Ticks are paced by the wall clock and never wait on
-I/O: a thread reads the port (and reconnects, with its backoff) while each tick takes whatever
-has arrived (``StreamReader.poll``). ``LiveLoop`` is the loop as a library: ``tick(now, frames,
-key_events)`` runs one control tick and tells every observer its ``Tick`` (``bomi trial`` and
-replays use it; given the same ticks' inputs it does the same, bit for bit).
+``bomi trial`` (``tasks.trials.session.TrialArm``). The arm never knows where the stick came from.
+Ticks are paced by the wall clock and never wait on I/O: a thread reads the port (and reconnects,
+with its backoff) while each tick takes whatever has arrived (``StreamReader.poll``). ``LiveLoop`` is
+the loop as a library: ``tick(now, frames, key_events)`` runs one control tick and tells every
+observer its ``Tick`` (``bomi trial`` and replays use it; given the same ticks' inputs it does the
+same, bit for bit).
 
 Safety (the live path is a safety path: input it cannot trust leaves the arm at rest):
 
