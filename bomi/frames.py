@@ -238,7 +238,8 @@ class NodeStats:
     """What the stream told about one IMU node so far."""
 
     frames: int = 0
-    lost: int = 0
+    lost: int = 0          # samples lost within a stream: the counter steps of 2 .. MAX_COUNTER_GAP, less one
+    restarts: int = 0      # counters that repeated or jumped further: a new stream (lost samples not countable)
     period_ms: int = 0
     last_counter: int = -1
     first_time: float | None = None
@@ -255,6 +256,17 @@ class NodeStats:
         if self.first_time is None or self.last_time is None or self.last_time <= self.first_time:
             return 0.0
         return (self.frames - 1) / (self.last_time - self.first_time)
+
+    def counter_stepped(self, step: int, max_gap: int) -> None:
+        """A delivered frame's counter is ``step`` ahead of the node's last: within a stream (a step of
+        1 .. ``max_gap``) ``step - 1`` samples were lost; a repeated counter or a longer jump (delivered only
+        once the frames after it vouched for it) is a new stream: the sender restarted, the source
+        reconnected or another sitting came in, and the one-byte counter cannot tell how many samples went
+        between (not the 229 or 255 its arithmetic gives whatever the gap). As ``bomi.gate``'s break rule."""
+        if 1 <= step <= max_gap:
+            self.lost += step - 1
+        else:
+            self.restarts += 1
 
     @property
     def loss_fraction(self) -> float:
@@ -433,7 +445,7 @@ class FrameParser:
         if stats is None:
             stats = self.nodes[frame.node_id] = NodeStats()
         else:
-            stats.lost += (counter_step(stats.last_counter, frame.counter) - 1) % COUNTER_MODULO  # a repeated counter: a full wrap lost
+            stats.counter_stepped(counter_step(stats.last_counter, frame.counter), self.max_counter_gap)
         stats.frames += 1
         stats.period_ms = frame.period_ms
         stats.last_counter = frame.counter
@@ -452,6 +464,7 @@ class FrameParser:
         parts = [
             f"IMU{imu_index(node_id)}(id {node_id}): {stats.frames} frames, {stats.lost} lost "
             f"({100 * stats.loss_fraction:.1f} %), {stats.rate_hz:.1f} Hz"
+            + (f", {stats.restarts} counter restart(s)" if stats.restarts else "")
             for node_id, stats in sorted(self.nodes.items())
         ]
         if self.skipped:

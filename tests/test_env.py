@@ -150,3 +150,33 @@ def test_the_film_is_a_wrapper_that_films_every_nth_tick(tmp_path):
                       task_config=TaskConfig(time_limit=1.0), video=path, video_speedup=4.0)
     every = max(1, round(4.0 * sim.config.physics.control_hz / sim.config.render.fps))
     assert imageio.get_reader(path).count_frames() == -(-len(log.t) // every)
+
+
+def test_free_mode_resets_the_arm_without_a_task_and_judges_nothing(env):
+    """``reset(options={"task": False})``: the scene as built (a new arm's state to the bit: the cubes at A
+    unturned, no jitter drawn, no task seed), then no outcome at all: a stack at B is not rewarded or
+    ended, a cube off the table does not terminate, the time limit does not truncate; the next reset
+    with a seed is a task again."""
+    from sim.env import ArmSim
+    from tasks.stacking.task import NOT_DONE
+
+    fresh = ArmSim()
+    free = StackingEnv(env.sim, config=TaskConfig(time_limit=0.05))
+    obs, info = free.reset(seed=3, options={"task": False})
+    assert info["task_seed"] is None and obs in free.observation_space
+    np.testing.assert_array_equal(env.sim.data.qpos, fresh.data.qpos)
+    np.testing.assert_array_equal(env.sim.cube_positions, fresh.cube_positions)
+    b, size = info["view"].target_xy, info["view"].cube_size
+    _place(free, [(b[0], b[1], size / 2), (b[0], b[1], 1.5 * size)])   # stacked at B
+    for _ in range(90):                          # 1.5 s: still for longer than still_time, beyond the limit
+        obs, reward, terminated, truncated, info = free.step(JoystickState())
+        assert (reward, terminated, truncated, info["outcome"]) == (0.0, False, False, NOT_DONE)
+    assert obs["phase"] == 2
+    _place(free, [(5.0, 5.0, 0.025), (b[0], b[1], size / 2)])            # a cube off the table
+    obs, reward, terminated, truncated, info = free.step(JoystickState({"F": 1.0}))
+    assert (reward, terminated, truncated, info["outcome"]) == (0.0, False, False, NOT_DONE)
+    assert info["command"].linear.any()          # the arm follows the stick
+    _, info = free.reset(seed=3)
+    truncated = [free.step(JoystickState())[3] for _ in range(4)]   # a task again: its time limit ends it
+    assert info["task_seed"] == 3 and not truncated[0] and truncated[-1]
+    fresh.close()

@@ -21,7 +21,8 @@ from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.operators.stick import DecisionStick
 from bomi.gate import GateConfig
 from tasks.trials.displays import StatusLine, TickLog, display_opens, has_display
-from tasks.trials.live import Tick, Watchdog, refusal, run_live, status_text
+from tasks.trials.live import Tick, run_live, status_text
+from tasks.trials.person import Watchdog, refusal
 from tasks.participants.imu_synth import SensorNoise, synthesize_raw
 from tasks.participants.wire import participant_blocks
 from tasks.participants.participant import load_participant

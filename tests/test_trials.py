@@ -280,6 +280,7 @@ def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_sessio
     records = _records(out)
     assert len(records) == 1 and records[0]["failure"] == "stream lost" and records[0]["participant"] == "person"
     assert records[0]["accuracy_all_decisions"] is None  # nobody knows what a person intended
+    assert records[0]["wall_time"] > 0 and records[0]["cpu_time"] > 0 and (out / "report.md").is_file()
     with h5py.File(out / "bomi.h5") as f:
         go, end = int(f["trials/go_tick"][0]), int(f["trials/end_tick"][0])
         t, stale = f["ticks/t"][()], f["ticks/stale"][()]

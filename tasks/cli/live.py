@@ -16,10 +16,10 @@ from sim.joystick import BUTTONS
 from tasks.operators.assist import ASSIST_HELP, Assistance, assist_option, profile_assist
 from tasks.cli import add_command
 from tasks.cli.options import non_negative_int, positive_int, seconds
+from tasks.stacking.env import StackingEnv
 from tasks.trials.displays import (Displays, Headless, PassiveViewer, StatusLine, TickLog, VideoDisplay, display_opens,
                                    has_display, open_log)
-from tasks.trials.live import run_live
-from tasks.stacking.task import StackingTask
+from tasks.trials.live import FreeArm, run_live
 from tasks.operators.stick import arm_profile, profile_layout
 
 
@@ -100,12 +100,12 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         source.stop()
         raise
+    arm = FreeArm(StackingEnv(sim))  # the one loop's env, without a task: the arm at home, the cubes at A
     assist = None
     if options:  # sees the arm and the scene's cubes and target, as on the table
         functions = {cls.function for cls in profile.classes}  # no button: a rest held on refuses a mode
         assistance = Assistance(options, sim.layout, tuple(b for b in BUTTONS if b in functions))
-        task = StackingTask(sim)
-        assist = lambda state: assistance.step(task.view(), state, sim)  # noqa: E731
+        assist = lambda state: assistance.step(arm.env.task.view(), state, sim)  # noqa: E731
     status, log, displays = StatusLine(), None, []
     try:
         log = TickLog(open_log(args.log), str(args.log)) if args.log is not None else None
@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         if args.video is not None:
             displays.append(VideoDisplay(sim, args.video))
         source.discard()   # what arrived while getting ready is old: never acted upon
-        summary = run_live(source, chain, sim, duration_s=args.duration, neutral=neutral, log=log,
+        summary = run_live(source, chain, arm, duration_s=args.duration, neutral=neutral, log=log,
                            status=status, display=Displays(displays), on_neutral=_print_neutral, assist=assist)
     finally:
         source.stop()

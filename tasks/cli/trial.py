@@ -294,6 +294,7 @@ def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
             stop.check()  # every tick: a signal whose raise was swallowed still ends the session
             writer.after_tick()
 
+        lost: BomiError | None = None   # the input that cut the session short: raised once it is reported
         try:
             for controller, plan in plans:
                 stop.check()
@@ -305,6 +306,10 @@ def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
                     _joystick_session(args, plan, standin, operator, device, sessions, meta, after_tick)
                 if sessions and sessions[-1][0].stopped:
                     break  # the person closed the viewer: the session ends here
+        except BomiError as exc:
+            if not (sessions and sessions[-1][0].stopped):
+                raise
+            lost = exc  # a lost stream or joystick cut the session short: its trials are reported too
         finally:
             with stop.shielded():  # a second signal does not cut the closing and the writing of the trials
                 if device is not None:
@@ -312,6 +317,8 @@ def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
                 if stream is not None:
                     stream.stop()
                 records, logs = writer.commit()  # a trial cut short by a lost input is written too
+        if lost is not None and not records:
+            raise lost  # no trial of this run ended: nothing to report
         records = previous + records
         predicted = (predictions(args.controller, args.trials, args.predict, args.seed, args.time_limit)
                      if args.predict is not None else [])
@@ -326,6 +333,8 @@ def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
             print(f"trial {r['trial']} {r['operator']}: {verdict}, {r['mode_switches']} mode switches"
                   + (f", accuracy {100 * acc:.1f} %" if acc is not None else ""))
         print(f"wrote {out / 'trials.jsonl'}, " + ", ".join(str(p) for p in written))
+        if lost is not None:
+            raise lost
         return 0
     finally:
         with stop.shielded():

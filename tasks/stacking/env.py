@@ -8,6 +8,12 @@ jitter of task seed ``s`` (``task.start_poses``; no seed: one drawn from the env
 next (``StackingTask.view``).  Nothing else: no physics call, random draw or read of its own, so
 an episode stepped here is the episode ``tasks.stacking.episode.run_episode`` records, bit for bit.
 
+Free mode, ``reset(options={"task": False})``: the arm at home and the cubes at A without a task
+(no jitter drawn: the scene ``ArmSim.reset`` sets up, ``task_seed`` None), and no outcome judged
+until the next reset: every step's reward is 0, terminated and truncated are False and its info's
+``outcome`` is ``NOT_DONE`` (``bomi live``: a person drives the arm for as long as they like, and
+a trial's wait before its first task).
+
 - action: a ``Dict`` of ``stick`` (the deflections of F, B, R, L, Rr, Lr in [0, 1]) and ``buttons``
   (B1, B2 pressed this tick), or a ``sim.joystick.JoystickState`` (the project's own sources);
 - observation: ``arm`` (joint angles, rad), ``hand`` (pinch point xyz m, yaw rad, tilt to level
@@ -31,7 +37,7 @@ from gymnasium import spaces
 
 from sim.env import ArmSim
 from sim.joystick import BUTTONS, FUNCTIONS, LAYOUTS, THREE_AXIS, JoystickState, Layout
-from tasks.stacking.task import StackingTask, TaskConfig
+from tasks.stacking.task import NOT_DONE, StackingTask, TaskConfig
 from tasks.stacking.vocabulary import View
 
 ENV_ID = "BomiJaco/Stacking-v0"
@@ -92,14 +98,20 @@ class StackingEnv(gymnasium.Env):
             "phase": spaces.Discrete(3),
         })
         self._phase = 0
+        self._free = False  # free mode (module docstring): no task, no outcome
         self._scales = {"dt": self.sim.dt, "full_speed": self.sim.config.control.full_speed}
 
     def reset(self, *, seed: int | None = None, options: Mapping[str, Any] | None = None):
         super().reset(seed=seed)
-        task_seed = (options or {}).get("task_seed", seed)
-        if task_seed is None:
-            task_seed = int(self.np_random.integers(SEED_RANGE))
-        self.task.reset(task_seed)
+        options = options or {}
+        self._free = not options.get("task", True)
+        task_seed = None if self._free else options.get("task_seed", seed)
+        if self._free:
+            self.sim.reset()  # the scene as built: no jitter drawn
+        else:
+            if task_seed is None:
+                task_seed = int(self.np_random.integers(SEED_RANGE))
+            self.task.reset(task_seed)
         view = self.task.view()
         obs = self._observe(view)
         self._phase = obs["phase"]
@@ -108,10 +120,10 @@ class StackingEnv(gymnasium.Env):
     def step(self, action: JoystickState | Mapping[str, Any]):
         state = as_state(action)
         command = self.sim.step(state)
-        outcome = self.task.outcome()
+        outcome = NOT_DONE if self._free else self.task.outcome()
         view = self.task.view()
         obs = self._observe(view)
-        reward, self._phase = float(obs["phase"] - self._phase), obs["phase"]
+        reward, self._phase = 0.0 if self._free else float(obs["phase"] - self._phase), obs["phase"]
         info = {"view": view, "outcome": outcome, "state": state,
                 "command": Command(command.linear, command.angular, command.finger), **self._scales}
         return obs, reward, outcome.done and not outcome.timed_out, outcome.timed_out, info

@@ -8,7 +8,7 @@ source of a tick's ``JoystickState``, so that the one loop (``env.StackingEnv``)
   ``joystick_user`` and ``bomi_user`` build one by name.
 - elsewhere: a gamepad, the viewer's keys and a logged stick (``tasks.trials.devices``,
   ``tasks.trials.replay.LoggedStick``: ``DeviceSource``), and the live person (stream -> gate ->
-  chain -> stick: ``tasks.trials.live.LiveLoop``).
+  chain -> stick: ``tasks.trials.person.LivePerson``, held at rest by ``SafetyHold``).
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ from misclassified ones), the amplitude the profile uses and nu(t). Legends sit 
 panels, never over the data."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+
 from pathlib import Path
 from typing import TYPE_CHECKING
 

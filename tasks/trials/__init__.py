@@ -3,8 +3,10 @@ session, `bomi replay` re-runs a logged trial.
 
 Map (data flows down):
 
-- ``live``: the live loop: a base-station stream through the gate, the chain and the stick to the
-  arm at its control rate, with the safety path (any input it cannot trust leaves the arm at rest).
+- ``live``: the live loop: a base-station stream through the live person (``person``) to the task's
+  environment at its control rate, with the safety path (any input it cannot trust leaves the arm at rest).
+- ``person``: the live person as an action source (stream -> gate -> chain -> sanitizer -> stick:
+  ``LivePerson``) and the safety hold around it (``SafetyHold``).
 - ``displays``: where a live run is shown and logged (viewer, film process, status line, tick log).
 - ``session``: the runner. ``TrialArm`` runs N trials on the task's environment
   (``tasks.stacking.env``: wait, countdown, the timed trial, next; reset per trial); ``run_bomi`` drives it from the live loop (``tasks.trials.live.run_live``),

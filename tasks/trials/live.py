@@ -1,13 +1,17 @@
 """The live loop: a base-station stream drives the simulated arm at its 60 Hz control rate.
 
-    StreamReader (own thread) -> poll -> Gate + fusion -> OnlineChain -> sanitizer -> button evidence
-    -> DecisionStick -> Watchdog -> ArmSim.step
+    StreamReader (own thread) -> poll -> the live person (``tasks.trials.person.LivePerson``: Gate +
+    fusion -> OnlineChain -> sanitizer -> button evidence -> DecisionStick) -> the safety hold
+    (``SafetyHold``: watchdog, gate, standby, re-zero) -> [assistance] -> the env, stepped once a tick
 
-The arm never knows where the stick came from. Ticks are paced by the wall clock and never wait on
-I/O: a thread reads the port (and reconnects, with its backoff) while each tick takes whatever
-has arrived (``StreamReader.poll``). ``LiveLoop`` is the loop as a library: ``tick(now, frames,
-key_events)`` runs one control tick and tells every observer its ``Tick`` (``bomi trial`` and
-replays use it; given the same ticks' inputs it does the same, bit for bit).
+The env is the one loop's (``tasks.stacking.env.StackingEnv``): without a task for ``bomi live``
+(``FreeArm``: free mode, the arm at home and the cubes at A, no outcome judged), running trials for
+``bomi trial`` (``tasks.trials.session.TrialArm``). The arm never knows where the stick came from.
+Ticks are paced by the wall clock and never wait on I/O: a thread reads the port (and reconnects,
+with its backoff) while each tick takes whatever has arrived (``StreamReader.poll``). ``LiveLoop`` is
+the loop as a library: ``tick(now, frames, key_events)`` runs one control tick and tells every
+observer its ``Tick`` (``bomi trial`` and replays use it; given the same ticks' inputs it does the
+same, bit for bit).
 
 Safety (the live path is a safety path: input it cannot trust leaves the arm at rest):
 
@@ -62,7 +66,6 @@ tick they take effect.
 from __future__ import annotations
 
 import functools
-import math
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -73,73 +76,13 @@ import numpy as np
 
 from bomi.chain import Decision, OnlineChain
 from bomi.errors import BomiError
-from bomi.frames import FrameParser, ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
-from bomi.fusion import DT, NodeFusion
-from bomi.gate import Gate, GateConfig, RezeroGesture
-from bomi.profiles import NEUTRAL_FUNCTION
-from sim.joystick import BUTTONS, ArmCommand, JoystickState
-from tasks.operators.stick import DecisionStick
+from bomi.frames import FrameParser, ImuFrame, SafetyKeyEvent
+from bomi.fusion import NodeFusion
+from bomi.gate import Gate, GateConfig
+from sim.joystick import ArmCommand, JoystickState
+from tasks.stacking.env import Command, StackingEnv
+from tasks.trials.person import NO_INFO, LivePerson, SafetyHold, Watchdog
 from tasks.trials.displays import Display, Headless, StatusLine, TickLog
-
-WATCHDOG_TIMEOUT_S = 0.1
-LOOKAHEAD_TICKS = 1.5  # the watchdog and the gate judge a tick at its time + this many periods (see LiveLoop.tick)
-BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
-
-
-# ---------------------------------------------------------------------------------- safety
-@dataclass
-class Watchdog:
-    """Expired when no frame has arrived for ``timeout_s`` (or none ever has). Pure: times are passed in."""
-
-    timeout_s: float = WATCHDOG_TIMEOUT_S
-    last_frame_s: float | None = None
-    trips: int = 0          # times it went from fresh to expired
-    _was_expired: bool = field(default=True, repr=False)
-
-    def frames_arrived(self, now: float) -> None:
-        self.last_frame_s = now
-
-    def expired(self, now: float) -> bool:
-        expired = self.last_frame_s is None or now - self.last_frame_s >= self.timeout_s
-        self.trips += expired and not self._was_expired
-        self._was_expired = expired
-        return expired
-
-
-def refusal(decision: Decision, functions: Mapping[int, str]) -> str | None:
-    """Why ``decision`` must not reach the arm (None if it may). ``functions``: label -> function of the profile."""
-    if functions.get(decision.label) != decision.function:
-        return f"unknown class {decision.label} ({decision.function})"
-    values = {"confidence": decision.confidence, "gamma": decision.gamma, "nu": decision.nu}
-    for name, value in values.items():
-        if not math.isfinite(value):
-            return f"{name} is {value}"
-    if not 0.0 <= decision.nu <= 1.0:
-        return f"nu {decision.nu} outside [0, 1]"
-    if not 0.0 <= decision.confidence <= 1.0:
-        return f"confidence {decision.confidence} outside [0, 1]"
-    return None
-
-
-@dataclass
-class SafetySwitch:
-    """The safety key's events in order: standby holds the arm until control. The events are those the
-    parser's key guard let through (``bomi.frames``: STANDBY at once, CONTROL and CALIBRATION only
-    when the key frame before them vouches)."""
-
-    standby: bool = False
-
-    def update(self, events: Sequence[SafetyKeyEvent]) -> bool:
-        """Apply new events; True if one asks for a new neutral calibration."""
-        calibrate = False
-        for event in events:
-            if event.event == SafetyKey.STANDBY:
-                self.standby = True
-            elif event.event == SafetyKey.CONTROL:
-                self.standby = False
-            calibrate |= event.event == SafetyKey.CALIBRATION
-        return calibrate
-
 
 # ---------------------------------------------------------------------------------- one tick
 @dataclass
@@ -192,6 +135,22 @@ class Arm(Protocol):
 
     @property
     def mode(self): ...
+
+
+class FreeArm:
+    """The env without a task (``StackingEnv.reset(options={"task": False})``: the arm at home, the cubes at
+    A, no outcome judged) as the loop's arm: what ``bomi live`` drives, stepped once a tick."""
+
+    def __init__(self, env: StackingEnv):
+        self.env, self.dt = env, env.sim.dt
+        env.reset(options={"task": False})
+
+    @property
+    def mode(self):
+        return self.env.sim.mode
+
+    def step(self, state: JoystickState) -> Command:
+        return self.env.step(state)[-1]["command"]
 
 
 class Source(Protocol):
@@ -284,11 +243,17 @@ Observer = Callable[[Tick], None]
 class LiveLoop:
     """The live path as a library: one control tick at a time, observers told every tick.
 
-    ``chain`` (a fresh ``OnlineChain`` of the model and profile), ``arm`` (``sim.env.ArmSim`` or
-    anything with ``step``/``mode``/``dt``), ``neutral`` (offsets per node index; None: taken from
-    the stream once it has settled), ``assist`` (``tasks.operators.assist``: between the decided stick and the
-    arm, not consulted while the arm is held), ``observers`` (called with each ``Tick`` after the arm
-    has stepped: read the arm's state then), ``on_neutral`` (told the offsets once they hold).
+    ``chain`` (a fresh ``OnlineChain`` of the model and profile), ``arm`` (what the loop steps once a
+    tick: ``FreeArm`` (the env without a task: ``bomi live``), ``tasks.trials.session.TrialArm`` (the
+    env running trials), or anything with ``step``/``mode``/``dt``), ``neutral`` (offsets per node
+    index; None: taken from the stream once it has settled), ``assist`` (``tasks.operators.assist``:
+    between the decided stick and the arm, not consulted while the arm is held), ``observers`` (called
+    with each ``Tick`` after the arm has stepped: read the arm's state then), ``on_neutral`` (told the
+    offsets once they hold).
+
+    A tick: the live person (``LivePerson``, the action source) senses the tick's stream, the safety hold
+    (``SafetyHold``) gives the person's stick or rest, the assistance may change it, the arm steps once,
+    and the ``Tick`` is built.
 
     ``tick(now, frames, key_events)``: one control tick at ``now`` (seconds, any clock that the
     caller keeps) with the IMU frames read since the last tick (arrival order) and the new safety-key
@@ -303,145 +268,46 @@ class LiveLoop:
                  watchdog: Watchdog | None = None):
         self.chain, self.arm, self.assist, self.on_neutral = chain, arm, assist, on_neutral
         self.observers = list(observers)
-        profile = chain.profile
-        self.functions = {cls.label: cls.function for cls in profile.classes}
-        self.gate = Gate(chain.nodes, gate or GateConfig())
-        self._calibration = {n.index: n.calibration for n in profile.nodes if n.index in chain.nodes}
-        self.fusion = {index: NodeFusion(calibration) for index, calibration in self._calibration.items()}
-        self.watchdog = watchdog or Watchdog()
-        self.stick, self.safety = DecisionStick(profile), SafetySwitch()
-        buttons = frozenset(f for f in self.functions.values() if f in BUTTONS)
-        # a profile without a re-zero hold (0) or without a button class has no gesture
-        self.rezero = RezeroGesture(math.ceil(profile.rezero_hold_s / DT - 1e-9),
-                                    buttons if profile.rezero_hold_s > 0 else frozenset(), NEUTRAL_FUNCTION)
+        self.person = LivePerson(chain, arm.dt, neutral=neutral, gate=gate, watchdog=watchdog)
+        self.source = SafetyHold(self.person)
         self.summary = LiveSummary()
         self.rate = LoopRate(arm.dt)
-        self.streaming = False        # every node settled once: frames go to the chain from then on
-        self._neutral = None if neutral is None else {int(k): tuple(v) for k, v in neutral.items()}
-        self._recalibrate = False
-        self.untrusted: dict[int, str] = {}   # node -> why, after a break, until the neutral is retaken
 
-    def _untrust(self, node: int, cause: str, counter: int | None = None) -> None:
-        """A break in ``node``'s stream (``bomi.gate``): its filter started again, its warm-up rerun, nothing to
-        the chain until every node has settled, and the neutral then retaken from the stream."""
-        self.gate.node[node].restart(counter)
-        self.fusion[node] = NodeFusion(self._calibration[node])
-        self.chain.forget_decisions()
-        # the first break says why (a reconnection is then also a gap in the node's frames)
-        self.untrusted.setdefault(node, f"node {node} untrusted after {cause}: retaking warm-up and neutral")
-        self.streaming, self._neutral, self._recalibrate = False, None, False
-        self.summary.neutral = None
+    @property
+    def gate(self) -> Gate:
+        return self.person.gate
 
-    def _start_streaming(self) -> None:
-        self.streaming = True
-        if self._neutral is None:
-            self.chain.begin_neutral_calibration()
-        else:
-            self.chain.set_neutral(self._neutral)
+    @property
+    def fusion(self) -> dict[int, NodeFusion]:
+        return self.person.fusion
 
-    def _frames_to_chain(self, frames: Sequence[ImuFrame]) -> tuple[list[Decision], int]:
-        """Gate and fuse the frames of the model's nodes and give them to the chain; of a node's backlog
-        (more than BACKLOG_FRAMES this tick) only the newest window's frames (the rest: skipped)."""
-        nodes = [imu_index(frame.node_id) for frame in frames]
-        counts = Counter(node for node in nodes if node in self.fusion)
-        keep_from = {node: count - self.chain.model.spec.window if count > BACKLOG_FRAMES else 0
-                     for node, count in counts.items()}
-        seen: Counter = Counter()
-        decisions, skipped = [], 0
-        for frame, node in zip(frames, nodes):
-            gate = self.gate.node.get(node)
-            if gate is None:
-                continue
-            seen[node] += 1
-            if (cause := gate.count(frame.counter)) is not None:
-                self._untrust(node, cause, frame.counter)
-            if seen[node] <= keep_from[node]:
-                skipped += 1
-                if seen[node] == keep_from[node]:
-                    gate.backlog(keep_from[node])
-                continue
-            if not gate.check_raw(frame.mag, frame.gyro, frame.acc):
-                continue
-            angles = self.fusion[node].update(frame.acc, frame.gyro, frame.mag)
-            gate.fused(angles)
-            if not self.streaming and self.gate.settled:
-                self._start_streaming()
-            if self.streaming and (made := self.chain.push_angles(node, angles, frame.gyro)) is not None:
-                decisions.append(made)
-        return decisions, skipped
+    @property
+    def watchdog(self) -> Watchdog:
+        return self.person.watchdog
 
     def tick(self, now: float, frames: Sequence[ImuFrame], key_events: Sequence[SafetyKeyEvent] = (),
              reconnected: bool = False) -> Tick:
         """One control tick (see the class docstring); returns it after telling the observers.
         ``reconnected``: the source reconnected since the last tick (every node's stream broke)."""
-        chain, summary = self.chain, self.summary
-        nodes = Counter(imu_index(frame.node_id) for frame in frames)
-        breaks = self.gate.arrivals(now, nodes)
-        if reconnected:
-            breaks = dict.fromkeys(self.gate.node, "reconnect")
-        for node, cause in breaks.items():
-            self._untrust(node, cause)
-        made, skipped = self._frames_to_chain(frames)
-        decisions, dropped = [], []
-        for decision in made:
-            reason = refusal(decision, self.functions)
-            if reason is None:
-                decisions.append(decision)
-            else:
-                dropped.append((decision.sample_index, reason))
-        if frames:
-            self.watchdog.frames_arrived(now)
-        if self.safety.update(key_events):   # the safety key's re-zero: as the person's gesture
-            chain.forget_decisions()
-            chain.begin_neutral_calibration()
-            summary.neutral = None
-        # judged ahead (the next tick's time, plus half a period of scheduling slack): the arm is at rest
-        # before 100 ms without frames have passed (on the last tick before them), not on the first after
-        ahead = now + LOOKAHEAD_TICKS * self.arm.dt
-        stale = self.watchdog.expired(ahead)
-        gate = self.gate.verdict(ahead)
-        retaking = next(iter(self.untrusted.values()), None)
-        hold = "no frames" if stale else "standby" if self.safety.standby else retaking or gate
-        if chain.calibrating and gate is not None:
-            self._recalibrate = True      # the neutral posture is taken from trusted samples only
-        elif self._recalibrate and gate is None:
-            self._recalibrate = False
-            chain.begin_neutral_calibration()
-        acted = decisions[-1:] if skipped else decisions     # a backlog: the newest decision only
-        skipped += len(decisions) - len(acted)
-        rezero = self._rezero_asked(acted, hold is not None)
-        state = guarded_stick(self.stick, acted, hold is not None or rezero)
-        if self.assist is not None and hold is None:
+        person, summary = self.person, self.summary
+        sensed = person.sense(now, frames, key_events, reconnected)
+        state = self.source.act(NO_INFO)
+        if self.assist is not None and sensed.hold is None:
             state = self.assist(state)
         command = self.arm.step(state)
-        new_neutral = None
-        if summary.neutral is None and self.streaming and not chain.calibrating:
-            new_neutral = summary.neutral = chain.neutral
-            self.untrusted.clear()      # the neutral of the sitting now streaming holds
+        new_neutral = person.neutral_taken()
+        summary.neutral, summary.rezeros = person.offsets, person.rezeros
+        if new_neutral is not None:
             self.on_neutral(new_neutral)
-        tick = Tick(summary.ticks, now, len(frames), self.gate.lost, stale, self.safety.standby, chain.calibrating,
-                    decisions, dropped, state, self.arm.mode.value, command, new_neutral, hold, skipped,
-                    self.rate.hz, self.rate.overruns, tuple(frames), reconnected, rezero)
+        tick = Tick(summary.ticks, now, len(frames), self.gate.lost, sensed.stale, person.safety.standby,
+                    self.chain.calibrating, sensed.decisions, sensed.dropped, state, self.arm.mode.value, command,
+                    new_neutral, sensed.hold, sensed.skipped, self.rate.hz, self.rate.overruns, tuple(frames),
+                    reconnected, sensed.rezero)
         summary.count(tick)
         summary.watchdog_trips = self.watchdog.trips
         for observer in self.observers:
             observer(tick)
         return tick
-
-    def _rezero_asked(self, decisions: Sequence[Decision], hold: bool) -> bool:
-        """The person's re-zero gesture completed on this tick's decisions (``bomi.gate.RezeroGesture``;
-        only while the arm is free: a hold forgets a gesture begun): the neutral is taken anew, the arm
-        at rest meanwhile."""
-        if hold:
-            self.rezero.reset()
-            return False
-        if not self.rezero.update(decision.function for decision in decisions):
-            return False
-        self.chain.forget_decisions()   # the long press's labels do not vote after the new neutral
-        self.chain.begin_neutral_calibration()
-        self.summary.neutral = None
-        self.summary.rezeros += 1
-        return True
 
     def run(self, source: Source, *, duration_s: float | None = None, log: TickLog | None = None,
             status: StatusLine | None = None, display: Display = Headless(),
@@ -495,12 +361,3 @@ def paced_ticks(dt: float, display: Display, clock: Callable[[], float], sleep: 
             return
         yield now, due
         due = max(due + dt, now)
-
-
-def guarded_stick(stick: DecisionStick, decisions: Sequence[Decision], hold: bool) -> JoystickState:
-    """The tick's stick: centred, and the last decision and any button evidence forgotten, while the
-    arm is held (no fresh frames, the safety key's standby, a re-zero); else the decisions on the stick."""
-    if hold:
-        stick.release()
-        return JoystickState()
-    return stick.update(decisions)

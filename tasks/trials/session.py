@@ -101,7 +101,8 @@ class TrialArm:
     on the one loop (``tasks.stacking.env.StackingEnv``), reset at each trial's countdown and go.
 
     Only ticks in the RUN phase pass the stick to the arm; the countdown steps the task with a
-    centred stick, and before the first countdown (WAIT: no task yet) the bare arm holds still.
+    centred stick, and before the first countdown (WAIT: no task yet) the env in free mode (no
+    task, no outcome: ``StackingEnv.reset(options={"task": False})``) holds the arm still.
     The countdown is counted in control ticks, so a replay of the same ticks runs the same trials.
     """
 
@@ -109,7 +110,7 @@ class TrialArm:
         self.sim, self.plan = sim, plan
         self.env = StackingEnv(sim, config=TaskConfig(time_limit=plan.time_limit_s))
         self.task = self.env.task
-        self._view: View | None = None  # what the last reset or step of the task showed (None: no task yet)
+        self._view: View = self.env.reset(options={"task": False})[1]["view"]  # what the last reset or step showed
         self.dt = sim.dt
         self.ticks = 0
         self.phase = Phase.WAIT
@@ -158,7 +159,7 @@ class TrialArm:
         self._view = self.env.reset(seed=self.plan.task_seed(self.trial))[1]["view"]
 
     def step(self, state: JoystickState) -> ArmCommand | Command:
-        view = self.task.view() if self._view is None else self._view
+        view = self._view
         self.rows.append({"trial": self.trial if self.phase in (Phase.COUNTDOWN, Phase.RUN) else 0,
                           "phase": int(self.phase), "task_t": view.t, "hand_pos": view.hand_pos,
                           "arm_qpos": self.sim.arm_qpos, "closure": view.closure, "mode": view.mode.value,
@@ -168,9 +169,10 @@ class TrialArm:
             self.phase = Phase.DONE
             self.not_ready = (f"the controller was not ready within {self.plan.ready_within_s:g} s (the live loop "
                               f"never took the neutral posture: a node's signal did not settle)")
-        if self.phase is Phase.WAIT or self.phase is Phase.DONE:  # no task under way: the bare arm holds still
-            self._view = None
-            return self.sim.step(JoystickState())
+        if self.phase is Phase.WAIT or self.phase is Phase.DONE:  # no task under way: the arm holds still
+            info = self.env.step(JoystickState())[-1]
+            self._view = info["view"]
+            return info["command"]
         if self.phase is Phase.COUNTDOWN:
             info = self.env.step(JoystickState())[-1]
             self._view = info["view"]
@@ -187,10 +189,14 @@ class TrialArm:
             result.success, result.failure = outcome.success, outcome.failure
             if outcome.success:
                 result.completion_time = outcome.completion_time - (result.first_command_s or 0.0)
-            result.wall_time = time.perf_counter() - self._started[0]
-            result.cpu_time = time.process_time() - self._started[1]
+            self.clock_out(result)
             self._count_down()
         return command
+
+    def clock_out(self, result: TrialResult) -> None:
+        """The trial's wall and CPU time, from its go to now (its end, or the tick a lost input cut it short)."""
+        result.wall_time = time.perf_counter() - self._started[0]
+        result.cpu_time = time.process_time() - self._started[1]
 
     def status(self) -> str:
         """The trial's part of the status line."""
@@ -457,10 +463,11 @@ class Session:
         return [r for r in self.arm.results if r.end_tick >= 0]
 
     def cut_short(self, why: str) -> None:
-        """The input went away: the running trial ends here as a failure."""
+        """The input went away: the running trial ends here as a failure, timed to here."""
         if self.arm.phase is Phase.RUN and self.arm.results and self.arm.results[-1].end_tick < 0:
             result = self.arm.results[-1]
             result.end_tick, result.failure = len(self.recorder.ticks), why
+            self.arm.clock_out(result)
         self.arm.phase, self.stopped = Phase.DONE, why
 
 
