@@ -85,7 +85,7 @@ def test_a_joystick_trial_with_assist_does_what_the_benchmarks_assisted_episode_
 
     from tasks.experiments.jobs import EpisodeJob, run_job
     from tasks.operators.assist import Assist
-    from tasks.stacking.episode import summarize
+    from tasks.stacking.summary import summarize
     out = tmp_path / "session"
     assert main(["trial", "--stand-in", "P1", "--controller", "joystick", "--trials", "1", "--seed", "12",
                  "--headless", "--time-limit", "30", "--countdown", "0.5", "--assist", "auto-mode",

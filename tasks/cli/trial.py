@@ -283,7 +283,7 @@ def _trial(args: argparse.Namespace, stop: StopRequest) -> int:
             settings = json.dumps({"argv": _settings_argv(args)}, indent=1) + "\n"
             replace_atomically(target / SETTINGS_FILE, lambda partial: partial.write_text(settings, "utf-8"))
         if bomi and model is None:
-            from tasks.stacking.episode import calibrated_model
+            from tasks.stacking.channels import calibrated_model
             with stage(f"{standin.name}: calibration through its stream (the protocol performed, recorded as bomi "
                         f"record does, then bomi train)", progress=True):
                 model = calibrated_model(standin, profile, args.seed)

@@ -19,7 +19,7 @@ from tasks.experiments.jobs import EpisodeJob, run_job
 from tasks.operators.assist import Assist, profile_assist
 from tasks.stacking.vocabulary import Controls
 from tasks.operators.stick import profile_layout
-from tasks.stacking.episode import summarize
+from tasks.stacking.summary import summarize
 from tasks.trials.dataset import file_sha256, replace_atomically, sync_directory, write_session
 from tasks.trials.session import Controller, Session, TrialPlan, episode_log, trial_record
 

@@ -5,7 +5,6 @@ from misclassified ones), the amplitude the profile uses and nu(t). Legends sit 
 panels, never over the data."""
 from __future__ import annotations
 
-
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -35,7 +34,6 @@ AMPLITUDE_LABELS = {"gamma": "gamma: angle change\nfrom neutral (deg)",
                     "along_class": "amplitude along\nthe class (deg)"}
 LEGEND = {"loc": "upper left", "bbox_to_anchor": (1.005, 1.0), "fontsize": 7, "borderaxespad": 0.0}
 
-
 def _shade_phases(ax, log: "EpisodeLog") -> list[tuple[float, float, str]]:
     """Every other task phase shaded; returns (start s, end s, phase) for the labels."""
     t, spans = log.t, []
@@ -46,9 +44,7 @@ def _shade_phases(ax, log: "EpisodeLog") -> list[tuple[float, float, str]]:
         spans.append((float(t0), float(t1), phase))
     return spans
 
-
 PHASE_POINTS = 8  # the phase labels' font size
-
 
 def _label_phases(ax, spans: list[tuple[float, float, str]]) -> None:
     """Each phase's name inside the top of the panel, where it fits (a phase too short for its name
@@ -61,7 +57,6 @@ def _label_phases(ax, spans: list[tuple[float, float, str]]) -> None:
                     fontsize=PHASE_POINTS, color="0.2", clip_on=False,
                     bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.7})
 
-
 def _mode_band(ax, log: "EpisodeLog") -> list[Patch]:
     """The joystick mode as a coloured band along the bottom of ``ax``; a tick at each switch."""
     modes, t = list(log.mode), log.t
@@ -72,7 +67,6 @@ def _mode_band(ax, log: "EpisodeLog") -> list[Patch]:
     for start in starts[1:]:
         ax.plot([t[start]] * 2, [0.0, 0.09], transform=transform, color="black", lw=0.6)
     return [Patch(color=MODE_COLOURS[m], label=f"mode: {m}") for m in MODE_COLOURS if m in set(modes)]
-
 
 def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
     """Write the figure for one or more episodes (any BoMI episode adds the decision panels)."""
@@ -114,10 +108,8 @@ def timeline_figure(logs: list["EpisodeLog"], path: Path | str) -> Path:
     plt.close(fig)
     return path
 
-
 STUCK_COLOUR = "tab:red"
 RECOVERY_COLOUR = "tab:purple"
-
 
 def _mark_recoveries(ax, log: "EpisodeLog") -> None:
     """Each recovery action (tasks/operators/recovery.py): a line where it started, named, and the time the arm
@@ -128,7 +120,6 @@ def _mark_recoveries(ax, log: "EpisodeLog") -> None:
             ax.axvspan(event.start_s, event.end_s, color=RECOVERY_COLOUR, alpha=0.15, lw=0)
         ax.text(event.start_s, 0.98, f" {event.action.value}", transform=ax.get_xaxis_transform(), ha="left",
                 va="top", fontsize=7, color=RECOVERY_COLOUR)
-
 
 def _mark_stuck(axes, period: "failures.StuckPeriod | None") -> None:
     """The stuck period (the longest span without progress) hatched on ``axes``, named with its
@@ -146,7 +137,6 @@ def _mark_stuck(axes, period: "failures.StuckPeriod | None") -> None:
                  + ", ".join(evidence), transform=axes[0].get_xaxis_transform(), ha="left", va="bottom",
                  fontsize=7, color=STUCK_COLOUR, bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8})
 
-
 def decision_kinds(intended: np.ndarray, decided: np.ndarray, allowance: int, neutral: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Masks over the decisions: equal to the intended class; excused (late: the previous class or
@@ -155,7 +145,6 @@ def decision_kinds(intended: np.ndarray, decided: np.ndarray, allowance: int, ne
     right = np.asarray(decided) == np.asarray(intended)
     return (right, metrics.excused(intended, decided, allowance, neutral),
             metrics.misclassified(intended, decided, allowance, neutral))
-
 
 def _decision_panels(axes, log: "EpisodeLog") -> None:
     d = log.decisions
