@@ -6,7 +6,7 @@ import pytest
 
 from tasks.experiments.tables import markdown_comparison, terminal_comparison
 from tasks.operators.assist import NONE
-from tasks.operators.planner import NO_RECOVERY
+from tasks.stacking.vocabulary import NO_RECOVERY
 
 
 def _row(operator: str, time: float, **decisions) -> dict:

@@ -23,7 +23,7 @@ from tasks.experiments.stop import StopRequest
 from tasks.experiments.trials import (Committer, controls_label, lock_session, predictions, remaining_plans, say,
                                      session_assist)
 from tasks.operators.assist import ASSIST_HELP, Assist, assist_label, assist_option
-from tasks.operators.planner import DEFAULT_OPERATOR_FILE, load_operator
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator
 from tasks.stacking.vocabulary import Controls
 from tasks.operators.stick import arm_profile, profile_layout
 from tasks.stacking.channels import profile_controls
@@ -145,7 +145,7 @@ def _viewer(headless: bool, sim: ArmSim, keys=None):
     from tasks.cli.live import _viewer as live_viewer
     if keys is None:
         return live_viewer(headless, sim)
-    from tasks.trials.live import PassiveViewer
+    from tasks.trials.displays import PassiveViewer
     return PassiveViewer(sim.model, sim.data, key_callback=keys.key)
 
 
@@ -456,7 +456,7 @@ def _person_stick(index: int | None, headless: bool):
     """A person's joystick: gamepad ``index``; by default gamepad 0, else the viewer's keys."""
     import time
 
-    from tasks.trials.live import display_opens, has_display
+    from tasks.trials.displays import display_opens, has_display
     from tasks.trials.devices import Gamepad, ViewerKeys
     if index is not None:
         return Gamepad(index)
