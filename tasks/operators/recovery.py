@@ -136,7 +136,7 @@ class Supervisor:
         self.phase: str | None = None  # the task phase (metrics.task_phase), carried over goals that interrupt it
         self.queue: list[RecoveryAction] = []
         self.obeyed: float | None = None  # what the person saw of the arm when the actions queued were chosen
-        self.acting: tuple[RecoveryAction, float, bool] | None = None  # (action, since, the neutral asked for)
+        self.acting: tuple[RecoveryAction, float, bool] | None = None  # (action, since, the channel asked)
         self.events: list[RecoveryEvent] = []
         self.last_intent: StickIntent | None = None  # what ``intent`` gave last (what ``gate`` judges the stick by)
 
