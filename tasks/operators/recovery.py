@@ -9,6 +9,11 @@ the person acts on what they have seen of the arm since the last progress:
   posture anew over the profile's neutral samples; the arm is stopped meanwhile);
 - it answered them: the plan is at fault: **backoff** (lift the hand, plan afresh:
   ``ScriptedUser.back_off``);
+- the interface at fault and a rezero made since the last progress did not help (or rezero is not
+  on): the classifier itself no longer reads the body (a posture drifted from what it was trained
+  on): **recalibrate** (the person performs a short calibration protocol while the arm is stopped,
+  the chain's classifier is retrained on it: ``BomiChannel.begin_recalibration``); once per span
+  without progress: a fresh classifier that did not help is not retrained again;
 - a recovery made and still no progress ``stuck_s`` later: **pause** first (the arm stopped while
   the person rests ``pause_s``), then the fitting action again.
 
@@ -28,7 +33,8 @@ from tasks.stacking import failures, metrics
 from tasks.stacking.vocabulary import Goal, RecoveryAction, RecoveryEvent, StickIntent, View
 
 # the goal each stopped action logs (no task phase: it interrupts the phase it is in, metrics.task_phase)
-_GOALS = {RecoveryAction.REZERO: Goal("re-zero the neutral"), RecoveryAction.PAUSE: Goal("pause")}
+_GOALS = {RecoveryAction.REZERO: Goal("re-zero the neutral"), RecoveryAction.PAUSE: Goal("pause"),
+          RecoveryAction.RECALIBRATE: Goal("recalibrate")}
 
 
 class Person(Protocol):
@@ -42,22 +48,36 @@ class Person(Protocol):
 
 
 class Rezeroable(Protocol):
-    """A channel whose neutral posture can be taken anew (``BomiChannel``)."""
+    """A channel whose neutral posture can be taken anew and whose classifier retrained (``BomiChannel``)."""
 
     def begin_rezero(self) -> None: ...
 
     @property
     def rezeroing(self) -> bool: ...
 
+    def begin_recalibration(self, t: float) -> None: ...
+
+    @property
+    def recalibrating(self) -> bool: ...
+
 
 def choose(actions: frozenset[RecoveryAction], obeyed: float | None, obeyed_share: float,
-           retry: bool) -> tuple[RecoveryAction, ...]:
+           retry: bool, made: frozenset[RecoveryAction] = frozenset()) -> tuple[RecoveryAction, ...]:
     """The actions to take, in order, after a span without progress: ``obeyed``, the share of the
     stick moves asked for that the arm answered (None: none asked); ``retry``: a recovery was made
-    in this span already.  See the module docstring."""
-    fix = RecoveryAction.BACKOFF if obeyed is None or obeyed >= obeyed_share else RecoveryAction.REZERO
+    in this span already; ``made``: the actions made since the last progress.  See the module docstring."""
+    fix = RecoveryAction.BACKOFF if obeyed is None or obeyed >= obeyed_share else _interface_fix(actions, made)
     chosen = [a for a in (RecoveryAction.PAUSE,) if retry and a in actions] + [fix] * (fix in actions)
     return tuple(chosen or [a for a in (RecoveryAction.PAUSE,) if a in actions])
+
+
+def _interface_fix(actions: frozenset[RecoveryAction], made: frozenset[RecoveryAction]) -> RecoveryAction | None:
+    """The interface is at fault: rezero first; recalibrate when a rezero of this span did not help
+    or rezero is not on; once recalibrated in the span, nothing more to fix (None)."""
+    rezero, recalibrate = RecoveryAction.REZERO, RecoveryAction.RECALIBRATE
+    if rezero in actions and not (recalibrate in actions and rezero in made):
+        return rezero
+    return None if recalibrate in made else recalibrate
 
 
 @dataclass
@@ -72,11 +92,13 @@ class StuckClock:
     asked: int = 0  # stick moves asked for
     answered: int = 0  # ... that the stick gave
     retry: bool = False  # a recovery has been made since the last progress
+    made: frozenset[RecoveryAction] = frozenset()  # ... which actions
     _move: frozenset[str] = frozenset()  # the functions of the move held now
     _answered: bool = False  # ... and whether the stick has given one of them yet
 
     def progress(self, t: float) -> None:
         self._restart(t, retry=False)
+        self.made = frozenset()
 
     def recovered(self, t: float) -> None:
         self._restart(t, retry=True)
@@ -114,7 +136,7 @@ class Supervisor:
         self.phase: str | None = None  # the task phase (metrics.task_phase), carried over goals that interrupt it
         self.queue: list[RecoveryAction] = []
         self.obeyed: float | None = None  # what the person saw of the arm when the actions queued were chosen
-        self.acting: tuple[RecoveryAction, float, bool] | None = None  # (action, since, the neutral asked for)
+        self.acting: tuple[RecoveryAction, float, bool] | None = None  # (action, since, the channel asked)
         self.events: list[RecoveryEvent] = []
         self.last_intent: StickIntent | None = None  # what ``intent`` gave last (what ``gate`` judges the stick by)
 
@@ -133,7 +155,8 @@ class Supervisor:
             if not self.clock.due(view.t):
                 return intent
             self.obeyed = self.clock.obeyed
-            self.queue = list(choose(self.params.actions, self.obeyed, self.params.obeyed_share, self.clock.retry))
+            self.queue = list(choose(self.params.actions, self.obeyed, self.params.obeyed_share, self.clock.retry,
+                                     self.clock.made))
             if not self.queue:
                 self.clock.recovered(view.t)
                 return intent
@@ -174,6 +197,11 @@ class Supervisor:
             self.acting = (action, since, True)
         elif action is RecoveryAction.REZERO and asked and not self.channel.rezeroing:
             self._done(action, since, view)
+        elif action is RecoveryAction.RECALIBRATE and not asked:  # at once: the protocol's first run is neutral
+            self.channel.begin_recalibration(view.t)
+            self.acting = (action, since, True)
+        elif action is RecoveryAction.RECALIBRATE and not self.channel.recalibrating:
+            self._done(action, since, view)
         if self.acting is None:
             return self._intent(view)
         return StickIntent(goal=_GOALS[action])
@@ -181,6 +209,7 @@ class Supervisor:
     def _done(self, action: RecoveryAction, start: float, view: View) -> None:
         """An action is over; after the last one queued, the person takes the task up again."""
         self.events.append(RecoveryEvent(action, start, view.t, self.obeyed))
+        self.clock.made |= {action}
         self.acting = None
         if not self.queue:
             self.clock.recovered(view.t)

@@ -11,17 +11,19 @@ from typing import Protocol
 import numpy as np
 
 from bomi.chain import Decision, OnlineChain, train
+from bomi.chain.windows import recording_neutral
 from bomi.classifier import NEUTRAL_LABEL, PostProcessing
 from bomi.errors import BomiError
 from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
+from bomi.recording import NodeData, Recording
 from sim.kernels import clip
 from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Mode
 from tasks.operators.assist import Assist, profile_assist
 from tasks.operators.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 from tasks.participants.imu_synth import Delivery
 from tasks.participants.participant import (Feel, ParticipantParams, VirtualParticipant, calibration_session,
-                                            load_participant, session_recording)
+                                            load_participant, record_stream, session_recording)
 from tasks.participants.receiver import Receiver
 from tasks.stacking.record import DecisionTrace
 from tasks.stacking.vocabulary import Controls, StickIntent
@@ -49,6 +51,13 @@ class OperatorChannel(Protocol):
     @property
     def rezeroing(self) -> bool:
         """The neutral posture asked for is still being taken."""
+
+    def begin_recalibration(self, t: float) -> None:
+        """Perform a short calibration session from task time ``t`` and retrain on it (a stick: nothing)."""
+
+    @property
+    def recalibrating(self) -> bool:
+        """The calibration session begun is still under way."""
 
     def caption(self) -> str | None:
         """A line for the film about what happens between the person and the stick (None: nothing)."""
@@ -79,6 +88,11 @@ class JoystickChannel:
         """A stick has no neutral posture to take anew."""
 
     rezeroing = False
+
+    def begin_recalibration(self, t: float) -> None:
+        """A stick has no classifier to retrain."""
+
+    recalibrating = False
 
     def caption(self) -> None:
         """Nothing between the person and the stick to show."""
@@ -202,6 +216,7 @@ class BomiChannel:
         # An intent set at t moves the body from t + reaction_s: samples may be made that far ahead.
         self._lookahead = 0.95 * participant.params.reaction_s
         self._asked_until = -np.inf
+        self._recalibration: Recalibration | None = None  # the calibration session under way
         self.clock_offset = 0.0
         if not calibrate:
             return
@@ -257,7 +272,10 @@ class BomiChannel:
                 mode: Mode = Mode.TRANSLATION) -> JoystickState:
         """``seen``: the hand's velocity as a fraction of full speed, in the arm's ``mode``: what the
         participant watches to judge whether to lean further or less."""
-        self.perform(intent, t, seen, mode)
+        if self._recalibration is not None and self.clock_offset + t >= self._recalibration.end - 1e-9:
+            self._retrain()
+        if self._recalibration is None:  # (during a recalibration the participant follows its protocol's cues)
+            self.perform(intent, t, seen, mode)
         made = self._made(self.clock_offset + t, self.clock_offset + t_end)
         if made is not None:
             self.receiver.take(made)
@@ -307,6 +325,51 @@ class BomiChannel:
     @property
     def rezeroing(self) -> bool:
         return self.chain.calibrating
+
+    def begin_recalibration(self, t: float, hold_s: float = 5.0, neutral_s: float = 5.0) -> None:
+        """From task time ``t``, the participant performs the calibration protocol once
+        (``calibration_order`` with one repetition, run as ``calibration_session`` runs it: each cued
+        posture held ``hold_s`` once reached, ``neutral_s`` of neutral between) on their own clock;
+        the recording starts with it, so its fusion first settles ``WARMUP_S`` (cut, as a session's
+        warm-up is) while the participant rests at neutral.  Its frames reach the chain as they
+        arrive (the arm is stopped meanwhile: the supervisor's gate) and are recorded; when the
+        session ends (``recalibrating`` goes False on the first tick after it), the classifier trained on the
+        recording (``bomi.chain.train``) replaces the chain's, with the recording's neutral."""
+        vp, params = self.participant, self.participant.params
+        settle = params.reaction_s + params.onset_s
+        # the recording's first sample: the first of a counter cycle (the packet counters count
+        # samples modulo 256) whose frames are all still to come
+        first = 256 * (int(np.floor(max(self._asked_until, self.clock_offset + t) / DT)) // 256 + 1)
+        cue = first * DT + WARMUP_S
+        vp.set_intent(NEUTRAL_LABEL, 0.0, self.clock_offset + t)
+        holds = [(cue, cue + neutral_s, NEUTRAL_LABEL)]
+        cue += neutral_s
+        for label, amplitude in calibration_order(params, self.profile, repetitions=1):
+            for run_label, run_amplitude, duration in ((label, amplitude, hold_s), (NEUTRAL_LABEL, 0.0, neutral_s)):
+                vp.pass_time(cue)
+                reached = vp.set_intent(run_label, run_amplitude, cue)
+                begin, end = cue + settle, cue + settle + duration
+                holds.append((min(max(begin, reached or begin), end), end, run_label))
+                cue = end
+        delivery = vp.deliveries(cue)
+        self.receiver.take(delivery)
+        self._asked_until = cue
+        self._recalibration = Recalibration(cue, first, tuple(holds), delivery)
+
+    @property
+    def recalibrating(self) -> bool:
+        return self._recalibration is not None
+
+    def _retrain(self) -> None:
+        """The recalibration's recording -> a classifier -> a chain of its own, its fusion brought up to
+        date on the recording's frames and its neutral the recording's, in place of the chain."""
+        recalibration, self._recalibration = self._recalibration, None
+        recording = recalibration.recording(self.profile)
+        chain = OnlineChain(train([recording], self.profile), self.profile)
+        Receiver(chain).take(recalibration.delivery)
+        nodes = chain.model.spec.nodes
+        chain.set_neutral(dict(zip(nodes, recording_neutral(recording, nodes, self.profile.neutral_samples))))
+        self.chain = self.receiver.chain = chain
 
     def caption(self) -> str:
         """The class the participant performs and the class the chain decided last (for the film)."""
@@ -411,6 +474,29 @@ class BomiChannel:
         full window and the vote."""
         move = int(np.ceil(self.participant.params.onset_s / DT))
         return move + self.chain.model.spec.window + self.chain.model.post.vote_length
+
+
+@dataclass(frozen=True)
+class Recalibration:
+    """A calibration session performed during the task (``BomiChannel.begin_recalibration``; participant time, s)."""
+
+    end: float
+    first: int  # the recording's first sample (the first of a packet counter's cycle)
+    holds: tuple[tuple[float, float, int], ...]  # (begin, end, class) of each posture held
+    delivery: Delivery  # every frame the session's samples sent, by the session's end
+
+    def recording(self, profile: Profile) -> Recording:
+        """The held postures, as ``bomi record`` records them from the first sample on, labelled with their class."""
+        mine = self.delivery.sample_index >= self.first
+        stream = b"".join(frame for frame, keep in zip(self.delivery.frames, mine) if keep)
+        full, index = record_stream(stream, profile, "recalibration")
+        time = (index + self.first) * DT
+        labels = np.full(len(time), -1)
+        for begin, end, label in self.holds:
+            labels[(time >= begin - 1e-9) & (time < end)] = label
+        keep = labels >= 0
+        nodes = {i: NodeData(d.acc[keep], d.gyro[keep], d.mag[keep], d.angles[keep]) for i, d in full.nodes.items()}
+        return Recording(nodes=nodes, labels=labels[keep], time=time[keep], source=full.source)
 
 
 def calibration_order(params: ParticipantParams, profile: Profile, repetitions: int = 3) -> list[tuple[int, float]]:

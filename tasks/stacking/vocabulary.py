@@ -128,6 +128,7 @@ class RecoveryAction(str, enum.Enum):
     REZERO = "rezero"  # hold still while the chain takes the neutral posture anew
     BACKOFF = "backoff"  # lift the hand and make the plan afresh
     PAUSE = "pause"  # stop the arm and rest
+    RECALIBRATE = "recalibrate"  # a short calibration session and a retrain of the classifier
 
 
 NO_RECOVERY = "none"
