@@ -95,7 +95,7 @@ def test_the_twin_fits_the_true_timing_and_its_spread(slow_person):
 
 
 def test_a_participant_without_timing_spread_moves_after_the_same_delay_every_time():
-    params = load_participant("P1")
+    params = dataclasses.replace(load_participant("P1"), onset_sd_s=0.0, reaction_sd_s=0.0)   # P1 ships a spread
     session = calibration_session(params, load_profile("P1"), seed=3, repetitions=1)
     cue_s, start_s, end_s = session.moves.T
     assert np.allclose(start_s - cue_s, params.reaction_s) and np.allclose(end_s - start_s, params.onset_s)
