@@ -61,6 +61,18 @@ def test_a_protocol_longer_than_a_recording_may_be_is_refused_before_it_is_perfo
     check_recording_seconds((MAX_RECORDING_ROWS - 1) / 62.5, "fits")       # exactly the limit: accepted
 
 
+def test_bomi_synth_refuses_a_protocol_of_55_hours_in_one_line(tmp_path, capsys):
+    import re
+    from tasks.participants.participant import PARTICIPANT_DIR
+    text = (PARTICIPANT_DIR / "P1.toml").read_text()
+    long = tmp_path / "long.toml"
+    long.write_text(re.sub(r"durations_s = \[[^\]]*\]", "durations_s = [" + ", ".join(["3600.0"] * 55) + "]", text))
+    assert main(["synth", "--participant", str(long), "--seed", "1", "--out", str(tmp_path / "out.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"bomi: error: {long}: the [protocol] of day1_testp.mat: 12375001 rows (55.0 h at 62.5 Hz), {LIMIT}"
+    assert not (tmp_path / "out.csv").exists()
+
+
 def labelled(rows: int, time: np.ndarray | None = None) -> Recording:
     """Neutral, then class 1 held 20 deg of pitch away, in degrees."""
     labels = (np.arange(rows) >= rows // 2).astype(int)

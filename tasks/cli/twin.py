@@ -15,6 +15,7 @@ from tasks.cli import add_command
 from tasks.experiments.training import read_all_passes
 from tasks.cli.options import add_force, check_outputs, non_negative_int
 from bomi.errors import BomiError
+from bomi.recording import check_recording_seconds
 from tasks.experiments.twins import PAPER_HOLD_S, paper_protocol, self_check
 from tasks.participants.participant import load_participant, parse_participant_text, protocol_session, session_recording
 from tasks.participants.twin import fit_twin, same_person, twin_toml
@@ -120,6 +121,7 @@ def synth_command(args: argparse.Namespace) -> int:
         protocol = paper_protocol(sorted(params.classes))
         print(f"{params.name} was not fitted from a recording: performing the protocol of {protocol.source} "
               f"({len(protocol.labels)} runs of {PAPER_HOLD_S:g} s, holds only)")
+    check_recording_seconds(sum(protocol.durations_s), f"{args.participant}: the [protocol] of {protocol.source}")
     session = protocol_session(params, profile, args.seed, protocol)
     rec = session_recording(session, profile, holds_only=protocol.holds_only)
     write_recording(out, rec, overwrite=args.force)
