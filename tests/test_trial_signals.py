@@ -119,7 +119,7 @@ def marked(self, signum, frame):        # the moment the session got the signal,
     os.write(2, b"<<signal received>>\n")
     handle(self, signum, frame)
 StopRequest.handle = marked
-assert main([*args, "--out", os.path.join(root, "warm")]) == 0     # imports, kernels, figures: once
+assert main([*args, "--time-limit", "2", "--out", os.path.join(root, "warm")]) == 0   # imports, kernels, figures: once
 draw = random.Random(seed)
 for k in range(runs):
     delay = draw.uniform(0.05, 1.8)
@@ -129,20 +129,22 @@ for k in range(runs):
         os.dup2(fd, 2)
         os._exit(main([*args, "--out", os.path.join(root, f"run{k}")]))
     time.sleep(delay)
-    running = os.waitpid(pid, os.WNOHANG) == (0, 0)   # not reaped: the pid is still this child's
+    reaped, status = os.waitpid(pid, os.WNOHANG)
+    running = reaped == 0                   # not reaped: the pid is still this child's
     if running:
         os.kill(pid, signal.SIGTERM)
-    _, status = os.waitpid(pid, 0)
+        _, status = os.waitpid(pid, 0)
     print("RUN", k, f"{delay:.3f}", running, os.waitstatus_to_exitcode(status), flush=True)
 """
 
 
 def test_sigterms_at_random_moments_each_end_the_session_with_no_trial_after_them(tmp_path):
-    """8 sessions (3 trials of 2 s, ~0.5 s of wall time each) forked from one warmed-up process, each sent
-    SIGTERM 0.05-1.8 s after it starts: during set-up, a countdown, a trial or its writing."""
+    """8 sessions (3 trials of up to 120 s simulated: far longer than 1.8 s of wall time on any machine)
+    forked from one warmed-up process, each sent SIGTERM 0.05-1.8 s after it starts: during set-up, a
+    countdown, a trial or its writing."""
     runs = 8
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])}
-    args = "|".join([*SHORT[:-4], "--time-limit", "6", "--countdown", "0.2"])
+    args = "|".join([*SHORT[:-4], "--time-limit", "120", "--countdown", "0.2"])
     done = subprocess.run([sys.executable, "-c", SERVER, args, str(tmp_path), str(runs), "55"], env=env,
                           capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stderr[-2000:]
