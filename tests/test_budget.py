@@ -4,7 +4,7 @@ import pytest
 
 from tasks.stacking import metrics
 from tasks.stacking.budget import (Context, IrrelevantRun, Part, decision_contexts, irrelevant_by_context,
-                                   irrelevant_runs, mode_switch_ticks, task_ticks, time_budget, vote_effect)
+                                   irrelevant_runs, task_ticks, time_budget, vote_effect)
 from tasks.stacking.record import DecisionTrace, EpisodeLog
 
 NAMES = ("neutral", "F", "B", "R", "L", "Rr", "Lr", "B1", "B2")  # P1's classes: 7 and 8 are the buttons
@@ -61,7 +61,7 @@ def test_a_bomi_record_splits_into_its_parts_by_hand():
                                     Part.MODE_SWITCH: 6 * dt, Part.REACTION: 3 * dt, Part.MOVEMENT: 6 * dt,
                                     Part.LAPSE: 1 * dt, Part.WAIT: 1 * dt, Part.REST: 7 * dt})
     assert sum(budget.values()) == pytest.approx(12.0)
-    spans = mode_switch_ticks(log.mode, log.pushing)
+    spans = metrics.mode_switch_ticks(log.mode, log.pushing)
     assert spans.sum() * dt == pytest.approx(metrics.mode_switch_time(log.mode, log.pushing, dt))
 
 

@@ -111,17 +111,6 @@ def task_ticks(log: EpisodeLog) -> int:
     return int(np.searchsorted(log.t, log.completion_time - 1e-9, side="left"))
 
 
-def mode_switch_ticks(mode: list[str], pushing: np.ndarray) -> np.ndarray:
-    """The ticks ``metrics.mode_switch_time`` counts as switching (its sum times dt is that time)."""
-    pushing = np.asarray(pushing, dtype=bool)
-    held = np.flatnonzero(pushing)
-    spent = np.zeros(len(pushing), dtype=bool)
-    for i in (i for i in range(1, len(pushing)) if mode[i] != mode[i - 1]):
-        before, after = held[held < i], held[held >= i]
-        spent[before[-1] + 1 if len(before) else 0:after[0] if len(after) else len(pushing)] = True
-    return spent
-
-
 def wrong_decisions(log: EpisodeLog) -> np.ndarray:
     """Per decision: an active class that is not the intended one and not excused (``metrics.excused``)."""
     d = log.decisions
@@ -229,7 +218,7 @@ def time_budget(log: EpisodeLog, still_speed: float) -> dict[Part, float]:
         Part.RECOVERY: recovery,
         Part.MISREAD: misread,
         Part.CORRECTION: correction_ticks(log.hand_pos, log.intended_dir, pushing, misread),
-        Part.MODE_SWITCH: mode_switch_ticks(list(log.mode), pushing),
+        Part.MODE_SWITCH: metrics.mode_switch_ticks(list(log.mode), pushing),
         Part.REACTION: reaction,
         Part.MOVEMENT: movement,
         Part.LAPSE: lapse,
@@ -274,7 +263,7 @@ def decision_contexts(log: EpisodeLog) -> list[Context]:
     runs = intent_runs(d.intended)
     switching = np.zeros(len(d.t), dtype=bool)
     if log.pushing is not None and len(log.t):
-        spans = mode_switch_ticks(list(log.mode), np.asarray(log.pushing, bool))
+        spans = metrics.mode_switch_ticks(list(log.mode), np.asarray(log.pushing, bool))
         tick = np.clip(np.searchsorted(log.t, d.t, side="right") - 1, 0, len(log.t) - 1)
         switching = spans[tick]
 

@@ -232,19 +232,21 @@ def phase_times(steps: Sequence[str], dt: float, until: int | None = None,
     return out
 
 
-def mode_switch_time(mode: list[str], pushing: np.ndarray, dt: float, until: int | None = None) -> float:
-    """Seconds spent switching modes (Herlant et al. 2016): from the last tick the stick was held
-    before a mode change to the first tick it is held after it (overlapping spans counted once)."""
-    pushing = np.asarray(pushing, dtype=bool)[:until]
-    changes = [i for i in range(1, len(pushing)) if mode[i] != mode[i - 1]]
+def mode_switch_ticks(mode: list[str], pushing: np.ndarray) -> np.ndarray:
+    """Per tick: switching modes (Herlant et al. 2016): from the last tick the stick was held before a
+    mode change to the first tick it is held after it (overlapping spans once)."""
+    pushing = np.asarray(pushing, dtype=bool)
     held = np.flatnonzero(pushing)
     spent = np.zeros(len(pushing), dtype=bool)
-    for i in changes:
+    for i in (i for i in range(1, len(pushing)) if mode[i] != mode[i - 1]):
         before, after = held[held < i], held[held >= i]
-        start = before[-1] + 1 if len(before) else 0
-        stop = after[0] if len(after) else len(pushing)
-        spent[start:stop] = True
-    return float(spent.sum() * dt)
+        spent[before[-1] + 1 if len(before) else 0:after[0] if len(after) else len(pushing)] = True
+    return spent
+
+
+def mode_switch_time(mode: list[str], pushing: np.ndarray, dt: float, until: int | None = None) -> float:
+    """Seconds spent switching modes (``mode_switch_ticks``), up to tick ``until``."""
+    return float(mode_switch_ticks(mode, np.asarray(pushing, dtype=bool)[:until]).sum() * dt)
 
 
 _CUBE = re.compile(r"cube (\d+)")
