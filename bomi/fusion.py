@@ -185,6 +185,14 @@ def neutral_offsets(angles: np.ndarray, samples: int = 100) -> np.ndarray:
     return np.asarray(angles, dtype=float)[:samples].mean(axis=0)
 
 
+def sample_times(arrival: float, count: int, previous: float) -> list[float]:
+    """Times of ``count`` rows read together at ``arrival``, one sample period apart, the last one at
+    ``arrival`` and none before ``previous`` (the last row's time). Rows that come in a bunch because the
+    host fell behind (a loaded machine, a pause of the interpreter) were sampled over that stall: timed by
+    their arrival, a whole held posture could fall into the next prompt's segment and be labelled with it."""
+    return [max(previous, arrival - (count - 1 - i) * DT) for i in range(count)]
+
+
 @dataclass
 class FusedRows:
     """Rows of frames (by node id) -> recording samples (by node index), each frame fused once."""

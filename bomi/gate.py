@@ -72,10 +72,12 @@ saturated frame does not bend the filter.
 Buttons (``ButtonEvidence``): a button class acts only after it has been decided on
 ``samples`` consecutive decisions with the gate open (the profile's ``button_hold_s``).
 
-Re-zero (``RezeroGesture``): the person asks for their neutral posture to be taken anew by holding a
-button class for the profile's ``rezero_hold_s`` (a long press, as the JACO's own joystick gives its
-buttons a second meaning when held) and then coming back to rest: the first neutral decision after
-the long press starts the neutral calibration, so the posture taken is the rest, not the press.
+Re-zero and recalibration (``LongPressGesture``): the person asks for their neutral posture to be
+taken anew by holding a button class for the profile's ``rezero_hold_s`` (a long press, as the JACO's
+own joystick gives its buttons a second meaning when held) and then coming back to rest: the first
+neutral decision after the long press starts the neutral calibration, so the posture taken is the
+rest, not the press. Held for ``recalibrate_hold_s`` (longer) and then rest, it asks for a
+recalibration instead (``tasks.trials.recalibration``).
 """
 from __future__ import annotations
 
@@ -83,6 +85,7 @@ import math
 from collections import deque
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import Enum
 
 import numpy as np
 
@@ -376,30 +379,48 @@ class ButtonEvidence:
         return out
 
 
-@dataclass
-class RezeroGesture:
-    """A button class decided ``samples`` times in a row, then the neutral class: a re-zero (module docstring)."""
+class LongPress(Enum):
+    """What a button class held long, then rest, asks of the live loop (``LongPressGesture``)."""
 
-    samples: int
+    REZERO = "rezero"              # the neutral posture taken anew
+    RECALIBRATE = "recalibrate"    # the calibration protocol performed once and the classifier retrained
+
+
+@dataclass
+class LongPressGesture:
+    """A button class decided ``rezero`` times in a row, then the neutral class: a re-zero; decided
+    ``recalibrate`` times in a row, then the neutral class: a recalibration (module docstring). 0 turns
+    a gesture off; the recalibration's hold is the longer one."""
+
+    rezero: int
+    recalibrate: int
     buttons: frozenset[str]
     neutral: str
     _function: str | None = None
     _run: int = 0
-    _armed: bool = False   # the long press was made: the next neutral decision asks for the re-zero
+    _longest: int = 0   # the longest run of one button since the last neutral decision
 
     def reset(self) -> None:
-        self._function, self._run, self._armed = None, 0, False
+        self._function, self._run, self._longest = None, 0, 0
 
-    def update(self, functions: Iterable[str]) -> bool:
-        """The decided functions in order: True when one of them completes the gesture."""
-        asked = False
+    def update(self, functions: Iterable[str]) -> LongPress | None:
+        """The decided functions in order: the gesture one of them completes (the last, if two do)."""
+        asked = None
         for function in functions:
             if function in self.buttons:
                 self._run = self._run + 1 if function == self._function else 1
-                self._armed |= self._run >= self.samples
+                self._longest = max(self._longest, self._run)
             else:
                 self._run = 0
-                if self._armed and function == self.neutral:
-                    self._armed, asked = False, True
+                if function == self.neutral:
+                    asked = self._asked() or asked
+                    self._longest = 0
             self._function = function
         return asked
+
+    def _asked(self) -> LongPress | None:
+        if 0 < self.recalibrate <= self._longest:
+            return LongPress.RECALIBRATE
+        if 0 < self.rezero <= self._longest:
+            return LongPress.REZERO
+        return None

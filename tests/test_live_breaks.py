@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from bomi.classifier import NEUTRAL_LABEL
 from bomi.fusion import DT
-from bomi.gate import GateConfig, RezeroGesture
+from bomi.gate import GateConfig
 from bomi.protocol import Cue
 from tasks.trials.live import LiveLoop
 from tests.test_live import QUICK_GATE, SETTLE, ScriptedChain, StickArm, decision, still_frame
@@ -175,24 +173,3 @@ def test_a_button_held_for_the_rezero_hold_then_rest_retakes_the_neutral_with_th
     # 7 rests left and F, which reaches the stick again
     assert ticks[asked].calibrating and ticks[asked + 3].neutral == chain.neutral
     assert [t.state.deflection for t in ticks[asked:]] == [{}] * 11 + [{"F": 0.5}] * 5
-
-
-def test_the_rezero_gesture_is_the_naive_scan_of_the_decisions():
-    """RezeroGesture against a scan of the whole decision sequence written the plain way: a re-zero at
-    each neutral that follows a run of one button of at least ``samples``, with no neutral between."""
-    rng = np.random.default_rng(3)
-    for _ in range(200):
-        functions = rng.choice(["neutral", "F", "B1", "B2"], size=rng.integers(1, 80), p=[0.3, 0.2, 0.3, 0.2])
-        functions = np.repeat(functions, rng.integers(1, 6, size=len(functions))).tolist()
-        gesture = RezeroGesture(5, frozenset({"B1", "B2"}), "neutral")
-        cuts = sorted(set(rng.integers(0, len(functions) + 1, size=4).tolist()) | {0, len(functions)})
-        got = [gesture.update(functions[a:b]) for a, b in zip(cuts, cuts[1:])]
-        expected, armed, run = [], False, 0
-        for k, function in enumerate(functions):
-            run = run + 1 if function in ("B1", "B2") and k and functions[k - 1] == function else \
-                (1 if function in ("B1", "B2") else 0)
-            armed = armed or run >= 5
-            if function == "neutral" and armed:
-                expected.append(k)
-                armed = False
-        assert [any(a <= k < b for k in expected) for a, b in zip(cuts, cuts[1:])] == got

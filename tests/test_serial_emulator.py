@@ -410,7 +410,7 @@ def test_record_labels_whole_segments_and_trains(tmp_path, capsys):
 
 
 def test_rows_read_in_a_bunch_are_timed_back_one_sample_period_apart():
-    from tasks.experiments.streams import sample_times
+    from bomi.fusion import sample_times
 
     period = 1 / 62.5
     np.testing.assert_allclose(sample_times(1.0, 3, 0.5), [1.0 - 2 * period, 1.0 - period, 1.0])

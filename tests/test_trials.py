@@ -293,18 +293,22 @@ def test_a_stream_that_goes_away_mid_trial_fails_that_trial_and_keeps_the_sessio
     assert _deviation(capsys.readouterr().out) <= 1e-6
 
 
-def test_a_trials_rezeros_are_its_free_calibrating_runs():
+def test_a_trials_recoveries_are_its_free_calibrating_runs_and_its_recalibrations():
     """The trial record's recoveries: each run of ticks calibrating the neutral with the arm otherwise
     free (the person's gesture, the safety key) is a re-zero from its first tick's task time to its
-    last; a retake held after a break in the stream (its ticks carry the hold) is not."""
+    last; a retake held after a break in the stream (its ticks carry the hold) is not; each run of
+    recalibrating ticks is a recalibration, in order of their start."""
     from tasks.operators.recovery import RecoveryAction
-    from tasks.trials.session import neutral_retaken
+    from tasks.trials.session import person_recoveries
 
     untrusted = "node 1 untrusted after reconnect: retaking warm-up and neutral"
-    flags = [(False, ""), (True, ""), (True, ""), (False, ""), (True, untrusted), (True, untrusted), (False, ""),
-             (False, ""), (True, "")]
-    ticks = [{"calibrating": c, "hold": h} for c, h in flags]
+    recalibrating = "recalibrating (relax: rest, 4 s left)"
+    flags = [(False, "", False), (True, "", False), (True, "", False), (False, "", False), (True, untrusted, False),
+             (True, untrusted, False), (False, "", False), (False, recalibrating, True), (False, recalibrating, True),
+             (True, "", False)]
+    ticks = [{"calibrating": c, "hold": h, "recalibrating": r} for c, h, r in flags]
     task_t = [0.5 * k for k in range(len(ticks))]
-    events = neutral_retaken(ticks, task_t)
+    events = person_recoveries(ticks, task_t)
     assert [(e.action, e.start_s, e.end_s) for e in events] == [(RecoveryAction.REZERO, 0.5, 1.0),
-                                                                (RecoveryAction.REZERO, 4.0, 4.0)]
+                                                                (RecoveryAction.RECALIBRATE, 3.5, 4.0),
+                                                                (RecoveryAction.REZERO, 4.5, 4.5)]

@@ -36,11 +36,16 @@ DEFAULT_NEUTRAL_SAMPLES = 100  # hardware.md step 6: about 100 samples of the ne
 # pitch/roll filter's decay (time constant 12.5 samples, 200 ms): 0.35 s outlasts both, and costs a
 # deliberate press 0.35 s.
 DEFAULT_BUTTON_HOLD_S = 0.35
-# Live: a button class held this long, then rest, retakes the neutral posture (bomi.gate.RezeroGesture).
+# Live: a button class held this long, then rest, retakes the neutral posture (bomi.gate.LongPressGesture).
 # 3 s: over eight deliberate presses' worth (DEFAULT_BUTTON_HOLD_S), so that no press meant as a mode
 # change makes it, and short enough for a person who must hold a posture with effort; a profile
 # sets its own ([live] rezero_hold_s; 0: no re-zero by gesture).
 DEFAULT_REZERO_HOLD_S = 3.0
+# Live: a button class held this long, then rest, asks for a recalibration (the calibration protocol
+# once, the classifier retrained: tasks.trials.recalibration). 8 s: well past the re-zero's 3 s, so
+# that a re-zero held a little long stays a re-zero, and still a hold a person can make on purpose;
+# [live] recalibrate_hold_s (0: off).
+DEFAULT_RECALIBRATE_HOLD_S = 8.0
 # The neutral posture is held for seconds, not for hours: more than a minute of samples is a typo.
 MAX_NEUTRAL_SAMPLES = 3750
 
@@ -86,6 +91,7 @@ class Profile:
     assist: tuple[str, ...] = ()
     button_hold_s: float = DEFAULT_BUTTON_HOLD_S   # [live] button_hold_s
     rezero_hold_s: float = DEFAULT_REZERO_HOLD_S   # [live] rezero_hold_s (0: off)
+    recalibrate_hold_s: float = DEFAULT_RECALIBRATE_HOLD_S   # [live] recalibrate_hold_s (0: off)
 
     @property
     def node_indices(self) -> tuple[int, ...]:
@@ -148,7 +154,9 @@ def profile_document(profile: Profile) -> dict:
     if profile.assist:
         doc["assist"] = {"options": list(profile.assist)}
     live = {key: value for key, value, default in (("button_hold_s", profile.button_hold_s, DEFAULT_BUTTON_HOLD_S),
-                                                   ("rezero_hold_s", profile.rezero_hold_s, DEFAULT_REZERO_HOLD_S))
+                                                   ("rezero_hold_s", profile.rezero_hold_s, DEFAULT_REZERO_HOLD_S),
+                                                   ("recalibrate_hold_s", profile.recalibrate_hold_s,
+                                                    DEFAULT_RECALIBRATE_HOLD_S))
             if value != default}
     if live:
         doc["live"] = live
@@ -297,6 +305,7 @@ class _Assist:
 class _Live:
     button_hold_s: float = DEFAULT_BUTTON_HOLD_S
     rezero_hold_s: float = DEFAULT_REZERO_HOLD_S
+    recalibrate_hold_s: float = DEFAULT_RECALIBRATE_HOLD_S
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.button_hold_s <= 10.0:
@@ -306,6 +315,11 @@ class _Live:
         if 0.0 < self.rezero_hold_s <= self.button_hold_s:
             raise ValueError(f"rezero_hold_s: {self.rezero_hold_s:g} s must be longer than button_hold_s "
                              f"({self.button_hold_s:g} s), or 0 (off): a press would re-zero")
+        if not 0.0 <= self.recalibrate_hold_s <= 60.0:
+            raise ValueError(f"recalibrate_hold_s: must be in [0, 60] s, got {self.recalibrate_hold_s}")
+        if 0.0 < self.recalibrate_hold_s <= max(self.rezero_hold_s, self.button_hold_s):
+            raise ValueError(f"recalibrate_hold_s: {self.recalibrate_hold_s:g} s must be longer than rezero_hold_s "
+                             f"({self.rezero_hold_s:g} s) and button_hold_s ({self.button_hold_s:g} s), or 0 (off)")
 
 
 @dataclass(frozen=True)
@@ -348,7 +362,7 @@ def _parse(data: dict, source: str) -> Profile:
                    post=post, select_rejection=file.post_processing.rejection_threshold == SELECT,
                    source=source, amplitude=file.proportional.amplitude, joystick_layout=file.joystick.layout,
                    assist=file.assist.options, button_hold_s=file.live.button_hold_s,
-                   rezero_hold_s=file.live.rezero_hold_s)
+                   rezero_hold_s=file.live.rezero_hold_s, recalibrate_hold_s=file.live.recalibrate_hold_s)
 
 
 def _parse_nodes(tables: tuple[_Node, ...]) -> tuple[NodeConfig, ...]:

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from bomi.errors import BomiError
 from bomi.frames import FrameParser, ImuFrame, RowAssembler, imu_index
-from bomi.fusion import DT, FusedRows, NodeCalibration
+from bomi.fusion import DT, FusedRows, NodeCalibration, sample_times
 from bomi.gate import Gate, NodeGate
 from bomi.protocol import Cue
 from bomi.recording import RecordingWriter
@@ -93,14 +93,6 @@ def cue_text(segments: list[Cue], k: int, t: float) -> str:
     if k + 1 < len(segments) and segments[k + 1].label != segment.label and left <= COUNTDOWN_S:
         text += f" - next: {segments[k + 1].prompt.removeprefix('HOLD ')} in {left:.0f}"
     return text
-
-
-def sample_times(arrival: float, count: int, previous: float) -> list[float]:
-    """Times of ``count`` rows read together at ``arrival``, one sample period apart, the last one at
-    ``arrival`` and none before ``previous`` (the last row's time). Rows that come in a bunch because the
-    host fell behind (a loaded machine, a pause of the interpreter) were sampled over that stall: timed by
-    their arrival, a whole held posture could fall into the next prompt's segment and be labelled with it."""
-    return [max(previous, arrival - (count - 1 - i) * DT) for i in range(count)]
 
 
 def unsettled(gate: NodeGate, now: float) -> str:

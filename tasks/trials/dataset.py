@@ -91,10 +91,12 @@ def session_columns(session: Session, intents: tuple[np.ndarray, np.ndarray]) ->
         "stage": np.array([t.get("stage", "") for t in ticks], dtype=object),
     }
     for flag, dtype in (("stale", bool), ("standby", bool), ("calibrating", bool), ("reconnected", bool),
+                        ("recalibrating", bool),
                         ("lost", np.int64),
                         ("dropped", np.int32), ("skipped", np.int32), ("loop_hz", float), ("overruns", np.int64)):
         tick_cols[flag] = np.array([t.get(flag, 0) for t in ticks], dtype=dtype)
-    tick_cols["hold"] = np.array([t.get("hold", "") for t in ticks], dtype=object)
+    for text in ("hold", "recalibrated"):
+        tick_cols[text] = np.array([t.get(text, "") for t in ticks], dtype=object)
     frame_cols = {"tick": frames[:, 0], "node_id": frames[:, 1], "period_ms": frames[:, 2], "counter": frames[:, 3],
                   "mag": frames[:, 4:7], "gyro": frames[:, 7:10], "acc": frames[:, 10:13], "sample": frames[:, 13],
                   "intended": np.asarray(frame_intents, dtype=np.int64).reshape(-1)}

@@ -41,16 +41,22 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
 - the safety key's standby holds the arm until its control event (its calibration event retakes
   the neutral posture);
 - re-zero by the person (issue 42): a button class held for the profile's ``rezero_hold_s`` (3 s),
-  then rest, retakes the neutral posture (``bomi.gate.RezeroGesture``; the button's own press acts
+  then rest, retakes the neutral posture (``bomi.gate.LongPressGesture``; the button's own press acts
   as usual on the way), the arm at rest until it holds: the tick logs ``rezero``, the new offsets
   come in ``neutral``, and a replay of the session's bytes makes the same gesture again;
+- recalibration by the person: a button class held for the profile's ``recalibrate_hold_s`` (8 s),
+  then rest, starts the calibration protocol once, its cue shown as what holds the arm; at its end
+  the classifier retrained on it takes the old one's place (``tasks.trials.recalibration``). A
+  stream the loop cannot trust meanwhile gives it up, the old model kept;
 - the loop's own rate and overruns are measured and shown; the film (``--video``) is made in a
   process of its own and drops film frames, never ticks; a log that cannot be written (disk full)
   is given up with one warning, and control goes on.
 
 Log (``--log L``, JSON lines, one object per control tick):
 ``tick``, ``t`` (wall seconds since start), ``frames`` (IMU frames read this tick), ``reconnected``
-(the source reconnected since the last tick), ``rezero`` (the person's re-zero gesture completed), ``skipped``
+(the source reconnected since the last tick), ``rezero`` (the person's re-zero gesture completed),
+``recalibrating`` (a recalibration's protocol holds the arm), ``recalibrated`` (on the tick it ended:
+"retrained", "given up: ..." or "old model kept: ..."; else null), ``skipped``
 (frames of a backlog kept from the chain this tick), ``lost`` (samples lost so far, from the
 packet counters), ``stale`` (no frames: the watchdog held the arm), ``standby`` (the safety key
 held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
@@ -109,11 +115,14 @@ class Tick:
     imu: Sequence[ImuFrame] = ()
     reconnected: bool = False
     rezero: bool = False   # the person's re-zero gesture completed on this tick: the neutral is being retaken
+    recalibrating: bool = False      # a recalibration's protocol holds the arm (tasks.trials.recalibration)
+    recalibrated: str | None = None  # on the tick its protocol ended: "retrained", or why the old model stays
 
     def record(self) -> dict:
         """The tick as one JSON-ready log object (columns in the module docstring)."""
         out = {"tick": self.tick, "t": self.t, "frames": self.frames, "reconnected": self.reconnected,
-               "rezero": self.rezero, "skipped": self.skipped, "lost": self.lost,
+               "rezero": self.rezero, "recalibrating": self.recalibrating, "recalibrated": self.recalibrated,
+               "skipped": self.skipped, "lost": self.lost,
                "stale": self.stale, "standby": self.standby, "hold": self.hold, "calibrating": self.calibrating,
                "loop_hz": self.loop_hz, "overruns": self.overruns,
                "decisions": [asdict(d) for d in self.decisions],
@@ -201,6 +210,7 @@ class LiveSummary:
     watchdog_trips: int = 0
     overruns: int = 0
     rezeros: int = 0   # neutral postures retaken at the person's gesture
+    recalibrations: int = 0   # classifiers retrained at the person's gesture
     holds: Counter = field(default_factory=Counter)   # why the gate held the arm, in ticks
     neutral: dict[int, tuple[float, float, float]] | None = None
 
@@ -266,12 +276,17 @@ class LiveLoop:
                  assist: Callable[[JoystickState], JoystickState] | None = None, observers: Sequence[Observer] = (),
                  on_neutral: Callable[[dict], None] = lambda offsets: None, gate: GateConfig | None = None,
                  watchdog: Watchdog | None = None):
-        self.chain, self.arm, self.assist, self.on_neutral = chain, arm, assist, on_neutral
+        self.arm, self.assist, self.on_neutral = arm, assist, on_neutral
         self.observers = list(observers)
         self.person = LivePerson(chain, arm.dt, neutral=neutral, gate=gate, watchdog=watchdog)
         self.source = SafetyHold(self.person)
         self.summary = LiveSummary()
         self.rate = LoopRate(arm.dt)
+
+    @property
+    def chain(self) -> OnlineChain:
+        """The person's chain (a recalibration puts a retrained one in its place)."""
+        return self.person.chain
 
     @property
     def gate(self) -> Gate:
@@ -296,13 +311,13 @@ class LiveLoop:
             state = self.assist(state)
         command = self.arm.step(state)
         new_neutral = person.neutral_taken()
-        summary.neutral, summary.rezeros = person.offsets, person.rezeros
+        summary.neutral, summary.rezeros, summary.recalibrations = person.offsets, person.rezeros, person.recalibrations
         if new_neutral is not None:
             self.on_neutral(new_neutral)
         tick = Tick(summary.ticks, now, len(frames), self.gate.lost, sensed.stale, person.safety.standby,
                     self.chain.calibrating, sensed.decisions, sensed.dropped, state, self.arm.mode.value, command,
                     new_neutral, sensed.hold, sensed.skipped, self.rate.hz, self.rate.overruns, tuple(frames),
-                    reconnected, sensed.rezero)
+                    reconnected, sensed.rezero, sensed.recalibrating, sensed.recalibrated)
         summary.count(tick)
         summary.watchdog_trips = self.watchdog.trips
         for observer in self.observers:

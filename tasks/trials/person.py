@@ -18,10 +18,12 @@ from dataclasses import dataclass, field
 from bomi.chain import Decision, OnlineChain
 from bomi.frames import ImuFrame, SafetyKey, SafetyKeyEvent, imu_index
 from bomi.fusion import DT, NodeFusion
-from bomi.gate import Gate, GateConfig, RezeroGesture
+from bomi.errors import BomiError
+from bomi.gate import Gate, GateConfig, LongPress, LongPressGesture
 from bomi.profiles import NEUTRAL_FUNCTION
 from sim.joystick import BUTTONS, JoystickState
 from tasks.operators.stick import DecisionStick
+from tasks.trials.recalibration import Recalibration
 
 WATCHDOG_TIMEOUT_S = 0.1
 LOOKAHEAD_TICKS = 1.5  # the watchdog and the gate judge a tick at its time + this many periods (see LivePerson.sense)
@@ -90,8 +92,10 @@ class Sensed:
     """What the live person's stream gave on one tick (``LivePerson.sense``): the chain's decisions the
     sanitizer passed (``decisions``) or refused (``dropped``), those that reach the stick (``acted``: of
     a backlog only the newest), frames and decisions kept from the chain and the stick (``skipped``),
-    whether the watchdog expired (``stale``), what holds the arm (``hold``) and whether the person's
-    re-zero gesture completed (``rezero``: the arm at rest while the neutral is retaken)."""
+    whether the watchdog expired (``stale``), what holds the arm (``hold``), whether the person's
+    re-zero gesture completed (``rezero``: the arm at rest while the neutral is retaken), whether a
+    recalibration holds the arm (``recalibrating``) and, on the tick its protocol ended, what came of
+    it (``recalibrated``: "retrained", or why the old model stays)."""
 
     decisions: list[Decision]
     dropped: list[tuple[int, str]]
@@ -100,6 +104,8 @@ class Sensed:
     stale: bool
     hold: str | None
     rezero: bool
+    recalibrating: bool = False
+    recalibrated: str | None = None
 
     @property
     def held(self) -> bool:
@@ -129,15 +135,17 @@ class LivePerson:
         self.watchdog = watchdog or Watchdog()
         self.stick, self.safety = DecisionStick(profile), SafetySwitch()
         buttons = frozenset(f for f in self.functions.values() if f in BUTTONS)
-        # a profile without a re-zero hold (0) or without a button class has no gesture
-        self.rezero = RezeroGesture(math.ceil(profile.rezero_hold_s / DT - 1e-9),
-                                    buttons if profile.rezero_hold_s > 0 else frozenset(), NEUTRAL_FUNCTION)
+        # a profile without a button class has no long press; a hold of 0 turns its gesture off
+        self.long_press = LongPressGesture(_samples(profile.rezero_hold_s), _samples(profile.recalibrate_hold_s),
+                                           buttons, NEUTRAL_FUNCTION)
+        self.recalibration: Recalibration | None = None   # the protocol under way
         self.streaming = False        # every node settled once: frames go to the chain from then on
         self._neutral = None if neutral is None else {int(k): tuple(v) for k, v in neutral.items()}
         self._recalibrate = False
         self.untrusted: dict[int, str] = {}   # node -> why, after a break, until the neutral is retaken
         self.offsets: dict[int, tuple[float, float, float]] | None = None   # the neutral that holds (None: being taken)
         self.rezeros = 0   # neutral postures retaken at the person's gesture
+        self.recalibrations = 0   # classifiers retrained at the person's gesture
         self.sensed: Sensed | None = None
 
     def _untrust(self, node: int, cause: str, counter: int | None = None) -> None:
@@ -228,8 +236,15 @@ class LivePerson:
             chain.begin_neutral_calibration()
         acted = decisions[-1:] if skipped else decisions     # a backlog: the newest decision only
         skipped += len(decisions) - len(acted)
-        rezero = self._rezero_asked(acted, hold is not None)
-        self.sensed = Sensed(decisions, dropped, acted, skipped, stale, hold, rezero)
+        recalibrated = None
+        if self.recalibration is not None:   # the protocol's motions are no commands
+            acted = []
+            hold, recalibrated = self._recalibrating(now, frames, hold)
+        rezero = self._long_press(acted, hold is not None, now)
+        if self.recalibration is not None and hold is None:   # asked for on this tick
+            hold = self.recalibration.hold_text(now)
+        self.sensed = Sensed(decisions, dropped, acted, skipped, stale, hold, rezero,
+                             self.recalibration is not None, recalibrated)
         return self.sensed
 
     def act(self, info: Mapping = NO_INFO) -> JoystickState:
@@ -248,20 +263,50 @@ class LivePerson:
         self.untrusted.clear()
         return self.offsets
 
-    def _rezero_asked(self, decisions: Sequence[Decision], hold: bool) -> bool:
-        """The person's re-zero gesture completed on this tick's decisions (``bomi.gate.RezeroGesture``;
-        only while the arm is free: a hold forgets a gesture begun): the neutral is taken anew, the arm
-        at rest meanwhile."""
+    def _long_press(self, decisions: Sequence[Decision], hold: bool, now: float) -> bool:
+        """The person's long press completed on this tick's decisions (``bomi.gate.LongPressGesture``; only
+        while the arm is free: a hold forgets a press begun). A re-zero (True): the neutral is taken anew,
+        the arm at rest meanwhile. A recalibration: its protocol starts now (``_recalibrating``)."""
         if hold:
-            self.rezero.reset()
+            self.long_press.reset()
             return False
-        if not self.rezero.update(decision.function for decision in decisions):
+        asked = self.long_press.update(decision.function for decision in decisions)
+        if asked is None:
             return False
-        self.chain.forget_decisions()   # the long press's labels do not vote after the new neutral
+        self.chain.forget_decisions()   # the long press's labels do not vote after it
+        if asked is LongPress.RECALIBRATE:
+            self.recalibration = Recalibration.begin(self.chain.profile, self.chain.model, now)
+            return False
         self.chain.begin_neutral_calibration()
         self.offsets = None
         self.rezeros += 1
         return True
+
+    def _recalibrating(self, now: float, frames: Sequence[ImuFrame], hold: str | None) -> tuple[str | None, str | None]:
+        """A tick of the recalibration under way: (what holds the arm, what came of it once it ended). A
+        stream the loop cannot trust ends it at once, the old model kept; at the protocol's end the
+        retrained chain takes the old one's place (its neutral logged as a new neutral)."""
+        recalibration = self.recalibration
+        if hold is not None:
+            self.recalibration = None
+            return hold, f"given up: {hold}"
+        recalibration.take(now, frames)
+        if not recalibration.over(now):
+            return recalibration.hold_text(now), None
+        self.recalibration = None
+        try:
+            chain = recalibration.retrained()
+        except BomiError as exc:
+            self.chain.forget_decisions()
+            return None, f"old model kept: {exc}"
+        self.chain, self.offsets = chain, None
+        self.recalibrations += 1
+        return None, "retrained"
+
+
+def _samples(seconds: float) -> int:
+    """A hold of ``seconds`` in decisions (one per sample); 0 stays 0 (off)."""
+    return math.ceil(seconds / DT - 1e-9)
 
 
 class SafetyHold:

@@ -301,7 +301,8 @@ class TickRecorder:
         """``tasks.trials.live.run_live``'s observer: one live tick."""
         self.record(tick.t, tick.state, tick.command, tick.decisions,
                     {"stale": tick.stale, "standby": tick.standby, "calibrating": tick.calibrating,
-                     "reconnected": tick.reconnected,
+                     "reconnected": tick.reconnected, "recalibrating": tick.recalibrating,
+                     "recalibrated": tick.recalibrated or "",
                      "lost": tick.lost, "dropped": len(tick.dropped), "skipped": tick.skipped,
                      "hold": tick.hold or "", "loop_hz": tick.loop_hz, "overruns": tick.overruns})
         if tick.neutral is not None:
@@ -351,25 +352,26 @@ def episode_log(recorder: TickRecorder, result: TrialResult, *, operator: str, p
         sample_period=sample_period, amplitude=amplitude,
         goals=tuple(t.get("goal", "") for t in ticks) if known else (),
         stages=tuple(t.get("stage", "") for t in ticks) if known else (),
-        recoveries=neutral_retaken(ticks, [r["task_t"] for r in rows]))
+        recoveries=person_recoveries(ticks, [r["task_t"] for r in rows]))
 
 
-def neutral_retaken(ticks: Sequence[dict], task_t: Sequence[float]) -> tuple[RecoveryEvent, ...]:
-    """The trial's re-zeros: each run of ticks in which the live loop took the neutral posture anew
-    while the arm was otherwise free (the person's gesture or the safety key's calibration event; a
-    retake after a break in the stream, whose ticks are held, is the loop's safety, not a recovery),
-    as recovery events (task time from its first tick to its last)."""
-    events, start = [], None
-    for k, tick in enumerate(ticks):
-        calibrating = bool(tick.get("calibrating")) and not tick.get("hold")
-        if calibrating and start is None:
-            start = k
-        elif not calibrating and start is not None:
-            events.append(RecoveryEvent(RecoveryAction.REZERO, task_t[start], task_t[k - 1]))
-            start = None
-    if start is not None:
-        events.append(RecoveryEvent(RecoveryAction.REZERO, task_t[start], task_t[-1]))
-    return tuple(events)
+def person_recoveries(ticks: Sequence[dict], task_t: Sequence[float]) -> tuple[RecoveryEvent, ...]:
+    """The trial's recoveries the person asked for, as recovery events (task time from the first tick to
+    the last, in order of their start): re-zeros, each run of ticks in which the live loop took the
+    neutral posture anew while the arm was otherwise free (the person's gesture or the safety key's
+    calibration event; a retake after a break in the stream, whose ticks are held, is the loop's
+    safety, not a recovery), and recalibrations, each run of ticks its protocol held the arm."""
+    runs = {RecoveryAction.REZERO: [bool(t.get("calibrating")) and not t.get("hold") for t in ticks],
+            RecoveryAction.RECALIBRATE: [bool(t.get("recalibrating")) for t in ticks]}
+    events = [RecoveryEvent(action, task_t[start], task_t[end - 1])
+              for action, flags in runs.items() for start, end in _runs(flags)]
+    return tuple(sorted(events, key=lambda event: event.start_s))
+
+
+def _runs(flags: Sequence[bool]) -> list[tuple[int, int]]:
+    """[start, end) of each run of True in ``flags``."""
+    edges = np.diff(np.r_[0, np.asarray(flags, dtype=np.int8), 0])
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))
 
 
 # what a trial record cannot know when nobody knows what the person intended
