@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 
 from bomi.chain.copies import MotionCopies, training_windows
+from bomi.chain.holds import MoveAllowances
 from bomi.chain.selection import Selection, select_settings
 from bomi.chain.windows import NODE_WIDTH, recorded_priors, require_for
 from bomi.classifier import (Model, PostProcessing, amplitude_ranges, fit_pipeline, model_defects,
@@ -70,6 +71,16 @@ def _check_signals_change(rec: Recording, spec: FeatureSpec) -> None:
                                 "recording: nothing to learn from it (a dead or unplugged sensor?)")
 
 
+def _on_hold(rec: Recording, spec: FeatureSpec) -> np.ndarray:
+    """(n,) True at the rows where the person holds the cued posture: every row of a recording that keeps
+    only its holds; where it keeps its moves, all but those from a cue to its move's measured offset
+    (``MoveAllowances``). The amplitude range is the one of the postures held (hardware.md: taken during
+    calibration), not of the way into them, whose windows would set gamma_min near 0 (any lean would
+    then drive the arm)."""
+    allowances = MoveAllowances.of(rec, spec.nodes)
+    return np.ones(len(rec), dtype=bool) if allowances is None else allowances.on_hold(len(rec))
+
+
 def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec | None = None,
           shrinkage: float | str | None = ..., post: PostProcessing | None = None,
           selection: Selection | None = None, allow_missing_classes: bool = False) -> Model:
@@ -98,8 +109,9 @@ def train(recordings: Sequence[Recording], profile: Profile, spec: FeatureSpec |
         xs.append(windows.features)
         ys.append(windows.labels)
         recorded.append(windows.recorded)
-        ends = windows.ends[windows.recorded]   # amplitude ranges: the recorded motions only
-        recorded_labels.append(windows.labels[windows.recorded])
+        held = windows.recorded & _on_hold(rec, spec)[windows.ends]
+        ends = windows.ends[held]   # amplitude ranges: the recorded motions only, as held
+        recorded_labels.append(windows.labels[held])
         for k, i in enumerate(spec.nodes):
             angles[i].append(prepared.states[ends, k * NODE_WIDTH:k * NODE_WIDTH + 3])
     x, y, recorded = np.concatenate(xs), np.concatenate(ys), np.concatenate(recorded)
