@@ -117,3 +117,17 @@ def test_leave_one_pass_out_judges_the_holds(slow_person):
     assert out.holds_accuracy > out.accuracy
     assert out.text().endswith(f"; on the holds {100 * out.holds_accuracy:.2f} %, each transition from its cue to "
                                "the end of its move found in the signals left out")
+
+
+def test_the_amplitude_range_is_the_held_postures_also_where_the_moves_are_kept(slow_person):
+    """gamma_min and gamma_max come from the postures held: a recording that keeps its moves gives the
+    range of the same session's holds alone, to within a degree; were the way into each posture counted,
+    every class's gamma_min would fall to the neutral's (a few degrees), and any lean would drive the arm."""
+    sessions, continuous, profile = slow_person
+    held = train([session_recording(sessions[0], profile)], profile).amplitude
+    kept = train([continuous[0]], profile).amplitude
+    assert held.keys() == kept.keys()
+    for label in held:
+        assert abs(kept[label].gamma_min - held[label].gamma_min) < 1.0, label
+        assert abs(kept[label].gamma_max - held[label].gamma_max) < 1.0, label
+    assert min(r.gamma_min for r in held.values()) > 5.0     # the check above could fail: the least lean is far from 0
