@@ -197,36 +197,20 @@ def number(table: dict, key: str, where: str, low: float = -math.inf, high: floa
 def from_table(cls: type[T], table: Any, section: str | None = None, **given: Any) -> T:
     """A ``cls`` dataclass from a TOML table: the document itself (``section`` None) or the table
     ``[section]``. No key outside the fields of ``cls`` (but those ``given``), every field without a
-    default present, each value of its field's type hint: a dataclass field is a table read the same
-    way (its section ``section.field``), a ``tuple[Dataclass, ...]`` an array of tables
-    (``field[k]``), anything else ``coerce``d. Then ``cls``'s own checks (its ``__post_init__``,
-    raising ValueError). ValueError ``[section] key: ...``, one line."""
+    default present, each value read by its field's type hint (``_read``). Then ``cls``'s own checks
+    (its ``__post_init__``, raising ValueError). ValueError ``[section] key: ...``, one line."""
     where = f"[{section}] " if section else ""
     if not isinstance(table, dict):
         raise ValueError(f"{where}must be a table, got {table!r}")
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls, include_extras=True)
     fields = [f for f in dataclasses.fields(cls) if f.init and f.name not in given]
     values = {}
     for f in fields:
         inner, kind = f.name if section is None else f"{section}.{f.name}", hints[f.name]
-        if f.name not in table:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ValueError(f"[{inner}] section missing" if dataclasses.is_dataclass(kind)
-                                 else f"{where}{f.name}: missing")
-            continue
-        value = table[f.name]
-        if dataclasses.is_dataclass(kind):
-            values[f.name] = from_table(kind, value, inner)
-        elif typing.get_origin(kind) is tuple and dataclasses.is_dataclass(typing.get_args(kind)[0]):
-            if not isinstance(value, list):
-                raise ValueError(f"{where}{f.name}: expected an array of tables ([[{inner}]]), got {value!r}")
-            values[f.name] = tuple(from_table(typing.get_args(kind)[0], item, f"{inner}[{k}]")
-                                   for k, item in enumerate(value))
-        else:
-            try:
-                values[f.name] = coerce(value, kind)
-            except ValueError as exc:
-                raise ValueError(f"{where}{f.name}: {exc}") from None
+        if f.name in table:
+            values[f.name] = _read(table[f.name], kind, inner, f"{where}{f.name}")
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ValueError(f"[{inner}] section missing" if _table_kind(kind) else f"{where}{f.name}: missing")
     unknown = set(table) - {f.name for f in fields}
     if unknown:
         raise ValueError(f"{where}unknown key(s) {sorted(unknown)}")
@@ -236,11 +220,47 @@ def from_table(cls: type[T], table: Any, section: str | None = None, **given: An
         raise ValueError(f"{where}{exc}") from None
 
 
+def _read(value: Any, kind: Any, section: str, key: str) -> Any:
+    """The value of the key ``key`` (as errors name it) by its type hint ``kind``: a dataclass (or an
+    optional one) is the table ``[section]`` (``from_table``), a ``tuple[Dataclass, ...]`` an array of
+    tables (``[section[k]]``), a ``dict[str, X]`` a table of any keys (``[section] name``), anything
+    else ``coerce``d. ValueError naming where."""
+    table = _table_kind(kind)
+    if table is not None:
+        return from_table(table, value, section)
+    args = typing.get_args(kind)
+    if typing.get_origin(kind) is tuple and dataclasses.is_dataclass(args[0]):
+        if not isinstance(value, list):
+            raise ValueError(f"{key}: expected an array of tables ([[{section}]]), got {value!r}")
+        return tuple(from_table(args[0], item, f"{section}[{k}]") for k, item in enumerate(value))
+    if typing.get_origin(kind) is dict:
+        if not isinstance(value, dict):
+            raise ValueError(f"{key}: expected a table ([{section}]), got {value!r}")
+        return {name: _read(item, args[1], f"{section}.{name}", f"[{section}] {name}") for name, item in value.items()}
+    try:
+        return coerce(value, kind)
+    except ValueError as exc:
+        raise ValueError(f"{key}: {exc}") from None
+
+
+def _table_kind(kind: Any) -> Any:
+    """The dataclass a type hint names (``X`` or ``X | None``), else None."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        kinds = [k for k in typing.get_args(kind) if k is not type(None)]
+        kind = kinds[0] if len(kinds) == 1 else None
+    return kind if dataclasses.is_dataclass(kind) else None
+
+
 def coerce(value: Any, kind: Any) -> Any:
     """A TOML value checked against a type hint: bool, int, float (an integer is taken), str, a
     fixed-length ``tuple[X, Y]`` or a ``tuple[X, ...]`` (from an array), a union (the first of its
-    kinds that takes the value; ``None`` only as an absent key's default: TOML has no null).
-    ValueError saying what was expected."""
+    kinds that takes the value; ``None`` only as an absent key's default: TOML has no null), ``Any``
+    (the value as written), or ``Annotated[X, read]``: ``read(value)``, for a format the type does
+    not say (``read`` checks the value itself). ValueError saying what was expected."""
+    if typing.get_origin(kind) is typing.Annotated:
+        return kind.__metadata__[0](value)
+    if kind is Any:
+        return value
     if typing.get_origin(kind) in (typing.Union, types.UnionType):
         kinds = [k for k in typing.get_args(kind) if k is not type(None)]
         if len(kinds) == 1:
@@ -292,3 +312,13 @@ def at_most(section: Any, limit: float, *names: str) -> None:
     for name in names:
         if getattr(section, name) > limit:
             raise ValueError(f"{name}: must be at most {limit!r}, got {getattr(section, name)!r}")
+
+
+def within(section: Any, low: float, high: float, *names: str) -> None:
+    """ValueError ``name: must be in [low, high]`` (``>= low`` when ``high`` is inf) for the first of
+    the fields ``names`` outside."""
+    for name in names:
+        value = getattr(section, name)
+        if not low <= value <= high:
+            bounds = f">= {low:g}" if high == math.inf else f"in [{low:g}, {high:g}]"
+            raise ValueError(f"{name}: must be {bounds}, got {value!r}")
