@@ -165,7 +165,7 @@ def test_the_operator_file_names_the_human_model(tmp_path):
     assert isinstance(person, HumanOperator) and person.params.fitts_slope == H.fitts_slope
     path = tmp_path / "op.toml"
     path.write_text(DEFAULT_OPERATOR_FILE.read_text().replace('model = "none"', "model = 3"))
-    with pytest.raises(BomiError, match=r"\[human\]: 'model' has the wrong type"):
+    with pytest.raises(BomiError, match=r"\[human\] model: expected a string, got 3"):
         load_operator(path)
 
 

@@ -60,7 +60,7 @@ time_limit = [{SHORT}, 2.5]
     ('participants = ["P1"]\noperators = ["bomi"]\nseeds = [0]\n[vary]\nprofile.post_processing.rejection_threshold '
      '= [0.9, 1.5]\n', "rejection threshold must be in (0, 1)"),
     ('participants = ["P1"]\noperators = ["joystick"]\nseeds = [0]\n[vary]\noperator.timing.reaction_tim = [0.3]\n',
-     "[timing]: unknown key(s) reaction_tim"),
+     "[timing] unknown key(s) ['reaction_tim']"),
 ])
 def test_a_bad_grid_is_one_line_naming_the_file_before_any_episode(tmp_path, capsys, text, fault):
     grid, out = grid_file(tmp_path, text), tmp_path / "out"
