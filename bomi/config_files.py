@@ -243,6 +243,12 @@ def _read(value: Any, kind: Any, section: str, key: str) -> Any:
         raise ValueError(f"{key}: {exc}") from None
 
 
+def section_keys(*sections: Any) -> dict[str, Any]:
+    """Every field of the dataclasses ``sections`` by name: a record that holds the keys of a file's
+    sections at once (a subclass of their dataclasses) is made of them."""
+    return {f.name: getattr(section, f.name) for section in sections for f in dataclasses.fields(section)}
+
+
 def _table_kind(kind: Any) -> Any:
     """The dataclass a type hint names (``X`` or ``X | None``), else None."""
     if typing.get_origin(kind) in (typing.Union, types.UnionType):

@@ -13,7 +13,8 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Annotated, Any
 
-from bomi.config_files import at_most, beside, coerce, config_path, from_table, load_toml, positive, within
+from bomi.config_files import (at_most, beside, coerce, config_path, from_table, load_toml, positive, section_keys,
+                               within)
 from tasks.stacking.vocabulary import NO_RECOVERY, RecoveryAction
 
 DEFAULT_OPERATOR_FILE = Path(__file__).with_name("operator.toml")
@@ -209,6 +210,6 @@ def load_operator(path: Path | str = DEFAULT_OPERATOR_FILE, overrides: Mapping[s
 def _parse_operator(data: dict, source: str) -> OperatorParams:
     """The operator file as OperatorParams; ValueError names what is wrong (load_toml adds the file)."""
     file = from_table(_OperatorFile, data)
-    sections = [getattr(file, f.name) for f in fields(file) if f.name not in ("human", "recovery")]
-    keys = {f.name: getattr(section, f.name) for section in sections for f in fields(section)}
+    keys = section_keys(file.timing, file.deflection, file.tolerance, file.heights, file.fingers, file.planner,
+                        file.learning)
     return OperatorParams(**keys, human_model=file.human.model, recovery=file.recovery)
