@@ -326,5 +326,6 @@ def within(section: Any, low: float, high: float, *names: str) -> None:
     for name in names:
         value = getattr(section, name)
         if not low <= value <= high:
-            bounds = f">= {low:g}" if high == math.inf else f"in [{low:g}, {high:g}]"
-            raise ValueError(f"{name}: must be {bounds}, got {value!r}")
+            least, most = (f"{b:g}" if isinstance(b, float) else str(b) for b in (low, high))
+            raise ValueError(f"{name}: must be {f'>= {least}' if high == math.inf else f'in [{least}, {most}]'}, "
+                             f"got {value!r}")
