@@ -1,14 +1,18 @@
 """The one loader of the project's TOML configuration files (profiles, participants, operators, the
-assistance, the simulation): a file -> its TOML document -> validated frozen dataclasses, every fault
-one line, ``path: [section] key: what is wrong``.
+human model, the assistance, the simulation, sweep grids): a file -> its TOML document -> validated
+frozen dataclasses, every fault one line, ``path: [section] key: what is wrong``.
 
 ``load_toml`` reads the file (a path, or a shipped file by bare name), applies overrides and rejects
 numbers no setting takes (``check_numbers``); its ``parse`` builds the dataclasses. A section whose
 keys are the fields of a dataclass is read by ``from_table`` (each value checked against the field's
-type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError), and a document by
-a dataclass whose fields are such sections (or arrays of them). ``parse_text`` reads a
-configuration's text (one about to be written) the same way. ``check_table``, ``typed`` and
-``number`` check a table by hand: the operator, human-model, participant and grid readers still do.
+type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError: ``positive``,
+``at_most``, ``within``), and a document by a dataclass whose fields are such sections (optional
+ones, arrays of them, tables of any keys). A value in a format its type does not say (a comma list
+of names, a list or a range of seeds) is read by the function its ``Annotated`` hint names.
+``parse_text`` reads a configuration's text (one about to be written) the same way; ``parse_toml``
+only the document (a sweep grid, whose seeds go beyond ``check_numbers``' bound). A record of every
+key of a file's sections at once (the operator's, the human model's) subclasses their dataclasses
+and is made by ``section_keys``.
 """
 from __future__ import annotations
 
@@ -18,7 +22,7 @@ import math
 import tomllib
 import types
 import typing
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -149,48 +153,6 @@ def with_overrides(data: dict, overrides: Mapping[str, Any]) -> dict:
                 raise ValueError(f"{dotted}: '{name}' is not a table")
         table[leaf] = value
     return data
-
-
-# The checks every configuration parser uses (profiles, participants, operators): each raises a
-# ValueError saying where (``where``: the table, e.g. "[timing]" or "classes[2]") and what is wrong.
-def check_table(table: Any, where: str, allowed: Iterable[str], required: Iterable[str] = ()) -> dict:
-    """``table`` itself, once it is a table with no key outside ``allowed`` and every key of ``required``."""
-    if table is None:
-        raise ValueError(f"{where}: missing table")
-    if not isinstance(table, dict):
-        raise ValueError(f"{where}: must be a table")
-    allowed = set(allowed)
-    unknown, missing = sorted(set(table) - allowed), sorted(set(required) - set(table))
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
-    if missing:
-        raise ValueError(f"{where}: missing key(s) {', '.join(missing)}")
-    return table
-
-
-def typed(table: dict, key: str, kind: type | tuple[type, ...], where: str, default: Any = ...) -> Any:
-    """``table[key]`` if it is of ``kind`` (a boolean never counts as a number), else ``default``
-    when the key is absent and there is one."""
-    if key not in table:
-        if default is ...:
-            raise ValueError(f"{where}: missing '{key}'")
-        return default
-    value = table[key]
-    if isinstance(value, bool) is not (kind is bool) or not isinstance(value, kind):
-        raise ValueError(f"{where}: '{key}' has the wrong type ({type(value).__name__})")
-    return value
-
-
-def number(table: dict, key: str, where: str, low: float = -math.inf, high: float = math.inf,
-           default: Any = ...) -> float:
-    """``table[key]`` as a float, if it is a finite number in [low, high]."""
-    if key not in table and default is not ...:
-        return default
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not low <= value <= high:
-        raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
-    return float(value)
 
 
 # ------------------------------------------------------------------------------ tables as dataclasses
