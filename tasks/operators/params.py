@@ -61,7 +61,8 @@ class RecoveryParams:
 
 
 def _at_least_0(section: Any, cls: type, *but: str) -> None:
-    """Every key of the section ``cls`` (but ``but``) is a number >= 0 (distances, times, shares)."""
+    """Every key of the section ``cls`` (but ``but``) is a number >= 0 (distances, times, shares) in
+    ``section`` (a ``cls``, or the OperatorParams that is one)."""
     within(section, 0.0, math.inf, *(f.name for f in fields(cls) if f.name not in but))
 
 
@@ -165,7 +166,7 @@ class _Learning:
 
 @dataclass(frozen=True)
 class _Human:
-    model: str  # a human-model TOML (tasks.operators.human) around this user, or none
+    model: str
 
     def __post_init__(self) -> None:
         if not self.model:
