@@ -1,14 +1,18 @@
 """The one loader of the project's TOML configuration files (profiles, participants, operators, the
-assistance, the simulation): a file -> its TOML document -> validated frozen dataclasses, every fault
-one line, ``path: [section] key: what is wrong``.
+human model, the assistance, the simulation, sweep grids): a file -> its TOML document -> validated
+frozen dataclasses, every fault one line, ``path: [section] key: what is wrong``.
 
 ``load_toml`` reads the file (a path, or a shipped file by bare name), applies overrides and rejects
 numbers no setting takes (``check_numbers``); its ``parse`` builds the dataclasses. A section whose
 keys are the fields of a dataclass is read by ``from_table`` (each value checked against the field's
-type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError), and a document by
-a dataclass whose fields are such sections (or arrays of them). ``parse_text`` reads a
-configuration's text (one about to be written) the same way. ``check_table``, ``typed`` and
-``number`` check a table by hand: the operator, human-model, participant and grid readers still do.
+type hint, then the dataclass's ``__post_init__`` checks, which raise ValueError: ``positive``,
+``at_most``, ``within``), and a document by a dataclass whose fields are such sections (optional
+ones, arrays of them, tables of any keys). A value in a format its type does not say (a comma list
+of names, a list or a range of seeds) is read by the function its ``Annotated`` hint names.
+``parse_text`` reads a configuration's text (one about to be written) the same way; ``parse_toml``
+only the document (a sweep grid, whose seeds go beyond ``check_numbers``' bound). A record of every
+key of a file's sections at once (the operator's, the human model's) subclasses their dataclasses
+and is made by ``section_keys``.
 """
 from __future__ import annotations
 
@@ -18,7 +22,7 @@ import math
 import tomllib
 import types
 import typing
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -151,82 +155,24 @@ def with_overrides(data: dict, overrides: Mapping[str, Any]) -> dict:
     return data
 
 
-# The checks every configuration parser uses (profiles, participants, operators): each raises a
-# ValueError saying where (``where``: the table, e.g. "[timing]" or "classes[2]") and what is wrong.
-def check_table(table: Any, where: str, allowed: Iterable[str], required: Iterable[str] = ()) -> dict:
-    """``table`` itself, once it is a table with no key outside ``allowed`` and every key of ``required``."""
-    if table is None:
-        raise ValueError(f"{where}: missing table")
-    if not isinstance(table, dict):
-        raise ValueError(f"{where}: must be a table")
-    allowed = set(allowed)
-    unknown, missing = sorted(set(table) - allowed), sorted(set(required) - set(table))
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(sorted(allowed))})")
-    if missing:
-        raise ValueError(f"{where}: missing key(s) {', '.join(missing)}")
-    return table
-
-
-def typed(table: dict, key: str, kind: type | tuple[type, ...], where: str, default: Any = ...) -> Any:
-    """``table[key]`` if it is of ``kind`` (a boolean never counts as a number), else ``default``
-    when the key is absent and there is one."""
-    if key not in table:
-        if default is ...:
-            raise ValueError(f"{where}: missing '{key}'")
-        return default
-    value = table[key]
-    if isinstance(value, bool) is not (kind is bool) or not isinstance(value, kind):
-        raise ValueError(f"{where}: '{key}' has the wrong type ({type(value).__name__})")
-    return value
-
-
-def number(table: dict, key: str, where: str, low: float = -math.inf, high: float = math.inf,
-           default: Any = ...) -> float:
-    """``table[key]`` as a float, if it is a finite number in [low, high]."""
-    if key not in table and default is not ...:
-        return default
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not low <= value <= high:
-        raise ValueError(f"{where}: '{key}' must be a number in [{low}, {high}], got {value!r}")
-    return float(value)
-
-
 # ------------------------------------------------------------------------------ tables as dataclasses
 def from_table(cls: type[T], table: Any, section: str | None = None, **given: Any) -> T:
     """A ``cls`` dataclass from a TOML table: the document itself (``section`` None) or the table
     ``[section]``. No key outside the fields of ``cls`` (but those ``given``), every field without a
-    default present, each value of its field's type hint: a dataclass field is a table read the same
-    way (its section ``section.field``), a ``tuple[Dataclass, ...]`` an array of tables
-    (``field[k]``), anything else ``coerce``d. Then ``cls``'s own checks (its ``__post_init__``,
-    raising ValueError). ValueError ``[section] key: ...``, one line."""
+    default present, each value read by its field's type hint (``_read``). Then ``cls``'s own checks
+    (its ``__post_init__``, raising ValueError). ValueError ``[section] key: ...``, one line."""
     where = f"[{section}] " if section else ""
     if not isinstance(table, dict):
         raise ValueError(f"{where}must be a table, got {table!r}")
-    hints = typing.get_type_hints(cls)
+    hints = typing.get_type_hints(cls, include_extras=True)
     fields = [f for f in dataclasses.fields(cls) if f.init and f.name not in given]
     values = {}
     for f in fields:
         inner, kind = f.name if section is None else f"{section}.{f.name}", hints[f.name]
-        if f.name not in table:
-            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ValueError(f"[{inner}] section missing" if dataclasses.is_dataclass(kind)
-                                 else f"{where}{f.name}: missing")
-            continue
-        value = table[f.name]
-        if dataclasses.is_dataclass(kind):
-            values[f.name] = from_table(kind, value, inner)
-        elif typing.get_origin(kind) is tuple and dataclasses.is_dataclass(typing.get_args(kind)[0]):
-            if not isinstance(value, list):
-                raise ValueError(f"{where}{f.name}: expected an array of tables ([[{inner}]]), got {value!r}")
-            values[f.name] = tuple(from_table(typing.get_args(kind)[0], item, f"{inner}[{k}]")
-                                   for k, item in enumerate(value))
-        else:
-            try:
-                values[f.name] = coerce(value, kind)
-            except ValueError as exc:
-                raise ValueError(f"{where}{f.name}: {exc}") from None
+        if f.name in table:
+            values[f.name] = _read(table[f.name], kind, inner, f"{where}{f.name}")
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ValueError(f"[{inner}] section missing" if _table_kind(kind) else f"{where}{f.name}: missing")
     unknown = set(table) - {f.name for f in fields}
     if unknown:
         raise ValueError(f"{where}unknown key(s) {sorted(unknown)}")
@@ -236,11 +182,53 @@ def from_table(cls: type[T], table: Any, section: str | None = None, **given: An
         raise ValueError(f"{where}{exc}") from None
 
 
+def _read(value: Any, kind: Any, section: str, key: str) -> Any:
+    """The value of the key ``key`` (as errors name it) by its type hint ``kind``: a dataclass (or an
+    optional one) is the table ``[section]`` (``from_table``), a ``tuple[Dataclass, ...]`` an array of
+    tables (``[section[k]]``), a ``dict[str, X]`` a table of any keys (``[section] name``), anything
+    else ``coerce``d. ValueError naming where."""
+    table = _table_kind(kind)
+    if table is not None:
+        return from_table(table, value, section)
+    args = typing.get_args(kind)
+    if typing.get_origin(kind) is tuple and dataclasses.is_dataclass(args[0]):
+        if not isinstance(value, list):
+            raise ValueError(f"{key}: expected an array of tables ([[{section}]]), got {value!r}")
+        return tuple(from_table(args[0], item, f"{section}[{k}]") for k, item in enumerate(value))
+    if typing.get_origin(kind) is dict:
+        if not isinstance(value, dict):
+            raise ValueError(f"{key}: expected a table ([{section}]), got {value!r}")
+        return {name: _read(item, args[1], f"{section}.{name}", f"[{section}] {name}") for name, item in value.items()}
+    try:
+        return coerce(value, kind)
+    except ValueError as exc:
+        raise ValueError(f"{key}: {exc}") from None
+
+
+def section_keys(*sections: Any) -> dict[str, Any]:
+    """Every field of the dataclasses ``sections`` by name: a record that holds the keys of a file's
+    sections at once (a subclass of their dataclasses) is made of them."""
+    return {f.name: getattr(section, f.name) for section in sections for f in dataclasses.fields(section)}
+
+
+def _table_kind(kind: Any) -> Any:
+    """The dataclass a type hint names (``X`` or ``X | None``), else None."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        kinds = [k for k in typing.get_args(kind) if k is not type(None)]
+        kind = kinds[0] if len(kinds) == 1 else None
+    return kind if dataclasses.is_dataclass(kind) else None
+
+
 def coerce(value: Any, kind: Any) -> Any:
     """A TOML value checked against a type hint: bool, int, float (an integer is taken), str, a
     fixed-length ``tuple[X, Y]`` or a ``tuple[X, ...]`` (from an array), a union (the first of its
-    kinds that takes the value; ``None`` only as an absent key's default: TOML has no null).
-    ValueError saying what was expected."""
+    kinds that takes the value; ``None`` only as an absent key's default: TOML has no null), ``Any``
+    (the value as written), or ``Annotated[X, read]``: ``read(value)``, for a format the type does
+    not say (``read`` checks the value itself). ValueError saying what was expected."""
+    if typing.get_origin(kind) is typing.Annotated:
+        return kind.__metadata__[0](value)
+    if kind is Any:
+        return value
     if typing.get_origin(kind) in (typing.Union, types.UnionType):
         kinds = [k for k in typing.get_args(kind) if k is not type(None)]
         if len(kinds) == 1:
@@ -292,3 +280,14 @@ def at_most(section: Any, limit: float, *names: str) -> None:
     for name in names:
         if getattr(section, name) > limit:
             raise ValueError(f"{name}: must be at most {limit!r}, got {getattr(section, name)!r}")
+
+
+def within(section: Any, low: float, high: float, *names: str) -> None:
+    """ValueError ``name: must be in [low, high]`` (``>= low`` when ``high`` is inf) for the first of
+    the fields ``names`` outside."""
+    for name in names:
+        value = getattr(section, name)
+        if not low <= value <= high:
+            least, most = (f"{b:g}" if isinstance(b, float) else str(b) for b in (low, high))
+            raise ValueError(f"{name}: must be {f'>= {least}' if high == math.inf else f'in [{least}, {most}]'}, "
+                             f"got {value!r}")

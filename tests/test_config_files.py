@@ -2,11 +2,12 @@
 line ``path: [section] key: ...``."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Annotated, Any
 
 import pytest
 
-from bomi.config_files import coerce, from_table, load_toml, parse_text
+from bomi.config_files import coerce, from_table, load_toml, parse_text, within
 from bomi.errors import BomiError
 
 
@@ -56,6 +57,42 @@ def test_every_fault_is_one_line_naming_its_section_and_key(document, fault):
     with pytest.raises(ValueError) as info:
         from_table(Bike, document)
     assert str(info.value) == fault
+
+
+def _gear_list(value: Any) -> tuple[int, ...]:
+    """A format no type says: "1-3" for gears 1, 2, 3."""
+    low, _, high = coerce(value, str).partition("-")
+    if not (low.isdigit() and high.isdigit()):
+        raise ValueError(f"expected FIRST-LAST, got {value!r}")
+    return tuple(range(int(low), int(high) + 1))
+
+
+@dataclass(frozen=True)
+class Trailer:
+    load: float = 0.0
+    hitch: Wheel | None = None                   # an optional table
+    notes: dict[str, str] = field(default_factory=dict)   # a table of any keys
+    gears: Annotated[tuple[int, ...], _gear_list] = ()
+    cargo: Any = None                             # as written
+
+    def __post_init__(self) -> None:
+        within(self, 0.0, 500.0, "load")
+
+
+def test_optional_tables_free_keyed_tables_annotated_readers_and_any():
+    assert from_table(Trailer, {}) == Trailer()
+    trailer = from_table(Trailer, {"hitch": {"radius": 1}, "notes": {"a.b": "x"}, "gears": "2-4", "cargo": [1, "a"]})
+    assert trailer == Trailer(0.0, Wheel(1.0), {"a.b": "x"}, (2, 3, 4), [1, "a"])
+    for document, fault in [({"hitch": 3}, "[hitch] must be a table, got 3"),
+                            ({"hitch": {"radius": 0}}, "[hitch] radius: must be > 0, got 0.0"),
+                            ({"notes": ["x"]}, "notes: expected a table ([notes]), got ['x']"),
+                            ({"notes": {"a": "x", "b": 2}}, "[notes] b: expected a string, got 2"),
+                            ({"gears": "2-x"}, "gears: expected FIRST-LAST, got '2-x'"),
+                            ({"gears": 3}, "gears: expected a string, got 3"),
+                            ({"load": 501}, "load: must be in [0, 500], got 501.0")]:
+        with pytest.raises(ValueError) as info:
+            from_table(Trailer, document)
+        assert str(info.value) == fault
 
 
 def test_coerce_refuses_a_boolean_for_a_number_and_nan():

@@ -141,10 +141,10 @@ def test_a_wrong_mode_command_the_arm_ignores_is_noticed_after_the_timeout():
 
 
 @pytest.mark.parametrize("text, fault", [
-    ("", "[perception]: missing table"),
-    ("rate", "'wrong_mode_rate' must be a number in [0.0, 1.0]"),
-    ("eye", "eye must be three numbers"),
-    ("unknown", "[timing]: unknown key(s) wobble"),
+    ("", "[perception] section missing"),
+    ("rate", "[slips] wrong_mode_rate: must be in [0, 1], got 1.5"),
+    ("eye", "[perception] eye: expected 3 values, got 2"),
+    ("unknown", "[timing] unknown key(s) ['wobble']"),
 ])
 def test_bad_human_file_is_one_clear_error(tmp_path, text, fault):
     good = DEFAULT_HUMAN_FILE.read_text()
@@ -165,7 +165,7 @@ def test_the_operator_file_names_the_human_model(tmp_path):
     assert isinstance(person, HumanOperator) and person.params.fitts_slope == H.fitts_slope
     path = tmp_path / "op.toml"
     path.write_text(DEFAULT_OPERATOR_FILE.read_text().replace('model = "none"', "model = 3"))
-    with pytest.raises(BomiError, match=r"\[human\]: 'model' has the wrong type"):
+    with pytest.raises(BomiError, match=r"\[human\] model: expected a string, got 3"):
         load_operator(path)
 
 

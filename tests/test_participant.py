@@ -44,14 +44,19 @@ def test_shipped_participants_match_their_bomi_profiles(name):
 
 
 @pytest.mark.parametrize("old, new, message", [
-    ("onset_s = 0.8", "onset_s = -1", "'onset_s' must be a number"),
-    ("onset_s = 0.8", "", "missing key(s) onset_s"),
-    ("max_amplitude = 1.0", "max_amplitude = 1.0\nspeed = 3", "unknown key(s) speed"),
-    ("frequencies_hz = [0.000, 0.488", "frequencies_hz = [0.488, 0.000", "frequencies_hz must rise from 0"),
-    ("label = 2", "label = 1", "'label' must be a positive integer not used before"),
-    ("rep_std_deg = [[", "rep_std_deg = [[-", "cannot be negative"),
-    ("posture_deg = [[", "posture_deg = [[1.0], [", "must be a 3 x 3 matrix"),
-    ("posture_deg = [[", "posture_deg = [[1, 2, 3], [", "must be a 3 x 3 matrix"),
+    ("onset_s = 0.8", "onset_s = -1", "onset_s: must be in [0.016, 10], got -1.0"),
+    ("onset_s = 0.8", "", "onset_s: missing"),
+    ("max_amplitude = 1.0", "max_amplitude = 1.0\nspeed = 3", "unknown key(s) ['speed']"),
+    ("frequencies_hz = [0.000, 0.488", "frequencies_hz = [0.488, 0.000", "[tremor] frequencies_hz: must rise from 0"),
+    ("label = 2", "label = 1", "[classes[1]] label: 1 is used by an earlier class"),
+    ("label = 2", "label = 0", "[classes[1]] label: must be a positive integer, got 0"),
+    ("rep_std_deg = [[", "rep_std_deg = [[-", "[neutral] rep_std_deg: holds standard deviations, they cannot be negative"),
+    ("posture_deg = [[", "posture_deg = [[1.0], [", "[classes[0]] posture_deg: expected 3 values, got 1"),
+    ("posture_deg = [[", "posture_deg = [[1, 2, 3], [", "[classes[0]] posture_deg: must be a 3 x 3 matrix"),
+    ("labels = [0, 2", "labels = [0, 9", "[protocol] labels: must list classes of the participant ([0, 1, 2, 3, 4, 5, 6, 7, "
+                                         "8]), not [9]"),
+    ('"tremor" = "measured', '"tremor" = 3 #', "[provenance] tremor: expected a string, got 3"),
+    ("least_lean = 0.5", "least_lean = 0.01", "[feel] least_lean: must be in [0.05, 1], got 0.01"),
     ('name = "P1"', 'name = "P1', "not valid TOML"),
 ])
 def test_bad_participant_files_name_the_file_and_the_problem(tmp_path, old, new, message):

@@ -198,7 +198,7 @@ def _p1_text() -> str:
     ("posture_deg = [[", "posture_deg = [[1e5 + ", "beyond the 180 deg an angle"),
     ("rep_std_deg = [[", "rep_std_deg = [[95.0 + ", "beyond the 90 deg a standard deviation"),
     ("labels = [0", "labels = [1000000000", "not a finite number within"),
-    ("durations_s = [", "durations_s = [-4.8, ", "'durations_s' as many durations in (0, 3600]"),
+    ("durations_s = [", "durations_s = [-4.8, ", "[protocol] durations_s: must be as many durations in (0, 3600] s"),
 ])
 def test_synth_s_validator_refuses_what_no_person_holds(old, new, fault):
     """The validator `bomi twin` runs on what it writes is the one `bomi synth` loads with."""

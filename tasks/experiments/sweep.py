@@ -18,14 +18,14 @@ import signal
 import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from tqdm import tqdm
 
 from bomi.classifier import MAX_VOTE_LENGTH
-from bomi.config_files import beside, check_table, config_path, parse_toml
+from bomi.config_files import beside, coerce, config_path, from_table, parse_toml, within
 from bomi.errors import BomiError
 from bomi.files import atomic_output, write_text
 from tasks.experiments.engine import Engine, is_interruption
@@ -52,7 +52,6 @@ FIGURE_METRICS = ("completion_time_mean", "successes", "success_rate", "accuracy
                   "accuracy_excused_transitions", "excused_share", "relevant_share", "irrelevant_per_min",
                   "longest_error_run_ms", "mode_switches", "unintended_displacement_mm", "latency_ms_median",
                   "cube_drops")
-_TOP_KEYS = {"participants", "operators", "seeds", "vary", "figure"}
 LOCK_FILE = ".sweep.lock"  # flock'ed while a sweep writes the directory; holds its pid
 SUMMARY_FILES = ("summary.md", "summary.json", "completion_time.png")
 # Sizes a grid may ask for: far beyond any sweep this machine (or a cluster in a week) runs, far
@@ -105,34 +104,65 @@ def load_grid(path: Path) -> Grid:
     return replace(grid, participants=tuple(beside(name, Path(path)) for name in grid.participants))
 
 
-def _names(data: dict, key: str) -> tuple[str, ...]:
-    names = data.get(key)
-    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n for n in names):
-        raise ValueError(f"'{key}' must be a non-empty list of names")
-    if len(set(names)) != len(names):
-        raise ValueError(f"'{key}' lists a name twice")
-    return tuple(names)
+@dataclass(frozen=True)
+class _SeedRange:
+    """``seeds = {first = N, count = K}``: K seeds from N."""
+
+    first: int
+    count: int
+
+    def __post_init__(self) -> None:
+        within(self, 1, MAX_SEEDS, "count")
+        within(self, 0, MAX_SEED - self.count + 1, "first")
 
 
 def _seeds(value: Any) -> tuple[int, ...]:
+    """A grid's ``seeds``: a list of integers or {first = N, count = K}; at least one, at most MAX_SEEDS,
+    each in [0, MAX_SEED], none twice."""
     if isinstance(value, dict):
-        if set(value) != {"first", "count"} or not all(isinstance(value[k], int) and not isinstance(value[k], bool)
-                                                       for k in value):
-            raise ValueError("'seeds' as a table needs integers 'first' and 'count' (and nothing else)")
-        first, count = value["first"], value["count"]
-        if not 1 <= count <= MAX_SEEDS or not 0 <= first <= MAX_SEED - count + 1:
-            raise ValueError(f"'seeds': count must be in [1, {MAX_SEEDS}] and every seed in [0, {MAX_SEED}], "
-                             f"got first = {first}, count = {count}")
-        seeds = tuple(range(first, first + count))
-    elif isinstance(value, list) and all(isinstance(s, int) and not isinstance(s, bool) for s in value):
-        if len(value) > MAX_SEEDS:
-            raise ValueError(f"'seeds': at most {MAX_SEEDS} seeds, got {len(value)}")
-        seeds = tuple(value)
+        span = from_table(_SeedRange, value)
+        seeds = tuple(range(span.first, span.first + span.count))
+    elif isinstance(value, list):
+        seeds = coerce(value, tuple[int, ...])
     else:
-        raise ValueError("'seeds' must be a list of integers or {first = N, count = K}")
+        raise ValueError(f"must be a list of integers or {{first = N, count = K}}, got {value!r}")
+    if len(seeds) > MAX_SEEDS:
+        raise ValueError(f"at most {MAX_SEEDS} seeds, got {len(seeds)}")
     if not seeds or min(seeds) < 0 or max(seeds) > MAX_SEED or len(set(seeds)) != len(seeds):
-        raise ValueError(f"'seeds' must be at least one seed, each in [0, {MAX_SEED}], none twice")
-    return seeds
+        raise ValueError(f"must be at least one seed, each in [0, {MAX_SEED}], none twice")
+    return tuple(seeds)
+
+
+@dataclass(frozen=True)
+class _Figure:
+    metric: str = FIGURE_METRICS[0]
+    setting: str | None = None   # one of [vary] (default: the first)
+
+    def __post_init__(self) -> None:
+        if self.metric not in FIGURE_METRICS:
+            raise ValueError(f"metric: {self.metric!r} is not one of {', '.join(FIGURE_METRICS)}")
+
+
+@dataclass(frozen=True)
+class _GridFile:
+    """A grid file as written (`bomi sweep`'s help)."""
+
+    participants: tuple[str, ...]
+    operators: tuple[str, ...]
+    seeds: Annotated[tuple[int, ...], _seeds]
+    vary: dict[str, Any] = field(default_factory=dict)   # setting -> its values; dotted names are nested tables
+    figure: _Figure = _Figure()
+
+    def __post_init__(self) -> None:
+        for key in ("participants", "operators"):
+            names = getattr(self, key)
+            if not names or not all(names):
+                raise ValueError(f"{key}: must be a non-empty list of names")
+            if len(set(names)) != len(names):
+                raise ValueError(f"{key}: lists a name twice")
+        bad = [o for o in self.operators if o not in OPERATORS]
+        if bad:
+            raise ValueError(f"operators: unknown {', '.join(bad)} (expected {', '.join(OPERATORS)})")
 
 
 def _flatten(table: dict, prefix: str = "") -> dict[str, Any]:
@@ -167,25 +197,12 @@ def _check_setting(name: str, values: Any) -> tuple:
 
 
 def _parse_grid(data: dict, source: str) -> Grid:
-    check_table(data, "grid", _TOP_KEYS)
-    operators = _names(data, "operators")
-    bad = [o for o in operators if o not in OPERATORS]
-    if bad:
-        raise ValueError(f"'operators': unknown {', '.join(bad)} (expected {', '.join(OPERATORS)})")
-    if "seeds" not in data:
-        raise ValueError("missing 'seeds'")
-    vary = data.get("vary", {})
-    if not isinstance(vary, dict):
-        raise ValueError("[vary] must be a table of settings, each a list of values")
-    vary = {name: _check_setting(name, values) for name, values in _flatten(vary).items()}
-    figure = check_table(data.get("figure", {}), "[figure]", {"metric", "setting"})
-    metric = figure.get("metric", FIGURE_METRICS[0])
-    if metric not in FIGURE_METRICS:
-        raise ValueError(f"[figure] metric: {metric!r} is not one of {', '.join(FIGURE_METRICS)}")
-    setting = figure.get("setting", next(iter(vary), None))
+    file = from_table(_GridFile, data)
+    vary = {name: _check_setting(name, values) for name, values in _flatten(file.vary).items()}
+    setting = next(iter(vary), None) if file.figure.setting is None else file.figure.setting
     if setting is not None and setting not in vary:
         raise ValueError(f"[figure] setting: {setting!r} is not one of [vary] ({', '.join(vary) or 'none'})")
-    grid = Grid(_names(data, "participants"), operators, _seeds(data["seeds"]), vary, metric, setting, source)
+    grid = Grid(file.participants, file.operators, file.seeds, vary, file.figure.metric, setting, source)
     episodes = len(grid.participants) * len(grid.operators) * math.prod(map(len, vary.values())) * len(grid.seeds)
     if episodes > MAX_EPISODES:
         raise ValueError(f"{episodes} episodes (participants x operators x [vary] combinations x seeds), "

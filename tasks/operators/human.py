@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 import scipy.stats
 
-from bomi.config_files import check_table, load_toml, number, typed
+from bomi.config_files import from_table, load_toml, positive, section_keys, within
 from sim.joystick import Kind, Mode
 from tasks.operators.judgement import Memory, wrapped_angle
 from tasks.operators.params import OperatorParams
@@ -54,31 +54,61 @@ HUMAN_STREAM = 0x4855  # the human's random streams: independent of the task's a
 
 
 @dataclass(frozen=True)
-class HumanParams:
+class _Perception:
     glance_interval: float
     visual_delay: float
-    eye: np.ndarray  # (3,) m, world
+    eye: tuple[float, float, float]  # m, world
     lateral_floor: float
     lateral_weber: float
     depth_ratio: float
     closer_look: float
+
+    def __post_init__(self) -> None:
+        within(self, 0.0, math.inf, "glance_interval", "visual_delay", "lateral_floor", "lateral_weber")
+        positive(self, "depth_ratio")
+        within(self, 0.0, 1.0, "closer_look")
+
+
+@dataclass(frozen=True)
+class _Timing:
     rt_mu: float
     rt_sigma: float
     rt_tau: float
     hick_slope: float
     fitts_slope: float
     check_pause: float
+
+    def __post_init__(self) -> None:
+        within(self, 0.0, math.inf, "rt_mu", "hick_slope", "fitts_slope", "check_pause")
+        positive(self, "rt_sigma", "rt_tau")
+
+
+@dataclass(frozen=True)
+class _Slips:
     wrong_mode_rate: float
     notice_move: float
     notice_turn_deg: float
     notice_timeout: float
 
+    def __post_init__(self) -> None:
+        within(self, 0.0, 1.0, "wrong_mode_rate")
+        within(self, 0.0, math.inf, "notice_move", "notice_turn_deg", "notice_timeout")
 
-_SECTIONS = {
-    "perception": ("glance_interval", "visual_delay", "eye", "lateral_floor", "lateral_weber", "depth_ratio", "closer_look"),
-    "timing": ("rt_mu", "rt_sigma", "rt_tau", "hick_slope", "fitts_slope", "check_pause"),
-    "slips": ("wrong_mode_rate", "notice_move", "notice_turn_deg", "notice_timeout"),
-}
+
+@dataclass(frozen=True)
+class HumanParams(_Slips, _Timing, _Perception):
+    """Every key of the human-model file's sections (a human-model file is ``_HumanFile``)."""
+
+    def __post_init__(self) -> None:
+        for section in HumanParams.__bases__:
+            section.__post_init__(self)
+
+
+@dataclass(frozen=True)
+class _HumanFile:
+    perception: _Perception
+    timing: _Timing
+    slips: _Slips
 
 
 def load_human(path: Path | str = DEFAULT_HUMAN_FILE, overrides: Mapping[str, Any] | None = None) -> HumanParams:
@@ -88,23 +118,8 @@ def load_human(path: Path | str = DEFAULT_HUMAN_FILE, overrides: Mapping[str, An
 
 
 def _parse_human(data: dict, source: str) -> HumanParams:
-    check_table(data, "human model", _SECTIONS)
-    values: dict = {}
-    for section, keys in _SECTIONS.items():
-        table = check_table(data.get(section), f"[{section}]", keys, keys)
-        for key in keys:
-            if key == "eye":
-                eye = typed(table, key, list, f"[{section}]")
-                if len(eye) != 3 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                            and math.isfinite(v) for v in eye):
-                    raise ValueError("[perception]: eye must be three numbers (x, y, z in metres)")
-                values[key] = np.array(eye, dtype=float)
-            else:
-                values[key] = number(table, key, f"[{section}]", 0.0,
-                                     1.0 if key in ("wrong_mode_rate", "closer_look") else math.inf)
-    if values["depth_ratio"] <= 0 or values["rt_sigma"] <= 0 or values["rt_tau"] <= 0:
-        raise ValueError("[perception] depth_ratio, [timing] rt_sigma and rt_tau must be positive")
-    return HumanParams(**values)
+    file = from_table(_HumanFile, data)
+    return HumanParams(**section_keys(file.perception, file.timing, file.slips))
 
 
 # ------------------------------------------------------------------------------------ timing

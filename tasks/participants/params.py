@@ -15,19 +15,23 @@ with ``classes``, ``probability``, ``duration_s`` and ``undo_share`` ([least, mo
 ``[protocol]`` (``Protocol``: the runs of its source recording). Every ``*_deg`` value is a (nodes x 3)
 matrix of (pitch, roll, yaw).
 ``profile`` is a bomi profile name or a TOML file, relative to the participant file.
+
+The file is read by ``bomi.config_files``: its tables are the dataclasses below (``Feel``, ``Spasm``,
+``EvokedSpasm`` and ``Protocol`` as they are, the rest as ``_ParticipantFile``'s), each checked by its
+``__post_init__``; ``_parse`` builds the ``ParticipantParams``.
 """
 from __future__ import annotations
 
-import tomllib
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bomi.classifier import NEUTRAL_LABEL
-from bomi.config_files import beside, check_numbers, check_table, config_path, load_toml, number
+from bomi.config_files import beside, config_path, from_table, load_toml, parse_text, within
 from bomi.errors import BomiError
 from bomi.frames import SAMPLE_RATE_HZ
 from bomi.fusion import DT
@@ -36,19 +40,6 @@ from bomi.profiles import Profile
 PARTICIPANT_DIR = Path(__file__).resolve().parent
 MAX_ANGLE_DEG = 180.0         # a posture or a neutral angle (pitch, roll, yaw) is within +-180 deg
 MAX_STD_DEG = 90.0            # a spread of a posture beyond this is no posture held
-
-_TOP_KEYS = {"name", "profile", "description", "onset_s", "reaction_s", "onset_sd_s", "reaction_sd_s", "max_amplitude",
-             "tremor", "neutral", "classes", "spasm", "evoked_spasm", "feel", "provenance", "protocol"}
-_OPTIONAL_KEYS = {"description", "onset_sd_s", "reaction_sd_s", "spasm", "evoked_spasm", "provenance", "protocol"}
-_NEUTRAL_KEYS = {"angles_deg", "rep_std_deg", "sway_std_deg", "tremor_std_deg"}
-_CLASS_KEYS = {"label", "posture_deg", "rep_std_deg", "day_gain_log_std", "day_std_deg", "sway_std_deg",
-               "tremor_std_deg", "range_share"}
-_SPASM_KEYS = {"rate_per_s", "max_deg", "duration_s", "nodes"}
-_EVOKED_KEYS = {"classes", "probability", "duration_s", "undo_share"}
-_PROTOCOL_KEYS = {"source", "holds_only", "labels", "durations_s", "run_digests"}
-_FEEL_KEYS = {"least_lean", "lean_step", "watch_s", "speed_smoothing_s", "too_slow", "too_fast", "max_zero", "most_lean",
-              "give_up_s"}
-
 
 @dataclass(frozen=True)
 class ClassMotion:
@@ -78,6 +69,17 @@ class Feel:
     most_lean: float = 1.0   # the furthest lean, as a share of the class posture (a twin: its recording's largest holds)
     give_up_s: float = 10.0  # the arm not answering the furthest lean this long, the participant relaxes and tries again
 
+    def __post_init__(self) -> None:
+        within(self, 0.05, 1.0, "least_lean")
+        within(self, 0.0, 1.0, "lean_step")
+        within(self, 0.0, 60.0, "watch_s")
+        within(self, DT, 60.0, "speed_smoothing_s")
+        within(self, 0.0, 1.0, "too_slow")
+        within(self, 1.0, math.inf, "too_fast")
+        within(self, 0.0, 0.99, "max_zero")
+        within(self, 1.0, 2.0, "most_lean")
+        within(self, 0.0, 3600.0, "give_up_s")
+
 
 @dataclass(frozen=True)
 class Spasm:
@@ -87,6 +89,13 @@ class Spasm:
     max_deg: float
     duration_s: float
     nodes: tuple[int, ...]       # 1-based node positions in the profile's node list
+
+    def __post_init__(self) -> None:
+        within(self, 0.0, math.inf, "rate_per_s")
+        within(self, 0.0, 90.0, "max_deg")
+        within(self, DT, 10.0, "duration_s")
+        if not self.nodes or min(self.nodes) < 1:
+            raise ValueError(f"nodes: must list node positions from 1, got {list(self.nodes)}")
 
 
 @dataclass(frozen=True)
@@ -101,6 +110,15 @@ class EvokedSpasm:
     duration_s: tuple[float, float]
     undo_share: tuple[float, float]
 
+    def __post_init__(self) -> None:
+        if not self.classes:
+            raise ValueError("classes: must list at least one motion class")
+        within(self, 0.0, 1.0, "probability")
+        for name, low, high in (("duration_s", DT, 10.0), ("undo_share", 0.0, 2.0)):
+            least, most = getattr(self, name)
+            if not low <= least <= most <= high:
+                raise ValueError(f"{name}: must be [least, most] within [{low:g}, {high:g}], got {[least, most]}")
+
 
 @dataclass(frozen=True)
 class Protocol:
@@ -113,6 +131,12 @@ class Protocol:
     holds_only: bool
     source: str
     run_digests: tuple[str, ...] = ()   # of every run of the source recordings (bomi.passes.run_digests)
+
+    def __post_init__(self) -> None:
+        if not self.labels or len(self.durations_s) != len(self.labels) \
+                or not all(0 < d <= 3600 for d in self.durations_s):
+            raise ValueError(f"durations_s: must be as many durations in (0, 3600] s as the {len(self.labels)} labels "
+                             "(at least one)")
 
 
 @dataclass(frozen=True)
@@ -143,6 +167,131 @@ class ParticipantParams:
         return self.neutral if label == NEUTRAL_LABEL else self.classes[label]
 
 
+# ------------------------------------------------------------------ the file's tables (bomi.config_files)
+Matrix = tuple[tuple[float, float, float], ...]   # a ``*_deg`` value: (pitch, roll, yaw) per node
+
+
+def _matrices(table: Any) -> dict[str, Matrix]:
+    """The ``*_deg`` values of a [neutral] or [[classes]] table, by name."""
+    return {f.name: getattr(table, f.name) for f in fields(table) if f.name.endswith("_deg")}
+
+
+def _check_degrees(table: Any) -> None:
+    """Each matrix of ``table`` has a row per node; its angles are within +-MAX_ANGLE_DEG, its
+    standard deviations (``*_std_deg``) not negative and at most MAX_STD_DEG."""
+    for name, rows in _matrices(table).items():
+        m, spread = np.array(rows, dtype=float).reshape(-1, 3), name.endswith("_std_deg")
+        if not len(m):
+            raise ValueError(f"{name}: must be a nodes x 3 matrix (pitch, roll, yaw per node), got no row")
+        if spread and (m < 0).any():
+            raise ValueError(f"{name}: holds standard deviations, they cannot be negative")
+        limit = MAX_STD_DEG if spread else MAX_ANGLE_DEG
+        if (np.abs(m) > limit).any():
+            what = "a standard deviation" if spread else "an angle"
+            raise ValueError(f"{name}: holds {np.abs(m).max():g} deg, beyond the {limit:g} deg {what} of a body's "
+                             f"posture can be")
+
+
+@dataclass(frozen=True)
+class _Tremor:
+    frequencies_hz: tuple[float, ...]
+    relative_power: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        freqs, power = np.array(self.frequencies_hz, dtype=float), np.array(self.relative_power, dtype=float)
+        if (freqs.shape != power.shape or len(freqs) < 3 or freqs[0] != 0 or np.any(np.diff(freqs) <= 0)
+                or freqs[-1] > SAMPLE_RATE_HZ / 2 or np.any(power < 0) or not np.any(power > 0)):
+            raise ValueError(f"frequencies_hz: must rise from 0 to at most {SAMPLE_RATE_HZ / 2} Hz, with as many "
+                             "non-negative relative_power values, not all 0")
+
+
+@dataclass(frozen=True)
+class _Neutral:
+    angles_deg: Matrix            # absolute
+    rep_std_deg: Matrix           # neutral-to-neutral
+    sway_std_deg: Matrix
+    tremor_std_deg: Matrix
+
+    def __post_init__(self) -> None:
+        _check_degrees(self)
+
+
+@dataclass(frozen=True)
+class _Class:
+    label: int
+    posture_deg: Matrix
+    rep_std_deg: Matrix
+    day_gain_log_std: float
+    day_std_deg: Matrix
+    sway_std_deg: Matrix
+    tremor_std_deg: Matrix
+    range_share: float = 1.0      # the share of the nominal posture this person reaches (P5's thumb)
+
+    def __post_init__(self) -> None:
+        if self.label <= NEUTRAL_LABEL:
+            raise ValueError(f"label: must be a positive integer, got {self.label}")
+        _check_degrees(self)
+        within(self, 0.0, 2.0, "day_gain_log_std")
+        within(self, 0.0, 1.0, "range_share")
+
+
+@dataclass(frozen=True)
+class _ParticipantFile:
+    name: str
+    profile: str
+    onset_s: float
+    reaction_s: float
+    max_amplitude: float
+    tremor: _Tremor
+    neutral: _Neutral
+    classes: tuple[_Class, ...]
+    feel: Feel
+    description: str = ""
+    onset_sd_s: float = 0.0
+    reaction_sd_s: float = 0.0
+    spasm: Spasm | None = None
+    evoked_spasm: EvokedSpasm | None = None
+    provenance: dict[str, str] = field(default_factory=dict)
+    protocol: Protocol | None = None
+
+    def __post_init__(self) -> None:
+        for key in ("name", "profile"):
+            if not getattr(self, key):
+                raise ValueError(f"{key}: must be a non-empty string")
+        within(self, DT, 10.0, "onset_s")
+        within(self, 0.0, 10.0, "reaction_s")
+        within(self, 0.0, 5.0, "onset_sd_s", "reaction_sd_s")
+        within(self, 0.01, 1.0, "max_amplitude")
+        self._check_across()
+
+    def _check_across(self) -> None:
+        """What spans tables: the classes' labels, the nodes of every matrix (as many as [neutral]
+        angles_deg has rows) and of the spasms, the classes that the evoked spasms and the protocol
+        name."""
+        if not self.classes:
+            raise ValueError("classes: must be at least one [[classes]] table")
+        labels = [c.label for c in self.classes]
+        for k, label in enumerate(labels):
+            if label in labels[:k]:
+                raise ValueError(f"[classes[{k}]] label: {label} is used by an earlier class")
+        n_nodes = len(self.neutral.angles_deg)
+        tables = {"neutral": self.neutral, **{f"classes[{k}]": c for k, c in enumerate(self.classes)}}
+        for where, table in tables.items():
+            for name, rows in _matrices(table).items():
+                if len(rows) != n_nodes:
+                    raise ValueError(f"[{where}] {name}: must be a {n_nodes} x 3 matrix (pitch, roll, yaw per node, "
+                                     f"as many rows as [neutral] angles_deg), got {len(rows)} rows")
+        if self.spasm is not None and max(self.spasm.nodes) > n_nodes:
+            raise ValueError(f"[spasm] nodes: must list node positions 1..{n_nodes}, got {list(self.spasm.nodes)}")
+        if self.evoked_spasm is not None and set(self.evoked_spasm.classes) - set(labels):
+            raise ValueError(f"[evoked_spasm] classes: must list motion classes of the participant ({sorted(labels)}), "
+                             f"not {sorted(set(self.evoked_spasm.classes) - set(labels))}")
+        performed = {NEUTRAL_LABEL, *labels}
+        if self.protocol is not None and set(self.protocol.labels) - performed:
+            raise ValueError(f"[protocol] labels: must list classes of the participant ({sorted(performed)}), "
+                             f"not {sorted(set(self.protocol.labels) - performed)}")
+
+
 # ------------------------------------------------------------------------------------- loading
 def load_participant(path_or_name: str | Path, overrides: Mapping[str, Any] | None = None) -> ParticipantParams:
     """Load and validate a participant file, or a shipped one by name (P1, P4, P5); ``overrides``:
@@ -155,138 +304,30 @@ def parse_participant_text(text: str, source: str) -> ParticipantParams:
     """A participant file's text, validated as ``load_participant`` validates a file (`bomi twin`
     checks what it is about to write with it, so `bomi synth` accepts every twin written); a fault
     is a ValueError."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"not valid TOML ({exc})") from None
-    check_numbers(data)
-    return _parse(data, source)
-
-
-def _matrix(table: dict, key: str, where: str, n_nodes: int | None, nonnegative: bool) -> np.ndarray:
-    try:
-        m = np.array(table[key], dtype=float)
-    except (TypeError, ValueError):
-        m = np.array([])
-    if m.ndim != 2 or m.shape[1] != 3 or (n_nodes is not None and m.shape[0] != n_nodes) or not np.isfinite(m).all():
-        nodes = "nodes" if n_nodes is None else str(n_nodes)
-        raise ValueError(f"{where}: '{key}' must be a {nodes} x 3 matrix of numbers (pitch, roll, yaw per node)")
-    if nonnegative and (m < 0).any():
-        raise ValueError(f"{where}: '{key}' holds standard deviations, they cannot be negative")
-    limit = MAX_STD_DEG if nonnegative else MAX_ANGLE_DEG
-    if (np.abs(m) > limit).any():
-        what = "a standard deviation" if nonnegative else "an angle"
-        raise ValueError(f"{where}: '{key}' holds {np.abs(m).max():g} deg, beyond the {limit:g} deg {what} of a "
-                         f"body's posture can be")
-    return m
-
-
-def _motion(table: dict, label: int, where: str, n_nodes: int, posture_key: str = "posture_deg") -> ClassMotion:
-    zeros = np.zeros((n_nodes, 3))
-    return ClassMotion(
-        label=label,
-        posture_deg=_matrix(table, posture_key, where, n_nodes, nonnegative=False),
-        rep_std_deg=_matrix(table, "rep_std_deg", where, n_nodes, nonnegative=True),
-        day_gain_log_std=number(table, "day_gain_log_std", where, 0.0, 2.0) if label else 0.0,
-        day_std_deg=_matrix(table, "day_std_deg", where, n_nodes, nonnegative=True) if label else zeros,
-        sway_std_deg=_matrix(table, "sway_std_deg", where, n_nodes, nonnegative=True),
-        tremor_std_deg=_matrix(table, "tremor_std_deg", where, n_nodes, nonnegative=True),
-    )
+    return parse_text(text, source, "participant", _parse)
 
 
 def _parse(data: dict, source: str) -> ParticipantParams:
-    check_table(data, "participant", _TOP_KEYS, _TOP_KEYS - _OPTIONAL_KEYS)
-    for key in ("name", "profile"):
-        if not isinstance(data[key], str) or not data[key]:
-            raise ValueError(f"'{key}' must be a non-empty string")
-    neutral_table = check_table(data["neutral"], "[neutral]", _NEUTRAL_KEYS, _NEUTRAL_KEYS)
-    n_nodes = _matrix(neutral_table, "angles_deg", "[neutral]", None, nonnegative=False).shape[0]
-    neutral = _motion(neutral_table, NEUTRAL_LABEL, "[neutral]", n_nodes, posture_key="angles_deg")
-    freqs, power = _parse_tremor(data["tremor"])
-    if not isinstance(data["classes"], list) or not data["classes"]:
-        raise ValueError("'classes' must be a non-empty list of [[classes]] tables")
-    classes: dict[int, ClassMotion] = {}
-    for k, table in enumerate(data["classes"]):
-        where = f"classes[{k}]"
-        check_table(table, where, _CLASS_KEYS, _CLASS_KEYS - {"range_share"})
-        label = table["label"]
-        if isinstance(label, bool) or not isinstance(label, int) or label <= NEUTRAL_LABEL or label in classes:
-            raise ValueError(f"{where}: 'label' must be a positive integer not used before, got {label!r}")
-        motion = _motion(table, label, where, n_nodes)
-        if "range_share" in table:   # the share of the nominal posture this person reaches (P5's thumb)
-            motion = replace(motion, posture_deg=number(table, "range_share", where, 0.0, 1.0) * motion.posture_deg)
-        classes[label] = motion
-    spasm = _parse_spasm(data["spasm"], n_nodes) if "spasm" in data else None
-    evoked = _parse_evoked(data["evoked_spasm"], set(classes)) if "evoked_spasm" in data else None
-    provenance = data.get("provenance", {})
-    if not isinstance(provenance, dict) or not all(isinstance(v, str) for v in provenance.values()):
-        raise ValueError("[provenance]: each parameter's provenance must be a string")
-    protocol = _parse_protocol(data["protocol"], set(classes) | {NEUTRAL_LABEL}) if "protocol" in data else None
+    file = from_table(_ParticipantFile, data)
+    neutral = file.neutral
+    n_nodes = len(neutral.angles_deg)
+    classes = {c.label: ClassMotion(c.label, c.range_share * _array(c.posture_deg), _array(c.rep_std_deg),
+                                    c.day_gain_log_std, _array(c.day_std_deg), _array(c.sway_std_deg),
+                                    _array(c.tremor_std_deg))
+               for c in file.classes}
     return ParticipantParams(
-        name=data["name"], profile=data["profile"], description=str(data.get("description", "")),
-        onset_s=number(data, "onset_s", "participant", DT, 10.0),
-        reaction_s=number(data, "reaction_s", "participant", 0.0, 10.0),
-        onset_sd_s=number(data, "onset_sd_s", "participant", 0.0, 5.0, default=0.0),
-        reaction_sd_s=number(data, "reaction_sd_s", "participant", 0.0, 5.0, default=0.0),
-        max_amplitude=number(data, "max_amplitude", "participant", 0.01, 1.0),
-        tremor_spectrum=(freqs, power), neutral=neutral, classes=classes, spasm=spasm, evoked_spasm=evoked,
-        feel=_parse_feel(data["feel"]), source=source, protocol=protocol, provenance=provenance)
+        name=file.name, profile=file.profile, description=file.description, onset_s=file.onset_s,
+        reaction_s=file.reaction_s, onset_sd_s=file.onset_sd_s, reaction_sd_s=file.reaction_sd_s,
+        max_amplitude=file.max_amplitude,
+        tremor_spectrum=(_array(file.tremor.frequencies_hz), _array(file.tremor.relative_power)),
+        neutral=ClassMotion(NEUTRAL_LABEL, _array(neutral.angles_deg), _array(neutral.rep_std_deg), 0.0,
+                            np.zeros((n_nodes, 3)), _array(neutral.sway_std_deg), _array(neutral.tremor_std_deg)),
+        classes=classes, spasm=file.spasm, evoked_spasm=file.evoked_spasm, feel=file.feel, source=source,
+        protocol=file.protocol, provenance=file.provenance)
 
 
-
-def _parse_tremor(table: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(frequencies_hz, relative_power) of the tremor spectrum."""
-    keys = {"frequencies_hz", "relative_power"}
-    tremor = check_table(table, "[tremor]", keys, keys)
-    try:
-        freqs, power = (np.array(tremor[k], dtype=float) for k in ("frequencies_hz", "relative_power"))
-    except (TypeError, ValueError):
-        freqs = power = np.array([])
-    if (freqs.ndim != 1 or freqs.shape != power.shape or len(freqs) < 3 or freqs[0] != 0
-            or np.any(np.diff(freqs) <= 0) or freqs[-1] > SAMPLE_RATE_HZ / 2
-            or np.any(power < 0) or not np.any(power > 0)):
-        raise ValueError("[tremor]: frequencies_hz must rise from 0 to at most "
-                         f"{SAMPLE_RATE_HZ / 2} Hz, with as many non-negative relative_power values, not all 0")
-    return freqs, power
-
-
-def _parse_protocol(table: Any, labels: set[int]) -> Protocol:
-    table = check_table(table, "[protocol]", _PROTOCOL_KEYS, _PROTOCOL_KEYS - {"run_digests"})
-    runs, durations = table["labels"], table["durations_s"]
-    if (not isinstance(runs, list) or not runs or not all(isinstance(v, int) and v in labels for v in runs)
-            or not isinstance(durations, list) or len(durations) != len(runs)
-            or not all(isinstance(v, (int, float)) and 0 < v <= 3600 for v in durations)):
-        raise ValueError(f"[protocol]: 'labels' must list classes of the participant ({sorted(labels)}) and "
-                         "'durations_s' as many durations in (0, 3600] s")
-    if not isinstance(table["holds_only"], bool) or not isinstance(table["source"], str):
-        raise ValueError("[protocol]: 'holds_only' must be true or false and 'source' a string")
-    digests = table.get("run_digests", [])
-    if not isinstance(digests, list) or not all(isinstance(v, str) for v in digests):
-        raise ValueError("[protocol]: 'run_digests' must be a list of strings")
-    return Protocol(tuple(runs), tuple(float(v) for v in durations), table["holds_only"], table["source"],
-                    tuple(digests))
-
-
-def _parse_feel(table: Any) -> Feel:
-    table = check_table(table, "[feel]", _FEEL_KEYS, _FEEL_KEYS - {"most_lean", "give_up_s"})
-    return Feel(least_lean=number(table, "least_lean", "[feel]", 0.05, 1.0),
-                lean_step=number(table, "lean_step", "[feel]", 0.0, 1.0),
-                watch_s=number(table, "watch_s", "[feel]", 0.0, 60.0),
-                speed_smoothing_s=number(table, "speed_smoothing_s", "[feel]", DT, 60.0),
-                too_slow=number(table, "too_slow", "[feel]", 0.0, 1.0),
-                too_fast=number(table, "too_fast", "[feel]", 1.0),
-                max_zero=number(table, "max_zero", "[feel]", 0.0, 0.99),
-                most_lean=number(table, "most_lean", "[feel]", 1.0, 2.0, default=1.0),
-                give_up_s=number(table, "give_up_s", "[feel]", 0.0, 3600.0, default=10.0))
-
-
-def _parse_spasm(table: Any, n_nodes: int) -> Spasm:
-    table = check_table(table, "[spasm]", _SPASM_KEYS, _SPASM_KEYS)
-    nodes = table["nodes"]
-    if not isinstance(nodes, list) or not nodes or not all(isinstance(n, int) and 1 <= n <= n_nodes for n in nodes):
-        raise ValueError(f"[spasm]: 'nodes' must list node positions 1..{n_nodes}")
-    return Spasm(number(table, "rate_per_s", "[spasm]", 0.0), number(table, "max_deg", "[spasm]", 0.0, 90.0),
-                 number(table, "duration_s", "[spasm]", DT, 10.0), tuple(nodes))
+def _array(values: tuple) -> np.ndarray:
+    return np.array(values, dtype=float)
 
 
 def recorded_day(params: ParticipantParams) -> ParticipantParams:
@@ -310,21 +351,3 @@ def check_against_profile(params: ParticipantParams, profile: Profile) -> None:
     if sorted(params.classes) != motions:
         raise BomiError(f"{params.source}: classes {sorted(params.classes)} do not match profile "
                         f"{profile.name}'s motion classes {motions}")
-
-
-def _range(table: dict, key: str, where: str, low: float, high: float) -> tuple[float, float]:
-    value = table[key]
-    if (not isinstance(value, list) or len(value) != 2 or not all(isinstance(v, (int, float)) for v in value)
-            or not low <= value[0] <= value[1] <= high):
-        raise ValueError(f"{where}: '{key}' must be [least, most] within [{low:g}, {high:g}]")
-    return float(value[0]), float(value[1])
-
-
-def _parse_evoked(table: Any, labels: set[int]) -> EvokedSpasm:
-    table = check_table(table, "[evoked_spasm]", _EVOKED_KEYS, _EVOKED_KEYS)
-    classes = table["classes"]
-    if not isinstance(classes, list) or not classes or not all(isinstance(c, int) and c in labels for c in classes):
-        raise ValueError(f"[evoked_spasm]: 'classes' must list motion classes of the participant ({sorted(labels)})")
-    return EvokedSpasm(tuple(classes), number(table, "probability", "[evoked_spasm]", 0.0, 1.0),
-                       _range(table, "duration_s", "[evoked_spasm]", DT, 10.0),
-                       _range(table, "undo_share", "[evoked_spasm]", 0.0, 2.0))
