@@ -168,9 +168,12 @@ class Pass:
     def protocol(self) -> Protocol:
         """Each run from its first row to the next run's first row (the last: to its last row, and one period)."""
         starts = np.r_[[self.time[b.start] for b in self.blocks], self.time[-1] + 1.0 / SAMPLE_RATE_HZ]
-        return Protocol(labels=tuple(b.label for b in self.blocks),
-                        durations_s=tuple(round(float(d), 3) for d in np.diff(starts)),
-                        holds_only=not self.continuous, source=Path(self.source).name)
+        try:
+            return Protocol(labels=tuple(b.label for b in self.blocks),
+                            durations_s=tuple(round(float(d), 3) for d in np.diff(starts)),
+                            holds_only=not self.continuous, source=Path(self.source).name)
+        except ValueError as exc:   # a run over an hour long: no protocol a twin can replay
+            raise BomiError(f"{self.source}: its protocol: {exc}") from None
 
 
 def read_pass(rec: Recording, day: int, profile: Profile) -> Pass:
