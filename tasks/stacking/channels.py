@@ -342,19 +342,18 @@ class BomiChannel:
         first = 256 * (int(np.floor(max(self._asked_until, self.clock_offset + t) / DT)) // 256 + 1)
         cue = first * DT + WARMUP_S
         vp.set_intent(NEUTRAL_LABEL, 0.0, self.clock_offset + t)
-        holds = [(cue, cue + neutral_s, NEUTRAL_LABEL)]
+        cues = [(cue, NEUTRAL_LABEL)]
         cue += neutral_s
         for label, amplitude in calibration_order(params, self.profile, repetitions=1):
             for run_label, run_amplitude, duration in ((label, amplitude, hold_s), (NEUTRAL_LABEL, 0.0, neutral_s)):
                 vp.pass_time(cue)
-                reached = vp.set_intent(run_label, run_amplitude, cue)
-                begin, end = cue + settle, cue + settle + duration
-                holds.append((min(max(begin, reached or begin), end), end, run_label))
-                cue = end
+                vp.set_intent(run_label, run_amplitude, cue)
+                cues.append((cue, run_label))
+                cue += settle + duration
         delivery = vp.deliveries(cue)
         self.receiver.take(delivery)
         self._asked_until = cue
-        self._recalibration = Recalibration(cue, first, tuple(holds), delivery)
+        self._recalibration = Recalibration(cue, first, tuple(cues), delivery)
 
     @property
     def recalibrating(self) -> bool:
@@ -482,19 +481,20 @@ class Recalibration:
 
     end: float
     first: int  # the recording's first sample (the first of a packet counter's cycle)
-    holds: tuple[tuple[float, float, int], ...]  # (begin, end, class) of each posture held
+    cues: tuple[tuple[float, int], ...]  # (time, class) of each cue shown
     delivery: Delivery  # every frame the session's samples sent, by the session's end
 
     def recording(self, profile: Profile) -> Recording:
-        """The held postures, as ``bomi record`` records them from the first sample on, labelled with their class."""
+        """The session as ``bomi record`` records it from its first cue on: every row, labelled with the
+        cue on screen (the moves kept, as for the task's first calibration: ``calibrated_model``)."""
         mine = self.delivery.sample_index >= self.first
         stream = b"".join(frame for frame, keep in zip(self.delivery.frames, mine) if keep)
         full, index = record_stream(stream, profile, "recalibration")
         time = (index + self.first) * DT
-        labels = np.full(len(time), -1)
-        for begin, end, label in self.holds:
-            labels[(time >= begin - 1e-9) & (time < end)] = label
-        keep = labels >= 0
+        starts, classes = np.array(self.cues).T
+        latest = np.searchsorted(starts - 1e-9, time, side="right") - 1
+        keep = (latest >= 0) & (time < self.end)
+        labels = np.where(latest >= 0, classes.astype(int)[np.maximum(latest, 0)], -1)
         nodes = {i: NodeData(d.acc[keep], d.gyro[keep], d.mag[keep], d.angles[keep]) for i, d in full.nodes.items()}
         return Recording(nodes=nodes, labels=labels[keep], time=time[keep], source=full.source)
 
@@ -523,7 +523,9 @@ def calibrated_channel(participant: str | ParticipantParams, seed: int, post: Po
 
 def calibrated_model(params: ParticipantParams, profile: Profile, seed: int, post: PostProcessing | None = None):
     """The participant performs the calibration protocol; its base-station stream is recorded as
-    ``bomi record`` records it and the LDA trained with the ``bomi train`` code."""
+    ``bomi record`` records it (every row after the warm-up, each labelled with the cue on screen: the
+    moves kept) and the LDA trained with the ``bomi train`` code (the rows before each measured
+    movement onset read as the posture still held, the amplitude range from the holds)."""
     session = calibration_session(params, profile, seed, order=calibration_order(params, profile))
-    return train([session_recording(session, profile)], profile, post=post)
+    return train([session_recording(session, profile, holds_only=False)], profile, post=post)
 
