@@ -24,12 +24,13 @@ def test_the_paper_real_time_accuracy_stands_beside_our_share_of_relevant_output
     header, _, line = terminal_comparison(ROWS).splitlines()
     cells = line.split()
     columns = header.split()
-    # participant assist BoMI/joy time paper relevant paper err. run ms paper acc. all acc. exc.
-    assert cells == ["P1", "none", "2.00", "2.38", "98.1", "%", "99.2", "%", "2000", "290", "53.0", "%", "71.0", "%"]
-    assert columns[columns.index("relevant") + 1] == "paper"
+    # participant assist BoMI/joy time paper relevant paper irr. run ms paper acc. all acc. exc.
+    assert cells == ["P1", "none", "2.00", "2.38", "98.1", "%", "99.2", "%", "400", "290", "53.0", "%", "71.0", "%"]
+    assert columns[columns.index("relevant") + 1] == "paper" and columns[columns.index("run") + 2] == "paper"
     head, _, row = (line.split("|")[1:-1] for line in markdown_comparison(ROWS).splitlines())
     assert head[5].strip() == "relevant outputs" and head[6].strip().startswith("paper real-time accuracy")
     assert (row[5].strip(), row[6].strip()) == ("98.1 %", "99.2 %")
+    assert head[7].strip() == "longest irrelevant run (ms)" and (row[7].strip(), row[8].strip()) == ("400", "290")
 
 
 @pytest.mark.parametrize("low, high, expected", [(70.0, 106.0, ["70", "80", "90", "100"]),

@@ -125,7 +125,7 @@ def comparison(rows: list[dict]) -> list[dict]:
                        ("relevant_share", "accuracy_all_decisions", "accuracy_excused_transitions",
                         "irrelevant_longest_run_ms", "longest_error_run_ms")},
                     "paper_realtime_accuracy": paper.TASK["realtime_accuracy"],
-                    "paper_longest_error_run_ms": paper.TASK["longest_error_run_ms"]})
+                    "paper_longest_irrelevant_run_ms": paper.TASK["longest_irrelevant_run_ms"]})
     return out
 
 
