@@ -191,6 +191,8 @@ class LivePerson:
                 continue
             angles = self.fusion[node].update(frame.acc, frame.gyro, frame.mag)
             gate.fused(angles)
+            if self.recalibration is not None:
+                self.recalibration.fused(frame, angles)
             if not self.streaming and self.gate.settled:
                 self._start_streaming()
             if self.streaming and (made := self.chain.push_angles(node, angles, frame.gyro)) is not None:
@@ -239,7 +241,7 @@ class LivePerson:
         recalibrated = None
         if self.recalibration is not None:   # the protocol's motions are no commands
             acted = []
-            hold, recalibrated = self._recalibrating(now, frames, hold)
+            hold, recalibrated = self._recalibrating(now, hold)
         rezero = self._long_press(acted, hold is not None, now)
         if self.recalibration is not None and hold is None:   # asked for on this tick
             hold = self.recalibration.hold_text(now)
@@ -282,7 +284,7 @@ class LivePerson:
         self.rezeros += 1
         return True
 
-    def _recalibrating(self, now: float, frames: Sequence[ImuFrame], hold: str | None) -> tuple[str | None, str | None]:
+    def _recalibrating(self, now: float, hold: str | None) -> tuple[str | None, str | None]:
         """A tick of the recalibration under way: (what holds the arm, what came of it once it ended). A
         stream the loop cannot trust ends it at once, the old model kept; at the protocol's end the
         retrained chain takes the old one's place (its neutral logged as a new neutral)."""
@@ -290,7 +292,7 @@ class LivePerson:
         if hold is not None:
             self.recalibration = None
             return hold, f"given up: {hold}"
-        recalibration.take(now, frames)
+        recalibration.take(now)
         if not recalibration.over(now):
             return recalibration.hold_text(now), None
         self.recalibration = None

@@ -5,10 +5,9 @@ Asked by the person (``bomi.gate.LongPressGesture``): a button class held for th
 ``recalibrate_hold_s`` (8 s), then rest. From that tick the protocol of ``bomi record`` runs once
 (``bomi.protocol.calibration_schedule``, one repetition: neutral, then every motion class held
 ``HOLD_S`` with ``NEUTRAL_S`` of neutral after it), its cue shown as what holds the arm. The rows are
-recorded as ``bomi record`` records them (``RowAssembler`` pairs the nodes' frames, ``FusedRows``
-fuses each frame once from a filter of its own started at the protocol's first frame, after a
-warm-up of ``WARMUP_S`` in the first neutral cue; each row labelled by the cue on screen when its
-sample arrived: ``bomi.fusion.sample_times``). Once the last cue ends the model is trained with the
+recorded as ``bomi record`` records them (``RowAssembler`` pairs the nodes' frames, each frame's
+angles those the live loop's own settled filters gave it; each row labelled by the cue on screen when
+its sample arrived: ``bomi.fusion.sample_times``). Once the last cue ends the model is trained with the
 ``bomi train`` code (``bomi.chain.train``: the current model's features and post-processing, the
 moves told from the holds as for any continuous recording) and takes the chain's place, with the
 recording's neutral. A recording that cannot be trained on (a class never held, a dead sensor)
@@ -27,18 +26,29 @@ import numpy as np
 from bomi.chain import OnlineChain, recording_neutral, train
 from bomi.classifier import Model
 from bomi.errors import BomiError
-from bomi.frames import ImuFrame, RowAssembler
-from bomi.fusion import FusedRows, sample_times
+from bomi.frames import ImuFrame, RowAssembler, imu_index
+from bomi.fusion import sample_times
 from bomi.profiles import Profile
 from bomi.protocol import Cue, calibration_schedule
 from bomi.recording import NodeData, NodeSample, Recording
 
 HOLD_S = 5.0      # each motion class held (bomi record's default)
 NEUTRAL_S = 5.0   # neutral after each (bomi record's default)
-# The recording's own filters start from their zero state at the protocol's first frame; its rows
-# count once they have run this long (yaw's time constant is 1.6 s: three of them). The first
-# neutral cue is longer than this and the neutral samples, so the recording still starts at rest.
-WARMUP_S = 4.8
+
+
+@dataclass(eq=False)
+class FusedFrame:
+    """A frame and the angles the live loop's filter gave it (``RowAssembler`` pairs them by node)."""
+
+    frame: ImuFrame
+    angles: tuple[float, float, float]
+
+    @property
+    def node_id(self) -> int:
+        return self.frame.node_id
+
+    def sample(self) -> NodeSample:
+        return NodeSample(self.frame.acc, self.frame.gyro, self.frame.mag, self.angles)
 
 
 @dataclass
@@ -50,13 +60,12 @@ class Recalibration:
     start: float
     cues: tuple[Cue, ...]
     _assembler: RowAssembler = field(init=False, repr=False)
-    _rows: FusedRows = field(init=False, repr=False)
+    _fused: list[FusedFrame] = field(default_factory=list, repr=False)   # this tick's, not yet in rows
     _times: list[float] = field(default_factory=list, repr=False)
     _samples: list[dict[int, NodeSample]] = field(default_factory=list, repr=False)
 
     def __post_init__(self) -> None:
-        self._rows = FusedRows({node.index: node.calibration for node in self.profile.nodes})
-        self._assembler = RowAssembler(self._rows.node_ids)
+        self._assembler = RowAssembler(tuple(node.node_id for node in self.profile.nodes))
 
     @classmethod
     def begin(cls, profile: Profile, model: Model, start: float) -> Recalibration:
@@ -80,19 +89,24 @@ class Recalibration:
         cue = self.cue(now)
         return f"recalibrating ({cue.prompt}, {max(0.0, self.start + cue.end_s - now):.0f} s left)"
 
-    def take(self, now: float, frames: Sequence[ImuFrame]) -> None:
-        """One tick's frames (arrival order): its complete rows, each fused and timed."""
-        rows = [row for row in map(self._assembler.push, frames) if row is not None]
+    def fused(self, frame: ImuFrame, angles: Sequence[float]) -> None:
+        """A frame the live loop fused (arrival order), with its angles."""
+        self._fused.append(FusedFrame(frame, tuple(float(a) for a in angles)))
+
+    def take(self, now: float) -> None:
+        """The tick's fused frames at ``now``: their complete rows, each timed."""
+        rows = [row for row in map(self._assembler.push, self._fused) if row is not None]
+        self._fused.clear()
         previous = self._times[-1] if self._times else now
         for t, row in zip(sample_times(now, len(rows), previous), rows):
             self._times.append(t)
-            self._samples.append(self._rows.samples(row))
+            self._samples.append({imu_index(node_id): fused.sample() for node_id, fused in row.items()})
 
     def recording(self) -> Recording:
-        """The protocol's rows after the warm-up, each labelled with the cue of its time (``bomi record``'s
-        layout: the moves kept, neutral between two motions)."""
+        """The protocol's rows, each labelled with the cue of its time (``bomi record``'s layout: the moves
+        kept, neutral between two motions)."""
         time = np.asarray(self._times) - self.start
-        keep = (time >= WARMUP_S) & (time < self.cues[-1].end_s)
+        keep = (time >= 0.0) & (time < self.cues[-1].end_s)
         starts = np.array([cue.start_s for cue in self.cues])
         labels = np.array([cue.label for cue in self.cues])[np.searchsorted(starts, time[keep], side="right") - 1]
         rows = [sample for sample, kept in zip(self._samples, keep) if kept]
