@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
           f"{summary.dropped} dropped by the sanitizer, {summary.skipped} skipped as backlog, watchdog stopped "
           f"the arm {summary.watchdog_trips} time(s) ({summary.stale_ticks} ticks), safety-key standby "
           f"{summary.standby_ticks} ticks, held by the gate {sum(summary.holds.values())} ticks{_holds(summary.holds)}, "
+          f"{summary.rezeros} re-zero(s) and {summary.recalibrations} recalibration(s) at the person's long press, "
           f"{summary.overruns} control period(s) missed, {sim.automatic_switches} automatic mode switch(es); "
           f"{source.parser.summary()}")
     if args.video is not None:
