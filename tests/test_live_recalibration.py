@@ -90,9 +90,13 @@ def test_a_long_press_then_rest_recalibrates_with_the_arm_at_rest_and_the_new_mo
     assert any(tick.hold.startswith("recalibrating (HOLD c1 F") for tick in during)     # the cues shown
     done = [tick for tick in ticks if tick.recalibrated is not None]
     assert len(done) == 1 and done[0].recalibrated == "retrained" and abs(done[0].t - end) < TICK
+    # the recording's neutral: the same rest as the first neutral, taken 1.6 s after the gate opened while yaw
+    # still settled (its filter's 1.6 s time constant: up to 5 deg off the 30 deg heading then); a neutral
+    # from a filter of its own started at the protocol (yaw from 0) or running into the first motion (F:
+    # head pitch +29 deg) would be off by 10 deg or more
     first = next(tick.neutral for tick in ticks if tick.neutral is not None)
-    assert done[0].neutral is not None and done[0].neutral.keys() == first.keys()   # the recording's neutral:
-    assert all(np.abs(np.subtract(done[0].neutral[n], first[n])).max() < 1.5 for n in first)   # the same rest
+    assert done[0].neutral is not None and done[0].neutral.keys() == first.keys()
+    assert all(np.abs(np.subtract(done[0].neutral[n], first[n])).max() < 6.0 for n in first)
     assert loop.summary.recalibrations == 1 and loop.summary.rezeros == 0   # the protocol's B1 is no re-zero
     assert loop.chain is not first_chain and loop.chain.model.training_runs != first_chain.model.training_runs
     record = done[0].record()

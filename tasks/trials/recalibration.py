@@ -26,7 +26,7 @@ import numpy as np
 from bomi.chain import OnlineChain, recording_neutral, train
 from bomi.classifier import Model
 from bomi.errors import BomiError
-from bomi.frames import ImuFrame, RowAssembler, imu_index
+from bomi.frames import ImuFrame, RowAssembler
 from bomi.fusion import sample_times
 from bomi.profiles import Profile
 from bomi.protocol import Cue, calibration_schedule
@@ -59,13 +59,16 @@ class Recalibration:
     model: Model            # the model it replaces (its features and post-processing are kept)
     start: float
     cues: tuple[Cue, ...]
+    _index: dict[int, int] = field(init=False, repr=False)   # base-station node id -> index, the model's nodes
     _assembler: RowAssembler = field(init=False, repr=False)
     _fused: list[FusedFrame] = field(default_factory=list, repr=False)   # this tick's, not yet in rows
     _times: list[float] = field(default_factory=list, repr=False)
     _samples: list[dict[int, NodeSample]] = field(default_factory=list, repr=False)
 
-    def __post_init__(self) -> None:
-        self._assembler = RowAssembler(tuple(node.node_id for node in self.profile.nodes))
+    def __post_init__(self) -> None:   # the model's nodes: those the live loop fuses
+        ids = {node.index: node.node_id for node in self.profile.nodes}
+        self._index = {ids[index]: index for index in self.model.spec.nodes}
+        self._assembler = RowAssembler(tuple(self._index))
 
     @classmethod
     def begin(cls, profile: Profile, model: Model, start: float) -> Recalibration:
@@ -100,7 +103,7 @@ class Recalibration:
         previous = self._times[-1] if self._times else now
         for t, row in zip(sample_times(now, len(rows), previous), rows):
             self._times.append(t)
-            self._samples.append({imu_index(node_id): fused.sample() for node_id, fused in row.items()})
+            self._samples.append({self._index[node_id]: fused.sample() for node_id, fused in row.items()})
 
     def recording(self) -> Recording:
         """The protocol's rows, each labelled with the cue of its time (``bomi record``'s layout: the moves
@@ -112,7 +115,7 @@ class Recalibration:
         rows = [sample for sample, kept in zip(self._samples, keep) if kept]
         nodes = {index: NodeData(*(np.array([getattr(row[index], name) for row in rows], dtype=float).reshape(-1, 3)
                                    for name in ("acc", "gyro", "mag", "angles")))
-                 for index in self.profile.node_indices}
+                 for index in self.model.spec.nodes}
         return Recording(nodes=nodes, labels=labels, time=time[keep], source=f"recalibration at {self.start:.2f} s")
 
     def retrained(self) -> OnlineChain:
@@ -120,7 +123,7 @@ class Recalibration:
         model could be trained on it)."""
         recording = self.recording()
         if not len(recording):
-            raise BomiError(f"{recording.source}: no complete row of nodes {list(self.profile.node_indices)}")
+            raise BomiError(f"{recording.source}: no complete row of nodes {list(self.model.spec.nodes)}")
         model = train([recording], self.profile, spec=self.model.spec, post=self.model.post)
         chain = OnlineChain(model, self.profile)
         nodes = model.spec.nodes
