@@ -7,6 +7,8 @@ Map (data flows down):
   environment at its control rate, with the safety path (any input it cannot trust leaves the arm at rest).
 - ``person``: the live person as an action source (stream -> gate -> chain -> sanitizer -> stick:
   ``LivePerson``) and the safety hold around it (``SafetyHold``).
+- ``recalibration``: the calibration protocol performed during a live session at the person's long
+  press, and the classifier retrained on it.
 - ``displays``: where a live run is shown and logged (viewer, film process, status line, tick log).
 - ``session``: the runner. ``TrialArm`` runs N trials on the task's environment
   (``tasks.stacking.env``: wait, countdown, the timed trial, next; reset per trial); ``run_bomi`` drives it from the live loop (``tasks.trials.live.run_live``),
