@@ -17,8 +17,9 @@ benchmarks/results/N.{md,json,png}, N_phases.png, N_best.png.  Development seeds
 held-out range (a fresh one of 10000-19999; 1000-4999 are spent) only once the model is frozen.
 
 ``check`` (issue 53) runs each participant:operator cell with the human model on, one episode at a time,
-and prints one JSON row per cell: successes, mean time, the share of relevant decisions (not
-``metrics.irrelevant``), the longest irrelevant run, the irrelevant decisions by context (``tasks.stacking.budget``).
+and prints one JSON row per cell: successes, mean time and its budget over the successes (seconds per
+``tasks.stacking.budget.Part``), the share of relevant decisions (not ``metrics.irrelevant``), the longest
+irrelevant run, the irrelevant decisions by context (``tasks.stacking.budget``).
 
 ``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
 benchmarks/results/human_sensitivity.{md,json}.
@@ -47,6 +48,7 @@ from tasks.stacking import budget  # noqa: E402
 from tasks.stacking.channels import participant_controls
 from tasks.stacking.summary import summarize
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
+from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator  # noqa: E402
 from tasks.stacking.timeline import timeline_figure  # noqa: E402
 from tasks.statistics import mean_interval, wilson_interval
 
@@ -291,12 +293,15 @@ def seed_range(text: str) -> range:
 
 
 def cell_row(participant: str, operator: str, seeds: range, recovery: str | None = None) -> dict:
-    records, contexts, decisions = [], Counter(), 0
+    records, contexts, decisions, budgets = [], Counter(), 0, []
     overrides = HUMAN_ON + (((RECOVERY_KEY, recovery),) if recovery else ())
+    still = load_operator(DEFAULT_OPERATOR_FILE).still_speed
     for seed in seeds:
         log = run_job(EpisodeJob(operator, participant, seed, overrides=overrides))
         record = summarize(log)
         records.append(record)
+        if record["success"]:
+            budgets.append(budget.time_budget(log, still))
         if operator == "bomi":
             contexts.update({c.value: n for c, n in budget.irrelevant_by_context(log).items()})
             decisions += len(log.decisions.t)
@@ -305,7 +310,9 @@ def cell_row(participant: str, operator: str, seeds: range, recovery: str | None
               file=sys.stderr, flush=True)
     times = [r["completion_time"] for r in records if r["success"]]
     row = {"cell": f"{participant} {operator}", "recovery": recovery or "none", "seeds": f"{seeds.start}-{seeds.stop - 1}",
-           "success": f"{len(times)}/{len(records)}", "mean_time_s": round(float(np.mean(times)), 1) if times else None}
+           "success": f"{len(times)}/{len(records)}", "mean_time_s": round(float(np.mean(times)), 1) if times else None,
+           "time_budget_s": {part.value: round(float(np.mean([b[part] for b in budgets])), 1) for part in budget.Part}
+           if budgets else None}
     if operator == "bomi":
         wild = sum(r["irrelevant_decisions"] for r in records)
         row.update({"relevant_pct": round(100.0 * (1.0 - wild / decisions), 2),
