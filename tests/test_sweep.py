@@ -183,9 +183,27 @@ time_limit = [1.0]
 """
 
 
-def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp_path):
-    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
+@pytest.fixture(scope="module")
+def finished_sweep(tmp_path_factory):
+    """(grid, directory) of a finished sweep of ONE_SECOND % 2 (`bomi sweep` in its own process), made once
+    for the module: the first step of the tests below, each of which copies the directory before going on
+    (they share an xdist group, so that one worker makes it once)."""
+    where = tmp_path_factory.mktemp("finished_sweep")
+    grid, out = grid_file(where, ONE_SECOND % 2), where / "out"
     sweep(grid, out, check=0)
+    assert len(keys_in(out)) == 2
+    return grid, out
+
+
+def finished_copy(finished_sweep, tmp_path) -> tuple[Path, Path]:
+    """A grid of ONE_SECOND % 2 in ``tmp_path`` and a copy of the finished sweep's directory beside it:
+    as after `bomi sweep grid.toml --out out` (the same command, the same files)."""
+    return grid_file(tmp_path, ONE_SECOND % 2), Path(shutil.copytree(finished_sweep[1], tmp_path / "out"))
+
+
+@pytest.mark.xdist_group("finished-sweep")
+def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp_path, finished_sweep):
+    grid, out = finished_copy(finished_sweep, tmp_path)
     first = keys_in(out)
     (out / "summary.md").write_text("stale")
     done = sweep(grid, out, check=0)
@@ -194,9 +212,9 @@ def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp
     assert not [p for p in out.iterdir() if TEMP_MARK in p.name]
 
 
-def test_more_seeds_run_only_the_new_episodes_and_the_summaries_agree(tmp_path):
-    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
-    sweep(grid, out, check=0)
+@pytest.mark.xdist_group("finished-sweep")
+def test_more_seeds_run_only_the_new_episodes_and_the_summaries_agree(tmp_path, finished_sweep):
+    grid, out = finished_copy(finished_sweep, tmp_path)
     first = keys_in(out)
     grid.write_text(ONE_SECOND % 3)  # the grid file's own advice: add seeds and rerun the same command
     sweep(grid, out, check=0)
@@ -231,19 +249,10 @@ def test_two_sweeps_started_together_run_each_episode_once(tmp_path):
     assert len(keys) == len(set(keys)) == 3
 
 
-@pytest.fixture(scope="module")
-def one_episode_sweep(tmp_path_factory):
-    """(grid, directory) of a finished one-episode sweep, made once for the module (copy before changing)."""
-    where = tmp_path_factory.mktemp("one_episode_sweep")
-    grid, out = grid_file(where, ONE_SECOND % 1), where / "out"
-    sweep(grid, out, check=0)
-    return grid, out
-
-
+@pytest.mark.xdist_group("finished-sweep")
 @pytest.mark.parametrize("planted", ["summary.md", RESULTS_FILE, "completion_time.png", LOCK_FILE])
-def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, one_episode_sweep, planted):
-    grid, finished = one_episode_sweep
-    out = Path(shutil.copytree(finished, tmp_path / "out"))
+def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, finished_sweep, planted):
+    grid, out = finished_copy(finished_sweep, tmp_path)
     victim = tmp_path / "precious.txt"
     victim.write_text("keep me")
     (out / planted).unlink()
@@ -323,16 +332,16 @@ def test_no_worker_outlives_the_driver_whatever_ends_it(tmp_path, how):
     assert lines.endswith("\n") and all(json.loads(line)["key"] for line in lines.splitlines())
 
 
-def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path):
+@pytest.mark.xdist_group("finished-sweep")
+def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path, finished_sweep):
     grid, out = grid_file(tmp_path, ONE_SECOND % 4), tmp_path / "out"
-    line = None
 
     def small_files():  # in the child: files may not grow beyond 1.5 records (as a disk that fills up)
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    sweep(grid_file(tmp_path, ONE_SECOND % 1, "one.toml"), tmp_path / "probe", check=0)
-    line = len((tmp_path / "probe" / RESULTS_FILE).read_bytes())
+    # one record's line (seed 0 of this grid's time limit: the finished sweep's first, as this grid's first)
+    line = len((finished_sweep[1] / RESULTS_FILE).read_bytes().splitlines(keepends=True)[0])
     limit = int(1.5 * line)
     done = sweep(grid, out, preexec_fn=small_files)
     assert done.returncode == 2, done.stderr
