@@ -185,12 +185,14 @@ time_limit = [1.0]
 
 @pytest.fixture(scope="module")
 def finished_sweep(tmp_path_factory):
-    """(grid, directory) of a finished sweep of ONE_SECOND % 2 (`bomi sweep` in its own process), made once
-    for the module: the first step of the tests below, each of which copies the directory before going on
-    (they share an xdist group, so that one worker makes it once)."""
+    """(grid, directory) of a finished sweep of ONE_SECOND % 2, made once for the module: the first step of
+    the tests below, each of which copies the directory and goes on with `bomi sweep` in its own process
+    (they share an xdist group, so that one worker makes it once). The first step is the same command
+    through ``main`` in this process: the directory it leaves is what the tests start from, not the
+    process that made it."""
     where = tmp_path_factory.mktemp("finished_sweep")
     grid, out = grid_file(where, ONE_SECOND % 2), where / "out"
-    sweep(grid, out, check=0)
+    assert main(["sweep", str(grid), "--out", str(out), "--jobs", "1"]) == 0
     assert len(keys_in(out)) == 2
     return grid, out
 
@@ -360,7 +362,7 @@ def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path, finishe
         in errors[0], done.stderr
     assert "Traceback" not in done.stderr
     assert len(keys_in(out)) == 1 and (out / RESULTS_FILE).read_text().endswith("\n")
-    sweep(grid, out, check=0)  # room again: the rest runs
+    assert main(["sweep", str(grid), "--out", str(out), "--jobs", "1"]) == 0  # room again: the rest runs
     assert len(keys_in(out)) == 4
 
 
