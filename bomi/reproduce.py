@@ -13,7 +13,7 @@ import numpy as np
 from tqdm import tqdm
 
 from bomi import paper
-from bomi.chain import Evaluation, Selection, evaluate, select_settings, train
+from bomi.chain import Evaluation, Selection, evaluate, evaluate_each, select_settings, select_settings_each, train
 from bomi.classifier import PostProcessing
 from bomi.features import FEATURE_KINDS
 from bomi.derived import DERIVED_AMPLITUDE_SCALES
@@ -78,28 +78,33 @@ def day_pair_variants(profile: Profile) -> dict[str, Profile]:
 
 
 def day_pairs(recordings: dict[int, Recording], profile: Profile) -> list[DayPairs]:
-    """Every ordered pair of days (20) for every variant; settings only ever chosen on the training day."""
-    out = []
+    """Every ordered pair of days (20) for every variant; settings only ever chosen on the training day.
+    A day's models are trained together (the variants that choose their settings share the candidates
+    they have in common: ``select_settings_each``) and each day is tested once for all the models
+    trained on the others (``evaluate_each``): the same models and scores, each computed once."""
     variants = day_pair_variants(profile)
+    selecting = [name for name, variant in variants.items() if variant.shrinkage == SELECT or variant.select_rejection]
+    models, chosen = {}, {name: {} for name in variants}
     progress = tqdm(total=len(variants) * len(DAYS), desc="day-pair models", unit="model")
-    for name, variant in variants.items():
-        accuracy, chosen = {}, {}
-        for train_day in DAYS:
-            selection = None
-            if variant.shrinkage == SELECT or variant.select_rejection:
-                selection = select_settings([recordings[train_day]], variant, variant.spec)
-            model = train([recordings[train_day]], variant, selection=selection)
+    for train_day in DAYS:
+        selections = dict(zip(selecting, select_settings_each([recordings[train_day]],
+                                                              [variants[name] for name in selecting], profile.spec)))
+        for name, variant in variants.items():
+            selection = selections.get(name)
+            model = models[name, train_day] = train([recordings[train_day]], variant, selection=selection)
             rejection = "off" if model.post.rejection_threshold is None else model.post.rejection_threshold
-            chosen[train_day] = f"shrinkage {model.shrinkage}, rejection {rejection}" + (
+            chosen[name][train_day] = f"shrinkage {model.shrinkage}, rejection {rejection}" + (
                 f" ({selection.reason})" if selection else "")
-            for test_day in DAYS:
-                if test_day != train_day:
-                    accuracy[(train_day, test_day)] = evaluate(model, recordings[test_day],
-                                                               variant.neutral_samples).accuracy
             progress.update()
-        out.append(DayPairs(name, accuracy, chosen))
     progress.close()
-    return out
+    scored = {}
+    for test_day in DAYS:
+        trained = [key for key in models if key[1] != test_day]
+        for (name, train_day), evaluation in zip(trained, evaluate_each([models[key] for key in trained],
+                                                                        recordings[test_day], profile.neutral_samples)):
+            scored[name, train_day, test_day] = evaluation.accuracy
+    return [DayPairs(name, {(a, b): scored[name, a, b] for a in DAYS for b in DAYS if a != b}, chosen[name])
+            for name in variants]
 
 
 def reproduction_record(rows: list[FeatureReproduction], pairs: list[DayPairs]) -> dict:

@@ -18,10 +18,13 @@ from bomi.profiles import load_profile
 from bomi.recording import read_recording
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``real_time`` (a stream paced on the wall clock: an emulator into a pty or socket,
     a window) run one after another on one worker of pytest-xdist (``--dist loadgroup``): two of them
-    side by side would compete for the CPU their timing assumes, while the rest spread over the others."""
+    side by side would compete for the CPU their timing assumes, while the rest spread over the others.
+    First among the hooks: pytest-xdist's worker reads the xdist_group marks in its own hook of this name
+    (turning them into the "@group" its scheduler goes by), which would otherwise run before this one."""
     for item in items:
         if item.get_closest_marker("real_time"):
             item.add_marker(pytest.mark.xdist_group("real-time"))

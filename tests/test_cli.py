@@ -122,9 +122,12 @@ def _helps(commands, preload: bool) -> dict[str, tuple[str, list[str]]]:
 
 @pytest.fixture(scope="module")
 def real_helps():
+    """Every command's real help (every command module imported: ~3 s of CPU), made once: its tests
+    share an xdist group, so that one worker makes it rather than each that draws one of them."""
     return _helps(COMMANDS, preload=True)
 
 
+@pytest.mark.xdist_group("cli-helps")
 @pytest.mark.parametrize("command", COMMANDS)
 def test_a_commands_help_loads_no_heavy_library_and_says_what_the_real_one_says(command, real_helps):
     (fast, heavy), = _helps([command], preload=False).values()

@@ -27,11 +27,17 @@ def in_order(engine, jobs) -> list[dict]:
     return [outcome(results[i]) for i in range(len(jobs))]
 
 
+# The tests that start a Ray (here, tests/test_ray_private.py and test_sweep.py's SIGTERM on a Ray sweep)
+# share an xdist group: one Ray at a time on this 2-core machine, and each module fixture made once.
+RAY = pytest.mark.xdist_group("ray")
+
+
 @pytest.fixture(scope="module")
 def pool_records():
     return in_order(ProcessPool(2), JOBS)
 
 
+@RAY
 def test_records_do_not_depend_on_the_order_or_the_worker(pool_records):
     # one worker runs them all in the opposite order: whatever an episode leaves behind in the
     # process (caches, global random state) would show here
@@ -50,6 +56,7 @@ def ray_cluster():
     ray.shutdown()
 
 
+@RAY
 def test_ray_gives_the_process_pool_s_records_field_by_field(pool_records):
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
     results = dict(run_private(episode_record, JOBS, 2))  # the local Ray `--engine ray` starts
@@ -61,6 +68,7 @@ def test_ray_gives_the_process_pool_s_records_field_by_field(pool_records):
             assert ours[field] == theirs[field], f"{job}: {field}"
 
 
+@RAY
 def test_ray_retries_a_failed_episode_once_and_names_it(ray_cluster, tmp_path, capsys):
     marker = tmp_path / "crashed-once"
 
@@ -76,6 +84,7 @@ def test_ray_retries_a_failed_episode_once_and_names_it(ray_cluster, tmp_path, c
     assert err.count("retrying once") == 1 and "failed on a Ray worker" in err
 
 
+@RAY
 def test_ray_stops_on_an_episode_that_fails_twice(ray_cluster):
     def always_fails(x):
         raise ValueError(f"no good: {x}")

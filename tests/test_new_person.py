@@ -13,8 +13,8 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
 from bomi.chain import (CONSISTENCY, MIN_CLASS_WINDOWS, Candidate, HoldScores, choose_candidate, choose_threshold, N_FOLDS,
-                        REQUIRED_GAIN, MotionCopies, choose_option, cross_validate, evaluate, hold_folds, prepare,
-                        select_settings, train, training_windows, window_features)
+                        REQUIRED_GAIN, MotionCopies, choose_option, cross_validate, evaluate, evaluate_each, hold_folds,
+                        prepare, select_settings, select_settings_each, train, training_windows, window_features)
 from bomi.classifier import PostProcessing, classify_windows, fit_pipeline
 from bomi.derived import derive_profile
 from bomi.errors import BomiError
@@ -159,6 +159,31 @@ def test_settings_rule_keeps_the_plain_setting_unless_an_extra_earns_it():
     chosen = select_settings([clean], derive_profile([clean]), derive_profile([clean]).spec)
     assert chosen.describe() == "plain" and chosen.plain_accuracy > 0.99
     assert {"plain", "shrinkage auto", "copies at 0.75, 0.5"} <= set(chosen.candidates)
+
+
+def test_settings_chosen_together_are_each_profiles_own_and_so_are_the_scores():
+    """select_settings_each (`bomi reproduce`'s per-person rule with and without the smaller copies: one
+    cross-validation of the candidates they share) gives each profile what select_settings gives it
+    alone, to the bit; evaluate_each (one preparation of the test recording) each model's evaluate; a
+    profile that cross-validates otherwise is refused."""
+    rec, other = noise_recording(1), noise_recording(2)
+    base = derive_profile([rec])
+    profiles = [replace(base, shrinkage=SELECT, amplitude_scales=()),
+                replace(base, shrinkage=SELECT, amplitude_scales=(0.75, 0.5), select_rejection=True)]
+    together = select_settings_each([rec], profiles, base.spec)
+    assert len(together[1].candidates) > len(together[0].candidates) >= 5
+    for profile, selection in zip(profiles, together):
+        alone = select_settings([rec], profile, profile.spec)
+        assert (selection.describe(), selection.candidates, selection.reason) == (alone.describe(), alone.candidates,
+                                                                                  alone.reason)
+        assert all(np.array_equal(a, b) for a, b in zip(selection.held_out, alone.held_out))
+    with pytest.raises(ValueError, match="cross-validate differently"):
+        select_settings_each([rec], [base, replace(base, neutral_samples=base.neutral_samples + 1)], base.spec)
+    models = [train([rec], profile, selection=selection) for profile, selection in zip(profiles, together)]
+    for model, each in zip(models, evaluate_each(models, other, base.neutral_samples)):
+        alone = evaluate(model, other, base.neutral_samples)
+        assert all(np.array_equal(getattr(each, name), getattr(alone, name))
+                   for name in ("truth", "predicted", "rejected", "holds"))
 
 
 def test_hold_folds_by_hand():

@@ -76,6 +76,7 @@ def descendants(pid: int) -> list[int]:
     return found
 
 
+@pytest.mark.xdist_group("ray")  # one Ray at a time (see tests/test_engine.py)
 def test_a_local_ray_sweep_listens_on_the_loopback_only(tmp_path):
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
     grid, out = tmp_path / "grid.toml", tmp_path / "out"

@@ -16,6 +16,9 @@ import pytest
 from tasks.cli import main
 
 
+SESSION = pytest.mark.xdist_group("replay-session")   # session_dir's tests: one worker makes it once
+
+
 @pytest.fixture(scope="module")
 def session_dir(p1_model_file, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("replay") / "session"
@@ -54,6 +57,7 @@ def copy_of(session: Path, tmp_path: Path) -> Path:
     return out
 
 
+@SESSION
 def test_a_bomi_trial_record_keeps_the_digests_of_its_model_and_profile(session_dir):
     bomi, joystick = records(session_dir)
     assert bomi["operator"] == "bomi" and joystick["operator"] == "joystick"
@@ -62,6 +66,7 @@ def test_a_bomi_trial_record_keeps_the_digests_of_its_model_and_profile(session_
     assert "model_sha256" not in joystick
 
 
+@SESSION
 def test_a_logged_trial_replays_to_the_same_decisions(session_dir, capsys):
     assert main(["replay", str(session_dir), "--trial", "1"]) == 0
     out = capsys.readouterr().out
@@ -71,6 +76,7 @@ def test_a_logged_trial_replays_to_the_same_decisions(session_dir, capsys):
     assert replayed == logged > 20
 
 
+@SESSION
 def test_another_days_model_is_refused_in_one_line(session_dir, other_day_model, tmp_path, capsys):
     out = copy_of(session_dir, tmp_path)
     logged = sha256(out / "model.json")
@@ -81,6 +87,7 @@ def test_another_days_model_is_refused_in_one_line(session_dir, other_day_model,
                    f"(sha256 {logged} logged, {sha256(other_day_model)} now)\n")
 
 
+@SESSION
 def test_an_edited_profile_is_refused_in_one_line(session_dir, tmp_path, capsys):
     out = copy_of(session_dir, tmp_path)
     with (out / "profile.toml").open("a") as f:
@@ -89,6 +96,7 @@ def test_an_edited_profile_is_refused_in_one_line(session_dir, tmp_path, capsys)
     assert "profile.toml: not the profile the trials were run with" in capsys.readouterr().err
 
 
+@SESSION
 def test_a_session_without_digests_is_judged_by_its_decisions(session_dir, other_day_model, tmp_path, capsys):
     """Records from before the digests: replay says the model cannot be checked; with the session's own
     model the decisions are the logged ones, with another day's they are not (and replay says so)."""
@@ -104,6 +112,7 @@ def test_a_session_without_digests_is_judged_by_its_decisions(session_dir, other
     assert "keeps no model hash" in other and "decisions:" in other and "NOT the same as logged" in other
 
 
+@SESSION
 def test_a_digest_that_is_not_one_is_one_line(session_dir, tmp_path, capsys):
     out = copy_of(session_dir, tmp_path)
     edited = records(out)

@@ -33,6 +33,7 @@ def test_bomi_reproduce_gives_the_papers_table_on_all_five_days(shared_data, tmp
         assert pairs["worst"] == min(pairs["accuracy"].values()) and sorted(pairs["settings"]) == ["1", "2", "3", "4", "5"]
     table = table_path.read_text()
     assert table.strip() == printed.strip()                            # what it printed is what it wrote
+    assert all(kind in table.splitlines()[2] for kind in ("FV1", "FV2", "FV3"))  # the header names every FV
     for day in DAYS[1:]:                                               # each later day's row, beside the paper's figure
         row = next(line for line in table.splitlines() if line.startswith(f"| {day} | "))
         assert row.split(" | ")[1] == f"{paper.DAY1_MODEL_PCT[day]:.2f}"

@@ -183,9 +183,29 @@ time_limit = [1.0]
 """
 
 
-def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp_path):
-    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
-    sweep(grid, out, check=0)
+@pytest.fixture(scope="module")
+def finished_sweep(tmp_path_factory):
+    """(grid, directory) of a finished sweep of ONE_SECOND % 2, made once for the module: the first step of
+    the tests below, each of which copies the directory and goes on with `bomi sweep` in its own process
+    (they share an xdist group, so that one worker makes it once). The first step is the same command
+    through ``main`` in this process: the directory it leaves is what the tests start from, not the
+    process that made it."""
+    where = tmp_path_factory.mktemp("finished_sweep")
+    grid, out = grid_file(where, ONE_SECOND % 2), where / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "--jobs", "1"]) == 0
+    assert len(keys_in(out)) == 2
+    return grid, out
+
+
+def finished_copy(finished_sweep, tmp_path) -> tuple[Path, Path]:
+    """A grid of ONE_SECOND % 2 in ``tmp_path`` and a copy of the finished sweep's directory beside it:
+    as after `bomi sweep grid.toml --out out` (the same command, the same files)."""
+    return grid_file(tmp_path, ONE_SECOND % 2), Path(shutil.copytree(finished_sweep[1], tmp_path / "out"))
+
+
+@pytest.mark.xdist_group("finished-sweep")
+def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp_path, finished_sweep):
+    grid, out = finished_copy(finished_sweep, tmp_path)
     first = keys_in(out)
     (out / "summary.md").write_text("stale")
     done = sweep(grid, out, check=0)
@@ -194,9 +214,9 @@ def test_the_same_command_again_reruns_nothing_and_regenerates_every_summary(tmp
     assert not [p for p in out.iterdir() if TEMP_MARK in p.name]
 
 
-def test_more_seeds_run_only_the_new_episodes_and_the_summaries_agree(tmp_path):
-    grid, out = grid_file(tmp_path, ONE_SECOND % 2), tmp_path / "out"
-    sweep(grid, out, check=0)
+@pytest.mark.xdist_group("finished-sweep")
+def test_more_seeds_run_only_the_new_episodes_and_the_summaries_agree(tmp_path, finished_sweep):
+    grid, out = finished_copy(finished_sweep, tmp_path)
     first = keys_in(out)
     grid.write_text(ONE_SECOND % 3)  # the grid file's own advice: add seeds and rerun the same command
     sweep(grid, out, check=0)
@@ -231,27 +251,27 @@ def test_two_sweeps_started_together_run_each_episode_once(tmp_path):
     assert len(keys) == len(set(keys)) == 3
 
 
-@pytest.fixture(scope="module")
-def one_episode_sweep(tmp_path_factory):
-    """(grid, directory) of a finished one-episode sweep, made once for the module (copy before changing)."""
-    where = tmp_path_factory.mktemp("one_episode_sweep")
-    grid, out = grid_file(where, ONE_SECOND % 1), where / "out"
-    sweep(grid, out, check=0)
-    return grid, out
-
-
-@pytest.mark.parametrize("planted", ["summary.md", RESULTS_FILE, "completion_time.png", LOCK_FILE])
-def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, one_episode_sweep, planted):
-    grid, finished = one_episode_sweep
-    out = Path(shutil.copytree(finished, tmp_path / "out"))
+@pytest.mark.xdist_group("finished-sweep")
+@pytest.mark.parametrize("planted, own_process", [("summary.md", True), (RESULTS_FILE, False),
+                                                  ("completion_time.png", False), (LOCK_FILE, False)])
+def test_a_symlink_planted_in_the_directory_is_refused_and_its_target_untouched(tmp_path, capsys, finished_sweep,
+                                                                                planted, own_process):
+    """`bomi sweep` refuses a directory with a link among its files before writing anything. One case
+    in its own process (its whole stderr is the one line); the others, which differ only in the file
+    planted, through the same ``main`` in this one (no interpreter and stack to start again)."""
+    grid, out = finished_copy(finished_sweep, tmp_path)
     victim = tmp_path / "precious.txt"
     victim.write_text("keep me")
     (out / planted).unlink()
     (out / planted).symlink_to(victim)
     before = {p.name: p.read_bytes() for p in out.iterdir() if not p.is_symlink()}
-    done = sweep(grid, out, check=2)
-    assert done.stderr.strip().startswith("bomi: error:") and "\n" not in done.stderr.strip()
-    assert planted in done.stderr and "symbolic link" in done.stderr
+    if own_process:
+        err = sweep(grid, out, check=2).stderr
+    else:
+        assert main(["sweep", str(grid), "--out", str(out), "--jobs", "1"]) == 2
+        err = capsys.readouterr().err
+    assert err.strip().startswith("bomi: error:") and "\n" not in err.strip()
+    assert planted in err and "symbolic link" in err
     assert victim.read_text() == "keep me" and (out / planted).is_symlink()
     assert {p.name: p.read_bytes() for p in out.iterdir() if not p.is_symlink()} == before
 
@@ -323,16 +343,16 @@ def test_no_worker_outlives_the_driver_whatever_ends_it(tmp_path, how):
     assert lines.endswith("\n") and all(json.loads(line)["key"] for line in lines.splitlines())
 
 
-def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path):
+@pytest.mark.xdist_group("finished-sweep")
+def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path, finished_sweep):
     grid, out = grid_file(tmp_path, ONE_SECOND % 4), tmp_path / "out"
-    line = None
 
     def small_files():  # in the child: files may not grow beyond 1.5 records (as a disk that fills up)
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    sweep(grid_file(tmp_path, ONE_SECOND % 1, "one.toml"), tmp_path / "probe", check=0)
-    line = len((tmp_path / "probe" / RESULTS_FILE).read_bytes())
+    # one record's line (seed 0 of this grid's time limit: the finished sweep's first, as this grid's first)
+    line = len((finished_sweep[1] / RESULTS_FILE).read_bytes().splitlines(keepends=True)[0])
     limit = int(1.5 * line)
     done = sweep(grid, out, preexec_fn=small_files)
     assert done.returncode == 2, done.stderr
@@ -342,7 +362,7 @@ def test_a_full_disk_is_one_line_and_leaves_only_whole_records(tmp_path):
         in errors[0], done.stderr
     assert "Traceback" not in done.stderr
     assert len(keys_in(out)) == 1 and (out / RESULTS_FILE).read_text().endswith("\n")
-    sweep(grid, out, check=0)  # room again: the rest runs
+    assert main(["sweep", str(grid), "--out", str(out), "--jobs", "1"]) == 0  # room again: the rest runs
     assert len(keys_in(out)) == 4
 
 
@@ -444,6 +464,7 @@ def descendants(pid):
     return found
 
 
+@pytest.mark.xdist_group("ray")  # one Ray at a time (see tests/test_engine.py)
 def test_sigterm_on_a_ray_sweep_keeps_what_finished_and_shuts_the_local_ray_down(tmp_path):
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
     grid, out = grid_file(tmp_path, LONG), tmp_path / "out"

@@ -19,6 +19,9 @@ time_limit = [2.0, 2.5]
 """
 
 
+FINISHED = pytest.mark.xdist_group("finished-records")   # finished's tests: one worker makes it once
+
+
 @pytest.fixture(scope="module")
 def finished(tmp_path_factory):
     """A sweep that ran all four of its episodes: its grid and directory."""
@@ -72,6 +75,7 @@ def _setting(field, value):
     (_set("cube_drops", -1), re.escape("cube_drops: -1 is less than the minimum of 0")),
     (_set("settings", "P1"), None),  # not a record at all: the reader's own line
 ])
+@FINISHED
 def test_an_edited_record_stops_the_resume_with_one_line_naming_it(finished, tmp_path, capsys, edit, fault):
     grid, out = edited(finished, tmp_path, edit)
     before = {name: (out / name).read_bytes() for name in (RESULTS_FILE, "summary.md", "summary.json")}
@@ -85,6 +89,7 @@ def test_an_edited_record_stops_the_resume_with_one_line_naming_it(finished, tmp
     assert {name: (out / name).read_bytes() for name in before} == before  # nothing lost or rewritten
 
 
+@FINISHED
 def test_a_success_beyond_its_time_limit_is_named(finished, tmp_path, capsys):
     grid, out = edited(finished, tmp_path, lambda r: r.update(success=True, failure=None,
                                                               completion_time=r["settings"]["time_limit"] + 1.0))
@@ -93,6 +98,7 @@ def test_a_success_beyond_its_time_limit_is_named(finished, tmp_path, capsys):
     assert "record 2: completion_time 3 s is beyond its time limit (2 s)" in err, err
 
 
+@FINISHED
 def test_a_failure_with_a_completion_time_is_named(finished, tmp_path, capsys):
     grid, out = edited(finished, tmp_path, lambda r: r.update(success=False, completion_time=1.0,
                                                               failure="time limit 2 s"))
@@ -100,6 +106,7 @@ def test_a_failure_with_a_completion_time_is_named(finished, tmp_path, capsys):
     assert "record 2: completion_time: 1.0 is not of type 'null'" in capsys.readouterr().err
 
 
+@FINISHED
 def test_records_as_written_resume_and_extra_fields_are_free(finished, tmp_path, capsys):
     """The check refuses nothing a sweep writes, nor a field it does not read (a later version's)."""
     grid, out = edited(finished, tmp_path, lambda r: r.update(note="checked by hand"))

@@ -27,6 +27,11 @@ JOYSTICK_ARGS = ["trial", "--stand-in", "P1", "--controller", "joystick", "--tri
                  "--headless", "--time-limit", "30", "--countdown", "0.5"]
 
 
+# the tests of the two stand-in sessions below run on one xdist worker, which makes each session once
+# (but the real-time test, in the real-time group: it makes bomi_dir on its own worker)
+SESSIONS = pytest.mark.xdist_group("trial-sessions")
+
+
 @pytest.fixture(scope="module")
 def bomi_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("trial") / "bomi"
@@ -55,6 +60,7 @@ def _summary_keys(with_decisions: bool) -> set[str]:
     return set(summarize(log))
 
 
+@SESSIONS
 def test_a_stand_in_session_writes_the_benchmark_records(bomi_dir, joystick_dir):
     bomi, joystick = _records(bomi_dir), _records(joystick_dir)
     assert [r["trial"] for r in bomi] == [1, 2] and [r["trial"] for r in joystick] == [1]
@@ -70,6 +76,7 @@ def test_a_stand_in_session_writes_the_benchmark_records(bomi_dir, joystick_dir)
     assert "| 1 | joystick | P1 |" in report and (joystick_dir / "timeline_joystick.png").stat().st_size > 10_000
 
 
+@SESSIONS
 def test_a_trial_is_timed_from_the_first_command_to_the_stack_standing_still(joystick_dir):
     record = _records(joystick_dir)[0]
     assert record["success"], record["failure"]
@@ -86,6 +93,7 @@ def test_a_trial_is_timed_from_the_first_command_to_the_stack_standing_still(joy
     assert top - bottom == pytest.approx(0.05, abs=0.005)
 
 
+@SESSIONS
 def test_the_dataset_reads_without_this_package_and_holds_the_bytes_the_loop_read(bomi_dir):
     with h5py.File(bomi_dir / "bomi.h5") as f:
         assert f.attrs["format"] == "bomi-trials" and f.attrs["version"] == 1
@@ -110,6 +118,7 @@ def _deviation(text: str) -> float:
     return float(re.search(r"^replay: max hand deviation (\S+) m$", text, re.M).group(1))
 
 
+@SESSIONS
 def test_replay_reproduces_the_hand_path_and_a_tampered_log_does_not(bomi_dir, tmp_path, capsys):
     assert main(["replay", str(bomi_dir), "--trial", "2"]) == 0
     assert _deviation(capsys.readouterr().out) <= 1e-6
@@ -128,6 +137,7 @@ def test_replay_reproduces_the_hand_path_and_a_tampered_log_does_not(bomi_dir, t
     assert _deviation(capsys.readouterr().out) > 1e-3
 
 
+@SESSIONS
 def test_rescoring_with_the_logged_model_gives_the_logged_accuracy(bomi_dir, capsys):
     assert main(["replay", str(bomi_dir), "--trial", "1", "--model", str(bomi_dir / "model.json")]) == 0
     out = capsys.readouterr().out
@@ -135,6 +145,7 @@ def test_rescoring_with_the_logged_model_gives_the_logged_accuracy(bomi_dir, cap
     assert logged == again and "100.00 % of the logged decisions decided alike" in out and "would have differed" in out
 
 
+@SESSIONS
 def test_bad_input_is_one_line(bomi_dir, tmp_path, capsys):
     other = tmp_path / "p4_model.json"
     text = (bomi_dir / "model.json").read_text()
@@ -224,6 +235,7 @@ def test_the_viewer_keys_hold_a_function_for_a_moment_and_press_a_button_once():
     assert keys.read(10.0 + 2.0 * KEY_HOLD_S).deflection == {}
 
 
+@SESSIONS
 def test_the_joystick_stand_in_does_what_the_simulated_episode_of_its_seed_does(joystick_dir):
     """An independent path to the same trial: `bomi run-task`'s episode (tasks.stacking.episode.run_episode)
     with the trial's seed moves the hand exactly as the trial did; only the clock differs (the trial

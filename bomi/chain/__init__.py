@@ -23,24 +23,24 @@ Every public name is re-exported here: ``from bomi.chain import train, OnlineCha
 """
 from bomi.chain.copies import MotionCopies, rest_offsets, rotated_about, training_windows
 from bomi.chain.evaluation import (Evaluation, PassOut, choose_rest_offsets, each_pass_by_the_others, evaluate,
-                                   leave_one_pass_out, rest_offset_scores)
+                                   evaluate_each, leave_one_pass_out, rest_offset_scores)
 from bomi.chain.holds import MAX_MOVE_END_S, MoveAllowances, as_held, held_labels, recording_moves
 from bomi.chain.online import Decision, OnlineChain
 from bomi.chain.selection import (CONSISTENCY, N_FOLDS, PLAIN, REQUIRED_GAIN, SHRINKAGE_GRID, THRESHOLD_GRID, Candidate,
                                   CrossValidation, HoldScores, Selection, choose_candidate, choose_option,
                                   choose_settings, choose_threshold, cross_validate, hold_folds, select_settings,
-                                  settings_candidates)
+                                  select_settings_each, settings_candidates)
 from bomi.chain.training import MIN_CLASS_WINDOWS, check_training_data, train
 from bomi.chain.windows import (PreparedRecording, TrainingWindows, node_states, prepare, recorded_priors,
                                 recording_neutral, require_for, spec_signals, window_features)
 
 __all__ = [
     "CONSISTENCY", "MAX_MOVE_END_S", "MIN_CLASS_WINDOWS", "MoveAllowances", "as_held", "held_labels",
-    "recording_moves", "N_FOLDS", "PLAIN", "REQUIRED_GAIN", "SHRINKAGE_GRID", "THRESHOLD_GRID",
-    "Candidate", "CrossValidation", "Decision", "Evaluation", "HoldScores", "MotionCopies", "OnlineChain", "PassOut",
+    "recording_moves", "N_FOLDS", "PLAIN", "REQUIRED_GAIN", "SHRINKAGE_GRID", "THRESHOLD_GRID", "Candidate",
+    "CrossValidation", "Decision", "Evaluation", "HoldScores", "MotionCopies", "OnlineChain", "PassOut",
     "PreparedRecording", "Selection", "TrainingWindows", "check_training_data", "choose_candidate", "choose_option",
     "choose_rest_offsets", "choose_settings", "choose_threshold", "cross_validate", "each_pass_by_the_others",
-    "evaluate", "hold_folds", "leave_one_pass_out", "node_states", "prepare", "recorded_priors", "recording_neutral",
-    "require_for", "rest_offset_scores", "rest_offsets", "rotated_about", "select_settings", "settings_candidates",
-    "spec_signals", "train", "training_windows", "window_features",
+    "evaluate", "evaluate_each", "hold_folds", "leave_one_pass_out", "node_states", "prepare", "recorded_priors",
+    "recording_neutral", "require_for", "rest_offset_scores", "rest_offsets", "rotated_about", "select_settings",
+    "select_settings_each", "settings_candidates", "spec_signals", "train", "training_windows", "window_features",
 ]

@@ -59,20 +59,37 @@ class Evaluation:
 def evaluate(model: Model, rec: Recording, neutral_samples: int, post: PostProcessing | None = None) -> Evaluation:
     """Decide every window in time order (as the stream does), then score the single-label ones against
     the cue; where the recording keeps its moves, also tell which lie on the holds (``holds``)."""
-    unknown = sorted(set(rec.require_labels().tolist()) - set(model.classes.tolist()))
-    if unknown:
-        raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of the model {model.classes.tolist()}")
-    prepared = prepare(rec, model.spec, neutral_samples)
+    (evaluation,) = evaluate_each([model], rec, neutral_samples, post)
+    return evaluation
+
+
+def evaluate_each(models: Sequence[Model], rec: Recording, neutral_samples: int,
+                  post: PostProcessing | None = None) -> list[Evaluation]:
+    """``evaluate`` of each of ``models`` (of one feature spec) on ``rec``: its windows prepared and its
+    moves found once for all of them."""
+    if not models:
+        return []
+    spec = models[0].spec
+    if any(model.spec != spec for model in models):
+        raise ValueError("evaluate_each: the models' feature specs differ")
+    for model in models:
+        unknown = sorted(set(rec.require_labels().tolist()) - set(model.classes.tolist()))
+        if unknown:
+            raise BomiError(f"{rec.source}: label(s) {unknown} are not classes of the model {model.classes.tolist()}")
+    prepared = prepare(rec, spec, neutral_samples)
     pure = prepared.pure
     if not pure.any():
-        raise BomiError(f"{rec.source}: no {model.spec.window}-sample window lies within one label; nothing to score")
-    decisions = classify_windows(model, prepared.features, post)
-    allowances = MoveAllowances.of(rec, model.spec.nodes)
-    on_hold = None
-    if allowances is not None:   # a hold's part after its transition is a suffix of its run: its first row decides
-        on_hold = allowances.on_hold(len(rec))[prepared.ends[pure] - (model.spec.window - 1)]
-    return Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure], decisions.rejected[pure], on_hold,
-                      allowances)
+        raise BomiError(f"{rec.source}: no {spec.window}-sample window lies within one label; nothing to score")
+    allowances = MoveAllowances.of(rec, spec.nodes)
+    evaluations = []
+    for model in models:
+        decisions = classify_windows(model, prepared.features, post)
+        on_hold = None
+        if allowances is not None:   # a hold's part after its transition is a suffix of its run: its first row decides
+            on_hold = allowances.on_hold(len(rec))[prepared.ends[pure] - (spec.window - 1)]
+        evaluations.append(Evaluation(rec.source, prepared.labels[pure], decisions.labels[pure],
+                                      decisions.rejected[pure], on_hold, allowances))
+    return evaluations
 
 
 @dataclass(frozen=True)

@@ -286,15 +286,37 @@ def select_settings(recordings: Sequence[Recording], profile: Profile, spec: Fea
     (``choose_option``), one extra at a time: first a shrinkage of SHRINKAGE_GRID; then the profile's
     smaller copies of the motions (with the shrinkage chosen); then a rejection threshold of
     THRESHOLD_GRID (a rejected window counts as decided neutral). Without enough data for the CV: plain."""
+    (selection,) = select_settings_each(recordings, [profile], spec)
+    return selection
+
+
+def select_settings_each(recordings: Sequence[Recording], profiles: Sequence[Profile],
+                         spec: FeatureSpec) -> list[Selection]:
+    """``select_settings`` for each of ``profiles``, each candidate setting cross-validated once for all of
+    them: profiles that differ in what the rule chooses among (their smaller copies, shrinkage,
+    rejection) but cross-validate alike otherwise share the candidates they have in common (`bomi
+    reproduce`'s per-person rule with and without the smaller copies: the five plain ones). A
+    candidate's cross-validation does not depend on the others beside it, so each selection is the one
+    ``select_settings`` makes for its profile alone."""
+    if not profiles:
+        return []
     # The turned copies (direction_spread) stand for how a motion's direction changes from one day to
     # another, which a cross-validation within the recording cannot see (it is chosen across days):
     # the settings are compared without them.
-    candidates = settings_candidates(profile)
+    validated = [replace(p, direction_spread=0.0) for p in profiles]
+    alike = [(MotionCopies.of(replace(p, amplitude_scales=())), p.neutral_samples) for p in validated]
+    if any(each != alike[0] for each in alike):
+        raise ValueError("select_settings_each: the profiles cross-validate differently (beyond their smaller copies)")
+    each = [settings_candidates(p) for p in profiles]
+    union = list(dict.fromkeys(c for candidates in each for c in candidates))
     try:
-        results = cross_validate(recordings, replace(profile, direction_spread=0.0), spec, candidates)
+        results = dict(zip(union, cross_validate(recordings, validated[0], spec, union)))
     except BomiError as exc:
-        return Selection(None, (), None, None, None, {}, f"{exc}: plain settings")
-    return choose_settings(candidates, results, profile.select_rejection)
+        if len(profiles) > 1:  # a candidate of one profile without enough data: each profile on its own
+            return [select_settings(recordings, p, spec) for p in profiles]
+        return [Selection(None, (), None, None, None, {}, f"{exc}: plain settings")]
+    return [choose_settings(candidates, [results[c] for c in candidates], p.select_rejection)
+            for p, candidates in zip(profiles, each)]
 
 
 
