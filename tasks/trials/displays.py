@@ -84,11 +84,13 @@ def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
     from sim.env import ArmSim
     from sim.render import VideoWriter
 
-    os.nice(FILM_NICENESS)
     sim = ArmSim(layout=layout)
     fps = sim.config.render.fps
     with VideoWriter(path, fps) as writer:
         sim.render(("", ""))   # the rendering context and fonts made before the loop starts, not during it
+        # the lowest priority once filming: the start (the scene, the GL context, the encoder) runs while
+        # the loop waits for it, and at that priority it could starve for minutes on a busy machine
+        os.nice(FILM_NICENESS)
         ready.set()
         start, written = None, 0
         while (item := frames.get()) is not None:
