@@ -160,6 +160,22 @@ class FakeClock:
         self.now += seconds
 
 
+class ClockedSource:
+    """Timed chunks sent by a clock's time, through one parser (as the pty delivers them)."""
+    error, reconnections = None, 0
+
+    def __init__(self, chunks: list[tuple[float, bytes]], clock):
+        self.chunks, self.clock, self.parser, self._next = chunks, clock, FrameParser(), 0
+
+    def poll(self):
+        data = b""
+        while self._next < len(self.chunks) and self.chunks[self._next][0] <= self.clock():
+            data += self.chunks[self._next][1]
+            self._next += 1
+        seen = len(self.parser.safety_events)
+        return self.parser.feed(data, self.clock()), self.parser.safety_events[seen:]
+
+
 def still_frame(counter: int, node: int = 1) -> ImuFrame:
     """A frame of P1's node sitting still at fusion angles (0, 0, 0), noise-free: from its zero state the
     filter reads exactly 0, so the gate settles on its first full window."""
@@ -342,8 +358,12 @@ def offline_decisions(model_path, hold_s: float, neutral_s: float, end_s: float,
     return out
 
 
+def read_log_text(text: str) -> list[dict]:
+    return [json.loads(line) for line in text.splitlines()]
+
+
 def read_log(path) -> list[dict]:
-    return [json.loads(line) for line in path.read_text().splitlines()]
+    return read_log_text(path.read_text())
 
 
 @pytest.mark.real_time
@@ -408,20 +428,8 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     paused = [(t + 0.5 if t >= 19.5 else t, data) for t, data in chunks]   # 0.5 s of silence at 19.5 s
     clock = FakeClock()
 
-    class ClockedSource:
-        """The chunks sent by the loop's clock's time, through one parser (as the pty delivers them)."""
-        parser, error, reconnections, _next = FrameParser(), None, 0, 0
-
-        def poll(self):
-            data = b""
-            while self._next < len(paused) and paused[self._next][0] <= clock():
-                data += paused[self._next][1]
-                self._next += 1
-            seen = len(self.parser.safety_events)
-            return self.parser.feed(data, clock()), self.parser.safety_events[seen:]
-
     log = io.StringIO()
-    summary = run_live(ClockedSource(), OnlineChain(load_model(p1_model_file), profile), StickArm(), duration_s=21.5,
+    summary = run_live(ClockedSource(paused, clock), OnlineChain(load_model(p1_model_file), profile), StickArm(), duration_s=21.5,
                        log=TickLog(log), clock=clock, sleep=clock.sleep)
     ticks = [json.loads(line) for line in log.getvalue().splitlines()]
     arrived = [tick for tick in ticks if tick["frames"]]
@@ -452,6 +460,40 @@ def test_watchdog_zeroes_the_arm_when_the_emulator_pauses(tmp_path, p1_model_fil
     assert "live: no display (DISPLAY and WAYLAND_DISPLAY are unset): running headless" in out.err
     assert re.search(r"watchdog stopped the arm \d+ time\(s\)", out.out)
 
+
+
+def test_a_stalled_loop_fuses_and_decides_the_backlog_whole_as_the_offline_chain(p1_model_file):
+    """The loop stalls 0.6 s while P1 holds F (its clock jumps; the frames wait in the port): the next tick
+    fuses every frame of the backlog, so each decision is the offline chain's for the same samples, to the
+    bit, before and after the stall (a filter that skipped the backlog would lag it); only the newest
+    decision of that tick reaches the stick, and the stick, not a hold, drives the arm on."""
+    from bomi.model_io import load_model
+
+    params, profile = load_participant("P1"), load_profile("P1")
+    cues = calibration_schedule(profile, hold_s=2.0, neutral_s=17.0)
+    chunks = list(block_chunks(participant_blocks(params, profile, SEED, cues, 21.0), EmulatorConfig(),
+                               EmulatorStats()))
+
+    class StallingClock(FakeClock):
+        def sleep(self, seconds: float) -> None:
+            self.now += seconds + (0.6 if self.now <= 18.5 < self.now + seconds else 0.0)
+
+    log = io.StringIO()
+    clock = StallingClock()
+    run_live(ClockedSource(chunks, clock), OnlineChain(load_model(p1_model_file), profile), StickArm(),
+             duration_s=20.5, log=TickLog(log), clock=clock, sleep=clock.sleep)
+    ticks = read_log_text(log.getvalue())
+    stalled = next(tick for tick in ticks if tick["t"] > 18.5)
+    assert 0.6 <= stalled["t"] - ticks[stalled["tick"] - 1]["t"] < 0.65 and stalled["frames"] >= 3 * 37
+    assert len(stalled["decisions"]) >= 37 and stalled["skipped"] == len(stalled["decisions"]) - 1
+    assert stalled["hold"] is None and any(d["function"] == "F" for d in stalled["decisions"])
+    assert np.linalg.norm(stalled["linear"]) > 0
+    live = [{k: v for k, v in d.items() if k != "sample_index"} for tick in ticks for d in tick["decisions"]]
+    neutral = next(tick for tick in ticks if "neutral" in tick)["neutral"]
+    offline = offline_decisions(p1_model_file, 2.0, 17.0, 21.0, neutral)
+    start = next(k for k in range(len(offline) - len(live) + 1)
+                 if [d["function"] for d in offline[k:k + len(live)]] == [d["function"] for d in live])
+    assert live == offline[start:start + len(live)]
 
 # ------------------------------------------------------------------------------------- bad input
 def test_live_refuses_bad_files_in_one_line_and_overwrites_nothing(tmp_path, p1_model_file, capsys):

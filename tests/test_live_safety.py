@@ -20,6 +20,7 @@ from bomi.gate import ButtonEvidence, Gate, GateConfig, NodeGate, half_mean_rati
 from bomi.serial_source import RetryPolicy, SerialSource, StreamReader
 from tasks.trials.live import LiveLoop
 from tasks.trials.displays import TickLog, VideoDisplay
+from tasks.trials.person import FUSED_BACKLOG_FRAMES
 from tests.test_live import QUICK_GATE, SETTLE, FakeClock, ScriptedChain, StickArm, decision, still_frame
 
 STILL = still_frame(0)
@@ -191,13 +192,29 @@ def test_zero_frames_stop_the_arm_on_the_tick_they_arrive_and_control_resumes_af
     assert len(seen) == 8 + 1 + SETTLE + 2                                            # the observer saw every tick
 
 
-def test_a_backlog_is_not_replayed_only_the_newest_window_reaches_the_chain():
+def test_a_backlog_is_decided_whole_but_only_its_newest_decision_acts():
+    """0.8 s of frames in one tick (the host stalled): the filter and the chain take every one (a filter
+    that missed them would lag), the stick the newest decision only; nothing holds the arm."""
+    b1 = next(cls.label for cls in ScriptedChain([]).profile.classes if cls.function == "B1")
+    loop, arm, chain = loop_for([decision(nu=0.5)] * 6 + [decision(label=b1, function="B1", nu=0.0)] * 40
+                                + [decision(nu=0.25)] * 10)
+    for k in range(6):
+        loop.tick(k * DT, [still_frame(k)])
+    pushed = chain.pushed
+    tick = loop.tick((5 + 50) * DT, [still_frame(6 + j) for j in range(50)])
+    assert chain.pushed - pushed == 50 and len(tick.decisions) == 50
+    assert tick.skipped == 49 and not arm.states[-1].pressed                           # no B1 from the backlog
+    assert tick.hold is None and arm.states[-1].deflection                             # the newest decision drives
+
+
+def test_a_backlog_faster_than_the_rate_is_not_replayed_only_the_newest_window_reaches_the_chain():
     b1 = next(cls.label for cls in ScriptedChain([]).profile.classes if cls.function == "B1")
     backlog_decisions = [decision(label=b1, function="B1", nu=0.0)] * 40 + [decision(nu=0.25)] * 200
     loop, arm, chain = loop_for([decision(nu=0.5)] * 6 + backlog_decisions)
     for k in range(6):
         loop.tick(k * DT, [still_frame(k)])
     pushed = chain.pushed
+    assert FUSED_BACKLOG_FRAMES < 100
     tick = loop.tick(6 * DT, [still_frame(6 + j) for j in range(100)])               # 1.6 s of frames at once
     assert chain.pushed - pushed == 8                                                  # the newest window
     assert tick.skipped == 92 + 7 and not arm.states[-1].pressed                       # no B1 from the backlog

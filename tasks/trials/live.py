@@ -32,9 +32,11 @@ Safety (the live path is a safety path: input it cannot trust leaves the arm at 
   the watchdog and the gate judge a tick 1.5 periods ahead (the next tick's time, plus half a period
   of scheduling slack), so the zero command comes on the last tick before 100 ms without frames
   have passed (75-92 ms after the last frame was read);
-- a backlog (more than ``BACKLOG_FRAMES`` of a node in one tick) is never replayed into the arm:
-  only the newest window's frames are fused and reach the chain, only the newest decision the
-  stick (the others are counted in ``skipped``); the counters then jump, so the node settles again;
+- a backlog (more than ``BACKLOG_FRAMES`` of a node in one tick: the host stalled) is never replayed
+  into the arm: every frame is fused and decided (the filter misses no sample), but only the newest
+  decision reaches the stick (the others are counted in ``skipped``). More than ``FUSED_BACKLOG_FRAMES``
+  in one tick come faster than the rate: only the newest window's frames are fused, and the node,
+  whose filter lags the rest, settles again;
 - decisions with an unknown class, a NaN or an out-of-range value are dropped before the stick
   (and counted); a button class (B1, B2) reaches the stick only once it has been decided for the
   profile's ``button_hold_s`` without a break (``bomi.gate.ButtonEvidence``);
@@ -57,7 +59,7 @@ Log (``--log L``, JSON lines, one object per control tick):
 (the source reconnected since the last tick), ``rezero`` (the person's re-zero gesture completed),
 ``recalibrating`` (a recalibration's protocol holds the arm), ``recalibrated`` (on the tick it ended:
 "retrained", "given up: ..." or "old model kept: ..."; else null), ``skipped``
-(frames of a backlog kept from the chain this tick), ``lost`` (samples lost so far, from the
+(decisions of a backlog kept from the stick, and frames kept from the filter, this tick), ``lost`` (samples lost so far, from the
 packet counters), ``stale`` (no frames: the watchdog held the arm), ``standby`` (the safety key
 held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
 (node k)", "node k: accelerometer all zero", ...), ``calibrating`` (neutral calibration still

@@ -27,7 +27,12 @@ from tasks.trials.recalibration import Recalibration
 
 WATCHDOG_TIMEOUT_S = 0.1
 LOOKAHEAD_TICKS = 1.5  # the watchdog and the gate judge a tick at its time + this many periods (see LivePerson.sense)
-BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog
+BACKLOG_FRAMES = 16  # a node's frames in one tick beyond this (0.25 s of samples) are a backlog: the newest decision acts
+# A backlog up to this many frames of a node is fused and decided whole, so the filter misses no sample (well
+# under a tick's work). An honest stream's backlog is shorter: a second without frames is a break (bomi.gate),
+# 62.5 frames. More in one tick come faster than the rate: only the newest window is fused (bounded work), the
+# filter lags the rest, and the node settles again.
+FUSED_BACKLOG_FRAMES = 64
 
 
 @dataclass
@@ -91,7 +96,7 @@ NO_INFO: Mapping = {}   # what the live person reads of the loop's info: nothing
 class Sensed:
     """What the live person's stream gave on one tick (``LivePerson.sense``): the chain's decisions the
     sanitizer passed (``decisions``) or refused (``dropped``), those that reach the stick (``acted``: of
-    a backlog only the newest), frames and decisions kept from the chain and the stick (``skipped``),
+    a backlog only the newest), frames kept from the filter and decisions from the stick (``skipped``),
     whether the watchdog expired (``stale``), what holds the arm (``hold``), whether the person's
     re-zero gesture completed (``rezero``: the arm at rest while the neutral is retaken), whether a
     recalibration holds the arm (``recalibrating``) and, on the tick its protocol ended, what came of
@@ -166,12 +171,13 @@ class LivePerson:
         else:
             self.chain.set_neutral(self._neutral)
 
-    def _frames_to_chain(self, frames: Sequence[ImuFrame]) -> tuple[list[Decision], int]:
-        """Gate and fuse the frames of the model's nodes and give them to the chain; of a node's backlog
-        (more than BACKLOG_FRAMES this tick) only the newest window's frames (the rest: skipped)."""
+    def _frames_to_chain(self, frames: Sequence[ImuFrame]) -> tuple[list[Decision], int, bool]:
+        """Gate and fuse the frames of the model's nodes and give them to the chain: the decisions, the
+        frames kept from the filter and whether the frames are a backlog (a node's beyond BACKLOG_FRAMES). Of
+        a backlog beyond FUSED_BACKLOG_FRAMES only the newest window's frames are fused."""
         nodes = [imu_index(frame.node_id) for frame in frames]
         counts = Counter(node for node in nodes if node in self.fusion)
-        keep_from = {node: count - self.chain.model.spec.window if count > BACKLOG_FRAMES else 0
+        keep_from = {node: count - self.chain.model.spec.window if count > FUSED_BACKLOG_FRAMES else 0
                      for node, count in counts.items()}
         seen: Counter = Counter()
         decisions, skipped = [], 0
@@ -197,7 +203,7 @@ class LivePerson:
                 self._start_streaming()
             if self.streaming and (made := self.chain.push_angles(node, angles, frame.gyro)) is not None:
                 decisions.append(made)
-        return decisions, skipped
+        return decisions, skipped, max(counts.values(), default=0) > BACKLOG_FRAMES
 
     def sense(self, now: float, frames: Sequence[ImuFrame], key_events: Sequence[SafetyKeyEvent] = (),
               reconnected: bool = False) -> Sensed:
@@ -210,7 +216,7 @@ class LivePerson:
             breaks = dict.fromkeys(self.gate.node, "reconnect")
         for node, cause in breaks.items():
             self._untrust(node, cause)
-        made, skipped = self._frames_to_chain(frames)
+        made, skipped, backlog = self._frames_to_chain(frames)
         decisions, dropped = [], []
         for decision in made:
             reason = refusal(decision, self.functions)
@@ -236,7 +242,7 @@ class LivePerson:
         elif self._recalibrate and gate is None:
             self._recalibrate = False
             chain.begin_neutral_calibration()
-        acted = decisions[-1:] if skipped else decisions     # a backlog: the newest decision only
+        acted = decisions[-1:] if backlog else decisions     # a backlog: the newest decision only
         skipped += len(decisions) - len(acted)
         recalibrated = None
         if self.recalibration is not None:   # the protocol's motions are no commands
