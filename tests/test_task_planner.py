@@ -318,6 +318,22 @@ def test_a_descent_that_corrects_upward_is_never_taken_as_stalled():
     assert not user.memory.stalled and str(user.current.goal) == "reach cube 1: descend"
 
 
+def test_a_grasp_is_judged_missed_only_miss_time_after_the_interface_answers_the_push():
+    """Through a BoMI that answers a push 1.5 s late (learnt: ``answered_hold``), fingers closing on nothing
+    are taken as a miss miss_time after the answer, not after the push: the fingers may not have reached the
+    cube yet (the miss-then-open cycles of P1's development seed 129)."""
+    high = (-0.14, -0.39, HALF + 0.03)
+    lagging = Memory(descending=True, stalled=True, answered_hold=1.5)
+    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.0, t=10.0), lagging, P, combine_axes=False)
+    assert memory.closing_since == 10.0
+    for t in (10.1 + P.miss_time, 10.0 + P.miss_time + 1.5):
+        intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.3, t=t), memory, P, combine_axes=False)
+        assert str(intent.goal) == "grasp cube 1"                        # not yet: the fingers are still closing
+    intent, memory = plan(view(hand=high, mode=Mode.FINGERS, closure=0.7, t=10.1 + P.miss_time + 1.5), memory, P,
+                          combine_axes=False)
+    assert str(intent.goal) == "missed cube 1: open hand"
+
+
 def test_fingers_closed_on_nothing_open_again_and_forget_the_stall():
     high = (-0.14, -0.39, HALF + 0.03)  # a stalled descent closed 3 cm too high
     stalled = Memory(descending=True, stalled=True)

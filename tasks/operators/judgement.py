@@ -41,6 +41,8 @@ class Memory:
     # m: how far the hand has been seen to go for the pulses the arm answered (Timing.pulse_step): an error of less
     # than half of it cannot be made smaller by a push, and is left where the grasp or the place tolerates it
     pulse_step: float = 0.0
+    # s: how long a push has had to be held to be seen answered (Timing.answered_hold): a grasp is judged from then
+    answered_hold: float = 0.0
     backoff_z: float | None = None  # backing off after a while without progress: lift the hand to this height first
 
 
@@ -97,8 +99,11 @@ def held_cube(view: View, memory: Memory, p: OperatorParams) -> int | None:
 
 def missed_grasp(view: View, memory: Memory, p: OperatorParams) -> bool:
     """The fingers have been closing for ``miss_time`` without touching a cube: they closed on
-    nothing, or beside the cube against something else."""
-    return memory.closing_since is not None and view.t - memory.closing_since > p.miss_time and not any(view.touching)
+    nothing, or beside the cube against something else. Counted from when the interface answers the
+    closing push (``answered_hold`` after it, as the person has learnt): through a lagging BoMI a clock
+    started at the push would call a grasp missed before the fingers had reached the cube."""
+    return (memory.closing_since is not None and view.t - memory.closing_since > p.miss_time + memory.answered_hold
+            and not any(view.touching))
 
 
 def missed_faces_of(view: View, p: OperatorParams) -> tuple[int, float]:

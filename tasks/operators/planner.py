@@ -449,8 +449,8 @@ class ScriptedUser:
         self._learn_coasting(view, speed)
         self._watch_descent(view)
         self._watch_opening(view)
-        if self.memory.pulse_step != self.timing.pulse_step:
-            self.memory = replace(self.memory, pulse_step=self.timing.pulse_step)
+        if (self.memory.pulse_step, self.memory.answered_hold) != (self.timing.pulse_step, self.timing.answered_hold):
+            self.memory = replace(self.memory, pulse_step=self.timing.pulse_step, answered_hold=self.timing.answered_hold)
         wanted, self.memory = plan(view, self.memory, self.params, self.combine_axes, self.current.deflection,
                                    self.anticipation, self.timing.pace, velocity)
         if self.current.button is not None and view.mode is not self._mode_at_start:
@@ -491,7 +491,7 @@ class ScriptedUser:
         """Give up the plan under way: lift the hand ``hover`` above where it is, then plan afresh
         (what was learnt of the arm is kept; what the plan remembered of this attempt is not)."""
         self.memory = Memory(controls=self.memory.controls, pulse_step=self.memory.pulse_step,
-                             backoff_z=float(view.hand_pos[2]) + self.params.hover)
+                             answered_hold=self.memory.answered_hold, backoff_z=float(view.hand_pos[2]) + self.params.hover)
         self.resume(view)
 
     def _let_go(self, view: View, velocity: tuple[float, float, float]) -> None:
@@ -532,14 +532,15 @@ class ScriptedUser:
             self.memory = replace(self.memory, stalled=True)
 
     def _watch_opening(self, view: View) -> None:
-        """Fingers pushed open for ``miss_time`` without opening further are caught (on a cube set
-        down askew, between the cubes): the person lifts the hand before opening on."""
+        """Fingers pushed open for ``miss_time`` (from when the push is answered: ``answered_hold``) without
+        opening further are caught (on a cube set down askew, between the cubes): the person lifts the hand
+        before opening on."""
         fingers = self.memory.controls.layout.axes(view.mode, Kind.FINGERS)
         opening = any(fn in fingers and fingers[fn] < 0 for fn in self.current.deflection)
         since, closure = self._closure_seen
         if not opening or closure - view.closure > OPENING_PROGRESS:
             self._closure_seen = (view.t, view.closure)
-        elif view.t - since > self.params.miss_time:
+        elif view.t - since > self.params.miss_time + self.timing.answered_hold:
             self.memory = replace(self.memory, fingers_blocked=float(view.hand_pos[2]))
             self._closure_seen = (view.t, view.closure)
 
