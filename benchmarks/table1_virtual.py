@@ -1,7 +1,7 @@
 """The paper's Table I as a check of the virtual participants: P1, P4, P5 through FV1/FV2/FV3, session to session.
 
     python benchmarks/table1_virtual.py [--first-seed 0] [--days 5] [--held-out]
-    python benchmarks/table1_virtual.py --calibrate P5:3 --shares 0.3,0.2,0.15,0.1 [--first-seed 0] [--days 5]
+    python benchmarks/table1_virtual.py --calibrate P5:3 --shares 0.3,0.25,0.2,0.15,0.1 [--first-seed 0] [--days 5]
 
 As the paper's Table I, a training and a test recording of one day: for each of ``--days`` development
 seeds from ``--first-seed`` on (each seed a day of the person), each participant performs the paper's
@@ -116,7 +116,8 @@ def main() -> None:
     if args.calibrate:
         calibrate(parser, args.calibrate, args.shares, seeds)
         return
-    lines = [f"Command: `python benchmarks/table1_virtual.py --first-seed {args.first_seed} --days {args.days}` "
+    held_out = " --held-out" if args.held_out else ""
+    lines = [f"Command: `python benchmarks/table1_virtual.py{held_out} --first-seed {args.first_seed} --days {args.days}` "
              f"(each seed s in {seeds} a day: trained on its calibration session, tested on its second session; "
              "mean (range) over the days)", "",
              "| participant | paper FV1/FV2/FV3 | FV1 | FV2 | FV3 | FV3 - paper | FV3 per-class recall (%) "
