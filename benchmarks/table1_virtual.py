@@ -63,7 +63,8 @@ def with_range_share(params: ParticipantParams, label: int, share: float) -> Par
     table = tomllib.loads((PARTICIPANT_DIR / f"{params.name}.toml").read_text())
     shipped = next(c.get("range_share", 1.0) for c in table["classes"] if c["label"] == label)
     motion = params.classes[label]
-    return replace(params, classes={**params.classes, label: replace(motion, posture_deg=motion.posture_deg * share / shipped)})
+    scaled = replace(motion, posture_deg=motion.posture_deg * share / shipped)
+    return replace(params, classes={**params.classes, label: scaled})
 
 
 def score(name: str, seeds: list[int], params: ParticipantParams | None = None,

@@ -59,9 +59,9 @@ Log (``--log L``, JSON lines, one object per control tick):
 (the source reconnected since the last tick), ``rezero`` (the person's re-zero gesture completed),
 ``recalibrating`` (a recalibration's protocol holds the arm), ``recalibrated`` (on the tick it ended:
 "retrained", "given up: ..." or "old model kept: ..."; else null), ``skipped``
-(decisions of a backlog kept from the stick, and frames kept from the filter, this tick), ``lost`` (samples lost so far, from the
-packet counters), ``stale`` (no frames: the watchdog held the arm), ``standby`` (the safety key
-held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
+(decisions of a backlog kept from the stick, and frames kept from the filter, this tick), ``lost``
+(samples lost so far, from the packet counters), ``stale`` (no frames: the watchdog held the arm),
+``standby`` (the safety key held the arm), ``hold`` (why the arm is held, or null: "no frames", "standby", "warming up
 (node k)", "node k: accelerometer all zero", ...), ``calibrating`` (neutral calibration still
 collecting), ``loop_hz`` (ticks in the last second), ``overruns`` (control periods missed so far),
 ``decisions`` (the chain's decisions this tick: label, name, function, confidence, rejected,
