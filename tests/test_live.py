@@ -18,6 +18,7 @@ from bomi.emulator import EmulatorConfig, EmulatorStats, block_chunks
 from bomi.frames import FrameParser, ImuFrame, SafetyKey, encode_imu_frame, encode_safety_key_frame
 from bomi.profiles import load_profile
 from bomi.protocol import calibration_schedule
+from sim.env import ArmSim
 from sim.joystick import ArmCommand, JoystickInterpreter, JoystickState
 from tasks.operators.stick import DecisionStick
 from bomi.gate import GateConfig
@@ -146,6 +147,25 @@ def test_an_unreachable_display_means_headless(tmp_path, p1_model_file, monkeypa
     assert main(["live", "--port", "loop://", "--profile", "P1", "--model", str(p1_model_file),
                  "--duration", "0.2"]) == 0
     assert "live: cannot open the display :4242: running headless" in capsys.readouterr().err
+
+
+def test_the_port_opens_once_the_scene_is_built_and_no_file_before_it(tmp_path, p1_model_file, monkeypatch):
+    """A sender that starts with its reader (the emulator, its cues from its first frame) must not run
+    while the scene is built: on a slow machine that took seconds, the frames were dropped and the
+    cues came early. And a port that cannot open leaves no log behind."""
+    import tasks.cli.live as live_cli
+    from bomi.serial_source import SerialSource
+
+    order: list[str] = []
+    monkeypatch.setattr(live_cli, "ArmSim", lambda *a, **k: order.append("scene") or ArmSim(*a, **k))
+    real_open = SerialSource.open
+    monkeypatch.setattr(SerialSource, "open", lambda self: order.append("port") or real_open(self))
+    assert main(["live", "--port", "loop://", "--profile", "P1", "--model", str(p1_model_file), "--headless",
+                 "--duration", "0.1", "--log", str(tmp_path / "live.jsonl")]) == 0
+    assert order[0] == "scene" and set(order[1:]) == {"port"} and (tmp_path / "live.jsonl").exists()
+    assert main(["live", "--port", "socket://127.0.0.1:1", "--profile", "P1", "--model", str(p1_model_file),
+                 "--headless", "--log", str(tmp_path / "never.jsonl")]) == 2
+    assert not (tmp_path / "never.jsonl").exists()
 
 
 # ------------------------------------------------------------------------ the loop, injected clock

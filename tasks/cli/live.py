@@ -90,16 +90,8 @@ def run(args: argparse.Namespace) -> int:
         offsets = recording_neutral(read_recording(args.neutral_from), model.spec.nodes, profile.neutral_samples)
         neutral = dict(zip(model.spec.nodes, offsets.tolist()))
     options = args.assist if args.assist is not None else profile_assist(profile)
-    # read on a thread of its own: a tick takes what has arrived and never waits, not even for a reconnection
     source = StreamReader(SerialSource(args.port, baudrate=args.baud, retry=RetryPolicy(attempts=args.retries)))
-    # a bad port fails before the simulator is built; reading starts at once, so that the sender never
-    # has to wait (and then catch up in a burst) while the scene, the viewer and the film get ready
-    source.start()
-    try:
-        sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
-    except BaseException:
-        source.stop()
-        raise
+    sim = ArmSim(layout=profile_layout(profile))  # the layout the profile's classes drive
     arm = FreeArm(StackingEnv(sim))  # the one loop's env, without a task: the arm at home, the cubes at A
     assist = None
     if options:  # sees the arm and the scene's cubes and target, as on the table
@@ -108,11 +100,15 @@ def run(args: argparse.Namespace) -> int:
         assist = lambda state: assistance.step(arm.env.task.view(), state, sim)  # noqa: E731
     status, log, displays = StatusLine(), None, []
     try:
-        log = TickLog(open_log(args.log), str(args.log)) if args.log is not None else None
         displays.append(_viewer(args.headless, sim))
+        # the port opens once the scene and the viewer are ready, the loop right after: a sender that
+        # starts with its reader (the emulator) is read from its first frame, and none has to wait;
+        # a bad port fails before any file is written
+        source.start()
+        log = TickLog(open_log(args.log), str(args.log)) if args.log is not None else None
         if args.video is not None:
             displays.append(VideoDisplay(sim, args.video))
-        source.discard()   # what arrived while getting ready is old: never acted upon
+        source.discard()   # what arrived while the log and the film opened is old: never acted upon
         summary = run_live(source, chain, arm, duration_s=args.duration, neutral=neutral, log=log,
                            status=status, display=Displays(displays), on_neutral=_print_neutral, assist=assist)
     finally:
