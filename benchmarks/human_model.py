@@ -284,9 +284,6 @@ def sensitivity(args: argparse.Namespace) -> None:
     print("\n".join(lines))
 
 
-HUMAN_ON = (("operator.human.model", "human"),)
-
-
 def seed_range(text: str) -> range:
     first, _, last = text.partition("-")
     return range(int(first), int(last or first) + 1)

@@ -16,7 +16,8 @@ def test_every_knob_of_the_sensitivity_reaches_the_code():
         if knob == sensitivity.VOTE:
             continue
         file, key = knob.split(".", 1)
-        edited = sensitivity.scaled(value, 0.5)
+        # half, or one and a half where half is out of the knob's range (most_lean: at least 1)
+        edited = next(v for v in (sensitivity.scaled(value, f) for f in (0.5, 1.5)) if sensitivity.invalid(knob, v) is None)
         if file == "operator":
             assert getattr(load_operator(overrides={key: edited}), key.rsplit(".", 1)[1]) == pytest.approx(edited)
         else:

@@ -22,18 +22,18 @@ def test_the_feel_asks_more_lean_for_more_speed_within_the_calibrated_range():
     feel = LeanFeel(FEEL)
     leans = [feel.lean_for(d) for d in np.linspace(0.0, 1.0, 11)]
     assert all(b >= a for a, b in zip(leans, leans[1:]))  # faster never asks less lean
-    assert leans[-1] == pytest.approx(1.0)  # full speed: full range
+    assert leans[-1] == pytest.approx(FEEL.most_lean)  # full speed: the furthest lean
     assert min(leans) >= FEEL.least_lean  # never below the least lean the classifier was calibrated on
     assert leans[5] > leans[0]  # the lean does depend on the speed wanted
 
 
 def test_a_lean_that_worked_is_where_the_next_move_of_that_class_starts():
     feel = LeanFeel(FEEL)
-    feel.learn(lean=0.8, deflection=0.3)
-    assert feel.lean_for(0.3) == pytest.approx(0.8)  # the next move for 0.3 starts from 0.8
-    assert feel.lean_for(0.6) > 0.8 and feel.lean_for(1.0) == pytest.approx(1.0)
-    feel.learn(lean=1.0, deflection=0.0)  # had to lean fully even for the least speed
-    assert feel.lean_for(0.05) < 1.0  # the least deflection never needs the whole range
+    feel.learn(lean=0.9, deflection=0.3)
+    assert feel.lean_for(0.3) == pytest.approx(0.9)  # the next move for 0.3 starts from 0.9
+    assert feel.lean_for(0.6) > 0.9 and feel.lean_for(1.0) == pytest.approx(FEEL.most_lean)
+    feel.learn(lean=FEEL.most_lean, deflection=0.0)  # had to lean fully even for the least speed
+    assert feel.lean_for(0.05) < FEEL.most_lean  # the least deflection never needs the whole range
     before = feel.lean_for(0.3)
     feel.learn(lean=0.6, deflection=1.0)  # a full-speed move says nothing about slower ones
     assert feel.lean_for(0.3) == before
@@ -48,7 +48,7 @@ def p1_model():
                                            post=PostProcessing(vote_length=5))
 
 
-def test_calibration_holds_proportional_classes_at_half_and_full_range_and_buttons_at_full(p1_model):
+def test_calibration_holds_proportional_classes_at_both_ends_of_the_leans_and_buttons_at_full(p1_model):
     params, profile, session, _ = p1_model
     functions = {cls.label: cls.function for cls in profile.classes}
     held = session.holding & session.recorded & (session.cue != 0)
@@ -57,7 +57,7 @@ def test_calibration_holds_proportional_classes_at_half_and_full_range_and_butto
         if functions[label] in ("B1", "B2"):
             assert amplitudes == {1.0}, functions[label]  # pressed at full range only
         else:
-            assert amplitudes == {FEEL.least_lean, 1.0}, functions[label]
+            assert amplitudes == {FEEL.least_lean, FEEL.most_lean}, functions[label]
 
 
 def test_nu_spans_the_leans_the_task_uses(p1_model):
