@@ -7,7 +7,7 @@ import pytest
 
 from bomi.chain import OnlineChain, train
 from bomi.classifier import PostProcessing
-from sim.joystick import THREE_AXIS, Kind, Mode
+from sim.joystick import Mode
 from tasks.stacking.channels import BomiChannel, LeanFeel, calibration_order
 from tasks.participants.participant import VirtualParticipant, calibration_session, load_participant, session_recording
 from tasks.stacking.vocabulary import StickIntent
@@ -78,16 +78,22 @@ def test_nu_spans_the_leans_the_task_uses(p1_model):
     assert 0.05 < np.median(trace.nu[half]) < 0.6 and np.median(trace.nu[full]) > 0.8
 
 
-def _correction(model, params, profile, seen_ratio: float | None, seconds: float = 5.0) -> list[float]:
-    """The lean the participant holds while wanting F at 0.3 and seeing the hand go ``seen_ratio``
-    times that speed along F (None: the arm does not move at all), sampled every tick."""
+# what the person sees of the hand (move, then turn about the vertical: sources.seen_velocity) when it
+# answers F in translation (-y, the layout's table) and Rr in the wrist mode (a turn about +z)
+SEEN_ALONG = {("F", Mode.TRANSLATION): np.array([0.0, -1.0, 0.0, 0.0, 0.0, 0.0]),
+              ("Rr", Mode.WRIST): np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0])}
+
+
+def _correction(model, params, profile, seen_ratio: float | None, seconds: float = 5.0,
+                function: str = "F", mode: Mode = Mode.TRANSLATION) -> list[float]:
+    """The lean the participant holds while wanting ``function`` at 0.3 in ``mode`` and seeing the hand go
+    ``seen_ratio`` times that speed along it (None: the arm does not move at all), sampled every tick."""
     channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
-    axis = np.array(THREE_AXIS.axes(Mode.TRANSLATION, Kind.LINEAR)["F"])
     wanted = 0.3
-    seen = axis * (0.0 if seen_ratio is None else seen_ratio * wanted)
+    seen = SEEN_ALONG[function, mode] * (0.0 if seen_ratio is None else seen_ratio * wanted)
     leans, t = [], 0.0
     for _ in range(int(seconds / TICK)):
-        channel.command(StickIntent({"F": wanted}), t, t + TICK, seen, Mode.TRANSLATION)
+        channel.command(StickIntent({function: wanted}), t, t + TICK, seen, mode)
         leans.append(channel.participant.intent[1])
         t += TICK
     return leans
@@ -107,22 +113,35 @@ def test_the_participant_leans_further_when_the_arm_is_too_slow_and_less_when_to
     assert np.allclose(right, start)  # the wanted speed: keep the lean
 
 
+def test_a_wrist_turn_seen_crawling_is_leant_into_as_a_slow_move(p1_model):
+    """The hand's turn is watched as its move is: a yaw turn answered at a tenth of the wanted speed (the
+    lean short of the class's calibrated range, nu near 0) makes the participant lean further; the wanted
+    speed keeps the lean; three times too fast, less (before, a turn was judged only by whether the chain
+    answered at all, and a crawling turn was held for seconds on end)."""
+    params, profile, _, model = p1_model
+    start = LeanFeel(FEEL).lean_for(0.3)
+    crawl = _correction(model, params, profile, 0.1, function="Rr", mode=Mode.WRIST)
+    assert crawl[0] == pytest.approx(start) and crawl[-1] > start
+    assert np.allclose(_correction(model, params, profile, 1.0, function="Rr", mode=Mode.WRIST), start)
+    assert _correction(model, params, profile, 3.0, function="Rr", mode=Mode.WRIST)[-1] < start
+
+
 def _let_go_while_the_arm_runs_on(model, params, profile, seen_ratio: float) -> tuple[float, float]:
     """The lean of a move of F for 0.3 that the person lets go of as soon as the chain answers it,
     the arm going on at ``seen_ratio`` times that speed for 1.5 s after (the BoMI answers late);
     then the lean of the next move of F for 0.3."""
     channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
-    axis = np.array(THREE_AXIS.axes(Mode.TRANSLATION, Kind.LINEAR)["F"])
+    axis = SEEN_ALONG["F", Mode.TRANSLATION]
     wanted, t = 0.3, 0.0
     while channel.stick.function != "F":
         assert t < 5.0, "the chain never answered F"
-        channel.command(StickIntent({"F": wanted}), t, t + TICK, np.zeros(3), Mode.TRANSLATION)
+        channel.command(StickIntent({"F": wanted}), t, t + TICK, np.zeros(6), Mode.TRANSLATION)
         t += TICK
     first = channel.participant.intent[1]
     for _ in range(int(1.5 / TICK)):  # let go; the arm still answers the posture
         channel.command(StickIntent(), t, t + TICK, axis * seen_ratio * wanted, Mode.TRANSLATION)
         t += TICK
-    channel.command(StickIntent({"F": wanted}), t, t + TICK, np.zeros(3), Mode.TRANSLATION)
+    channel.command(StickIntent({"F": wanted}), t, t + TICK, np.zeros(6), Mode.TRANSLATION)
     return first, channel.participant.intent[1]
 
 

@@ -18,7 +18,7 @@ from bomi.fusion import DT, WARMUP_S
 from bomi.profiles import Profile
 from bomi.recording import NodeData, Recording
 from sim.kernels import clip
-from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Mode
+from sim.joystick import BUTTONS, FUNCTIONS, JoystickState, Kind, Layout, Mode
 from tasks.operators.assist import Assist, profile_assist
 from tasks.operators.stick import DecisionStick, arm_profile, profile_layout, rising_edge
 from tasks.participants.imu_synth import Delivery
@@ -39,8 +39,9 @@ class OperatorChannel(Protocol):
 
     def command(self, intent: StickIntent, t: float, t_end: float, seen: np.ndarray | None = None,
                 mode: Mode = Mode.TRANSLATION) -> JoystickState:
-        """The stick over the control tick [t, t_end) of task time. ``seen``: the hand's velocity as
-        a fraction of full speed (None on the first tick); ``mode``: the arm's mode."""
+        """The stick over the control tick [t, t_end) of task time. ``seen``: what the person saw the
+        hand do since their last look (``sources.seen_velocity``: its move and its turn as fractions of
+        the arm's top speeds; None on the first tick); ``mode``: the arm's mode."""
 
     def log_fields(self) -> dict:
         """Extra ``EpisodeLog`` fields the channel recorded (the BoMI's decisions)."""
@@ -144,6 +145,16 @@ class Watched:
     judged: bool = False  # let go of and seen too fast: already taught the feel a lesser lean
 
 
+def watched_axes(layout: Layout, mode: Mode) -> dict[str, tuple[float, ...]]:
+    """Per stick function of ``mode`` whose answer the person can see, its direction in
+    ``sources.seen_velocity``'s (move, turn) vector: a move of the hand along its axis, or a turn about
+    the vertical (the hand's heading: a tilt is not followed)."""
+    axes = {function: (*map(float, axis), 0.0, 0.0, 0.0) for function, axis in layout.axes(mode, Kind.LINEAR).items()}
+    axes.update({function: (0.0, 0.0, 0.0, 0.0, 0.0, float(axis[2]))
+                 for function, axis in layout.axes(mode, Kind.ANGULAR).items() if abs(axis[2]) == 1.0})
+    return axes
+
+
 def profile_controls(profile: Profile) -> Controls:
     """The controls a profile's classes give the scripted user: its joystick layout and the mode
     buttons it has a class for.  The user needs every direction of the layout, and B1 unless the
@@ -196,12 +207,10 @@ class BomiChannel:
                      if cls.function in FUNCTIONS}
         self._watched: Watched | None = None  # the proportional posture taken up last
         self._unanswered_since: float | None = None  # since when the furthest lean has gone unanswered
-        # what _watch reads every tick, made once: per mode, the hand axis each stick function moves along
-        # (as Python floats), and the share of a tick in the speed's smoothing
+        # what _watch reads every tick, made once: per mode, the direction in ``seen`` (move, turn) each stick
+        # function drives the hand along (as Python floats), and the share of a tick in the speed's smoothing
         layout = self.controls.layout
-        self._linear_axes = {mode: {function: tuple(float(v) for v in axis)
-                                    for function, axis in layout.axes(mode, Kind.LINEAR).items()}
-                             for mode in layout.modes}
+        self._watched_axes = {mode: watched_axes(layout, mode) for mode in layout.modes}
         self._smoothing = min(1.0, DT / participant.params.feel.speed_smoothing_s)
         # how long the person waits for a posture (or a change of lean) to take effect before
         # leaning further: reaction + the body's move + a second of watching
@@ -412,12 +421,13 @@ class BomiChannel:
         if watched is None or seen is None:
             return False
         function = self._function_of[watched.label]
-        axis = self._linear_axes[mode].get(function)
+        axis = self._watched_axes[mode].get(function)
         if axis is None:
             return False
         if self.stick.function == function:
-            (x, y, z), (ax, ay, az) = seen.tolist(), axis
-            along = 0.0 + x * ax + y * ay + z * az   # np.dot's sum of a (3,) . (3,) product, in its order
+            along = 0.0
+            for v, a in zip(seen.tolist(), axis):   # np.dot's sum, in its order
+                along += v * a
             watched.speed += (along - watched.speed) * self._smoothing
         return True
 

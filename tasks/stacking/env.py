@@ -23,7 +23,7 @@ a trial's wait before its first task).
 - reward: the change of ``phase`` (an episode's rewards sum to the cubes in place at its end);
 - terminated: stacked and still (success) or a cube off the table; truncated: the time limit;
 - info: ``view`` (the ``View`` the operators read), ``outcome`` (``Outcome``), ``state`` (the
-  ``JoystickState`` the arm got), ``command`` (the arm's ``Command``), ``dt`` and ``full_speed``
+  ``JoystickState`` the arm got), ``command`` (the arm's ``Command``), ``dt``, ``full_speed`` and ``wrist_speed``
   (the control period and the hand's speed at full deflection: what a person judges speeds by).
 """
 from __future__ import annotations
@@ -99,7 +99,8 @@ class StackingEnv(gymnasium.Env):
         })
         self._phase = 0
         self._free = False  # free mode (module docstring): no task, no outcome
-        self._scales = {"dt": self.sim.dt, "full_speed": self.sim.config.control.full_speed}
+        control = self.sim.config.control
+        self._scales = {"dt": self.sim.dt, "full_speed": control.full_speed, "wrist_speed": control.wrist_speed}
 
     def reset(self, *, seed: int | None = None, options: Mapping[str, Any] | None = None):
         super().reset(seed=seed)

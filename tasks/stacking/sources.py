@@ -12,6 +12,7 @@ source of a tick's ``JoystickState``, so that the one loop (``env.StackingEnv``)
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
@@ -21,11 +22,11 @@ import numpy as np
 from sim.joystick import JoystickState, Layout
 from tasks.operators.human import HumanOperator, load_human
 from tasks.operators.params import DEFAULT_OPERATOR_FILE, NO_HUMAN_MODEL, OperatorParams, load_operator
-from tasks.operators.judgement import Memory
+from tasks.operators.judgement import Memory, wrapped_angle
 from tasks.operators.planner import ScriptedUser
 from tasks.operators.recovery import Supervisor
 from tasks.stacking.channels import JoystickChannel, OperatorChannel, calibrated_channel, participant_controls
-from tasks.stacking.vocabulary import StickIntent
+from tasks.stacking.vocabulary import StickIntent, View
 
 
 class ActionSource(Protocol):
@@ -55,7 +56,7 @@ class Operator:
                  supervisor: Supervisor | None = None):
         self.user, self.channel, self.supervisor = user, channel, supervisor
         self.intent: StickIntent | None = None  # the intent of the last tick acted on
-        self._previous = None  # the hand's position at the last look
+        self._previous: View | None = None  # what was seen at the last look
 
     @property
     def layout(self) -> Layout:
@@ -63,12 +64,12 @@ class Operator:
         return self.channel.controls.layout
 
     def look(self, info: Mapping[str, Any]) -> tuple[StickIntent, np.ndarray | None]:
-        """What the person wants now and the hand's velocity they saw since their last look, as a
-        fraction of full speed (None at the first look)."""
+        """What the person wants now and what they saw the hand do since their last look (None at the
+        first look): ``seen_velocity``."""
         view = info["view"]
         intent = self.user.stick_intent(view) if self.supervisor is None else self.supervisor.intent(view)
-        seen = None if self._previous is None else (view.hand_pos - self._previous) / (info["dt"] * info["full_speed"])
-        self._previous = view.hand_pos
+        seen = None if self._previous is None else seen_velocity(self._previous, view, info)
+        self._previous = view
         self.intent = intent
         return intent, seen
 
@@ -76,6 +77,16 @@ class Operator:
         intent, seen = self.look(info)
         view = info["view"]
         return self.channel.command(intent, view.t, view.t + info["dt"], seen, view.mode)
+
+
+def seen_velocity(before: View, now: View, info: Mapping[str, Any]) -> np.ndarray:
+    """(6,): the hand's velocity between two looks as a fraction of the arm's top speeds: its move
+    (3, of ``full_speed``), then its turn (3, of ``wrist_speed``; about the vertical only: the hand's
+    heading is what the person sees of its turns)."""
+    elapsed = now.t - before.t
+    move = (now.hand_pos - before.hand_pos) / (elapsed * info["full_speed"])
+    turn = wrapped_angle(now.hand_yaw - before.hand_yaw, 2 * math.pi) / (elapsed * info["wrist_speed"])
+    return np.concatenate([move, [0.0, 0.0, turn]])
 
 
 def operator_at(channel: OperatorChannel, seed: int, operator_file: Path | str | OperatorParams = DEFAULT_OPERATOR_FILE

@@ -58,8 +58,9 @@ class StandIn:
                                     self.channel)
             self._trial = arm.trial
         view = arm.task.view()
-        intent, seen = self._person.look({"view": view, "dt": arm.dt,
-                                          "full_speed": arm.sim.config.control.full_speed})
+        control = arm.sim.config.control
+        intent, seen = self._person.look({"view": view, "dt": arm.dt, "full_speed": control.full_speed,
+                                          "wrist_speed": control.wrist_speed})
         self._truth = {"intended_dir": intended_direction(view.mode, intent, arm.sim.layout),
                        "pushing": bool(intent.deflection), "goal": intent.goal.step,
                        "stage": "" if intent.goal.phase is None else intent.goal.phase.value}
