@@ -24,7 +24,7 @@ a trial's wait before its first task).
 - terminated: stacked and still (success) or a cube off the table; truncated: the time limit;
 - info: ``view`` (the ``View`` the operators read), ``outcome`` (``Outcome``), ``state`` (the
   ``JoystickState`` the arm got), ``command`` (the arm's ``Command``), ``dt``, ``full_speed`` and ``wrist_speed``
-  (the control period and the hand's speed at full deflection: what a person judges speeds by).
+  (the control period, the hand's speed and turn rate at full deflection: what a person judges speeds by).
 """
 from __future__ import annotations
 

@@ -80,12 +80,11 @@ class Operator:
 
 
 def seen_velocity(before: View, now: View, info: Mapping[str, Any]) -> np.ndarray:
-    """(6,): the hand's velocity between two looks as a fraction of the arm's top speeds: its move
-    (3, of ``full_speed``), then its turn (3, of ``wrist_speed``; about the vertical only: the hand's
-    heading is what the person sees of its turns)."""
-    elapsed = now.t - before.t
-    move = (now.hand_pos - before.hand_pos) / (elapsed * info["full_speed"])
-    turn = wrapped_angle(now.hand_yaw - before.hand_yaw, 2 * math.pi) / (elapsed * info["wrist_speed"])
+    """(6,): the hand's velocity between two looks a control tick (``info["dt"]``) apart, as a fraction
+    of the arm's top speeds: its move (3, of ``full_speed``), then its turn (3, of ``wrist_speed``; about
+    the vertical only: the hand's heading is what the person sees of its turns)."""
+    move = (now.hand_pos - before.hand_pos) / (info["dt"] * info["full_speed"])
+    turn = wrapped_angle(now.hand_yaw - before.hand_yaw, 2 * math.pi) / (info["dt"] * info["wrist_speed"])
     return np.concatenate([move, [0.0, 0.0, turn]])
 
 
