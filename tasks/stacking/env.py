@@ -100,7 +100,8 @@ class StackingEnv(gymnasium.Env):
         self._phase = 0
         self._free = False  # free mode (module docstring): no task, no outcome
         control = self.sim.config.control
-        self._scales = {"dt": self.sim.dt, "full_speed": control.full_speed, "wrist_speed": control.wrist_speed}
+        # the units the info gives with every view: what a person judges the arm's speeds by
+        self.scales = {"dt": self.sim.dt, "full_speed": control.full_speed, "wrist_speed": control.wrist_speed}
 
     def reset(self, *, seed: int | None = None, options: Mapping[str, Any] | None = None):
         super().reset(seed=seed)
@@ -116,7 +117,7 @@ class StackingEnv(gymnasium.Env):
         view = self.task.view()
         obs = self._observe(view)
         self._phase = obs["phase"]
-        return obs, {"view": view, "task_seed": task_seed, **self._scales}
+        return obs, {"view": view, "task_seed": task_seed, **self.scales}
 
     def step(self, action: JoystickState | Mapping[str, Any]):
         state = as_state(action)
@@ -126,7 +127,7 @@ class StackingEnv(gymnasium.Env):
         obs = self._observe(view)
         reward, self._phase = 0.0 if self._free else float(obs["phase"] - self._phase), obs["phase"]
         info = {"view": view, "outcome": outcome, "state": state,
-                "command": Command(command.linear, command.angular, command.finger), **self._scales}
+                "command": Command(command.linear, command.angular, command.finger), **self.scales}
         return obs, reward, outcome.done and not outcome.timed_out, outcome.timed_out, info
 
     def _observe(self, view: View) -> dict[str, Any]:

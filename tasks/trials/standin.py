@@ -58,9 +58,7 @@ class StandIn:
                                     self.channel)
             self._trial = arm.trial
         view = arm.task.view()
-        control = arm.sim.config.control
-        intent, seen = self._person.look({"view": view, "dt": arm.dt, "full_speed": control.full_speed,
-                                          "wrist_speed": control.wrist_speed})
+        intent, seen = self._person.look({"view": view, **arm.env.scales})  # what the loop's info gives a person
         self._truth = {"intended_dir": intended_direction(view.mode, intent, arm.sim.layout),
                        "pushing": bool(intent.deflection), "goal": intent.goal.step,
                        "stage": "" if intent.goal.phase is None else intent.goal.phase.value}
