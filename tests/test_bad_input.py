@@ -529,17 +529,19 @@ def test_garbage_on_a_socket_is_not_a_recording(tmp_path, capsys, nodes):
 @pytest.mark.real_time
 def test_capture_ends_within_its_duration_when_the_stream_is_lost_and_says_the_file_is_partial(tmp_path, capsys):
     def stream_then_vanish(client):
+        # 40 rows of 3 nodes, sent as 4 bursts of 0.16 s of stream: on a loaded machine a sender that slept
+        # 16 ms per row took longer than the capture's duration to send them (CI: 33 rows in 2.5 s)
         time.sleep(0.35)
-        for k in range(40):  # 0.64 s of 3 nodes
+        for burst in range(4):
             client.sendall(b"".join(encode_imu_frame(ImuFrame(10 + n, 16, k, (k, 1, 2), (0, 0, 0), (0, 0, 16000)))
-                                    for n in range(3)))
-            time.sleep(0.016)
+                                    for k in range(10 * burst, 10 * burst + 10) for n in range(3)))
+            time.sleep(0.16)
 
     url, thread = serve(stream_then_vanish)
     out = tmp_path / "c.csv"
     start = time.monotonic()
-    assert main(["capture", "--port", url, "--duration", "2.5", "--out", str(out)]) == 2
-    assert time.monotonic() - start < 3.5  # 6 retries would take 31.5 s: the duration bounds them
+    assert main(["capture", "--port", url, "--duration", "4", "--out", str(out)]) == 2
+    assert time.monotonic() - start < 5.5  # 6 retries would take 31.5 s: the duration bounds them
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("bomi: error: ")]
     assert len(err) == 1 and f"{out} is partial: it keeps the" in err[0]
     assert 10 < len(read_recording(out)) <= 40
