@@ -300,13 +300,10 @@ def wait_for(condition, seconds):
     return condition()
 
 
-# Long enough that a test stopping it after its first episode is never too late: 8 episodes of about 1 s
-# each once the first is in were all done on a loaded machine before the test's next poll came round
-LONG_EPISODES = 40
-LONG = f"""
+LONG = """
 participants = ["P1"]
 operators = ["joystick"]
-seeds = {{first = 0, count = {LONG_EPISODES}}}
+seeds = {first = 0, count = 8}
 [vary]
 time_limit = [30.0]
 """
@@ -330,7 +327,7 @@ def test_ctrl_c_keeps_every_finished_episode_and_stops_the_workers(tmp_path):
     assert process.returncode == 130, err
     assert "Traceback" not in err
     saved = keys_in(out)
-    assert 1 <= len(saved) < LONG_EPISODES and f"{len(saved)} of the grid's {LONG_EPISODES} episodes are saved" in err
+    assert 1 <= len(saved) < 8 and f"{len(saved)} of the grid's 8 episodes are saved" in err
     assert (out / RESULTS_FILE).read_text().endswith("\n")
     assert json.loads((out / "summary.json").read_text())["rows"][0]["episodes"] == len(saved)
     assert wait_for(lambda: not any(alive(w) for w in workers), 10)
@@ -482,4 +479,4 @@ def test_sigterm_on_a_ray_sweep_keeps_what_finished_and_shuts_the_local_ray_down
     assert process.returncode == 130, err
     assert "episodes are saved in" in err and "Traceback" not in err
     assert wait_for(lambda: not any(alive(p) for p in ray_processes), 30), "a Ray process outlived the sweep"
-    assert 1 <= len(keys_in(out)) < LONG_EPISODES
+    assert 1 <= len(keys_in(out)) < 8
