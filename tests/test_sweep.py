@@ -313,7 +313,10 @@ def start_long_sweep(tmp_path):
     grid, out = grid_file(tmp_path, LONG), tmp_path / "out"
     process = subprocess.Popen([sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out),
                                 "--jobs", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)  # its own process group, as a shell job
+                               start_new_session=True,  # its own process group, as a shell job
+                               # a person's Ctrl-C: the default SIGINT even when the tests run as a background
+                               # job, whose children inherit SIGINT ignored (the sweep then ran all 8 to the end)
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert wait_for(lambda: (out / RESULTS_FILE).exists() and (out / RESULTS_FILE).read_text().count("\n") >= 1, 120)
     workers = children(process.pid)
     assert len(workers) >= 2
