@@ -101,8 +101,8 @@ def cell(text: str) -> str:
 
 
 def markdown(runs: list[Run]) -> str:
-    held = sorted({r.seeds for r in runs if r.held_out}, key=first_seed)
-    people = sorted({m for r in runs if r.held_out for m in PEOPLE.findall(r.people)}, key=first_seed)
+    held = sorted({r.seeds for r in runs if r.held_out}, key=lambda seeds: (first_seed(seeds), seeds))  # one order, run to run
+    people = sorted({m for r in runs if r.held_out for m in PEOPLE.findall(r.people)}, key=lambda m: (first_seed(m), m))
     lines = [
         "# Runs",
         "",
