@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import cache
@@ -250,18 +251,33 @@ def fit_pipeline(features: np.ndarray, labels: np.ndarray, shrinkage: float | st
     2-core machine made the threaded scipy lstsq ~100x slower (0.24 s instead of 2 ms) while its
     threads waited for a core, and the threaded Gram matrix of the rank 1 s of CPU instead of 0.08 s.
     """
+    (pipeline,) = fit_pipelines(features, labels, (shrinkage,), priors)
+    return pipeline
+
+
+def fit_pipelines(features: np.ndarray, labels: np.ndarray, shrinkages: Sequence[float | str | None],
+                  priors: np.ndarray | None = None) -> list[Pipeline]:
+    """``fit_pipeline`` for each of ``shrinkages`` on the same data: the scaler, and the PCA of the
+    settings that have one, fitted once and shared (the same fits each pipeline would make alone, so
+    the same parameters to the bit; a cross-validation fold compares the shrinkages so)."""
     if not np.isfinite(features).all():   # checked once here: each step would check its input again
         raise ValueError("the features hold NaN or infinite values")
+    pipelines = []
     with single_threaded_blas(), config_context(assume_finite=True):
         scale = StandardScaler()
         standardised = scale.fit_transform(features, labels)
-        if shrinkage is None and priors is None:
-            pca, lda = "passthrough", LinearDiscriminantAnalysis(solver="svd").fit(standardised, labels)
-        else:
-            pca = PCA(n_components=numerical_rank(standardised), svd_solver="covariance_eigh")
-            lda = LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors)
-            lda.fit(pca.fit_transform(standardised, labels), labels)
-    return Pipeline([("scale", scale), ("pca", pca), ("lda", lda)])
+        pca, rotated = None, None
+        for shrinkage in shrinkages:
+            if shrinkage is None and priors is None:
+                steps = ("passthrough", LinearDiscriminantAnalysis(solver="svd").fit(standardised, labels))
+            else:
+                if pca is None:
+                    pca = PCA(n_components=numerical_rank(standardised), svd_solver="covariance_eigh")
+                    rotated = pca.fit_transform(standardised, labels)
+                lda = LinearDiscriminantAnalysis(solver="lsqr", shrinkage=shrinkage, priors=priors)
+                steps = (pca, lda.fit(rotated, labels))
+            pipelines.append(Pipeline([("scale", scale), ("pca", steps[0]), ("lda", steps[1])]))
+    return pipelines
 
 
 def pipeline_parameters(pipeline: Pipeline) -> tuple[np.ndarray, PipelineParameters]:

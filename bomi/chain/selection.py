@@ -18,7 +18,7 @@ import numpy as np
 
 from bomi.chain.copies import MotionCopies, training_windows
 from bomi.chain.windows import recorded_priors
-from bomi.classifier import Model, fit_pipeline, pipeline_parameters, posteriors, reject, single_threaded_blas
+from bomi.classifier import Model, fit_pipelines, pipeline_parameters, posteriors, reject, single_threaded_blas
 from bomi.errors import BomiError
 from bomi.features import FeatureSpec, run_edges, single_label_windows
 from bomi.profiles import Profile
@@ -171,20 +171,22 @@ def _cross_validate(rec: Recording, profile: Profile, spec: FeatureSpec,
     for scales in dict.fromkeys(c.amplitude_scales for c in candidates):
         copies = replace(MotionCopies.of(profile), scales=scales)
         by_scales[scales] = training_windows(rec, spec, profile.neutral_samples, copies)
-    for candidate, part in zip(candidates, parts):
-        windows, prepared = by_scales[candidate.amplitude_scales]
+    for scales, (windows, prepared) in by_scales.items():
+        alike = [i for i, c in enumerate(candidates) if c.amplitude_scales == scales]   # one fit of a fold's scaler and PCA
         train_fold = np.where(inside[(windows.ends - (spec.window - 1)) // spec.stride], folds[windows.ends], -1)
         for k in range(n_folds):
             fit_rows = (train_fold >= 0) & (train_fold != k)
             test_rows = inside & prepared.pure & (folds[prepared.ends] == k)
             if len(np.unique(windows.labels[fit_rows])) < 3 or not test_rows.any():
                 continue   # a fold without enough classes to fit, or nothing to test: left out
-            classes, parameters = pipeline_parameters(fit_pipeline(
-                windows.features[fit_rows], windows.labels[fit_rows], candidate.shrinkage,
-                recorded_priors(windows.labels[fit_rows], windows.recorded[fit_rows])))
-            model = Model(classes=classes, parameters=parameters, spec=spec, amplitude={})
-            part.append((prepared.labels[test_rows], model.classes, posteriors(model, prepared.features[test_rows]),
-                         hold_starts[prepared.ends[test_rows]] * n_folds + k))
+            pipelines = fit_pipelines(windows.features[fit_rows], windows.labels[fit_rows],
+                                      [candidates[i].shrinkage for i in alike],
+                                      recorded_priors(windows.labels[fit_rows], windows.recorded[fit_rows]))
+            for i, pipeline in zip(alike, pipelines):
+                classes, parameters = pipeline_parameters(pipeline)
+                model = Model(classes=classes, parameters=parameters, spec=spec, amplitude={})
+                parts[i].append((prepared.labels[test_rows], model.classes, posteriors(model, prepared.features[test_rows]),
+                                 hold_starts[prepared.ends[test_rows]] * n_folds + k))
     return parts
 
 
