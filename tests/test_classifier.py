@@ -13,7 +13,7 @@ from threadpoolctl import threadpool_limits
 
 from bomi.chain import MotionCopies, prepare, recorded_priors, training_windows
 from bomi.classifier import (AmplitudeRange, MajorityVote, PipelineParameters, PostProcessing, amplitude_ranges, class_amplitude,
-                             RANK_TOLERANCE, classify_windows, fit_pipeline, gamma, majority_vote, numerical_rank, posteriors,
+                             RANK_TOLERANCE, classify_windows, fit_pipeline, fit_pipelines, gamma, majority_vote, numerical_rank, posteriors,
                              proportional, reject, sample_amplitude)
 from tasks.cli import main
 from bomi.errors import BomiError
@@ -239,6 +239,23 @@ def test_fitted_steps_are_the_plain_pipelines_to_the_bit(p1_days, p1_profile, se
         assert ours.named_steps["pca"].n_components_ < windows.features.shape[1]   # a rank-reducing projection
     test = prepare(p1_days[2], p1_profile.spec, p1_profile.neutral_samples).features
     assert np.array_equal(ours.predict_proba(test), former.predict_proba(test))
+
+
+def test_pipelines_fitted_together_are_each_the_plain_pipeline_to_the_bit():
+    """A cross-validation fold fits every shrinkage at once (``fit_pipelines``: one scaler, one PCA):
+    each pipeline is scikit-learn's own ``Pipeline.fit`` of its shrinkage alone, plain LDA included."""
+    rng = np.random.default_rng(3)
+    labels = np.repeat(np.arange(4), 250)
+    features = rng.normal(size=(1000, 12)) + 0.8 * labels[:, None] * rng.normal(size=12)
+    features[:, 11] = features[:, 10]                  # a rank the PCA drops
+    shrinkages = (None, 1e-3, 0.1, "auto")
+    together = fit_pipelines(features, labels, shrinkages)
+    for shrinkage, ours in zip(shrinkages, together):
+        former = _former_pipeline(features, labels, shrinkage, None)
+        assert np.array_equal(ours.predict_proba(features), former.predict_proba(features)), shrinkage
+        assert np.array_equal(ours.named_steps["lda"].coef_, former.named_steps["lda"].coef_), shrinkage
+    assert together[1].named_steps["pca"] is together[3].named_steps["pca"]   # shared, not refitted
+    assert together[1].named_steps["pca"].n_components_ == 11
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
