@@ -6,8 +6,9 @@ import sys
 import pytest
 
 from tasks.cli import main
-from tasks.experiments.engine import EpisodeFailed, ProcessPool, RayCluster, run_private
+from tasks.experiments.engine import PRIVATE_RAY, EpisodeFailed, ProcessPool, RayCluster, run_private
 from tasks.experiments.jobs import EpisodeJob, benchmark_jobs, episode_record
+from tests.network import ServedSockets, children_running
 
 # how fast the machine ran the episode, not what happened in it
 TIMING_FIELDS = ("wall_time", "cpu_time", "realtime_factor", "realtime_factor_cpu")
@@ -27,7 +28,7 @@ def in_order(engine, jobs) -> list[dict]:
     return [outcome(results[i]) for i in range(len(jobs))]
 
 
-# The tests that start a Ray (here, tests/test_ray_private.py and test_sweep.py's SIGTERM on a Ray sweep)
+# The tests that start a Ray (here, and test_sweep.py's SIGTERM on a Ray sweep)
 # share an xdist group: one Ray at a time on this 2-core machine, and each module fixture made once.
 RAY = pytest.mark.xdist_group("ray")
 
@@ -57,9 +58,15 @@ def ray_cluster():
 
 
 @RAY
-def test_ray_gives_the_process_pool_s_records_field_by_field(pool_records):
+def test_ray_gives_the_process_pool_s_records_field_by_field_and_listens_on_the_loopback_only(pool_records):
+    """The private local Ray `--engine ray` starts gives the pool's records; over its whole run (start-up,
+    episodes, idle workers, shut-down) no process of it listens (TCP) or receives (UDP) on anything but
+    the loopback, as each process's own network namespace sees it (tasks/experiments/private_ray.py)."""
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
-    results = dict(run_private(episode_record, JOBS, 2))  # the local Ray `--engine ray` starts
+    with ServedSockets(lambda: children_running(os.getpid(), PRIVATE_RAY)) as served:
+        results = dict(run_private(episode_record, JOBS, 2))
+    assert "gcs_server" in served.commands() and "raylet" in served.commands()  # Ray's servers were seen, listening
+    assert not served.beyond_loopback(), f"listening beyond the loopback: {served.beyond_loopback()}"
     assert sorted(results) == list(range(len(JOBS)))
     ray_records = [outcome(results[i]) for i in range(len(JOBS))]
     for job, ours, theirs in zip(JOBS, ray_records, pool_records):

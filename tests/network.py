@@ -1,24 +1,14 @@
-"""A local Ray reachable from this machine only: during a `bomi sweep --engine ray`, no process of
-the sweep or of its Ray listens (TCP) or receives (UDP) on anything but the loopback, as each
-process's own network namespace sees it (read from /proc, as `ss -lptn` would)."""
+"""What a process tree serves on the network, read from /proc as `ss -lptn` would: each process's
+listening TCP and bound UDP sockets in the tables of its own network namespace."""
+from __future__ import annotations
+
 import ipaddress
 import os
 import socket
-import subprocess
-import sys
+import threading
 import time
+from collections.abc import Callable
 
-import pytest
-
-from tasks.experiments.sweep import RESULTS_FILE
-
-GRID = """
-participants = ["P1"]
-operators = ["joystick"]
-seeds = {first = 0, count = 4}
-[vary]
-time_limit = [2.0]
-"""
 TCP_LISTEN = "0A"  # include/net/tcp_states.h
 
 
@@ -76,32 +66,49 @@ def descendants(pid: int) -> list[int]:
     return found
 
 
-@pytest.mark.xdist_group("ray")  # one Ray at a time (see tests/test_engine.py)
-def test_a_local_ray_sweep_listens_on_the_loopback_only(tmp_path):
-    pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
-    grid, out = tmp_path / "grid.toml", tmp_path / "out"
-    grid.write_text(GRID)
-    sweep = subprocess.Popen([sys.executable, "-m", "tasks.cli", "sweep", str(grid), "--out", str(out),
-                              "--engine", "ray", "--jobs", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             text=True)
-    seen: dict[tuple[int, str, str, int], str] = {}  # (pid, protocol, address, port) -> the process's command
-    try:
-        while sweep.poll() is None:  # the whole run: start-up, episodes, idle workers, shut-down
-            for pid in [sweep.pid, *descendants(sweep.pid)]:
+class ServedSockets:
+    """While open, every 0.3 s: the sockets served by the processes ``roots()`` names and all their
+    descendants, as {(pid, protocol, address, port): the process's command line}."""
+
+    def __init__(self, roots: Callable[[], list[int]]):
+        self.roots, self.seen = roots, {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+
+    def __enter__(self) -> "ServedSockets":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10)
+
+    def _watch(self) -> None:
+        while not self._stop.is_set():
+            for pid in [p for root in self.roots() for p in (root, *descendants(root))]:
                 for served in served_sockets(pid):
                     try:
                         with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
-                            seen[(pid, *served)] = cmdline.read().replace(b"\0", b" ")[:100].decode()
+                            self.seen[(pid, *served)] = cmdline.read().replace(b"\0", b" ")[:100].decode()
                     except OSError:
                         pass
             time.sleep(0.3)
-        _, err = sweep.communicate()
-    finally:
-        if sweep.poll() is None:
-            sweep.kill()
-    assert sweep.returncode == 0, err
-    assert (out / RESULTS_FILE).read_text().count("\n") == 4
-    commands = " ".join(seen.values())
-    assert "gcs_server" in commands and "raylet" in commands  # Ray's servers were seen, listening
-    beyond = {key: command for key, command in seen.items() if not is_loopback(key[2])}
-    assert not beyond, f"listening beyond the loopback: {beyond}"
+
+    def beyond_loopback(self) -> dict:
+        return {key: command for key, command in self.seen.items() if not is_loopback(key[2])}
+
+    def commands(self) -> str:
+        return " ".join(self.seen.values())
+
+
+def children_running(parent: int, module: str) -> list[int]:
+    """The children of ``parent`` whose command line names ``module``."""
+    found = []
+    for pid in descendants(parent):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
+                if module.encode() in cmdline.read():
+                    found.append(pid)
+        except OSError:
+            pass
+    return found
