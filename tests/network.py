@@ -101,8 +101,8 @@ class ServedSockets:
         return " ".join(self.seen.values())
 
 
-def children_running(parent: int, module: str) -> list[int]:
-    """The children of ``parent`` whose command line names ``module``."""
+def descendants_running(parent: int, module: str) -> list[int]:
+    """The descendants of ``parent`` whose command line names ``module``."""
     found = []
     for pid in descendants(parent):
         try:

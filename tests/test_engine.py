@@ -8,7 +8,7 @@ import pytest
 from tasks.cli import main
 from tasks.experiments.engine import PRIVATE_RAY, EpisodeFailed, ProcessPool, RayCluster, run_private
 from tasks.experiments.jobs import EpisodeJob, benchmark_jobs, episode_record
-from tests.network import ServedSockets, children_running
+from tests.network import ServedSockets, descendants_running
 
 # how fast the machine ran the episode, not what happened in it
 TIMING_FIELDS = ("wall_time", "cpu_time", "realtime_factor", "realtime_factor_cpu")
@@ -63,7 +63,7 @@ def test_ray_gives_the_process_pool_s_records_field_by_field_and_listens_on_the_
     episodes, idle workers, shut-down) no process of it listens (TCP) or receives (UDP) on anything but
     the loopback, as each process's own network namespace sees it (tasks/experiments/private_ray.py)."""
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
-    with ServedSockets(lambda: children_running(os.getpid(), PRIVATE_RAY)) as served:
+    with ServedSockets(lambda: descendants_running(os.getpid(), PRIVATE_RAY)) as served:
         results = dict(run_private(episode_record, JOBS, 2))
     assert "gcs_server" in served.commands() and "raylet" in served.commands()  # Ray's servers were seen, listening
     assert not served.beyond_loopback(), f"listening beyond the loopback: {served.beyond_loopback()}"
