@@ -18,4 +18,6 @@ which only parses arguments and prints) and the benchmarks (benchmarks/) both ca
   ends the session).
 - ``limits``: the largest seeds, seed counts and durations any run accepts.
 - ``engine`` and ``sweep`` (process pool or Ray; grids of settings x seeds, resumable).
+- ``faults``: the fault corpora run through the command line (damaged files, session faults, the live
+  loop's safety), for `python benchmarks/faults.py`.
 """
