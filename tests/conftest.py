@@ -13,8 +13,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 # One BLAS (and OpenMP) thread per process, this one and those the tests start, unless the environment says
 # otherwise (set before anything loads numpy's BLAS; tests/test_suite_priority.py checks it): three workers
 # run on two cores, where a threaded BLAS in each only oversubscribes them (why the library's fits run
-# single-threaded: bomi.classifier.single_threaded_blas). The whole suite on 2 cores: 336.1 s (run ci-18),
-# 302.9 s with this and one local Ray fewer (run tests-one-blas-thread).
+# single-threaded: bomi.classifier.single_threaded_blas).
 BLAS_THREADS = {name: os.environ.setdefault(name, "1") for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                                      "MKL_NUM_THREADS")}
 
