@@ -16,7 +16,6 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-
 from tasks.experiments.faults.runs import ROOT, forked
 
 

@@ -26,7 +26,6 @@ from tasks.participants.wire import participant_blocks, session_heading
 from tasks.trials.live import LiveLoop
 
 
-
 # ================================================================================= live
 # The live loop's safety bars (issue 27), measured end to end: a virtual participant's raw samples as
 # base-station frames on a pseudo-terminal -> StreamReader -> LiveLoop -> the simulated arm.
