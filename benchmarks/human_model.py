@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 from bomi import paper  # noqa: E402
 from tasks.stacking import metrics  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
-from tasks.experiments.jobs import RECOVERY_KEY, EpisodeJob, run_job  # noqa: E402
+from tasks.experiments.jobs import HUMAN_MODEL_KEY, HUMAN_ON, RECOVERY_KEY, EpisodeJob, run_job  # noqa: E402
 from tasks.stacking import budget  # noqa: E402
 from tasks.stacking.channels import participant_controls
 from tasks.stacking.summary import summarize
@@ -94,7 +94,7 @@ def human_variant(directory: Path, key: str, value: float) -> str:
 def calibrate(args: argparse.Namespace) -> None:
     slopes = [float(x) for x in args.slopes.split(",")]
     with tempfile.TemporaryDirectory() as tmp:
-        jobs = [EpisodeJob("joystick", "P1", seed, overrides=(("operator.human.model", human_variant(Path(tmp), "fitts_slope", b)),))
+        jobs = [EpisodeJob("joystick", "P1", seed, overrides=((HUMAN_MODEL_KEY, human_variant(Path(tmp), "fitts_slope", b)),))
                 for b in slopes for seed in range(args.seeds)]
         records = run(jobs, args.jobs)
     rows = []
@@ -121,7 +121,6 @@ def calibrate(args: argparse.Namespace) -> None:
     print("\n".join(lines))
 
 
-HUMAN_ON = (("operator.human.model", "human"),)
 PHASES = ("reach", "grasp", "carry", "place", "release", "other")
 
 
@@ -254,7 +253,7 @@ def sensitivity(args: argparse.Namespace) -> None:
             human = "human" if key is None else human_variant(Path(tmp), key, value)
             for operator in ("joystick", "bomi"):
                 for seed in seeds:
-                    jobs.append(EpisodeJob(operator, "P1", seed, overrides=(("operator.human.model", human),)))
+                    jobs.append(EpisodeJob(operator, "P1", seed, overrides=((HUMAN_MODEL_KEY, human),)))
                     cells.append((key, value, operator))
         records = run(jobs, args.jobs)
     table: dict[tuple, dict[str, list[float]]] = {}

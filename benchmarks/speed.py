@@ -65,7 +65,7 @@ from bomi.chain import OnlineChain
 from bomi.frames import FrameParser
 from sim.controller import CartesianVelocityController
 from sim.env import ArmSim
-from tasks.experiments.jobs import EpisodeJob, job_assist, run_job
+from tasks.experiments.jobs import HUMAN_ON, EpisodeJob, job_assist, run_job
 from tasks.stacking.channels import JoystickChannel, calibrated_channel, profile_controls
 from tasks.stacking.episode import run_episode
 from tasks.participants.participant import VirtualParticipant, load_participant
@@ -141,9 +141,10 @@ def dm_control_episode(env, seed: int) -> dict:
     return clocked(run) | {"sim_s": float(env.physics.data.time)}
 
 
-def our_episode(operator: str, seed: int) -> dict:
+def our_episode(operator: str, seed: int, overrides: tuple = ()) -> dict:
+    """One episode of virtual P1 (``overrides``: the job's, e.g. the human operator model on)."""
     with StepClock() as physics:
-        out = clocked(lambda: {"log": run_job(EpisodeJob(operator, "P1", seed))})
+        out = clocked(lambda: {"log": run_job(EpisodeJob(operator, "P1", seed, overrides=overrides))})
     log = out.pop("log")
     return out | {"sim_s": float(log.t[-1] + (log.t[1] - log.t[0])), "loop_wall_s": log.wall_time,
                   "loop_cpu_s": log.cpu_time, "setup_wall_s": out["wall_s"] - log.wall_time,
@@ -342,8 +343,11 @@ def markdown(record: dict) -> str:
     m = record["machine"]
     lines = [
         f"# Episode speed, measured fairly ({args['rounds']} rounds, seeds {args['first_seed']}-"
-        f"{args['first_seed'] + args['rounds'] - 1}, one process pinned to one core)", "",
-        f"`python benchmarks/speed.py --rounds {args['rounds']} --first-seed {args['first_seed']}` at commit "
+        f"{args['first_seed'] + args['rounds'] - 1}, one process pinned to one core"
+        f"{'; our operators with the human model' if args.get('human') else ''})", "",
+        f"`python benchmarks/speed.py --rounds {args['rounds']} --first-seed {args['first_seed']}"
+        f"{' --no-profile' if args['no_profile'] else ''}{' --human' if args.get('human') else ''}"
+        f" --out {args['out']}` at commit "
         f"{record['commit']}. Machine: {m['cpu']}, {m['cpu_count']} cores shared with other work; 1-min load "
         f"average {m['load_before']:.2f} before, {m['load_after']:.2f} after the run. Python {m['python']}, "
         f"mujoco {record['versions']['mujoco']}, dm-control {record['versions']['dm-control']}, "
@@ -431,8 +435,13 @@ def main() -> None:
     parser.add_argument("--physics-repeats", type=int, default=5,
                         help="runs of physics alone per round, the least disturbed one charged")
     parser.add_argument("--no-profile", action="store_true", help="skip the cProfile tables")
+    parser.add_argument("--human", action="store_true",
+                        help="our episodes with the human operator model on (docs/human_model.md); with --no-profile")
     parser.add_argument("--out", default="side_by_side", help="results file name (benchmarks/results/OUT.md, .json)")
     args = parser.parse_args()
+    if args.human and not args.no_profile:
+        parser.error("--human: the profile tables are the scripted user's; add --no-profile")
+    overrides = HUMAN_ON if args.human else ()
     pin_to_one_core()
     load_before = os.getloadavg()[0]
     arm = ArmSim()
@@ -440,13 +449,13 @@ def main() -> None:
     env = manipulation.load("stack_2_bricks_features", seed=args.first_seed)
     build_s = time.perf_counter() - built
     dm_control_episode(env, 0)   # steady state for every kind: one untimed run each
-    our_episode("joystick", args.first_seed)
-    our_episode("bomi", args.first_seed)
+    our_episode("joystick", args.first_seed, overrides)
+    our_episode("bomi", args.first_seed, overrides)
     rounds = []
     for k in range(args.rounds):
         seed = args.first_seed + k
         kinds = {PHYSICS: lambda: physics_alone(arm, args.physics_s, args.physics_repeats), DM: lambda: dm_control_episode(env, seed),
-                 JOY: lambda: our_episode("joystick", seed), BOMI: lambda: our_episode("bomi", seed)}
+                 JOY: lambda: our_episode("joystick", seed, overrides), BOMI: lambda: our_episode("bomi", seed, overrides)}
         order = list(kinds)[k % 4:] + list(kinds)[:k % 4]   # who goes first rotates
         rounds.append({kind: r for kind, r in sorted(((kind, kinds[kind]()) for kind in order),
                                                       key=lambda kv: list(kinds).index(kv[0]))})

@@ -2,6 +2,7 @@
 
     python benchmarks/table1_virtual.py [--first-seed 0] [--days 5] [--held-out]
     python benchmarks/table1_virtual.py --calibrate P5:3 --shares 0.3,0.25,0.2,0.15,0.1 [--first-seed 0] [--days 5]
+    python benchmarks/table1_virtual.py --calibrate P4:all --shares 0.6,0.5,0.45,0.4,0.35,0.3,0.25
 
 As the paper's Table I, a training and a test recording of one day: for each of ``--days`` development
 seeds from ``--first-seed`` on (each seed a day of the person), each participant performs the paper's
@@ -12,10 +13,11 @@ trained on the first and tested on the second, for each feature vector. Printed:
 over the days (and its range), and for FV3 each class's mean recall and where the paper's
 weakest class goes, beside the paper's figures (P1 100/100/100; P4 89.02/90.92/94.84 with c1 at
 64.2 %; P5 82.28/83.78/88.48 with c3 read 48.8 % as c0 and 14.2 % as c5). P4's spasms and P5's small
-range are set from the paper's descriptions (their TOML files). One parameter is calibrated on Table I's FV1
-column, never on FV3 (the check): ``--calibrate NAME:CLASS`` prints, for each ``--shares`` value of that
-class's ``range_share`` (the share of its nominal posture the person reaches), the FV1 accuracy on the
-development days and the value nearest the paper's FV1 (P5's thumb abduction: its TOML file says which).
+range are set from the paper's descriptions (their TOML files). One parameter per participant is calibrated on
+Table I's FV1 column, never on FV3 (the check): ``--calibrate NAME:CLASS`` prints, for each ``--shares`` value of
+that class's ``range_share`` (the share of its nominal posture the person reaches), the FV1 accuracy on the
+development days and the value nearest the paper's FV1 (P5's thumb abduction); ``--calibrate NAME:all`` does the
+same for ``max_amplitude``, the share of every motion's nominal range (P4's). Their TOML files say which.
 ``--held-out`` takes the days from the confirmation range (10000-19999, once per freeze). Writes
 benchmarks/results/table1_virtual.md (not in calibration).
 """
@@ -45,6 +47,7 @@ PAPER = {"P1": PaperRow((100.0, 100.0, 100.0), None), "P4": PaperRow((89.02, 90.
          "P5": PaperRow((82.28, 83.78, 88.48), 3)}
 RESULTS = Path(__file__).resolve().parent / "results"
 MAX_DEVELOPMENT_SEED = 999
+ALL_CLASSES = "all"   # --calibrate NAME:all: the participant's max_amplitude (every motion's range)
 HELD_OUT = range(10000, 20000)
 
 
@@ -106,7 +109,8 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--days", type=int, default=5)
     parser.add_argument("--held-out", action="store_true", help="days from the confirmation range 10000-19999")
-    parser.add_argument("--calibrate", metavar="NAME:CLASS", help="FV1 for each --shares value of the class's range_share")
+    parser.add_argument("--calibrate", metavar="NAME:CLASS", help="FV1 for each --shares value of the class's range_share "
+                        "(NAME:all: of the participant's max_amplitude)")
     parser.add_argument("--shares", default="0.3,0.2,0.15,0.1", help="comma list of range_share values")
     args = parser.parse_args()
     seeds = list(range(args.first_seed, args.first_seed + args.days))
@@ -130,25 +134,28 @@ def main() -> None:
 
 
 def calibrate(parser: argparse.ArgumentParser, which: str, shares: str, seeds: list[int]) -> None:
-    """FV1 (never FV3: the check) for each range_share of one class; the value nearest the paper's FV1."""
+    """FV1 (never FV3: the check) for each range_share of one class (``NAME:CLASS``) or each max_amplitude
+    (``NAME:all``); the value nearest the paper's FV1."""
     name, _, label = which.partition(":")
-    if name not in PAPER or not label.isdigit():
-        parser.error(f"--calibrate: NAME:CLASS with NAME one of {', '.join(PAPER)}, got {which!r}")
+    if name not in PAPER or not (label.isdigit() or label == ALL_CLASSES):
+        parser.error(f"--calibrate: NAME:CLASS or NAME:{ALL_CLASSES} with NAME one of {', '.join(PAPER)}, got {which!r}")
     try:
         values = [float(v) for v in shares.split(",")]
     except ValueError:
         parser.error(f"--shares: a comma list of numbers, got {shares!r}")
     params = load_participant(name)
-    if int(label) not in params.classes or not all(0 < v <= 1 for v in values):
+    if (label != ALL_CLASSES and int(label) not in params.classes) or not all(0 < v <= 1 for v in values):
         parser.error(f"--calibrate/--shares: {name} has classes {sorted(params.classes)}; shares within (0, 1]")
+    what = "max_amplitude" if label == ALL_CLASSES else f"c{label} range_share"
     fv1 = {}
     for share in values:
-        scores = score(name, seeds, with_range_share(params, int(label), share), kinds=("FV1",))
+        varied = (replace(params, max_amplitude=share) if label == ALL_CLASSES
+                  else with_range_share(params, int(label), share))
+        scores = score(name, seeds, varied, kinds=("FV1",))
         fv1[share] = float(np.mean(scores.accuracy["FV1"]))
-        print(f"{name} c{label} range_share {share:g}: FV1 {fv1[share]:.2f} % (paper {PAPER[name].accuracy[0]:.2f})",
-              flush=True)
+        print(f"{name} {what} {share:g}: FV1 {fv1[share]:.2f} % (paper {PAPER[name].accuracy[0]:.2f})", flush=True)
     best = min(fv1, key=lambda v: abs(fv1[v] - PAPER[name].accuracy[0]))
-    print(f"nearest the paper's FV1: range_share {best:g}")
+    print(f"nearest the paper's FV1: {what} {best:g}")
 
 
 if __name__ == "__main__":

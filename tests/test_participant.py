@@ -398,7 +398,7 @@ def test_online_chain_on_the_virtual_stream_follows_the_intent(p1, session):
 # ------------------------------------------------------------------- spasms, range, timing (issue 53)
 def test_a_class_range_share_scales_its_posture():
     p5 = load_participant("P5")
-    assert p5.classes[3].posture_deg.tolist() == [[0.0, 0.0, 0.0], [0.0, 0.15 * 25.0, 0.0]]   # P5.toml: 0.15 x 25 deg
+    assert p5.classes[3].posture_deg.tolist() == [[0.0, 0.0, 0.0], [0.0, 0.1 * 25.0, 0.0]]   # P5.toml: 0.1 x 25 deg
     assert p5.classes[4].posture_deg.tolist() == [[0.0, 0.0, 0.0], [0.0, -25.0, 0.0]]        # the others as written
 
 

@@ -28,9 +28,10 @@ def bomi(capsys, *argv) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="module")
 def known_p4():
-    """A P4 whose timing differs from every prior (onset 0.6 s, reaction 0.25 s), without spasms."""
+    """A P4 whose timing differs from every prior (onset 0.6 s, reaction 0.25 s), without spasms, at its postures'
+    full size (not P4's reduced range: the twin's postures are checked against the file's)."""
     return dataclasses.replace(load_participant("P4"), onset_s=0.6, reaction_s=0.25, reaction_sd_s=0.0, spasm=None,
-                               evoked_spasm=None)
+                               evoked_spasm=None, max_amplitude=1.0)
 
 
 @pytest.fixture(scope="module")

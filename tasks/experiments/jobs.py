@@ -27,6 +27,8 @@ if TYPE_CHECKING:
 DEFAULT_VOTE = 5
 
 RECOVERY_KEY = "operator.recovery.actions"  # the override --recovery sets (a grid may vary it too)
+HUMAN_MODEL_KEY = "operator.human.model"     # the override that puts a human model around the scripted user
+HUMAN_ON = ((HUMAN_MODEL_KEY, "human"),)     # ... the shipped one (tasks/operators/human.toml)
 
 
 def with_recovery(job: EpisodeJob, recovery: str | None) -> EpisodeJob:
