@@ -77,9 +77,9 @@ def test_shipped_p1_is_the_twin_of_its_five_days(tmp_path, shared_data, capsys):
     assert code == 0, stdout
     # the same file: the leans measured from the holds (issue 53.4), as shipped
     refit = load_participant(out)
-    assert 0.8 < refit.feel.least_lean < 0.95, refit.feel.least_lean
+    assert 0.5 < refit.feel.least_lean < 0.7, refit.feel.least_lean   # the least held sample (median over classes)
     assert refit.provenance["feel.least_lean"].startswith("measured")
-    assert 1.0 < refit.feel.most_lean < 1.2, refit.feel.most_lean
+    assert 1.2 < refit.feel.most_lean < 1.3, refit.feel.most_lean     # the largest
     assert refit.feel == load_participant("P1").feel
     # apart: the shipped P1's onset spread (issue 53's measurement on a continuous recording: these
     # holds-only days cannot show it) and the refit's digests of its source runs (tasks.trials.standin)

@@ -59,12 +59,13 @@ SETTLE_MARGIN_S = 0.3          # continuous recordings: a block's hold starts th
 ASSUMED_ONSET_S = 0.8
 ASSUMED_REACTION_S = 0.4
 # The least and the furthest lean (``Feel.least_lean``, ``Feel.most_lean``) are where the recording's
-# holds begin and end: these quantiles of each class's held samples along its posture (the median over
-# classes). A model trained on the recording calibrates its speed range from the least to the largest
-# held sample (``bomi.classifier.amplitude_ranges``): a twin leaning less far than the person held sits
-# below it and never moves the arm, one that never leans further than the median hold never drives it
-# faster than half way (issue 53.4).
-LEAN_QUANTILES = (0.05, 0.95)
+# holds begin and end: the least and the largest of each class's held samples along its posture (the
+# median over classes), the very range a model trained on the recording calibrates its speed on
+# (``bomi.classifier.amplitude_ranges``: nu = 0 at the least held sample, 1 at the largest), so that the
+# twin drives that model over the speeds it drives the person (issue 53.4). The 5 % and 95 % quantiles
+# used before (0.810 and 1.187 for P1) left the slowest fifth of the range out: run lean-range-dev.
+LEAN_QUANTILES = (0.0, 1.0)
+LEAN_ENDS = ("least", "largest")   # how the provenance names them
 # The rest of how the participant leans through the BoMI (tasks.participants.params.Feel): recordings
 # of holds do not show it; written as assumed, the same as P4's and P5's files.
 FEEL = """
@@ -451,8 +452,8 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     provenance["max_amplitude"] = "definition: the postures are measured as performed (full range)"
     least_lean, most_lean = (holds.held_share(postures, q) for q in LEAN_QUANTILES)
     least_lean, most_lean = float(np.clip(least_lean, 0.05, 1.0)), float(np.clip(most_lean, 1.0, 2.0))
-    for key, quantile in zip(("feel.least_lean", "feel.most_lean"), LEAN_QUANTILES):
-        provenance[key] = (f"measured: the {quantile:.0%} quantile of each class's held samples along its posture, "
+    for key, end in zip(("feel.least_lean", "feel.most_lean"), LEAN_ENDS):
+        provenance[key] = (f"measured: the {end} of each class's held samples along its posture, "
                            f"median over the classes ({names})")
     provenance["feel"] = "assumed: recordings of holds do not show how a person corrects a lean (as P4, P5)"
     provenance["protocol"] = f"the runs of {first}, for bomi synth"
