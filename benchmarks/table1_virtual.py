@@ -2,7 +2,7 @@
 
     python benchmarks/table1_virtual.py [--first-seed 0] [--days 5] [--held-out]
     python benchmarks/table1_virtual.py --calibrate P5:3 --shares 0.3,0.25,0.2,0.15,0.1 [--first-seed 0] [--days 5]
-    python benchmarks/table1_virtual.py --calibrate P4:all --shares 0.6,0.5,0.45,0.4,0.35,0.3,0.25
+    python benchmarks/table1_virtual.py --calibrate P4:all --shares 0.5,0.45,0.4,0.375,0.35,0.325,0.3 --days 20
 
 As the paper's Table I, a training and a test recording of one day: for each of ``--days`` development
 seeds from ``--first-seed`` on (each seed a day of the person), each participant performs the paper's

@@ -63,7 +63,7 @@ ASSUMED_REACTION_S = 0.4
 # median over classes), the very range a model trained on the recording calibrates its speed on
 # (``bomi.classifier.amplitude_ranges``: nu = 0 at the least held sample, 1 at the largest), so that the
 # twin drives that model over the speeds it drives the person (issue 53.4). The 5 % and 95 % quantiles
-# used before (0.810 and 1.187 for P1) left the slowest fifth of the range out: run lean-range-dev.
+# used before (0.810 and 1.187 for P1) left the slowest third of that range out: run lean-range-dev.
 LEAN_QUANTILES = (0.0, 1.0)
 LEAN_ENDS = ("least", "largest")   # how the provenance names them
 # The rest of how the participant leans through the BoMI (tasks.participants.params.Feel): recordings
