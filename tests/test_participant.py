@@ -427,6 +427,28 @@ def test_a_motion_sets_off_its_spasm_once_its_posture_is_reached():
     assert len(vp._evoked) == 1
 
 
+def test_a_clonic_spasm_beats_at_its_rate_between_the_posture_and_the_pulled_back_point():
+    from tasks.participants.params import EvokedSpasm
+    p4 = dataclasses.replace(load_participant("P4"), spasm=None, reaction_sd_s=0.0,
+                             evoked_spasm=EvokedSpasm((1,), 1.0, (2.0, 2.0), (0.5, 0.5), beat_hz=5.0))
+    vp = VirtualParticipant(p4, load_profile("P4"), seed=2)
+    reached = vp.set_intent(1, 1.0, 1.0)
+    vp.deliveries(6.0)
+    truth = vp.truth()
+    excursion = (vp.moves[1].target - vp.moves[1].start)[0, 0]
+    during = (truth.time_s >= reached) & (truth.time_s < reached + 2.0)
+    pulled = truth.angles[during, 0, 0] - truth.angles[(truth.time_s >= reached + 2.5), 0, 0].mean()
+    # the deepest beat, in the spasm's middle, pulls back the full half excursion; the beats average half that
+    assert pulled.min() == pytest.approx(-0.5 * excursion, abs=2.0)
+    assert pulled.mean() == pytest.approx(-0.5 * 0.5 * 0.5 * excursion, abs=1.0)   # (raised cosine x beats: 1/4)
+    # ten beats in two seconds: above the spasm's own slow course (0.5 Hz), the pull's spectrum peaks at 5 Hz
+    spectrum = np.abs(np.fft.rfft(pulled - pulled.mean()))
+    frequencies = np.fft.rfftfreq(len(pulled), truth.time_s[1] - truth.time_s[0])
+    fast = frequencies >= 2.0
+    assert frequencies[fast][np.argmax(spectrum[fast])] == pytest.approx(5.0, abs=0.5)
+    assert spectrum[fast].max() > 5 * np.median(spectrum[fast])
+
+
 def test_reaction_and_move_times_vary_as_gamma_draws_of_the_stated_mean_and_spread():
     params = dataclasses.replace(load_participant("P1"), reaction_s=0.6, reaction_sd_s=0.2, onset_s=1.0, onset_sd_s=0.1)
     vp = VirtualParticipant(params, load_profile("P1"), seed=4)

@@ -103,17 +103,21 @@ class EvokedSpasm:
     """Spasms that a motion sets off: each move to one of ``classes``, once its posture is reached, sets
     off with ``probability`` a spasm that pulls the body back along the move (a raised cosine peaking
     at ``undo_share`` of the move's excursion, drawn uniformly in its range) for a duration drawn
-    uniformly in ``duration_s``."""
+    uniformly in ``duration_s``. With ``beat_hz`` > 0 the spasm is clonic: within that raised cosine
+    the body beats between the posture and the pulled-back point at that rate (each beat a full
+    pull and return), instead of one smooth pull."""
 
     classes: tuple[int, ...]
     probability: float
     duration_s: tuple[float, float]
     undo_share: tuple[float, float]
+    beat_hz: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.classes:
             raise ValueError("classes: must list at least one motion class")
         within(self, 0.0, 1.0, "probability")
+        within(self, 0.0, 0.5 / DT, "beat_hz")   # up to the sampling's Nyquist rate
         for name, low, high in (("duration_s", DT, 10.0), ("undo_share", 0.0, 2.0)):
             least, most = getattr(self, name)
             if not low <= least <= most <= high:

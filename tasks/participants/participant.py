@@ -208,11 +208,15 @@ class VirtualParticipant:
     def _spasms(self, t: np.ndarray) -> np.ndarray:
         """Spasms over the samples at ``t``, (n, nodes, 3): the background bursts and those set off by moves."""
         out = self._bursts(t)
+        beat_hz = self.params.evoked_spasm.beat_hz if self.params.evoked_spasm else 0.0
         for onset, duration, peak in self._evoked:
             if onset <= t[-1] and onset + duration >= t[0]:
                 phase = (t - onset) / duration
                 active = (phase >= 0) & (phase <= 1)
-                out[active] += raised_cosine(phase[active])[:, None, None] * peak[None]
+                course = raised_cosine(phase[active])
+                if beat_hz > 0:   # clonic: full beats at beat_hz within the spasm's course
+                    course = course * raised_cosine(beat_hz * (t[active] - onset))
+                out[active] += course[:, None, None] * peak[None]
         return out
 
     def _bursts(self, t: np.ndarray) -> np.ndarray:
