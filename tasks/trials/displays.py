@@ -24,7 +24,7 @@ STATUS_PERIOD_S = 0.5
 VIEWER_EXIT_S = 5.0  # how long closing waits for the viewer's drawing thread to end
 FILM_START_S = 60.0  # how long the film's process may take to start (imports, the scene, the encoder)
 FILM_QUEUE = 4       # film frames waiting for the film's process; more are dropped
-FILM_NICENESS = 19   # the film's process runs at the lowest priority: the control loop, not the film, gets the processor
+FILM_NICENESS = 19   # the film's process (and the viewer's drawing thread) at the lowest priority: the control loop gets the processor
 
 
 class Display(Protocol):
@@ -62,6 +62,12 @@ class PassiveViewer:
         # the viewer draws from a thread of its own; close() waits for it, so that the process never
         # exits while it is still drawing into a window being destroyed
         self._threads = [thread for thread in threading.enumerate() if thread not in before]
+        # and it redraws as fast as it can where the display does not pace it (no vertical sync: a
+        # software renderer, a virtual X server): at the film's priority, so that it draws with the
+        # processor the control loop leaves and never slows the loop that drives the arm
+        for thread in self._threads:
+            if thread.native_id is not None and hasattr(os, "setpriority"):
+                os.setpriority(os.PRIO_PROCESS, thread.native_id, FILM_NICENESS)
 
     def running(self) -> bool:
         return self._handle.is_running()
