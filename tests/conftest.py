@@ -34,6 +34,12 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.get_closest_marker("real_time"):
             item.add_marker(pytest.mark.xdist_group("real-time"))
+    # The longest first, in the order pytest-xdist hands the work out in (the longest-processing-time-first
+    # rule, so that no long test starts late and runs alone at the end while the other workers wait): the
+    # real-time tests (one worker's queue of several minutes), then the modules with a test marked ``long``
+    # (whole modules, in their own order: a module's fixtures are made once).
+    long_modules = {item.module.__name__ for item in items if item.get_closest_marker("long")}
+    items.sort(key=lambda item: (item.get_closest_marker("real_time") is None, item.module.__name__ not in long_modules))
 
 
 # The niceness the other tests run at (their worker's thread, and the processes they start): a test paced on

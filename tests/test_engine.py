@@ -58,6 +58,7 @@ def ray_cluster():
 
 
 @RAY
+@pytest.mark.long
 def test_ray_gives_the_process_pool_s_records_field_by_field_and_listens_on_the_loopback_only(pool_records):
     """The private local Ray `--engine ray` starts gives the pool's records; over its whole run (start-up,
     episodes, idle workers, shut-down) no process of it listens (TCP) or receives (UDP) on anything but

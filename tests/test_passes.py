@@ -248,6 +248,7 @@ def test_the_twin_of_a_two_pass_file_counts_two_passes_and_its_profile_drives_th
     assert warning.startswith("warning: self-check: ") and "more than 10 points apart" in warning
 
 
+@pytest.mark.long
 def test_the_new_person_path_end_to_end_twin_design_benchmark_train(two_pass_file, tmp_path, capsys):
     """docs/start_here.md's commands, in order, on the six-motion two-pass file, no edit: each exits 0
     and hands the next what it needs (short episodes: the path, not the success, is under test)."""

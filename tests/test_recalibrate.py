@@ -143,6 +143,7 @@ def test_the_participant_performs_the_protocol_and_the_chain_gets_a_retrained_cl
     assert channel._rows[-1][0] * SAMPLE_PERIOD_S > channel.clock_offset + t - 1.0
 
 
+@pytest.mark.long
 def test_an_episode_recalibrates_with_the_arm_at_rest_and_the_clock_running():
     overrides = (("operator.recovery.actions", "recalibrate"), ("operator.recovery.stuck_s", 3.0),
                  ("operator.recovery.obeyed_share", 1.0))

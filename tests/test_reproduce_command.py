@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from bomi import paper
 from bomi.reproduce import DAYS
 from tasks.cli import main
@@ -12,6 +14,7 @@ from tasks.cli import main
 VARIANTS = ("P1 as shipped", "P1 + smaller motions", "per-person rule", "per-person rule + smaller motions")
 
 
+@pytest.mark.long
 def test_bomi_reproduce_gives_the_papers_table_on_all_five_days(shared_data, tmp_path, capsys):
     record_path, table_path = tmp_path / "reproduce.json", tmp_path / "reproduce.md"
     assert main(["reproduce", "--data", str(shared_data), "--json", str(record_path),

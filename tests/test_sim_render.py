@@ -87,6 +87,7 @@ def test_png_and_mp4_round_trip(sim, tmp_path):
     assert not np.array_equal(frames[0], frames[-1])  # the arm moved
 
 
+@pytest.mark.long
 def test_cli_render_writes_mp4_and_png(tmp_path, capsys):
     out, png = tmp_path / "run.mp4", tmp_path / "run.png"
     assert main(["render", "--out", str(out), "--png", str(png)]) == 0

@@ -60,6 +60,7 @@ def test_doc_commands_are_read_as_a_shell_would():
 
 
 @pytest.mark.xdist_group("start-here")
+@pytest.mark.long
 def test_the_documented_path_runs_end_to_end(tmp_path, monkeypatch, capsys):
     commands = doc_commands(DOC.read_text(encoding="utf-8"))
     assert [c[0] for c in commands if NEEDS_A_PERSON not in c][:3] == ["synth", "train", "twin"]

@@ -468,6 +468,7 @@ def descendants(pid):
 
 
 @pytest.mark.xdist_group("ray")  # one Ray at a time (see tests/test_engine.py)
+@pytest.mark.long
 def test_sigterm_on_a_ray_sweep_keeps_what_finished_and_shuts_the_local_ray_down(tmp_path):
     pytest.importorskip("ray", reason="Ray is the optional extra: pip install -e \".[ray]\"")
     grid, out = grid_file(tmp_path, LONG), tmp_path / "out"

@@ -138,6 +138,7 @@ for k in range(runs):
 """
 
 
+@pytest.mark.long
 def test_sigterms_at_random_moments_each_end_the_session_with_no_trial_after_them(tmp_path):
     """8 sessions (3 trials of up to 120 s simulated: far longer than 1.8 s of wall time on any machine)
     forked from one warmed-up process, each sent SIGTERM 0.05-1.8 s after it starts: during set-up, a

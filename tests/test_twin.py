@@ -120,6 +120,7 @@ def test_a_one_day_twin_takes_the_drift_from_the_prior_and_says_so(tmp_path, sha
 
 
 # ------------------------------------------------------------------------------------ measuring
+@pytest.mark.long
 def test_the_twin_of_a_continuous_recording_recovers_the_known_participant(tmp_path, continuous_csv, known_p4,
                                                                              capsys):
     out = tmp_path / "twin.toml"
