@@ -21,6 +21,8 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
+from tasks.trials.displays import FILM_NICENESS
+
 XVFB = shutil.which("Xvfb")
 pytestmark = [pytest.mark.real_time, pytest.mark.skipif(XVFB is None, reason="Xvfb is not installed (Debian package xvfb; .ci/run installs it)")]
 SCREEN = (1280, 800)
@@ -47,6 +49,13 @@ def screenshot(display: str, path: Path) -> np.ndarray:
     subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "x11grab", "-video_size",
                     f"{SCREEN[0]}x{SCREEN[1]}", "-i", display, "-frames:v", "1", str(path)], check=True, timeout=30)
     return imageio.imread(path)[:, :, :3].astype(int)
+
+
+def thread_niceness(pid: int) -> dict[int, tuple[str, int]]:
+    """Each thread of a running process (Linux's /proc): its name and niceness (its stat's 19th field)."""
+    tasks = Path(f"/proc/{pid}/task")
+    return {int(task.name): ((task / "comm").read_text().strip(),
+                             int((task / "stat").read_text().rsplit(")", 1)[1].split()[16])) for task in tasks.iterdir()}
 
 
 def arm_pixels(image: np.ndarray) -> int:
@@ -103,6 +112,7 @@ def test_live_viewer_draws_the_arm_and_its_status_and_closes_cleanly(tmp_path, p
         assert calibrated.wait(timeout=120), "".join(err)
         time.sleep(2.0)  # a few seconds of the arm driven by the stream
         shot = screenshot(x_display, tmp_path / "screen.png")
+        niceness = thread_niceness(live.pid)
         out, _ = live.communicate(timeout=120)
         reader.join(timeout=10)
     finally:
@@ -113,6 +123,11 @@ def test_live_viewer_draws_the_arm_and_its_status_and_closes_cleanly(tmp_path, p
     assert live.returncode == 0, log
     assert "live: " in out and " ticks, " in out and f"wrote {video}" in out
     assert "running headless" not in log and "X Error" not in log and "Traceback" not in log
+    # the viewer's threads (its own and the software renderer's workers, llvmpipe-N) at the lowest
+    # priority, the loop that drives the arm (the main thread) at its own
+    renderers = [nice for (name, nice) in niceness.values() if name.startswith("llvmpipe")]
+    assert renderers and set(renderers) == {FILM_NICENESS}, niceness
+    assert niceness[live.pid][1] == os.getpriority(os.PRIO_PROCESS, 0), niceness
     # the window showed the scene: the table, both cubes, the arm, and the status text in its corner
     assert table_pixels(shot) > 20000, "table"
     assert cube_pixels(shot, 0) > 50 and cube_pixels(shot, 2) > 50, "cubes"

@@ -55,7 +55,7 @@ class PassiveViewer:
 
     def __init__(self, model, data, key_callback: Callable[[int], None] | None = None):
         import mujoco.viewer  # needs a display; imported only when one is there
-        before = set(threading.enumerate())
+        before, tasks_before = set(threading.enumerate()), _thread_ids()
         # the scene fills the window; Tab and Shift+Tab bring MuJoCo's side panels back
         self._handle = mujoco.viewer.launch_passive(model, data, show_left_ui=False, show_right_ui=False,
                                                     key_callback=key_callback)
@@ -63,11 +63,14 @@ class PassiveViewer:
         # exits while it is still drawing into a window being destroyed
         self._threads = [thread for thread in threading.enumerate() if thread not in before]
         # and it redraws as fast as it can where the display does not pace it (no vertical sync: a
-        # software renderer, a virtual X server): at the film's priority, so that it draws with the
-        # processor the control loop leaves and never slows the loop that drives the arm
-        for thread in self._threads:
-            if thread.native_id is not None and hasattr(os, "setpriority"):
-                os.setpriority(os.PRIO_PROCESS, thread.native_id, FILM_NICENESS)
+        # software renderer, a virtual X server): every thread it brought (its own, a software
+        # renderer's workers) at the film's priority, so that it draws with the processor the control
+        # loop leaves and never slows the loop that drives the arm
+        for thread_id in _thread_ids() - tasks_before:
+            try:
+                os.setpriority(os.PRIO_PROCESS, thread_id, FILM_NICENESS)
+            except ProcessLookupError:   # a thread that has ended meanwhile
+                pass
 
     def running(self) -> bool:
         return self._handle.is_running()
@@ -81,6 +84,13 @@ class PassiveViewer:
         self._handle.close()
         for thread in self._threads:
             thread.join(timeout=VIEWER_EXIT_S)
+
+
+def _thread_ids() -> set[int]:
+    """This process's threads by their kernel ids, where each has a priority of its own (Linux's
+    /proc); elsewhere none."""
+    tasks = Path("/proc/self/task")
+    return {int(task.name) for task in tasks.iterdir()} if sys.platform.startswith("linux") and tasks.is_dir() else set()
 
 
 def _film(layout, path: Path, frames: multiprocessing.Queue, ready) -> None:
