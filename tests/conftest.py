@@ -38,8 +38,8 @@ def pytest_collection_modifyitems(config, items):
     # rule, so that no long test starts late and runs alone at the end while the other workers wait): the
     # real-time tests (one worker's queue of several minutes), then the modules with a test marked ``long``
     # (whole modules, in their own order: a module's fixtures are made once).
-    long_modules = {item.module.__name__ for item in items if item.get_closest_marker("long")}
-    items.sort(key=lambda item: (item.get_closest_marker("real_time") is None, item.module.__name__ not in long_modules))
+    long_files = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("long")}
+    items.sort(key=lambda item: (item.get_closest_marker("real_time") is None, item.nodeid.split("::")[0] not in long_files))
 
 
 # The niceness the other tests run at (their worker's thread, and the processes they start): a test paced on
