@@ -449,6 +449,27 @@ def test_a_clonic_spasm_beats_at_its_rate_between_the_posture_and_the_pulled_bac
     assert spectrum[fast].max() > 5 * np.median(spectrum[fast])
 
 
+def test_a_rest_keeps_its_carry_over_of_the_rest_before_and_rests_keep_their_spread():
+    p1 = load_participant("P1")
+    assert p1.rest_carry[2].tolist() == [0.756, 0.753, 0.796]             # P1.toml [neutral] carry_over
+    assert load_participant("P4").rest_carry is None                      # absent: each rest drawn anew
+
+    def rest_offsets(params) -> np.ndarray:
+        vp = VirtualParticipant(dataclasses.replace(params, reaction_sd_s=0.0), load_profile("P1"), seed=5)
+        for k in range(1, 801):
+            vp.set_intent(1 if k % 2 else 0, 1.0, 3.0 * k)
+        return np.array([m.target - params.neutral.posture_deg for m in vp.moves if m.label == 0])
+
+    carried = rest_offsets(p1)
+    fresh = rest_offsets(dataclasses.replace(p1, rest_carry=None))
+    lag1 = lambda x: np.mean(x[1:] * x[:-1], axis=0) / np.mean(x * x, axis=0)  # noqa: E731
+    assert lag1(carried) == pytest.approx(p1.rest_carry, abs=0.12)     # 400 rests: sampling error about 0.05
+    assert np.abs(lag1(fresh)).max() < 0.15
+    # the stationary spread is rep_std either way (the AR(1) keeps the variance)
+    for offsets in (carried, fresh):
+        assert offsets.std(axis=0) == pytest.approx(p1.neutral.rep_std_deg, rel=0.2)
+
+
 def test_reaction_and_move_times_vary_as_gamma_draws_of_the_stated_mean_and_spread():
     params = dataclasses.replace(load_participant("P1"), reaction_s=0.6, reaction_sd_s=0.2, onset_s=1.0, onset_sd_s=0.1)
     vp = VirtualParticipant(params, load_profile("P1"), seed=4)

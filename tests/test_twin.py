@@ -69,6 +69,26 @@ def test_fit_helpers_on_synthetic_signals():
     assert holds_module.within_pass_std([np.array([[9.0]])]) is None
 
 
+def test_a_rest_s_carry_over_is_the_slope_of_each_rest_on_the_one_before():
+    # by hand: one pass of rests 0, 2, 4, 2 (mean 2: offsets -2, 0, 2, 0): pairs (-2, 0), (0, 2), (2, 0) give
+    # sum(before x after) = 0 and a slope of 0; the same pass as 0, 0, 4, 4 (offsets -2, -2, 2, 2): pairs (-2, -2),
+    # (-2, 2), (2, 2): (4 - 4 + 4) / 12 = 1/3
+    flat = np.array([[0.0], [2.0], [4.0], [2.0]] * 4)
+    assert holds_module.carry_over([flat[:4]] * 4)[0] == pytest.approx(0.0)
+    steps = np.array([[0.0], [0.0], [4.0], [4.0]])
+    assert holds_module.carry_over([steps] * 4)[0] == pytest.approx(1 / 3)
+    assert holds_module.carry_over([steps] * 3) is None          # 9 pairs: fewer than MIN_REST_PAIRS
+    assert holds_module.carry_over([-steps[:2]] * 20) is None    # passes of two rests give no pair
+    # an AR(1) of 0.7 over long passes: recovered within the sampling error
+    rng = np.random.default_rng(3)
+    series = [np.zeros(2)]
+    for _ in range(399):
+        series.append(0.7 * series[-1] + rng.normal(0.0, 1.0, 2))
+    assert holds_module.carry_over([np.array(series)]) == pytest.approx([0.7, 0.7], abs=0.08)
+    # clipped: rests that keep more than MAX_CARRY of the last offset (a trend) read as MAX_CARRY
+    assert holds_module.carry_over([np.arange(30.0)[:, None]])[0] == holds_module.MAX_CARRY
+
+
 # ------------------------------------------------------------------------------------ P1
 def test_shipped_p1_is_the_twin_of_its_five_days(tmp_path, shared_data, capsys):
     out = tmp_path / "P1.toml"

@@ -20,6 +20,8 @@ MAX_REPEATED_ROWS = 0.25       # blocks of a node with more held (repeated) rows
 WELCH_SEGMENT = 128            # samples per Welch segment of the tremor spectrum (0.49 Hz bins)
 SPECTRUM_FLOOR = 0.1           # above the peak, the tremor spectrum ends where it falls below this share of the peak
 MIN_DAY_GAIN = 0.1             # guards the log of a day's gain (never reached on P1)
+MIN_REST_PAIRS = 10            # fewer pairs of consecutive rests and a rest's carry-over is not measured
+MAX_CARRY = 0.95               # a rest keeps at most this share of the last one's offset (the rests stay a stationary AR(1))
 
 
 @dataclass(frozen=True)
@@ -166,6 +168,17 @@ class Holds:
 
     def per_day(self, table: dict, label: int, days: int) -> list[np.ndarray]:
         return [np.array(table[(label, d)]) for d in range(1, days + 1) if (label, d) in table]
+
+
+def carry_over(groups: Sequence[np.ndarray]) -> np.ndarray | None:
+    """Per node and angle, the share of a rest's offset from its pass's mean rest that the pass's next
+    rest keeps: the least-squares slope of each offset on the one before, pooled over the passes
+    (``groups``: each pass's rest levels in order), within [0, MAX_CARRY]; None below MIN_REST_PAIRS pairs."""
+    pairs = [(g[:-1] - g.mean(axis=0), g[1:] - g.mean(axis=0)) for g in groups if len(g) > 2]
+    if sum(len(before) for before, _ in pairs) < MIN_REST_PAIRS:
+        return None
+    before, after = (np.concatenate(side) for side in zip(*pairs))
+    return np.clip(np.sum(before * after, axis=0) / np.maximum(np.sum(before ** 2, axis=0), 1e-12), 0.0, MAX_CARRY)
 
 
 def within_pass_std(groups: Sequence[np.ndarray]) -> np.ndarray | None:

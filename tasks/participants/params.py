@@ -5,7 +5,8 @@ TOML schema: ``name``, ``profile`` (bomi profile name), ``description``, ``onset
 duration), ``reaction_s`` (cue to movement), optional ``onset_sd_s`` and ``reaction_sd_s`` (their
 spread from move to move, gamma-distributed; 0 or absent: fixed), ``max_amplitude`` (0..1]; ``[tremor]`` with ``frequencies_hz`` and ``relative_power``
 (the tremor's power spectrum shape); ``[neutral]`` with
-``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg``; one
+``angles_deg`` (absolute), ``rep_std_deg``, ``sway_std_deg``, ``tremor_std_deg`` and optionally
+``carry_over`` (per node and angle, the share of a rest's offset from the neutral the next rest keeps); one
 ``[[classes]]`` per motion with ``label``, ``posture_deg``, ``rep_std_deg``, ``day_gain_log_std``, ``day_std_deg``,
 ``sway_std_deg``, ``tremor_std_deg`` and optionally ``range_share`` (the share of ``posture_deg`` this
 person reaches); optional ``[spasm]`` (``Spasm``: background bursts) with ``rate_per_s``, ``max_deg``,
@@ -162,6 +163,7 @@ class ParticipantParams:
     onset_sd_s: float = 0.0                       # move durations vary from move to move with this SD ...
     reaction_sd_s: float = 0.0                    # ... and reaction times with this one (gamma; 0: fixed)
     provenance: Mapping[str, str] = field(default_factory=dict)   # a twin's: parameter -> where it comes from
+    rest_carry: np.ndarray | None = None          # (nodes, 3): the share of a rest's offset the next rest keeps
 
     @property
     def n_nodes(self) -> int:
@@ -215,9 +217,15 @@ class _Neutral:
     rep_std_deg: Matrix           # neutral-to-neutral
     sway_std_deg: Matrix
     tremor_std_deg: Matrix
+    carry_over: Matrix | None = None   # how much of a rest's offset the next rest keeps (absent: none)
 
     def __post_init__(self) -> None:
         _check_degrees(self)
+        if self.carry_over is not None:
+            carry = np.array(self.carry_over, dtype=float)
+            if carry.shape != np.array(self.rep_std_deg).shape or (carry < 0).any() or (carry >= 1).any():
+                raise ValueError("carry_over: must be a matrix like rep_std_deg, each value in [0, 1), got "
+                                 f"{carry.tolist()}")
 
 
 @dataclass(frozen=True)
@@ -327,7 +335,8 @@ def _parse(data: dict, source: str) -> ParticipantParams:
         neutral=ClassMotion(NEUTRAL_LABEL, _array(neutral.angles_deg), _array(neutral.rep_std_deg), 0.0,
                             np.zeros((n_nodes, 3)), _array(neutral.sway_std_deg), _array(neutral.tremor_std_deg)),
         classes=classes, spasm=file.spasm, evoked_spasm=file.evoked_spasm, feel=file.feel, source=source,
-        protocol=file.protocol, provenance=file.provenance)
+        protocol=file.protocol, provenance=file.provenance,
+        rest_carry=None if neutral.carry_over is None else _array(neutral.carry_over))
 
 
 def _array(values: tuple) -> np.ndarray:

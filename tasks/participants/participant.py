@@ -81,6 +81,7 @@ class VirtualParticipant:
         self._tremor = ColouredNoise(*tremor_filter(params.tremor_spectrum), channels, tremor)
         self._day_posture = {label: np.exp(person.normal(0.0, m.day_gain_log_std)) * m.posture_deg
                              + person.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
+        self._rest_offset: np.ndarray | None = None   # the last rest's offset from the neutral (_target)
         rest = self._target(NEUTRAL_LABEL, 0.0)
         self._moves: list[PostureMove] = [PostureMove(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
         self._starts = np.array([0.0])          # each move's t0
@@ -102,7 +103,14 @@ class VirtualParticipant:
         """A fresh repetition's posture: the session's neutral + amplitude x (day posture + repetition offset)."""
         neutral = self.params.neutral
         if label == NEUTRAL_LABEL:
-            return neutral.posture_deg + self._rng.normal(0.0, neutral.rep_std_deg)
+            fresh = self._rng.normal(0.0, neutral.rep_std_deg)
+            carry = self.params.rest_carry
+            if carry is not None and self._rest_offset is not None:
+                # a rest keeps part of the previous rest's offset (an AR(1) of the rests, whose spread
+                # stays rep_std): a person returns near where they rested last (P1's five days, twin.py)
+                fresh = carry * self._rest_offset + np.sqrt(1.0 - carry ** 2) * fresh
+            self._rest_offset = fresh
+            return neutral.posture_deg + fresh
         excursion = self._day_posture[label] + self._rng.normal(0.0, self.params.classes[label].rep_std_deg)
         return neutral.posture_deg + amplitude * self.params.max_amplitude * excursion
 

@@ -44,8 +44,8 @@ from bomi.onsets import SPEED_SHARE, Move, MoveKind, find_moves, keeps_moves
 from bomi.passes import run_digests
 from bomi.profiles import Profile
 from bomi.recording import Recording, Signal
-from tasks.participants.holds import (EDGE_SAMPLES, WELCH_SEGMENT, Block, Holds, day_variation, hold_blocks,
-                                     motion_spectrum, isotropic_yaw, stacked_angles,
+from tasks.participants.holds import (EDGE_SAMPLES, MIN_REST_PAIRS, WELCH_SEGMENT, Block, Holds, carry_over,
+                                     day_variation, hold_blocks, isotropic_yaw, motion_spectrum, stacked_angles,
                                      within_pass_std)
 from tasks.participants.motion import SWAY_CUTOFF_HZ
 from tasks.participants.params import ClassMotion, ParticipantParams, Protocol
@@ -269,6 +269,7 @@ class Twin:
     reaction_sd_s: float
     neutral_deg: np.ndarray
     neutral_rep_std: np.ndarray
+    rest_carry: np.ndarray | None
     neutral_sway_std: np.ndarray
     neutral_tremor_std: np.ndarray
     tremor_spectrum: tuple[np.ndarray, np.ndarray]   # frequencies (Hz), power relative to the peak
@@ -390,6 +391,13 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
     else:
         from_prior(("neutral.rep_std_deg",), "the neutral posture is held once per pass")
         neutral_rep_std = prior_nodes(prior, profile, prior.neutral.rep_std_deg)
+    rest_carry = carry_over(day_neutrals)
+    if rest_carry is not None:
+        provenance["neutral.carry_over"] = ("measured: per node and angle, the slope of each neutral hold's level "
+                                            f"(from its pass's mean) on the one before it, pooled over the passes ({names})")
+    else:
+        provenance["neutral.carry_over"] = (f"not measurable: fewer than {MIN_REST_PAIRS} pairs of consecutive neutral "
+                                            "holds; none (each rest drawn anew)")
 
     # drift between passes
     day_gain, day_std = {}, {}
@@ -461,7 +469,7 @@ def fit_twin(recordings: Sequence[Recording], profile: Profile, prior: Participa
         name=name, profile=profile_ref or profile.name, passes=n_passes, onset_s=onset, reaction_s=reaction,
         onset_sd_s=onset_sd, reaction_sd_s=reaction_sd,
         neutral_deg=np.median(day_neutrals[0], axis=0) if day_neutrals else np.zeros((n_nodes, 3)),
-        neutral_rep_std=neutral_rep_std, neutral_sway_std=neutral_sway, neutral_tremor_std=neutral_tremor,
+        neutral_rep_std=neutral_rep_std, rest_carry=rest_carry, neutral_sway_std=neutral_sway, neutral_tremor_std=neutral_tremor,
         tremor_spectrum=spectrum, postures=postures, rep_std=rep_std, day_gain_log_std=day_gain, day_std=day_std,
         sway_std=sway, tremor_std=tremor, protocol=replace(passes[0].protocol(), run_digests=tuple(sorted({d for p in passes for d in p.run_digests}))), least_lean=least_lean, most_lean=most_lean, provenance=provenance, fallbacks=fallbacks)
 
@@ -518,6 +526,8 @@ def twin_toml(twin: Twin, description: str) -> str:
         f"sway_std_deg = {_toml_matrix(twin.neutral_sway_std)}",
         f"tremor_std_deg = {_toml_matrix(twin.neutral_tremor_std)}",
     ]
+    if twin.rest_carry is not None:
+        lines.append(f"carry_over = {_toml_matrix(twin.rest_carry)}   # of a rest's offset, kept by the next rest")
     for label, posture in twin.postures.items():
         lines += [
             "",
