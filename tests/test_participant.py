@@ -438,7 +438,8 @@ def test_a_clonic_spasm_beats_at_its_rate_between_the_posture_and_the_pulled_bac
     excursion = (vp.moves[1].target - vp.moves[1].start)[0, 0]
     during = (truth.time_s >= reached) & (truth.time_s < reached + 2.0)
     pulled = truth.angles[during, 0, 0] - truth.angles[(truth.time_s >= reached + 2.5), 0, 0].mean()
-    # the deepest beat, in the spasm's middle, pulls back the full half excursion; the beats average half that
+    # the deepest beat, in the spasm's middle, pulls back the full half excursion; the pull averages a quarter
+    # of that over the spasm (its raised-cosine course and its beats, a half each)
     assert pulled.min() == pytest.approx(-0.5 * excursion, abs=2.0)
     assert pulled.mean() == pytest.approx(-0.5 * 0.5 * 0.5 * excursion, abs=1.0)   # (raised cosine x beats: 1/4)
     # ten beats in two seconds: above the spasm's own slow course (0.5 Hz), the pull's spectrum peaks at 5 Hz

@@ -52,10 +52,16 @@ def screenshot(display: str, path: Path) -> np.ndarray:
 
 
 def thread_niceness(pid: int) -> dict[int, tuple[str, int]]:
-    """Each thread of a running process (Linux's /proc): its name and niceness (its stat's 19th field)."""
-    tasks = Path(f"/proc/{pid}/task")
-    return {int(task.name): ((task / "comm").read_text().strip(),
-                             int((task / "stat").read_text().rsplit(")", 1)[1].split()[16])) for task in tasks.iterdir()}
+    """Each thread of a running process (Linux's /proc): its name and niceness (its stat's 19th field);
+    a thread that ends while it is read is left out."""
+    threads = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            name, stat = (task / "comm").read_text().strip(), (task / "stat").read_text()
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+        threads[int(task.name)] = (name, int(stat.rsplit(")", 1)[1].split()[16]))
+    return threads
 
 
 def arm_pixels(image: np.ndarray) -> int:
