@@ -187,6 +187,7 @@ def test_evaluate_twice_in_one_directory_replaces_its_own_confusion_png_but_not_
     assert sorted(p.name for p in tmp_path.iterdir()) == ["confusion.png", "link.png", "r.csv"]
 
 
+@pytest.mark.long
 def test_demo_writes_its_figure_film_and_record_and_replaces_only_its_own_directory(tmp_path, monkeypatch, capsys):
     """`bomi demo` as a newcomer runs it (its default directory; a short time limit keeps it quick: the
     episodes stop unfinished, everything is still written); run again it replaces demo_out (the second

@@ -79,6 +79,7 @@ def test_a_scripted_episode_through_the_api_is_run_episodes_to_the_bit():
     _same_episode(log, hand, goals, info)
 
 
+@pytest.mark.long
 def test_a_virtual_participant_through_the_api_is_run_episodes_to_the_bit():
     """The README's lines: a simulated BoMI user (P1's twin through the chain) as the action source
     of ``gymnasium.make``'s environment, against ``run_episode`` on the same seed."""

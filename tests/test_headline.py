@@ -10,6 +10,7 @@ from tasks.stacking.summary import summarize
 DEV_SEED = 0
 
 
+@pytest.mark.long
 def test_a_p1_bomi_episode_stacks_the_cubes_within_a_generous_time():
     """Calibration, then the task, through frames, fusion, LDA and vote: both cubes stacked at B."""
     summary = summarize(run_job(EpisodeJob("bomi", "P1", DEV_SEED, time_limit=300.0, vote_length=DEFAULT_VOTE)))
