@@ -100,7 +100,8 @@ class VirtualParticipant:
 
     # -- intents
     def _target(self, label: int, amplitude: float) -> np.ndarray:
-        """A fresh repetition's posture: the session's neutral + amplitude x (day posture + repetition offset)."""
+        """A fresh repetition's posture: the session's neutral + amplitude x (day posture + repetition offset);
+        a rest's offset keeps ``rest_carry`` of the last rest's (none: drawn anew)."""
         neutral = self.params.neutral
         if label == NEUTRAL_LABEL:
             fresh = self._rng.normal(0.0, neutral.rep_std_deg)
