@@ -508,3 +508,23 @@ def test_a_participant_leans_up_to_its_most_lean_and_no_further():
         VirtualParticipant(p4, load_profile("P4"), seed=1).set_intent(1, 1.1, 0.0)
     with pytest.raises(ValueError, match=r"amplitude must be in \[0, 1.246\]"):
         VirtualParticipant(p1, load_profile("P1"), seed=1).set_intent(1, 1.3, 0.0)
+
+
+def test_a_corrected_lean_keeps_its_posture_with_an_error_in_proportion_to_the_correction():
+    """A move from rest lands a repetition's spread (rep_std, scaled by the lean) from the day's posture;
+    a correction of the lean held within the class keeps that posture and errs by rep_std x the
+    correction's size (signal-dependent motor noise): hand-computed spreads over 400 seeds."""
+    params = dataclasses.replace(load_participant("P1"), reaction_sd_s=0.0, rest_carry=None)
+    profile, rep = load_profile("P1"), params.classes[1].rep_std_deg
+    first, corrected = [], []
+    for seed in range(400):
+        vp = VirtualParticipant(params, profile, seed)
+        vp.set_intent(1, 0.8, 0.0)
+        vp.set_intent(1, 0.95, 3.0)
+        day, neutral = vp.day_postures[1], params.neutral.posture_deg
+        from_rest, correction = (m.target - neutral for m in vp.moves[-2:])
+        first.append(from_rest - 0.8 * day)
+        corrected.append(correction - from_rest * 0.95 / 0.8)   # what the posture kept does not explain
+    # 400 draws: a spread's sampling error is about 3.5 %
+    assert np.std(first, axis=0) == pytest.approx(0.8 * rep, rel=0.15)
+    assert np.std(corrected, axis=0) == pytest.approx(0.15 * rep, rel=0.15)

@@ -206,3 +206,27 @@ def test_a_lean_the_arm_never_answers_is_let_go_of_and_tried_again(p1_model):
     first_full = next(m for m in moves if m.label == forward and m.amplitude == params.feel.most_lean)
     assert rests[0].t0 >= first_full.t0 + params.feel.give_up_s  # held the full lean give_up_s first
     assert moves[-1].label == forward or moves[-2].label == forward  # and tried again
+
+
+def test_a_function_decided_at_no_speed_is_no_answer_the_person_sees(p1_model):
+    """The person watches the arm, not the chain: the class's function decided at nu 0 leaves the arm
+    still, so a lean held at its furthest is let go of after give_up_s as if the chain read rest."""
+    params, profile, _, model = p1_model
+    channel = BomiChannel(VirtualParticipant(params, profile, SEED + 2), OnlineChain(model, profile), profile)
+    forward = next(cls.label for cls in profile.classes if cls.function == "F")
+    furthest = params.feel.most_lean
+    channel.stick.function, channel.stick.nu = "F", 0.0
+    assert not channel._arm_answers(forward)
+    assert not channel._gives_up(forward, furthest, 10.0)                          # unanswered from now ...
+    assert channel._gives_up(forward, furthest, 10.0 + params.feel.give_up_s)      # ... let go of give_up_s on
+    channel.stick.nu = 0.2
+    assert channel._arm_answers(forward) and not channel._gives_up(forward, furthest, 30.0)
+    channel.stick.function = "B"
+    assert not channel._arm_answers(forward)
+
+
+def test_a_learnt_zero_stays_below_max_zero_of_the_furthest_lean():
+    """A twin leaning past its posture (most_lean 1.246): the bound on the learnt zero scales with it."""
+    feel = LeanFeel(FEEL)
+    feel.learn(lean=FEEL.most_lean, deflection=0.0)
+    assert FEEL.most_lean == 1.246 and feel.zero == pytest.approx(FEEL.max_zero * 1.246)

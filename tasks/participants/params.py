@@ -66,7 +66,7 @@ class Feel:
     speed_smoothing_s: float  # the arm's speed is judged over about this long
     too_slow: float          # seen / wanted speed below which the participant leans further
     too_fast: float          # seen / wanted speed above which they lean less far
-    max_zero: float          # the learnt zero lean never exceeds this (the least deflection needs less than full range)
+    max_zero: float          # the learnt zero lean never exceeds this share of most_lean (the least deflection needs less than full range)
     most_lean: float = 1.0   # the furthest lean, as a share of the class posture (a twin: its recording's largest holds)
     give_up_s: float = 10.0  # the arm not answering the furthest lean this long, the participant relaxes and tries again
 

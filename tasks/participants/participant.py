@@ -82,6 +82,7 @@ class VirtualParticipant:
         self._day_posture = {label: np.exp(person.normal(0.0, m.day_gain_log_std)) * m.posture_deg
                              + person.normal(0.0, m.day_std_deg) for label, m in params.classes.items()}
         self._rest_offset: np.ndarray | None = None   # the last rest's offset from the neutral (_target)
+        self._excursion: np.ndarray | None = None     # the class posture held now, offsets included (_target)
         rest = self._target(NEUTRAL_LABEL, 0.0)
         self._moves: list[PostureMove] = [PostureMove(0.0, params.onset_s, rest, rest, NEUTRAL_LABEL, 0.0)]
         self._starts = np.array([0.0])          # each move's t0
@@ -101,7 +102,8 @@ class VirtualParticipant:
     # -- intents
     def _target(self, label: int, amplitude: float) -> np.ndarray:
         """A fresh repetition's posture: the session's neutral + amplitude x (day posture + repetition offset);
-        a rest's offset keeps ``rest_carry`` of the last rest's (none: drawn anew)."""
+        a rest's offset keeps ``rest_carry`` of the last rest's (none: drawn anew); a lean corrected within the
+        class held keeps its posture, with a repetition error scaled by the correction's share of the lean."""
         neutral = self.params.neutral
         if label == NEUTRAL_LABEL:
             fresh = self._rng.normal(0.0, neutral.rep_std_deg)
@@ -112,7 +114,15 @@ class VirtualParticipant:
                 fresh = carry * self._rest_offset + np.sqrt(1.0 - carry ** 2) * fresh
             self._rest_offset = fresh
             return neutral.posture_deg + fresh
-        excursion = self._day_posture[label] + self._rng.normal(0.0, self.params.classes[label].rep_std_deg)
+        error = self._rng.normal(0.0, self.params.classes[label].rep_std_deg)
+        held_label, held_amplitude = self.intent
+        if held_label == label and held_amplitude > 0.0 and self._excursion is not None:
+            # a correction of the lean held: the posture kept, an error in proportion to how far the
+            # correction moves (signal-dependent motor noise: Harris & Wolpert 1998; Schmidt et al. 1979)
+            excursion = self._excursion + error * abs(amplitude - held_amplitude) / amplitude
+        else:
+            excursion = self._day_posture[label] + error
+        self._excursion = excursion
         return neutral.posture_deg + amplitude * self.params.max_amplitude * excursion
 
     @property

@@ -77,7 +77,7 @@ watch_s = 1.0              # s: after reaction + move, how long a posture is wat
 speed_smoothing_s = 0.3    # s: the arm's speed is judged over about this long
 too_slow = 0.5             # seen / wanted speed below which the participant leans further
 too_fast = 2.0             # seen / wanted speed above which the participant leans less far
-max_zero = 0.9             # the learnt zero lean never exceeds this: the least deflection needs less than full range
+max_zero = 0.9             # the learnt zero lean never exceeds this share of the furthest lean: the least deflection needs less than full range
 give_up_s = 10.0           # s: the arm not answering the furthest lean this long, the participant relaxes to rest and tries again: the limit of a person's attention to a system that does not respond (Nielsen 1993, Usability Engineering, 5.5; Miller 1968)
 """
 

@@ -121,10 +121,11 @@ class LeanFeel:
         return clip(self.zero + (most - self.zero) * deflection, self.feel.least_lean, most)
 
     def learn(self, lean: float, deflection: float) -> None:
-        """The zero that makes ``lean_for(deflection)`` the ``lean`` that worked."""
+        """The zero that makes ``lean_for(deflection)`` the ``lean`` that worked (at most ``max_zero`` of
+        the furthest lean: the least deflection needs less than the whole range)."""
         if deflection < 1.0:
             zero = (lean - self.feel.most_lean * deflection) / (1.0 - deflection)
-            self.zero = float(np.clip(zero, 0.0, self.feel.max_zero))
+            self.zero = float(np.clip(zero, 0.0, self.feel.max_zero * self.feel.most_lean))
 
     def corrected(self, lean: float, further: bool) -> float:
         """The lean one correction of ``lean`` takes (``lean_step`` further, or less far)."""
@@ -406,12 +407,17 @@ class BomiChannel:
         """The arm has not answered the class held at the furthest lean for ``Feel.give_up_s``: a person
         does not hold a lean for minutes at a machine that does not respond; they relax and try again."""
         feel = self.participant.params.feel
-        if self.stick.function == self._function_of[label] or lean < feel.most_lean:
+        if self._arm_answers(label) or lean < feel.most_lean:
             self._unanswered_since = None
             return False
         if self._unanswered_since is None:
             self._unanswered_since = t
         return t - self._unanswered_since >= feel.give_up_s
+
+    def _arm_answers(self, label: int) -> bool:
+        """Whether the arm moves for ``label`` now: the chain decided its function, deflected (what the
+        person sees is the arm, not the decision: a function decided at nu 0 leaves the arm still)."""
+        return self.stick.function == self._function_of[label] and self.stick.nu > 0.0
 
     def _watch(self, seen: np.ndarray | None, mode: Mode) -> bool:
         """Follow the arm's speed along the watched posture's direction while the arm answers that
@@ -439,8 +445,7 @@ class BomiChannel:
         if t - self._since <= self._patience:
             return lean
         feel, watched = self.participant.params.feel, self._watched
-        answered = self.stick.function == self._function_of[label]
-        if not answered or (judged and watched.speed < feel.too_slow * watched.wanted):
+        if not self._arm_answers(label) or (judged and watched.speed < feel.too_slow * watched.wanted):
             return self.feel[label].corrected(lean, further=True)
         if judged and watched.speed > feel.too_fast * watched.wanted:
             return self.feel[label].corrected(lean, further=False)
