@@ -116,7 +116,7 @@ class VirtualParticipant:
             return neutral.posture_deg + fresh
         error = self._rng.normal(0.0, self.params.classes[label].rep_std_deg)
         held_label, held_amplitude = self.intent
-        if held_label == label and held_amplitude > 0.0 and self._excursion is not None:
+        if held_label == label and min(held_amplitude, amplitude) > 0.0 and self._excursion is not None:
             # a correction of the lean held: the posture kept, an error in proportion to how far the
             # correction moves (signal-dependent motor noise: Harris & Wolpert 1998; Schmidt et al. 1979)
             excursion = self._excursion + error * abs(amplitude - held_amplitude) / amplitude
