@@ -4,6 +4,7 @@
     python benchmarks/human_model.py predict [--participants P1,P4,P5] [--seeds 5] [--first-seed 0] [--name N] [--jobs 1]
     python benchmarks/human_model.py check --seeds A-B [--cells P1:joystick,P1:bomi,P4:bomi,P5:bomi] [--recovery R]
     python benchmarks/human_model.py sensitivity [--params K,K] [--seeds 5] [--first-seed 0] [--jobs 1]
+    python benchmarks/human_model.py latency --seeds A-B [--participants P1,P4,P5]
 
 ``calibrate`` runs the joystick operator (tasks/operators/human.toml, only ``timing.fitts_slope`` varied) on
 dev seeds 0..N-1 and interpolates the slope at which the mean completion time is the paper's
@@ -20,6 +21,11 @@ held-out range (a fresh one of 10000-19999; 1000-4999 are spent) only once the m
 and prints one JSON row per cell: successes, mean time and its budget over the successes (seconds per
 ``tasks.stacking.budget.Part``), the share of relevant decisions (not ``metrics.irrelevant``), the longest
 irrelevant run, the irrelevant decisions by context (``tasks.stacking.budget``).
+
+``latency`` (issue 53.3) times the body against a real person's cue-to-decision latency (issue 53: a median
+560 ms, SD 185 ms on a continuous calibration recording): each seed's participant performs the protocol twice
+on one day, both kept continuous (the moves in), a model is trained on the first, and the second is decided
+window by window as the stream is; per cue, the time from the cue to the first decision of the cued class.
 
 ``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
 benchmarks/results/human_sensitivity.{md,json}.
@@ -41,6 +47,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bomi import paper  # noqa: E402
+from bomi.chain import train  # noqa: E402
+from bomi.chain.evaluation import evaluate  # noqa: E402
+from bomi.classifier import NEUTRAL_LABEL  # noqa: E402
+from bomi.fusion import DT  # noqa: E402
 from tasks.stacking import metrics  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
 from tasks.experiments.jobs import HUMAN_MODEL_KEY, HUMAN_ON, RECOVERY_KEY, EpisodeJob, run_job  # noqa: E402
@@ -49,6 +59,8 @@ from tasks.stacking.channels import participant_controls
 from tasks.stacking.summary import summarize
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
 from tasks.operators.params import DEFAULT_OPERATOR_FILE, load_operator  # noqa: E402
+from tasks.operators.stick import arm_profile  # noqa: E402
+from tasks.participants.participant import Session, calibration_session, load_participant, session_recording  # noqa: E402
 from tasks.stacking.timeline import timeline_figure  # noqa: E402
 from tasks.statistics import mean_interval, wilson_interval
 
@@ -317,6 +329,38 @@ def cell_row(participant: str, operator: str, seeds: range, recovery: str | None
                     "irrelevant_by_context": dict(contexts)})
     return row
 
+def cue_latencies_s(participant: str, seed: int) -> list[float]:
+    """Per motion cue of a second continuous session of ``seed``'s day, the time from the cue to the first
+    decision of the cued class by a model trained on the first (``latency``; a cue never decided: left out)."""
+    params = load_participant(participant)
+    profile = arm_profile(params.profile)
+    first = calibration_session(params, profile, seed)
+    model = train([session_recording(first, profile, holds_only=False)], profile)
+    rec = session_recording(calibration_session(params, profile, seed, session=Session.TASK), profile, holds_only=False)
+    predicted = evaluate(model, rec, profile.neutral_samples, model.post).predicted
+    window = model.spec.window
+    labels = np.asarray(rec.labels)
+    starts = np.r_[0, np.flatnonzero(np.diff(labels)) + 1]
+    latencies, scored = [], 0   # the scored windows are each run's single-label ones, in time order
+    for start, end in zip(starts, np.r_[starts[1:], len(labels)]):
+        run = predicted[scored:scored + max(0, end - start - (window - 1))]
+        scored += len(run)
+        hits = np.flatnonzero(run == labels[start])
+        if start > 0 and labels[start] != NEUTRAL_LABEL and len(hits):
+            latencies.append((window - 1 + int(hits[0])) * DT)
+    return latencies
+
+
+def latency(args: argparse.Namespace) -> None:
+    """One JSON row per participant: the cue-to-decision latencies over the seeds (``cue_latencies_s``)."""
+    for participant in args.participants.split(","):
+        ms = 1000.0 * np.array([x for seed in seed_range(args.seeds) for x in cue_latencies_s(participant, seed)])
+        print(json.dumps({"participant": participant, "seeds": args.seeds, "cues": len(ms),
+                          "median_ms": round(float(np.median(ms))), "sd_ms": round(float(np.std(ms, ddof=1))),
+                          "p10_p90_ms": [round(float(q)) for q in np.percentile(ms, [10, 90])],
+                          "min_max_ms": [round(float(ms.min())), round(float(ms.max()))]}), flush=True)
+
+
 def check(args: argparse.Namespace) -> None:
     """One JSON row per cell: the body's check (``cell_row``), printed as it comes."""
     for cell in args.cells.split(","):
@@ -341,13 +385,17 @@ def main() -> None:
     chk.add_argument("--seeds", required=True, help="first-last, e.g. 0-9")
     chk.add_argument("--cells", default="P1:joystick,P1:bomi,P4:bomi,P5:bomi", help="participant:operator, comma list")
     chk.add_argument("--recovery", help='recovery actions, e.g. "rezero,backoff,pause" (default: none)')
+    lat = sub.add_parser("latency", help="the body's cue-to-decision latency on a continuous session (issue 53.3)")
+    lat.add_argument("--seeds", required=True, help="first-last, e.g. 0-9")
+    lat.add_argument("--participants", default="P1,P4,P5", help="comma list (default P1,P4,P5)")
     for p in (pred, sens):
         p.add_argument("--seeds", type=int, default=5, help="episodes per condition (default 5)")
         p.add_argument("--first-seed", type=int, default=0, help="first seed (default 0: development seeds)")
     for p in (cal, pred, sens):
         p.add_argument("--jobs", type=int, default=1, help="parallel episodes (default 1)")
     args = parser.parse_args()
-    {"calibrate": calibrate, "predict": predict, "sensitivity": sensitivity, "check": check}[args.command](args)
+    {"calibrate": calibrate, "predict": predict, "sensitivity": sensitivity, "check": check,
+     "latency": latency}[args.command](args)
 
 
 if __name__ == "__main__":
