@@ -329,6 +329,7 @@ def cell_row(participant: str, operator: str, seeds: range, recovery: str | None
                     "irrelevant_by_context": dict(contexts)})
     return row
 
+
 def cue_latencies_s(participant: str, seed: int) -> list[float]:
     """Per motion cue of a second continuous session of ``seed``'s day, the time from the cue to the first
     decision of the cued class by a model trained on the first (``latency``; a cue never decided: left out)."""
