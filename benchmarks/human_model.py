@@ -25,7 +25,7 @@ irrelevant run, the irrelevant decisions by context (``tasks.stacking.budget``).
 ``latency`` (issue 53.3) times the body against a real person's cue-to-decision latency (issue 53: a median
 560 ms, SD 185 ms on a continuous calibration recording): each seed's participant performs the protocol twice
 on one day, both kept continuous (the moves in), a model is trained on the first, and the second is decided
-window by window as the stream is; per cue, the time from the cue to the first decision of the cued class.
+window by window as the stream is; per cue (``metrics.decision_latencies``), the time from the cue to the first decision of the cued class.
 
 ``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
 benchmarks/results/human_sensitivity.{md,json}.
@@ -47,9 +47,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from bomi import paper  # noqa: E402
-from bomi.chain import train  # noqa: E402
-from bomi.chain.evaluation import evaluate  # noqa: E402
-from bomi.classifier import NEUTRAL_LABEL  # noqa: E402
+from bomi.chain import prepare, train  # noqa: E402
+from bomi.classifier import NEUTRAL_LABEL, classify_windows  # noqa: E402
 from bomi.fusion import DT  # noqa: E402
 from tasks.stacking import metrics  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
@@ -332,24 +331,16 @@ def cell_row(participant: str, operator: str, seeds: range, recovery: str | None
 
 def cue_latencies_s(participant: str, seed: int) -> list[float]:
     """Per motion cue of a second continuous session of ``seed``'s day, the time from the cue to the first
-    decision of the cued class by a model trained on the first (``latency``; a cue never decided: left out)."""
+    decision of the cued class by a model trained on the first, every window decided in time order as the
+    stream decides them (``metrics.decision_latencies``, the episodes' own; a cue never decided: left out)."""
     params = load_participant(participant)
     profile = arm_profile(params.profile)
     first = calibration_session(params, profile, seed)
     model = train([session_recording(first, profile, holds_only=False)], profile)
     rec = session_recording(calibration_session(params, profile, seed, session=Session.TASK), profile, holds_only=False)
-    predicted = evaluate(model, rec, profile.neutral_samples, model.post).predicted
-    window = model.spec.window
-    labels = np.asarray(rec.labels)
-    starts = np.r_[0, np.flatnonzero(np.diff(labels)) + 1]
-    latencies, scored = [], 0   # the scored windows are each run's single-label ones, in time order
-    for start, end in zip(starts, np.r_[starts[1:], len(labels)]):
-        run = predicted[scored:scored + max(0, end - start - (window - 1))]
-        scored += len(run)
-        hits = np.flatnonzero(run == labels[start])
-        if start > 0 and labels[start] != NEUTRAL_LABEL and len(hits):
-            latencies.append((window - 1 + int(hits[0])) * DT)
-    return latencies
+    windows = prepare(rec, model.spec, profile.neutral_samples)   # labels: the cue on screen at each window's end
+    decided = classify_windows(model, windows.features, model.post).labels
+    return (metrics.decision_latencies(windows.labels, decided, NEUTRAL_LABEL) * model.spec.stride * DT).tolist()
 
 
 def latency(args: argparse.Namespace) -> None:
