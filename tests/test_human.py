@@ -262,12 +262,12 @@ def test_the_interface_model_learns_how_far_the_answered_pulses_went():
     """``step``: how far the hand went for a pulse it answered, learnt at the learning rate (0.5)
     from 0; a pulse never answered and a move steered by watching teach it nothing."""
     model = InterfaceModel(P.learning_rate, P.full_speed, P.still_speed, P.max_wait)
-    down = StickIntent({"Rr": 0.05}, remaining=0.004)
+    down = StickIntent({"Lr": 0.05}, remaining=0.004)  # Lr: the hand down in the 3-axis translation mode
     rest = (-0.14, -0.39, 0.05)
 
     def glances(start, hold, positions):  # one move begun at ``start``, then the hand at 10 glances a second
         for k, z in enumerate(positions):
-            model.observe(view(hand=(rest[0], rest[1], z), t=start + k / 10), down, start, hold)
+            model.observe(view(hand=(rest[0], rest[1], z), t=start + k / 10), down, start, hold, THREE_AXIS)
 
     glances(0.0, 0.3, [0.05] * 10 + [0.045, 0.04, 0.035, 0.03] + [0.03] * 6)  # answered after 1 s: 2 cm down
     glances(2.0, 0.3, [0.03] * 20)  # begins at rest 2 cm lower: learns from the first; never answered
@@ -279,3 +279,24 @@ def test_the_interface_model_learns_how_far_the_answered_pulses_went():
     glances(6.0, 0.3, [0.0] * 5)  # the watched move (3 cm) teaches no step either
     assert model.pulse_step == pytest.approx(0.5 * 0.02)
     assert model.answered_hold == pytest.approx(0.5 * 0.15 + 0.5 * 0.1)  # but was seen answered 0.1 s after its start
+
+
+def test_the_interface_model_learns_the_speed_along_the_push_not_a_misread_motion():
+    """A push L (x+ in the 3-axis translation mode) at deflection 0.5, watched: when the hand goes 5 cm/s
+    along x, the gain seen is 0.05 / (0.2 x 0.5) = 0.5, learnt at the rate 0.5 from 1: 0.75.  When the
+    hand goes as fast along y instead (another class read, a forgotten mode press), the push was not
+    answered: the gain stays 1 and no onset is learnt from it (a watched move never answered says nothing)."""
+    def run(direction):
+        model = InterfaceModel(P.learning_rate, P.full_speed, P.still_speed, P.max_wait)
+        push = StickIntent({"L": 0.5}, remaining=0.2)
+        hand = np.array([-0.14, -0.39, 0.05])
+        for k in range(20):  # still for 0.5 s, then 5 cm/s along ``direction``
+            at = hand + max(0, k - 5) * 0.1 * 0.05 * np.asarray(direction)
+            model.observe(view(hand=at, t=k / 10), push, 0.0, math.inf, THREE_AXIS)
+        model.observe(view(hand=at, t=2.0), StickIntent({"F": 0.5}, remaining=0.2), 2.0, math.inf, THREE_AXIS)
+        return model
+
+    answered, misread = run((1.0, 0.0, 0.0)), run((0.0, 1.0, 0.0))
+    assert answered.gain["L"] == pytest.approx(0.75)
+    assert answered.onset == pytest.approx(0.5 * 0.6)  # first seen moving at the 7th glance (0.6 s)
+    assert "L" not in misread.gain and misread.onset == 0.0

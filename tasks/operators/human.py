@@ -43,7 +43,7 @@ import numpy as np
 import scipy.stats
 
 from bomi.config_files import from_table, load_toml, positive, section_keys, within
-from sim.joystick import Kind, Mode
+from sim.joystick import Kind, Layout, Mode
 from tasks.operators.judgement import Memory, wrapped_angle
 from tasks.operators.params import OperatorParams
 from tasks.operators.planner import ScriptedUser
@@ -187,7 +187,8 @@ class InterfaceModel:
     """What the person has learnt of how the arm answers the stick, from what they saw (an internal
     forward model; adaptation to a feedback delay): how long after a move starts the hand is seen to
     move (``onset``, 0 at first: a stick is expected to answer at once), and how fast it goes for a
-    deflection, per function (``gain``: seen peak speed / (``full_speed`` x deflection), 1 at first).
+    deflection, per function (``gain``: seen peak speed / (``full_speed`` x deflection), 1 at first),
+    both from the hand's motion along the way the function pushes it (a misread's or a slip's is not its answer).
     A move so short that it would be over before its start can be seen (its time at the expected
     speed below ``onset``) cannot be steered by watching: it is made as a pulse of the length the
     model predicts, then the person waits for the hand to settle and looks again (move-and-wait,
@@ -207,7 +208,7 @@ class InterfaceModel:
     gain: dict[str, float] = field(default_factory=dict)
     pulse_step: float = 0.0  # m: how far the hand went for the pulses it answered, a running mean (0 at first: as little as wanted)
     answered_hold: float = 0.0  # s: how long the pushes it answered had been held when it was seen answering them
-    _move: tuple[float, str, float, float, np.ndarray] | None = None  # (start, function, deflection, hold, hand) of the last move
+    _move: tuple[float, str, float, float, np.ndarray, np.ndarray] | None = None  # (start, function, deflection, hold, hand, the unit direction the function moves the hand) of the last move
     _seen_onset: float | None = None  # when the hand was first seen moving since that move started
     _peak: float = 0.0  # the fastest the hand was seen going since
     _last: View | None = None
@@ -223,17 +224,20 @@ class InterfaceModel:
             return math.inf
         return max(0.0, self.onset - settle) + travel
 
-    def observe(self, seen: View, current: StickIntent, started: float, hold: float) -> None:
-        """One glance: the move held now (``current``, begun at ``started``, held ``hold`` at most)."""
+    def observe(self, seen: View, current: StickIntent, started: float, hold: float, layout: Layout) -> None:
+        """One glance: the move held now (``current``, begun at ``started``, held ``hold`` at most, its
+        functions those of ``layout`` in the mode seen).  What is learnt of a move is how fast the hand
+        goes the way it was pushed: a hand moved another way (a misread, a slip) is not its answer."""
         last, self._last = self._last, seen
-        speed = 0.0 if last is None or seen.t <= last.t else \
-            float(np.linalg.norm(seen.hand_pos - last.hand_pos)) / (seen.t - last.t)
         if current.remaining > 0 and (self._move is None or started != self._move[0]):
             self._learn(seen)
             function, deflection = max(current.deflection.items(), key=lambda item: item[1])
-            self._move = (started, function, deflection, hold, seen.hand_pos)
+            self._move = (started, function, deflection, hold, seen.hand_pos,
+                          np.asarray(layout.effects[seen.mode][function].axis, dtype=float))
             self._seen_onset, self._peak = None, 0.0
             return
+        speed = 0.0 if self._move is None or last is None or seen.t <= last.t else \
+            float(np.dot(seen.hand_pos - last.hand_pos, self._move[5])) / (seen.t - last.t)
         if self._move is not None and speed > self.still_speed:
             if self._seen_onset is None:
                 self._seen_onset = seen.t - self._move[0]
@@ -247,14 +251,14 @@ class InterfaceModel:
         table, in the wrong mode) says nothing."""
         if self._move is None:
             return
-        start, function, deflection, hold, hand = self._move
+        start, function, deflection, hold, hand, direction = self._move
         pulse = math.isfinite(hold)
         rate = self.learning_rate
         if self._seen_onset is not None:
             seen = self._seen_onset
             self.answered_hold = (1 - rate) * self.answered_hold + rate * min(hold, seen)
             if pulse:
-                self.pulse_step = (1 - rate) * self.pulse_step + rate * float(np.linalg.norm(now.hand_pos - hand))
+                self.pulse_step = (1 - rate) * self.pulse_step + rate * abs(float(np.dot(now.hand_pos - hand, direction)))
             seen_gain = self._peak / (self.full_speed * deflection)
             self.gain[function] = (1 - rate) * self.gain.get(function, 1.0) + rate * seen_gain
         elif pulse:
@@ -377,7 +381,7 @@ class HumanOperator:
             self._just_noticed = False
         if self.intent.deflection and not intent.functions & self.intent.functions:
             self.eyes.rejudge()  # a move of the stick ends: the person looks again from where the hand is
-        self.interface.observe(seen, self.user.current, self.user.started, self.user.hold)
+        self.interface.observe(seen, self.user.current, self.user.started, self.user.hold, self.controls.layout)
         self.intent = intent
         return intent
 
