@@ -5,6 +5,7 @@
     python benchmarks/human_model.py check --seeds A-B [--cells P1:joystick,P1:bomi,P4:bomi,P5:bomi] [--recovery R]
     python benchmarks/human_model.py sensitivity [--params K,K] [--seeds 5] [--first-seed 0] [--jobs 1]
     python benchmarks/human_model.py latency --seeds A-B [--participants P1,P4,P5]
+    python benchmarks/human_model.py pushes --seeds A-B [--cells P1:bomi]
 
 ``calibrate`` runs the joystick operator (tasks/operators/human.toml, only ``timing.fitts_slope`` varied) on
 dev seeds 0..N-1 and interpolates the slope at which the mean completion time is the paper's
@@ -26,6 +27,14 @@ irrelevant run, the irrelevant decisions by context (``tasks.stacking.budget``).
 560 ms, SD 185 ms on a continuous calibration recording): each seed's participant performs the protocol twice
 on one day, both kept continuous (the moves in), a model is trained on the first, and the second is decided
 window by window as the stream is; per cue (``metrics.decision_latencies``), the time from the cue to the first decision of the cued class.
+
+``pushes`` (issue 53: where a BoMI episode's pushes go) reads each episode's pushes of the hand (runs of ticks
+pushed along one direction: a BoMI drives one function at a time; a stick pushing several axes at once changes
+direction at every look, so its runs are not pushes) from its record: how many, how long, how far they moved the hand; and each push of a
+step's travel (``metrics``' stage "travel") against the true error along the pushed axis when it began (the cube
+to reach, or the held cube's place): ``needless`` (the true error already under ``NEEDLESS_M``, the push made on a
+misjudgement), ``wrong way``, ``unanswered`` (the hand moved under 2 mm), ``short`` (under 60 % of the error),
+``long`` (over 140 %), else ``ok``.
 
 ``sensitivity`` varies each human parameter alone (50 %, 150 %) for the joystick and P1's BoMI:
 benchmarks/results/human_sensitivity.{md,json}.
@@ -54,6 +63,7 @@ from tasks.stacking import metrics  # noqa: E402
 from tasks.experiments.engine import ProcessPool  # noqa: E402
 from tasks.experiments.jobs import HUMAN_MODEL_KEY, HUMAN_ON, RECOVERY_KEY, EpisodeJob, run_job  # noqa: E402
 from tasks.stacking import budget  # noqa: E402
+from tasks.stacking.task import TaskConfig  # noqa: E402
 from tasks.stacking.channels import participant_controls
 from tasks.stacking.summary import summarize
 from tasks.operators.human import DEFAULT_HUMAN_FILE, load_human  # noqa: E402
@@ -353,6 +363,74 @@ def latency(args: argparse.Namespace) -> None:
                           "min_max_ms": [round(float(ms.min())), round(float(ms.max()))]}), flush=True)
 
 
+NEEDLESS_M = 0.012  # the tightest tolerance the task's person keeps on xy (operator.toml's placed)
+AT_B_M = TaskConfig().at_b
+
+
+def hand_pushes(log) -> list[tuple[int, int]]:
+    """(first, last) tick of each push of the hand until the completion: a run of ticks pushed along one direction."""
+    end = len(log.t) if log.completion_time is None else int(np.searchsorted(log.t, log.completion_time))
+    pushed = log.pushing[:end] & (np.linalg.norm(log.intended_dir[:end], axis=1) > 0)
+    runs, i = [], 0
+    while i < end:
+        if not pushed[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < end and pushed[j + 1] and np.array_equal(log.intended_dir[j + 1], log.intended_dir[i]):
+            j += 1
+        runs.append((i, j))
+        i = j + 1
+    return runs
+
+
+def travel_outcome(log, first: int, until: int) -> str | None:
+    """What a travel push begun at tick ``first`` did by tick ``until`` (the next push's start), against the true
+    error along its axis (``pushes``' categories); None for a push that is not a step's travel."""
+    step, axis = log.goals[first], log.intended_dir[first]
+    if log.stages[first] != "travel" or not step.startswith(("reach cube", "carry cube")):
+        return None
+    k = int(step.split()[-1]) - 1
+    if step.startswith("reach"):
+        error = log.cube_pos[first, k] - log.hand_pos[first]
+    else:   # the held cube onto the other one if that one is at B (the task's at_b), else to B
+        other = log.cube_pos[first, 1 - k]
+        place = other if np.linalg.norm(other[:2] - log.target_pos[:2]) <= AT_B_M else log.target_pos
+        error = place - log.cube_pos[first, k]
+    true, moved = float(np.dot(error[:2], axis[:2])), float(np.dot(log.hand_pos[until] - log.hand_pos[first], axis))
+    if abs(true) < NEEDLESS_M:
+        return "needless"
+    if true < 0:
+        return "wrong way"
+    if abs(moved) < 0.002:
+        return "unanswered"
+    return "short" if moved < 0.6 * true else "long" if moved > 1.4 * true else "ok"
+
+
+def pushes(args: argparse.Namespace) -> None:
+    """One JSON row per cell: pushes of the hand per episode, their median length and move, and the travel
+    pushes per episode by outcome (``travel_outcome``), printed as it comes."""
+    for cell in args.cells.split(","):
+        participant, operator = cell.split(":")
+        seeds, counts, lengths, moves, outcomes = seed_range(args.seeds), [], [], [], Counter()
+        for seed in seeds:
+            log = run_job(EpisodeJob(operator, participant, seed, overrides=HUMAN_ON))
+            runs = hand_pushes(log)
+            counts.append(len(runs))
+            for n, (first, last) in enumerate(runs):
+                until = runs[n + 1][0] if n + 1 < len(runs) else min(last + 1, len(log.t) - 1)
+                lengths.append(float(log.t[last] - log.t[first]) + float(log.t[1] - log.t[0]))
+                moves.append(float(np.dot(log.hand_pos[until] - log.hand_pos[first], log.intended_dir[first])))
+                outcomes[travel_outcome(log, first, until)] += 1
+            print(json.dumps({"seed": seed, "time": log.completion_time, "pushes": len(runs)}), file=sys.stderr, flush=True)
+        outcomes.pop(None, None)
+        print(json.dumps({"cell": cell, "seeds": args.seeds, "pushes_per_episode": round(float(np.mean(counts)), 1),
+                          "median_push_s": round(float(np.median(lengths)), 2),
+                          "median_move_mm": round(1000 * float(np.median(moves)), 1),
+                          "travel_pushes_per_episode": {k: round(v / len(seeds), 1) for k, v in sorted(outcomes.items())}}),
+              flush=True)
+
+
 def check(args: argparse.Namespace) -> None:
     """One JSON row per cell: the body's check (``cell_row``), printed as it comes."""
     for cell in args.cells.split(","):
@@ -380,6 +458,10 @@ def main() -> None:
     lat = sub.add_parser("latency", help="the body's cue-to-decision latency on a continuous session (issue 53.3)")
     lat.add_argument("--seeds", required=True, help="first-last, e.g. 0-9")
     lat.add_argument("--participants", default="P1,P4,P5", help="comma list (default P1,P4,P5)")
+    push = sub.add_parser("pushes", help="where a BoMI episode's pushes go: per episode, and each travel push's outcome "
+                          "(BoMI cells: one function at a time)")
+    push.add_argument("--seeds", required=True, help="first-last, e.g. 0-9")
+    push.add_argument("--cells", default="P1:bomi", help="participant:operator, comma list (default P1:bomi)")
     for p in (pred, sens):
         p.add_argument("--seeds", type=int, default=5, help="episodes per condition (default 5)")
         p.add_argument("--first-seed", type=int, default=0, help="first seed (default 0: development seeds)")
@@ -387,7 +469,7 @@ def main() -> None:
         p.add_argument("--jobs", type=int, default=1, help="parallel episodes (default 1)")
     args = parser.parse_args()
     {"calibrate": calibrate, "predict": predict, "sensitivity": sensitivity, "check": check,
-     "latency": latency}[args.command](args)
+     "latency": latency, "pushes": pushes}[args.command](args)
 
 
 if __name__ == "__main__":
