@@ -205,6 +205,30 @@ def test_the_benchmark_compares_each_bomi_with_the_joystick_on_its_own_controls(
     assert reference["P4 BoMI"] == "joystick (2-axis, B1)"
 
 
+def test_the_pushes_benchmark_cuts_pushes_and_scores_travel_pushes_against_the_true_error():
+    """Hand-made record: ticks 1-3 pushed along +x, 5-6 along +y, rest between and after; cube 1 10 cm along
+    +x from the hand, level with it in y.  Pushes (1, 3) and (5, 6).  The first, scored up to the second's
+    start, moved the hand 5 cm of the 10: short (under 60 %); the second pushed along y where the true error
+    is 0: needless (under 12 mm); a push that is not a travel is not scored."""
+    from types import SimpleNamespace
+    human_model = benchmark_script("human_model")
+    n = 10
+    x, y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    direction = np.zeros((n, 3))
+    direction[1:4], direction[5:7] = x, y
+    hand = np.zeros((n, 3))
+    hand[4:, 0] = 0.05   # 5 cm along x once the first push is over
+    log = SimpleNamespace(t=np.arange(n) * 0.1, completion_time=None, pushing=np.linalg.norm(direction, axis=1) > 0,
+                          intended_dir=direction, hand_pos=hand, goals=("reach cube 1",) * n,
+                          stages=("travel",) * n, cube_pos=np.tile([[0.1, 0.0, 0.025], [0.3, 0.3, 0.025]], (n, 1, 1)),
+                          target_pos=np.array([0.5, 0.5, 0.0]))
+    assert human_model.hand_pushes(log) == [(1, 3), (5, 6)]
+    assert human_model.travel_outcome(log, 1, 5) == "short"
+    assert human_model.travel_outcome(log, 5, 7) == "needless"
+    log.stages = ("descend",) * n
+    assert human_model.travel_outcome(log, 1, 5) is None
+
+
 def _reach_through_a_delayed_stick(delay: float, least: float = 0.0, learns: bool = True, seed: int = 4,
                                    seconds: float = 120.0):
     """The person reaches cube 1 through a stick whose every command takes effect ``delay`` s late
