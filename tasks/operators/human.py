@@ -208,7 +208,8 @@ class InterfaceModel:
     gain: dict[str, float] = field(default_factory=dict)
     pulse_step: float = 0.0  # m: how far the hand went for the pulses it answered, a running mean (0 at first: as little as wanted)
     answered_hold: float = 0.0  # s: how long the pushes it answered had been held when it was seen answering them
-    _move: tuple[float, str, float, float, np.ndarray, np.ndarray] | None = None  # (start, function, deflection, hold, hand, the unit direction the function moves the hand) of the last move
+    # the last move: (start, function, deflection, hold, hand, the unit direction the function moves the hand)
+    _move: tuple[float, str, float, float, np.ndarray, np.ndarray] | None = None
     _seen_onset: float | None = None  # when the hand was first seen moving since that move started
     _peak: float = 0.0  # the fastest the hand was seen going since
     _last: View | None = None
@@ -258,7 +259,8 @@ class InterfaceModel:
             seen = self._seen_onset
             self.answered_hold = (1 - rate) * self.answered_hold + rate * min(hold, seen)
             if pulse:
-                self.pulse_step = (1 - rate) * self.pulse_step + rate * abs(float(np.dot(now.hand_pos - hand, direction)))
+                went = abs(float(np.dot(now.hand_pos - hand, direction)))
+                self.pulse_step = (1 - rate) * self.pulse_step + rate * went
             seen_gain = self._peak / (self.full_speed * deflection)
             self.gain[function] = (1 - rate) * self.gain.get(function, 1.0) + rate * seen_gain
         elif pulse:
