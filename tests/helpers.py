@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import importlib.util
+import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
@@ -61,7 +63,15 @@ def disagreement(actual, expected, ulps: float = 4.0, scale: float | None = None
     paths at run time, so the last bit of a sin, a dot product or a sum depends on the CPU (and on
     which form runs). Measuring against the largest magnitude, not each element's, lets a component
     that is the difference of large terms carry their rounding; a chained computation (a solve, a
-    rotation composed of several) passes ``ulps`` grown by its condition or length, said where used."""
+    rotation composed of several) passes ``ulps`` grown by its condition or length, said where used.
+
+    Two finite floats (most calls: a test of a float form compares sample by sample) take the same
+    test without numpy's per-call overhead: ``math.ulp`` of a positive float is ``np.spacing`` of it."""
+    if isinstance(actual, float) and isinstance(expected, float) and math.isfinite(actual) and math.isfinite(expected):
+        scale = abs(expected) if scale is None else scale
+        tolerance = ulps * math.ulp(max(scale, sys.float_info.min))
+        worst = abs(actual - expected)
+        return None if worst <= tolerance else f"differ by {worst:.3g} > {tolerance:.3g} ({ulps:g} ulps of {scale:.3g})"
     a, b = np.asarray(actual, dtype=float), np.asarray(expected, dtype=float)
     if a.shape != b.shape:
         return f"shapes {a.shape} and {b.shape}"
