@@ -21,22 +21,41 @@ def _address(hex_address: str) -> tuple[str, int]:
     return socket.inet_ntop(family, words), int(hex_port, 16)
 
 
-def served_sockets(pid: int) -> list[tuple[str, str, int]]:
-    """(protocol, address, port) of every TCP socket listening and UDP socket bound to a port that
-    process ``pid`` holds, in the tables of its own network namespace."""
+def socket_inodes(pid: int) -> set[str] | None:
+    """The sockets (``socket:[inode]``) among process ``pid``'s open files; None if it has ended."""
     try:
-        inodes = {os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")}
+        return {os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")}
     except OSError:  # ended meanwhile
-        return []
-    found = []
+        return None
+
+
+def network_namespace(pid: int) -> str | None:
+    """Process ``pid``'s network namespace (``net:[inode]``); None if it has ended."""
+    try:
+        return os.readlink(f"/proc/{pid}/ns/net")
+    except OSError:
+        return None
+
+
+def socket_tables(pid: int) -> dict[str, list[list[str]]] | None:
+    """The TCP and UDP tables (their rows' fields) of process ``pid``'s own network namespace, as
+    /proc/PID/net/ shows them (as `ss -lptn` reads them); None if it has ended."""
+    tables = {}
     for protocol in ("tcp", "tcp6", "udp", "udp6"):
         try:
             with open(f"/proc/{pid}/net/{protocol}") as table:
-                lines = table.read().splitlines()[1:]
+                tables[protocol] = [line.split() for line in table.read().splitlines()[1:]]
         except OSError:
-            return []
-        for line in lines:
-            fields = line.split()
+            return None
+    return tables
+
+
+def served_in(inodes: set[str], tables: dict[str, list[list[str]]]) -> list[tuple[str, str, int]]:
+    """(protocol, address, port) of every TCP socket listening and UDP socket bound to a port in
+    ``tables`` (a namespace's, ``socket_tables``) that is one of ``inodes`` (a process's, ``socket_inodes``)."""
+    found = []
+    for protocol, rows in tables.items():
+        for fields in rows:
             address, port = _address(fields[1])
             if f"socket:[{fields[9]}]" in inodes and port and (protocol.startswith("udp") or fields[3] == TCP_LISTEN):
                 found.append((protocol, address, port))
@@ -85,8 +104,18 @@ class ServedSockets:
 
     def _watch(self) -> None:
         while not self._stop.is_set():
-            for pid in [p for root in self.roots() for p in (root, *descendants(root))]:
-                for served in served_sockets(pid):
+            processes = [p for root in self.roots() for p in (root, *descendants(root))]
+            inodes = {pid: socket_inodes(pid) for pid in processes}
+            # each namespace's tables read once, after its processes' files (Ray's ~15 processes share
+            # one: /proc/PID/net/* costs ~2 ms a table, each process reading its own kept a core busy)
+            tables: dict[str, dict | None] = {}
+            for pid in processes:
+                namespace = network_namespace(pid)
+                if inodes[pid] is None or namespace is None:
+                    continue
+                if tables.get(namespace) is None:   # its namespace's first, or the process read from had ended
+                    tables[namespace] = socket_tables(pid)
+                for served in served_in(inodes[pid], tables[namespace] or {}):
                     try:
                         with open(f"/proc/{pid}/cmdline", "rb") as cmdline:
                             self.seen[(pid, *served)] = cmdline.read().replace(b"\0", b" ")[:100].decode()
