@@ -580,22 +580,22 @@ def test_record_of_a_node_that_never_settles_is_one_error_line_and_no_file(tmp_p
 def test_emulate_settle_first_keeps_the_participant_in_step_with_records_prompts(tmp_path, capsys):
     """`bomi emulate --participant P1 --settle-first` holds still until a receiver's gate would open, then
     performs the protocol; `bomi record` starts its prompts when its gate opens: the label record gives
-    each row is the cue the participant was following at that sample on >= 90 % of the rows (the rest:
-    a few samples of the emulator's estimate against the recorder's batches at each of the 17 changes).
-    Without the lead-in the participant would be 9 s (3.5 segments) ahead of the prompts."""
+    each row is the cue the participant was following at that sample on >= 90 % of the rows (the rest: a
+    few samples at some of the 17 changes, the emulator's estimate against the recorder's batches: 0-4 rows
+    measured). Without the lead-in the participant would be 12 s (almost 10 segments) ahead of the prompts."""
     from bomi.fusion import DT
     from bomi.profiles import load_profile
     from bomi.protocol import calibration_schedule
     from tasks.participants.participant import load_participant
     from tasks.participants.wire import delayed, participant_blocks, settled_after
 
-    segments = ["--neutral", "1", "--hold", "1.5"]   # 21 s of protocol
+    segments = ["--neutral", "0.5", "--hold", "0.75"]   # 10.5 s of protocol
     code, err, recorded = record_from_p1(tmp_path, capsys, ["--settle-first", *segments], segments)
     assert code == 0, err
     params, profile = load_participant("P1"), load_profile("P1")
     lead_s = settled_after(params, profile, 3)
-    cues = delayed(calibration_schedule(profile, hold_s=1.5, neutral_s=1), lead_s)
-    raw = np.vstack([block[1] for block in participant_blocks(params, profile, 3, cues, lead_s + 25.0)])
+    cues = delayed(calibration_schedule(profile, hold_s=0.75, neutral_s=0.5), lead_s)
+    raw = np.vstack([block[1] for block in participant_blocks(params, profile, 3, cues, lead_s + 15.0)])
     index = {tuple(row): k for k, row in enumerate(raw.tolist())}
     node = recorded.nodes[1]
     rows = [index[tuple(row)] for row in np.hstack([node.mag, node.gyro, node.acc]).tolist()]
