@@ -370,18 +370,14 @@ AT_B_M = TaskConfig().at_b
 def hand_pushes(log) -> list[tuple[int, int]]:
     """(first, last) tick of each push of the hand until the completion: a run of ticks pushed along one direction."""
     end = len(log.t) if log.completion_time is None else int(np.searchsorted(log.t, log.completion_time))
-    pushed = log.pushing[:end] & (np.linalg.norm(log.intended_dir[:end], axis=1) > 0)
-    runs, i = [], 0
-    while i < end:
-        if not pushed[i]:
-            i += 1
-            continue
-        j = i
-        while j + 1 < end and pushed[j + 1] and np.array_equal(log.intended_dir[j + 1], log.intended_dir[i]):
-            j += 1
-        runs.append((i, j))
-        i = j + 1
-    return runs
+    direction = log.intended_dir[:end]
+    pushed = log.pushing[:end] & (np.linalg.norm(direction, axis=1) > 0)
+    turned = np.r_[True, np.any(direction[1:] != direction[:-1], axis=1)]   # the direction differs from the tick before
+    pushes = []
+    for start, length in metrics.runs(pushed):   # each run of pushed ticks, cut where the direction turns
+        bounds = [start, *(start + 1 + np.flatnonzero(turned[start + 1:start + length])).tolist(), start + length]
+        pushes += [(a, b - 1) for a, b in zip(bounds[:-1], bounds[1:])]
+    return pushes
 
 
 def travel_outcome(log, first: int, until: int) -> str | None:
